@@ -1,0 +1,26 @@
+"""Shared fixtures: every test that takes ``device`` runs on each available Warp device."""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+import warp as wp
+
+wp.config.quiet = True
+wp.init()
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+DEVICES = [str(d) for d in wp.get_devices()]
+
+
+@pytest.fixture(params=DEVICES)
+def device(request):
+    """Each available Warp device: ``cpu`` (when Warp has a CPU compiler) and every CUDA device."""
+    return request.param
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

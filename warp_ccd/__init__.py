@@ -1,0 +1,41 @@
+"""warp_ccd: collision detection among many moving triangle meshes, as NVIDIA Warp kernels.
+
+One frame: world vertices -> object bounds -> broad phase (sweep and prune) -> mid phase ->
+narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, per-object flags.
+
+>>> import warp_ccd as wc
+>>> res = wc.collide(meshes, transforms)            # one shot
+>>> scene = wc.Scene.random(1000, seed=0)           # polyhedra in motion
+>>> pipe = wc.CollisionPipeline(scene)
+>>> scene.advance(1 / 60); res = pipe.detect()      # every frame
+"""
+
+from .broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
+from .mid_phase import MidPhaseAllPairs
+from .motion import EllipseMotion
+from .narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
+from .pipeline import CollisionPipeline, CollisionResult, collide
+from .scene import Scene
+from .shapes import SHAPES, icosphere, shape, validate_mesh
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "SHAPES",
+    "TOLERANCE",
+    "BroadPhaseNxN",
+    "BroadPhaseSAP",
+    "CollisionPipeline",
+    "CollisionResult",
+    "EllipseMotion",
+    "MidPhaseAllPairs",
+    "NarrowPhase",
+    "Scene",
+    "broad_phase_pairs",
+    "collide",
+    "icosphere",
+    "shape",
+    "tri_tri_edge_face",
+    "tri_tri_moller",
+    "validate_mesh",
+]

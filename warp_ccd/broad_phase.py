@@ -1,0 +1,563 @@
+"""Broad phase: which pairs of axis-aligned boxes overlap.
+
+Two implementations behind one interface (``launch(lower, upper, pairs)`` writes pairs ``(a, b)``,
+``a < b``, into a :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i``; boxes are closed, so
+touching boxes overlap):
+
+* :class:`BroadPhaseNxN`, the reference: one thread per pair index ``k < N (N - 1) / 2`` (the
+  seed's step 1.4). O(N^2) work, exact, limited to 65,536 boxes.
+* :class:`BroadPhaseSAP`, the default: sort-based sweep and prune on a grid (Liu et al. 2010).
+
+Sweep and prune, as run on the device each frame:
+
+1. Statistics of the boxes (one strided pass, a few atomics per thread block): bounds of the
+   scene, mean extent, variance of the centres per axis.
+2. The sweep axis is the axis of greatest variance of the centres; the plane perpendicular to it
+   is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
+   one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
+   overlapping one box along one axis grows like N^(2/3); per grid cell it stays constant.
+3. Every box is entered in each cell it covers (usually 1 to 4). A box covering more than
+   ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the grid; it goes
+   to a short list tested against all boxes instead (O(N) per huge box).
+4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by a 64-bit key: cell id in the high
+   word, lower bound along the sweep axis quantised monotonically to 32 bits in the low word.
+5. One thread per entry sweeps forward through its cell while the next quantised lower bound is
+   not past its own quantised upper bound, tests the exact boxes, and reports a pair only from
+   the cell holding the lower corner of the two boxes' intersection (both boxes are entered
+   there), so no pair is reported twice and none is lost.
+
+Cost per frame: O(N) work plus the output, O(log N)-depth sort; everything stays on the device and
+the host reads nothing. Counters are int32 and every buffer grows: the entry buffer and the pair
+buffer report overflow through their counters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .buffers import GrowableBuffer, read_counts
+
+__all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "make_broad_phase"]
+
+NXN_MAX_BOXES = 65536
+"""The reference enumerates pair indices in int32: at most ``65536 * 65535 / 2 < 2**31`` pairs."""
+
+
+@wp.func
+def boxes_overlap(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
+    """Closed boxes: True when they overlap or touch on every axis."""
+    return (
+        lo_a[0] <= hi_b[0]
+        and lo_b[0] <= hi_a[0]
+        and lo_a[1] <= hi_b[1]
+        and lo_b[1] <= hi_a[1]
+        and lo_a[2] <= hi_b[2]
+        and lo_b[2] <= hi_a[2]
+    )
+
+
+@wp.func
+def emit_pair(a: int, b: int, pair: wp.array[wp.vec2i], pair_count: wp.array[wp.int32], pair_capacity: int):
+    """Appends ``(min, max)`` through the capacity + counter protocol."""
+    slot = wp.atomic_add(pair_count, 0, 1)
+    if slot < pair_capacity:
+        pair[slot] = wp.vec2i(wp.min(a, b), wp.max(a, b))
+
+
+# ---------------------------------------------------------------------------------------------
+# Reference: all pairs
+
+
+@wp.kernel
+def nxn_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    pair_capacity: int,
+    # Outputs
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int32],
+):
+    """One thread per pair index ``k``: pair ``(j, i)`` with ``k = i (i - 1) / 2 + j``, ``j < i``."""
+    k = wp.int64(wp.tid())
+    one = wp.float64(1.0)
+    i = wp.int64((one + wp.sqrt(one + wp.float64(8.0) * wp.float64(k))) * wp.float64(0.5))
+    while i * (i - wp.int64(1)) / wp.int64(2) > k:
+        i = i - wp.int64(1)
+    while (i + wp.int64(1)) * i / wp.int64(2) <= k:
+        i = i + wp.int64(1)
+    j = k - i * (i - wp.int64(1)) / wp.int64(2)
+    a = int(j)
+    b = int(i)
+    if boxes_overlap(lower[a], upper[a], lower[b], upper[b]):
+        emit_pair(a, b, pair, pair_count, pair_capacity)
+
+
+class BroadPhaseNxN:
+    """Reference broad phase: tests all ``N (N - 1) / 2`` pairs, one thread each.
+
+    Args:
+        device: Warp device.
+    """
+
+    def __init__(self, *, device=None):
+        self.device = wp.get_device(device)
+
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
+        """Writes overlapping pairs of the ``(N,)`` boxes ``lower``/``upper`` into ``pairs``.
+
+        The caller resets ``pairs`` (or not, to append) and checks its counter afterwards.
+        """
+        n = lower.shape[0]
+        if n > NXN_MAX_BOXES:
+            raise ValueError(f"nxn broad phase: at most {NXN_MAX_BOXES} boxes, got {n}; use method='sap'")
+        num_pairs = n * (n - 1) // 2
+        if num_pairs == 0:
+            return
+        wp.launch(
+            nxn_kernel,
+            dim=num_pairs,
+            inputs=[lower, upper, pairs.capacity],
+            outputs=[pairs.data, pairs.count],
+            device=self.device,
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# Sweep and prune on a grid
+
+
+@wp.struct
+class SapGrid:
+    """Per-frame layout chosen on the device: sweep axis, perpendicular grid, key quantisation."""
+
+    axis: int
+    ay: int
+    az: int
+    origin_y: float
+    origin_z: float
+    inv_cell_y: float
+    inv_cell_z: float
+    ny: int
+    nz: int
+    axis_min: wp.float64
+    qscale: wp.float64
+
+
+QKEY_MAX = 4294967295.0
+"""Largest quantised lower bound (low 32 bits of a sort key)."""
+
+
+@wp.kernel
+def sap_stats_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    num_boxes: int,
+    stride: int,
+    # Outputs
+    stat_lo: wp.array[wp.float32],
+    stat_hi: wp.array[wp.float32],
+    stat_sum: wp.array[wp.float64],
+):
+    """Strided pass: scene bounds (``stat_lo``/``stat_hi``, 3 each) and sums (``stat_sum``, 9:
+    centres, squared centres, extents per axis), with one atomic per value per thread."""
+    t = wp.tid()
+    lo = wp.vec3(1.0e30, 1.0e30, 1.0e30)
+    hi = wp.vec3(-1.0e30, -1.0e30, -1.0e30)
+    c1 = wp.vec3d(0.0, 0.0, 0.0)
+    c2 = wp.vec3d(0.0, 0.0, 0.0)
+    ext = wp.vec3d(0.0, 0.0, 0.0)
+    i = t
+    while i < num_boxes:
+        a = lower[i]
+        b = upper[i]
+        lo = wp.min(lo, a)
+        hi = wp.max(hi, b)
+        c = wp.vec3d(wp.float64(0.5) * (wp.float64(a[0]) + wp.float64(b[0])),
+                     wp.float64(0.5) * (wp.float64(a[1]) + wp.float64(b[1])),
+                     wp.float64(0.5) * (wp.float64(a[2]) + wp.float64(b[2])))
+        c1 = c1 + c
+        c2 = c2 + wp.cw_mul(c, c)
+        ext = ext + wp.vec3d(wp.float64(b[0] - a[0]), wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
+        i += stride
+    for k in range(3):
+        wp.atomic_min(stat_lo, k, lo[k])
+        wp.atomic_max(stat_hi, k, hi[k])
+        wp.atomic_add(stat_sum, k, c1[k])
+        wp.atomic_add(stat_sum, 3 + k, c2[k])
+        wp.atomic_add(stat_sum, 6 + k, ext[k])
+
+
+@wp.func
+def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: float) -> float:
+    cell = cell_scale * mean_extent
+    cell = wp.max(cell, span / max_cells)
+    if cell <= 0.0:
+        cell = 1.0
+    return cell
+
+
+@wp.kernel
+def sap_setup_kernel(
+    num_boxes: int,
+    stat_lo: wp.array[wp.float32],
+    stat_hi: wp.array[wp.float32],
+    stat_sum: wp.array[wp.float64],
+    cell_scale: float,
+    # Outputs
+    grid: wp.array[SapGrid],
+):
+    """One thread: sweep axis of greatest centre variance, grid of the other two axes."""
+    inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
+    best = int(0)
+    best_var = wp.float64(-1.0)
+    for k in range(3):
+        mean = stat_sum[k] * inv_n
+        var = stat_sum[3 + k] * inv_n - mean * mean
+        if var > best_var:
+            best_var = var
+            best = k
+    g = SapGrid()
+    g.axis = best
+    g.ay = (best + 1) % 3
+    g.az = (best + 2) % 3
+    max_cells = 32767.0
+    span_y = stat_hi[g.ay] - stat_lo[g.ay]
+    span_z = stat_hi[g.az] - stat_lo[g.az]
+    cell_y = _cell_size(float(stat_sum[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
+    cell_z = _cell_size(float(stat_sum[6 + g.az] * inv_n), span_z, cell_scale, max_cells)
+    g.origin_y = stat_lo[g.ay]
+    g.origin_z = stat_lo[g.az]
+    g.inv_cell_y = 1.0 / cell_y
+    g.inv_cell_z = 1.0 / cell_z
+    g.ny = wp.min(int(span_y / cell_y) + 1, 32768)
+    g.nz = wp.min(int(span_z / cell_z) + 1, 32768)
+    g.axis_min = wp.float64(stat_lo[best])
+    span = wp.float64(stat_hi[best]) - g.axis_min
+    g.qscale = wp.float64(0.0)
+    if span > wp.float64(0.0):
+        g.qscale = wp.float64(QKEY_MAX) / span
+    grid[0] = g
+
+
+@wp.func
+def _cell(x: float, origin: float, inv_cell: float, count: int) -> int:
+    """Monotonic cell coordinate of ``x``, clamped to ``[0, count)``."""
+    c = wp.floor((x - origin) * inv_cell)
+    c = wp.clamp(c, 0.0, float(count - 1))
+    return int(c)
+
+
+@wp.func
+def _quantise(x: float, g: SapGrid) -> wp.int64:
+    """Monotonic 32-bit quantisation of ``x`` along the sweep axis."""
+    q = wp.floor((wp.float64(x) - g.axis_min) * g.qscale)
+    q = wp.clamp(q, wp.float64(0.0), wp.float64(QKEY_MAX))
+    return wp.int64(q)
+
+
+@wp.kernel
+def sap_count_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    grid: wp.array[SapGrid],
+    max_cells_per_box: int,
+    # Outputs
+    entry_count: wp.array[wp.int32],
+    big_box: wp.array[wp.int32],
+    big_count: wp.array[wp.int32],
+):
+    """One thread per box: number of grid cells it covers, or 0 and a place in the big list."""
+    i = wp.tid()
+    g = grid[0]
+    lo = lower[i]
+    hi = upper[i]
+    cy = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny) - _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny) + 1
+    cz = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz) - _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz) + 1
+    if cy * cz > max_cells_per_box:
+        entry_count[i] = 0
+        big_box[wp.atomic_add(big_count, 0, 1)] = i
+    else:
+        entry_count[i] = cy * cz
+
+
+@wp.kernel
+def sap_fill_kernel(entry_key: wp.array[wp.int64]):
+    """Pads the whole key buffer with the largest key (padding sorts last)."""
+    entry_key[wp.tid()] = wp.int64(9223372036854775807)
+
+
+@wp.kernel
+def sap_emit_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    grid: wp.array[SapGrid],
+    entry_count: wp.array[wp.int32],
+    entry_start: wp.array[wp.int32],
+    entry_capacity: int,
+    # Outputs
+    entry_key: wp.array[wp.int64],
+    entry_box: wp.array[wp.int32],
+    entry_total: wp.array[wp.int32],
+):
+    """One thread per box: one (key, box) entry per covered cell."""
+    i = wp.tid()
+    if i == entry_count.shape[0] - 1:
+        entry_total[0] = entry_start[i] + entry_count[i]
+    n = entry_count[i]
+    if n == 0:
+        return
+    g = grid[0]
+    lo = lower[i]
+    hi = upper[i]
+    y0 = _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny)
+    y1 = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny)
+    z0 = _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz)
+    z1 = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz)
+    q = _quantise(lo[g.axis], g)
+    slot = entry_start[i]
+    for y in range(y0, y1 + 1):
+        for z in range(z0, z1 + 1):
+            if slot < entry_capacity:
+                cell = wp.int64(y * g.nz + z)
+                entry_key[slot] = cell * wp.int64(4294967296) + q
+                entry_box[slot] = i
+            slot += 1
+
+
+@wp.kernel
+def sap_sweep_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    grid: wp.array[SapGrid],
+    entry_key: wp.array[wp.int64],
+    entry_box: wp.array[wp.int32],
+    entry_total: wp.array[wp.int32],
+    entry_capacity: int,
+    pair_capacity: int,
+    # Outputs
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int32],
+):
+    """One thread per sorted entry: sweep forward within the cell, report owned pairs."""
+    e = wp.tid()
+    total = wp.min(entry_total[0], entry_capacity)
+    if e >= total:
+        return
+    g = grid[0]
+    key = entry_key[e]
+    cell = key >> wp.int64(32)
+    i = entry_box[e]
+    lo_i = lower[i]
+    hi_i = upper[i]
+    q_hi = _quantise(hi_i[g.axis], g)
+    cy = int(cell) / g.nz
+    cz = int(cell) - cy * g.nz
+    for f in range(e + 1, total):
+        key_f = entry_key[f]
+        if (key_f >> wp.int64(32)) != cell:
+            break
+        if (key_f & wp.int64(4294967295)) > q_hi:
+            break
+        j = entry_box[f]
+        lo_j = lower[j]
+        hi_j = upper[j]
+        if boxes_overlap(lo_i, hi_i, lo_j, hi_j):
+            # Report from the cell holding the lower corner of the intersection only.
+            oy = _cell(wp.max(lo_i[g.ay], lo_j[g.ay]), g.origin_y, g.inv_cell_y, g.ny)
+            oz = _cell(wp.max(lo_i[g.az], lo_j[g.az]), g.origin_z, g.inv_cell_z, g.nz)
+            if oy == cy and oz == cz:
+                emit_pair(i, j, pair, pair_count, pair_capacity)
+
+
+@wp.kernel
+def sap_big_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    entry_count: wp.array[wp.int32],
+    big_box: wp.array[wp.int32],
+    big_count: wp.array[wp.int32],
+    pair_capacity: int,
+    # Outputs
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int32],
+):
+    """One thread per box ``j``: test it against every big box ``i`` (pairs of two big boxes once)."""
+    j = wp.tid()
+    nb = big_count[0]
+    if nb == 0:
+        return
+    lo_j = lower[j]
+    hi_j = upper[j]
+    j_big = entry_count[j] == 0
+    for b in range(nb):
+        i = big_box[b]
+        if i == j or (j_big and j < i):
+            continue
+        if boxes_overlap(lower[i], upper[i], lo_j, hi_j):
+            emit_pair(i, j, pair, pair_count, pair_capacity)
+
+
+class BroadPhaseSAP:
+    """Sort-based sweep and prune on a grid perpendicular to the sweep axis (see module docs).
+
+    Owns its scratch arrays, sized for ``N`` boxes and grown on demand.
+
+    Args:
+        device: Warp device.
+        cell_scale: grid cell width relative to the mean box extent.
+        max_cells_per_box: boxes covering more cells go to the big-box list.
+        stats_threads: threads of the statistics pass (each handles ``N / stats_threads`` boxes).
+    """
+
+    def __init__(self, *, device=None, cell_scale: float = 2.0, max_cells_per_box: int = 64, stats_threads: int = 4096):
+        self.device = wp.get_device(device)
+        self.cell_scale = float(cell_scale)
+        self.max_cells_per_box = int(max_cells_per_box)
+        self.stats_threads = int(stats_threads) if self.device.is_cuda else 1
+        d = self.device
+        self.stat_lo = wp.zeros(3, dtype=wp.float32, device=d)
+        self.stat_hi = wp.zeros(3, dtype=wp.float32, device=d)
+        self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
+        self.grid = wp.zeros(1, dtype=SapGrid, device=d)
+        self.num_boxes = -1
+        self.entry_key = None
+        self.entry_box = None
+        self.entry = GrowableBuffer(wp.int64, 1024, d, "sap grid entries", factor=2)
+        self._init_lo = wp.array(np.full(3, 1e30, np.float32), device=d)
+        self._init_hi = wp.array(np.full(3, -1e30, np.float32), device=d)
+
+    def _resize(self, n: int) -> None:
+        if n == self.num_boxes:
+            return
+        d = self.device
+        self.num_boxes = n
+        self.entry_count = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+        self.entry_start = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+        self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+        self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self.entry.ensure(2 * n + 1024)
+        self._entry_box = None
+
+    def _entry_arrays(self):
+        if self._entry_box is None or self._entry_box.shape[0] != 2 * self.entry.capacity:
+            self._entry_box = wp.empty(2 * self.entry.capacity, dtype=wp.int32, device=self.device)
+        return self.entry.data, self._entry_box
+
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers whose counters the caller checks after :meth:`launch` (the grid entries)."""
+        return [self.entry]
+
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
+        """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
+
+        After the frame, check ``pairs`` and :attr:`counters`; if a counter passed its capacity,
+        ``ensure`` it and launch again.
+        """
+        n = lower.shape[0]
+        self._resize(n)
+        if n < 2:
+            return
+        d = self.device
+        wp.copy(self.stat_lo, self._init_lo)
+        wp.copy(self.stat_hi, self._init_hi)
+        self.stat_sum.zero_()
+        self.big_count.zero_()
+        wp.launch(sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
+                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum], device=d)
+        wp.launch(sap_setup_kernel, dim=1, inputs=[n, self.stat_lo, self.stat_hi, self.stat_sum, self.cell_scale],
+                  outputs=[self.grid], device=d)
+        wp.launch(sap_count_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box],
+                  outputs=[self.entry_count, self.big_box, self.big_count], device=d)
+        wp.utils.array_scan(self.entry_count, self.entry_start, inclusive=False)
+        key, box = self._entry_arrays()
+        cap = self.entry.capacity
+        wp.launch(sap_fill_kernel, dim=cap, inputs=[key], device=d)
+        wp.launch(sap_emit_kernel, dim=n,
+                  inputs=[lower, upper, self.grid, self.entry_count, self.entry_start, cap],
+                  outputs=[key, box, self.entry.count], device=d)
+        wp.utils.radix_sort_pairs(key, box, cap)
+        wp.launch(sap_sweep_kernel, dim=cap,
+                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, pairs.capacity],
+                  outputs=[pairs.data, pairs.count], device=d)
+        wp.launch(sap_big_kernel, dim=n,
+                  inputs=[lower, upper, self.entry_count, self.big_box, self.big_count, pairs.capacity],
+                  outputs=[pairs.data, pairs.count], device=d)
+
+
+def make_broad_phase(method: str, *, device=None):
+    """``"sap"`` -> :class:`BroadPhaseSAP`, ``"nxn"`` -> :class:`BroadPhaseNxN`."""
+    if method == "sap":
+        return BroadPhaseSAP(device=device)
+    if method == "nxn":
+        return BroadPhaseNxN(device=device)
+    raise ValueError(f"broad phase method must be 'sap' or 'nxn', got {method!r}")
+
+
+def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
+    try:
+        arr = np.asarray(a)
+    except Exception as exc:
+        raise ValueError(f"{name}: not an array of numbers ({exc})") from None
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"{name}: expected real numbers, got dtype {arr.dtype}")
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (N, 3), got {arr.shape}")
+    if not np.isfinite(arr).all():
+        bad = int(np.argmin(np.isfinite(arr).all(axis=1)))
+        raise ValueError(f"{name}: box {bad} is not finite ({arr[bad].tolist()})")
+    f32 = arr.astype(np.float32)
+    if not np.isfinite(f32).all():
+        raise ValueError(f"{name}: coordinates overflow float32")
+    if arr.dtype != np.float32:
+        # Round outward so no overlap is lost by the conversion.
+        wide = arr.astype(np.float64)
+        off = (f32.astype(np.float64) - wide) * outward < 0
+        f32[off] = np.nextafter(f32[off], np.float32(outward * np.inf))
+    return f32
+
+
+def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndarray:
+    """Overlapping pairs among ``N`` closed axis-aligned boxes.
+
+    Args:
+        lower: ``(N, 3)`` lower corners.
+        upper: ``(N, 3)`` upper corners, ``upper >= lower``. Inputs that are not float32 are
+            rounded outward to float32 (a pair may be added, never lost).
+        method: ``"sap"`` (default) or ``"nxn"`` (the reference).
+        device: Warp device (default: Warp's default device).
+
+    Returns:
+        ``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, rows sorted.
+
+    Raises:
+        ValueError: bad shapes, non-finite values, ``lower > upper``, unknown method.
+    """
+    lo = _boxes_to_float32(lower, "lower", -1)
+    hi = _boxes_to_float32(upper, "upper", +1)
+    if lo.shape != hi.shape:
+        raise ValueError(f"lower and upper: shapes differ, {lo.shape} and {hi.shape}")
+    bad = (lo > hi).any(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"box {i}: lower {lo[i].tolist()} exceeds upper {hi[i].tolist()}")
+    device = wp.get_device(device)
+    bp = make_broad_phase(method, device=device)
+    n = lo.shape[0]
+    if n < 2:
+        return np.zeros((0, 2), np.int32)
+    wlo = wp.array(lo, dtype=wp.vec3, device=device)
+    whi = wp.array(hi, dtype=wp.vec3, device=device)
+    pairs = GrowableBuffer(wp.vec2i, 4 * n, device, "broad-phase pairs")
+    buffers = [pairs, *getattr(bp, "counters", [])]
+    while True:
+        for b in buffers:
+            b.reset()
+        bp.launch(wlo, whi, pairs)
+        counts = read_counts([b.count for b in buffers], device)
+        grew = [b.ensure(c) for b, c in zip(buffers, counts)]
+        if not any(grew):
+            break
+    out = pairs.numpy(counts[0]).reshape(-1, 2).astype(np.int32)
+    return out[np.lexsort((out[:, 1], out[:, 0]))]

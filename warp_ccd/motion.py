@@ -1,0 +1,129 @@
+"""The composed motion of the seed scenes: an inclined ellipse with spin.
+
+Each object's pose at time ``t`` (seconds) is a composition of translations and rotations, each
+with its own angular velocity:
+
+    position(t)    = centre + tilt * (a cos(w t + phi), b sin(w t + phi), 0)
+    orientation(t) = quat(spin_axis, s t + psi) * base
+
+The orbit (semi-axes ``a``, ``b`` in scene units, angular velocity ``w`` in rad/s) lies in a plane
+inclined by the rotation ``tilt``; the object spins about its own ``spin_axis`` at ``s`` rad/s.
+One kernel computes the poses of all objects; cost O(N), no host work.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+__all__ = ["EllipseMotion", "motion_pose_kernel"]
+
+
+@wp.kernel
+def motion_pose_kernel(
+    time: float,
+    motion_centre: wp.array[wp.vec3],
+    motion_axes: wp.array[wp.vec2],
+    motion_orbit: wp.array[wp.vec2],
+    motion_tilt: wp.array[wp.quat],
+    motion_spin_axis: wp.array[wp.vec3],
+    motion_spin: wp.array[wp.vec2],
+    motion_base: wp.array[wp.quat],
+    # Outputs
+    instance_pose: wp.array[wp.transform],
+):
+    """One thread per object: pose at ``time`` (see the module docstring)."""
+    i = wp.tid()
+    axes = motion_axes[i]
+    orbit = motion_orbit[i]
+    theta = orbit[0] * time + orbit[1]
+    local = wp.vec3(axes[0] * wp.cos(theta), axes[1] * wp.sin(theta), 0.0)
+    pos = motion_centre[i] + wp.quat_rotate(motion_tilt[i], local)
+    spin = motion_spin[i]
+    rot = wp.quat_from_axis_angle(motion_spin_axis[i], spin[0] * time + spin[1]) * motion_base[i]
+    instance_pose[i] = wp.transform(pos, wp.normalize(rot))
+
+
+def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Uniformly distributed unit quaternions, (n, 4) as (x, y, z, w)."""
+    q = rng.normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _random_unit(rng: np.random.Generator, n: int) -> np.ndarray:
+    d = rng.normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+class EllipseMotion:
+    """Parameters of the composed motion of ``N`` objects, as device arrays.
+
+    Args:
+        centre: ``(N, 3)`` ellipse centres (scene units).
+        axes: ``(N, 2)`` semi-axes ``a, b`` (scene units).
+        orbit: ``(N, 2)`` orbit angular velocity (rad/s) and phase (rad).
+        tilt: ``(N, 4)`` quaternions ``(x, y, z, w)`` of the orbit plane.
+        spin_axis: ``(N, 3)`` unit spin axes.
+        spin: ``(N, 2)`` spin rate (rad/s) and phase (rad).
+        base: ``(N, 4)`` base orientation quaternions.
+        device: Warp device of the arrays.
+    """
+
+    def __init__(self, centre, axes, orbit, tilt, spin_axis, spin, base, device=None):
+        self.device = wp.get_device(device)
+        self.num_objects = len(centre)
+        d = self.device
+        self.motion_centre = wp.array(np.asarray(centre, np.float32), dtype=wp.vec3, device=d)
+        self.motion_axes = wp.array(np.asarray(axes, np.float32), dtype=wp.vec2, device=d)
+        self.motion_orbit = wp.array(np.asarray(orbit, np.float32), dtype=wp.vec2, device=d)
+        self.motion_tilt = wp.array(np.asarray(tilt, np.float32), dtype=wp.quat, device=d)
+        self.motion_spin_axis = wp.array(np.asarray(spin_axis, np.float32), dtype=wp.vec3, device=d)
+        self.motion_spin = wp.array(np.asarray(spin, np.float32), dtype=wp.vec2, device=d)
+        self.motion_base = wp.array(np.asarray(base, np.float32), dtype=wp.quat, device=d)
+
+    @classmethod
+    def random(
+        cls,
+        rng: np.random.Generator,
+        centre: np.ndarray,
+        radius: np.ndarray,
+        *,
+        orbit_scale: float = 2.0,
+        device=None,
+    ) -> EllipseMotion:
+        """Random ellipses around given centres.
+
+        Args:
+            rng: numpy random generator.
+            centre: ``(N, 3)`` ellipse centres.
+            radius: ``(N,)`` object radii; semi-axes are ``U(0.5, 1) * orbit_scale * radius``,
+                so objects travel a few of their own sizes and the density stays constant.
+            orbit_scale: semi-axis scale relative to the object radius.
+            device: Warp device.
+        """
+        n = len(centre)
+        axes = rng.uniform(0.5, 1.0, size=(n, 2)) * orbit_scale * np.asarray(radius)[:, None]
+        orbit = np.stack([rng.uniform(0.5, 2.0, n) * rng.choice([-1.0, 1.0], n), rng.uniform(0, 2 * np.pi, n)], 1)
+        spin = np.stack([rng.uniform(0.5, 3.0, n) * rng.choice([-1.0, 1.0], n), rng.uniform(0, 2 * np.pi, n)], 1)
+        return cls(
+            centre, axes, orbit, _random_quat(rng, n), _random_unit(rng, n), spin, _random_quat(rng, n), device=device
+        )
+
+    def launch(self, time: float, instance_pose: wp.array) -> None:
+        """Writes the poses of all objects at ``time`` (seconds) into ``instance_pose`` ``(N,)``."""
+        wp.launch(
+            motion_pose_kernel,
+            dim=self.num_objects,
+            inputs=[
+                float(time),
+                self.motion_centre,
+                self.motion_axes,
+                self.motion_orbit,
+                self.motion_tilt,
+                self.motion_spin_axis,
+                self.motion_spin,
+                self.motion_base,
+            ],
+            outputs=[instance_pose],
+            device=self.device,
+        )

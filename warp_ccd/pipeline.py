@@ -1,0 +1,206 @@
+"""The frame: bounds -> broad phase -> mid phase -> narrow phase -> result.
+
+:class:`CollisionPipeline` owns one object of each stage and chains their launches on the scene's
+device. Between stages the host reads nothing; at the end of the frame it reads the stages'
+counters once (a single synchronisation). A counter that passed its buffer's capacity makes that
+buffer grow and the frame run again, so no pair is ever dropped.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import numpy as np
+import warp as wp
+
+from .aabb import InstanceBounds
+from .broad_phase import make_broad_phase
+from .buffers import GrowableBuffer, read_counts
+from .mid_phase import MidPhaseAllPairs
+from .narrow_phase import TOLERANCE, NarrowPhase
+from .scene import Scene
+
+__all__ = ["CollisionPipeline", "CollisionResult", "collide"]
+
+STAGES = ("bounds", "broad", "mid", "narrow")
+
+
+class CollisionResult:
+    """What one frame found. Arrays are computed on first access and cached.
+
+    Attributes:
+        num_objects: ``N``.
+        timings: per-stage wall times in ms (``bounds``, ``broad``, ``mid``, ``narrow``,
+            ``total``) when the pipeline was asked for them, else None.
+        device_triangle_pairs: ``(M,)`` ``wp.vec4i`` on the device, unsorted.
+        device_colliding: ``(N,)`` int32 flags on the device.
+    """
+
+    def __init__(self, num_objects: int, device_triangle_pairs: wp.array, device_colliding: wp.array,
+                 timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0):
+        self.num_objects = num_objects
+        self.device_triangle_pairs = device_triangle_pairs
+        self.device_colliding = device_colliding
+        self.timings = timings
+        self.num_candidates = num_candidates
+        self.num_broad_pairs = num_broad_pairs
+        self._tri = None
+
+    @property
+    def num_triangle_pairs(self) -> int:
+        """``M``, the number of intersecting triangle pairs."""
+        return self.device_triangle_pairs.shape[0]
+
+    @property
+    def triangle_pairs(self) -> np.ndarray:
+        """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, rows sorted.
+
+        ``tri_a`` is the local triangle index within object ``obj_a``'s mesh.
+        """
+        if self._tri is None:
+            t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
+            self._tri = t[np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))]
+        return self._tri
+
+    @property
+    def object_pairs(self) -> np.ndarray:
+        """``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, of objects whose surfaces intersect; sorted."""
+        t = self.triangle_pairs
+        if t.shape[0] == 0:
+            return np.zeros((0, 2), np.int32)
+        return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
+
+    @property
+    def colliding(self) -> np.ndarray:
+        """``(N,)`` bool: the object's surface intersects another object's."""
+        return self.device_colliding.numpy().astype(bool)
+
+    def __repr__(self) -> str:
+        return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}, "
+                f"timings={self.timings})")
+
+
+class CollisionPipeline:
+    """Persistent collision detection for one :class:`Scene`, every frame on its device.
+
+    Args:
+        scene: the scene; its world vertices are read at each :meth:`detect`.
+        broad_phase: ``"sap"`` (default) or ``"nxn"`` (reference).
+        mid_phase: ``"all_pairs"`` (reference: every triangle pair of each object pair).
+        narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
+        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
+        timings: when True, synchronise after each stage and report ms per stage.
+        pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        *,
+        broad_phase: str = "sap",
+        mid_phase: str = "all_pairs",
+        narrow_phase: str = "moller",
+        tolerance: float = TOLERANCE,
+        timings: bool = False,
+        pair_capacity: int | None = None,
+        candidate_capacity: int | None = None,
+        hit_capacity: int | None = None,
+    ):
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        if mid_phase != "all_pairs":
+            raise ValueError(f"mid_phase must be 'all_pairs', got {mid_phase!r}")
+        self.scene = scene
+        self.device = scene.device
+        n = scene.num_objects
+        d = self.device
+        self.timings = bool(timings)
+        self.bounds = InstanceBounds(n, device=d, margin_rel=tolerance)
+        self.broad = make_broad_phase(broad_phase, device=d)
+        self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
+        self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
+        self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
+                                  capacity=hit_capacity or max(256, 4 * n), device=d)
+
+    def _buffers(self) -> list[GrowableBuffer]:
+        return [self.pairs, *getattr(self.broad, "counters", []), self.mid.candidates, self.narrow.hits]
+
+    def _run_frame(self) -> dict | None:
+        scene = self.scene
+        times = {} if self.timings else None
+        t0 = time.perf_counter()
+
+        def mark(stage: str, start: float) -> float:
+            if times is None:
+                return start
+            wp.synchronize_device(self.device)
+            now = time.perf_counter()
+            times[stage] = (now - start) * 1e3
+            return now
+
+        for b in self._buffers():
+            b.reset()
+        if times is not None:
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+        t = t0
+        self.bounds.launch(scene.world_vertex, scene.instance_vertex_start)
+        t = mark("bounds", t)
+        self.broad.launch(self.bounds.lower, self.bounds.upper, self.pairs)
+        t = mark("broad", t)
+        self.mid.launch(scene, self.pairs)
+        t = mark("mid", t)
+        self.narrow.launch(scene.mesh_view(), self.mid.candidates)
+        mark("narrow", t)
+        if times is not None:
+            times["total"] = sum(times[s] for s in STAGES)
+        return times
+
+    def detect(self) -> CollisionResult:
+        """Runs one frame on the scene's current world vertices.
+
+        Returns:
+            A :class:`CollisionResult` that owns copies of this frame's device arrays.
+        """
+        n = self.scene.num_objects
+        d = self.device
+        if n < 2:
+            return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
+                                   {s: 0.0 for s in (*STAGES, "total")} if self.timings else None)
+        buffers = self._buffers()
+        while True:
+            times = self._run_frame()
+            counts = read_counts([b.count for b in buffers], d)
+            grew = [b.ensure(c) for b, c in zip(buffers, counts)]
+            if not any(grew):
+                break
+        num_hits = counts[-1]
+        return CollisionResult(
+            n,
+            wp.clone(self.narrow.hits.data[:num_hits]) if num_hits else wp.zeros(0, dtype=wp.vec4i, device=d),
+            wp.clone(self.narrow.object_colliding),
+            times,
+            num_candidates=counts[-2],
+            num_broad_pairs=counts[0],
+        )
+
+
+def collide(meshes: Sequence, transforms=None, device=None, **options) -> CollisionResult:
+    """One-shot collision detection among meshes (like trimesh's ``CollisionManager``).
+
+    Args:
+        meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
+        transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
+        device: Warp device (default: Warp's default device).
+        **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``narrow_phase``,
+            ``tolerance``, ``timings``, capacities).
+
+    Returns:
+        :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``.
+
+    Raises:
+        ValueError / TypeError: naming the bad mesh or transform and the problem.
+    """
+    scene = Scene.from_meshes(meshes, transforms, device=device)
+    return CollisionPipeline(scene, **options).detect()

@@ -1,0 +1,416 @@
+"""Scenes: shapes stored once, instances by shape id, world vertices on one device.
+
+Data layout (struct of arrays, all on ``scene.device``):
+
+* Shapes: local vertices of all shapes concatenated (``shape_vertex``), triangles as local vertex
+  indices (``shape_triangle``), and ``shape_vertex_start`` / ``shape_triangle_start`` offsets
+  (``S + 1`` entries each).
+* Instances (objects): ``instance_shape`` (shape id), ``instance_scale`` (uniform scale),
+  ``instance_pose`` (``wp.transform``), ``instance_vertex_start`` and ``instance_triangle_start``
+  (``N + 1`` entries each). A triangle is identified by ``(instance, local triangle id)``; its
+  global id is ``instance_triangle_start[instance] + local id``. Triangles are never copied per
+  instance.
+* World vertices of all instances concatenated (``world_vertex``, ``V`` entries), with
+  ``vertex_instance`` giving the owner of each.
+
+Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd.motion.EllipseMotion`,
+``set_transforms`` / ``set_poses`` for rigid objects placed by the caller, and writing
+``world_vertex`` directly (``set_world_vertices`` or a kernel of one's own) for deforming meshes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import warp as wp
+
+from .motion import EllipseMotion
+from .shapes import shape as _named_shape
+from .shapes import validate_mesh
+
+__all__ = ["MeshView", "Scene", "mesh_triangle", "world_vertex_kernel", "transforms_to_poses"]
+
+
+@wp.struct
+class MeshView:
+    """What a kernel needs to fetch the world vertices of triangle ``(instance, local id)``."""
+
+    shape_triangle: wp.array[wp.vec3i]
+    shape_triangle_start: wp.array[wp.int32]
+    instance_shape: wp.array[wp.int32]
+    instance_vertex_start: wp.array[wp.int32]
+    world_vertex: wp.array[wp.vec3]
+
+
+@wp.func
+def mesh_triangle(view: MeshView, instance: int, tri: int):
+    """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
+    s = view.instance_shape[instance]
+    idx = view.shape_triangle[view.shape_triangle_start[s] + tri]
+    base = view.instance_vertex_start[instance]
+    return (
+        view.world_vertex[base + idx[0]],
+        view.world_vertex[base + idx[1]],
+        view.world_vertex[base + idx[2]],
+    )
+
+
+@wp.kernel
+def world_vertex_kernel(
+    shape_vertex: wp.array[wp.vec3],
+    shape_vertex_start: wp.array[wp.int32],
+    instance_shape: wp.array[wp.int32],
+    instance_scale: wp.array[wp.float32],
+    instance_pose: wp.array[wp.transform],
+    instance_vertex_start: wp.array[wp.int32],
+    vertex_instance: wp.array[wp.int32],
+    # Outputs
+    world_vertex: wp.array[wp.vec3],
+):
+    """One thread per world vertex: ``pose * (scale * local vertex)``."""
+    v = wp.tid()
+    i = vertex_instance[v]
+    local = v - instance_vertex_start[i]
+    p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
+    world_vertex[v] = wp.transform_point(instance_pose[i], p * instance_scale[i])
+
+
+def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(N, 3, 3)`` to unit quaternions ``(N, 4)`` as ``(x, y, z, w)``."""
+    r = np.asarray(r, dtype=np.float64)
+    n = r.shape[0]
+    q = np.empty((n, 4))
+    tr = np.trace(r, axis1=1, axis2=2)
+    diag = np.stack([r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]], axis=1)
+    case = np.where(tr > diag.max(axis=1), 3, diag.argmax(axis=1))
+    for c in range(4):
+        m = case == c
+        if not m.any():
+            continue
+        rm = r[m]
+        if c == 3:
+            s = np.sqrt(1.0 + tr[m]) * 2.0
+            q[m] = np.stack(
+                [(rm[:, 2, 1] - rm[:, 1, 2]) / s, (rm[:, 0, 2] - rm[:, 2, 0]) / s, (rm[:, 1, 0] - rm[:, 0, 1]) / s, s / 4],
+                axis=1,
+            )
+        else:
+            i, j, k = c, (c + 1) % 3, (c + 2) % 3
+            s = np.sqrt(1.0 + rm[:, i, i] - rm[:, j, j] - rm[:, k, k]) * 2.0
+            out = np.empty((m.sum(), 4))
+            out[:, i] = s / 4
+            out[:, j] = (rm[:, j, i] + rm[:, i, j]) / s
+            out[:, k] = (rm[:, k, i] + rm[:, i, k]) / s
+            out[:, 3] = (rm[:, k, j] - rm[:, j, k]) / s
+            q[m] = out
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> np.ndarray:
+    """Validates rigid 4x4 transforms and converts them to ``wp.transform`` rows.
+
+    Args:
+        transforms: ``(N, 4, 4)`` array-like; each a rotation (orthonormal, determinant +1, within
+            ``tol``) and a translation, bottom row ``(0, 0, 0, 1)``.
+        num_objects: expected ``N``.
+        tol: tolerance of the rigidity checks.
+
+    Returns:
+        ``(N, 7)`` float32 rows ``(px, py, pz, qx, qy, qz, qw)``.
+
+    Raises:
+        ValueError: naming the first bad transform and what is wrong with it.
+    """
+    try:
+        m = np.asarray(transforms, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"transforms: not an array of numbers ({exc})") from None
+    if m.shape != (num_objects, 4, 4):
+        raise ValueError(f"transforms: expected shape ({num_objects}, 4, 4) for {num_objects} objects, got {m.shape}")
+    if num_objects == 0:
+        return np.zeros((0, 7), np.float32)
+    finite = np.isfinite(m).all(axis=(1, 2))
+    if not finite.all():
+        raise ValueError(f"transform {int(np.argmin(finite))}: contains NaN or inf")
+    bottom = np.abs(m[:, 3] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=1) > tol
+    if bottom.any():
+        i = int(np.argmax(bottom))
+        raise ValueError(f"transform {i}: bottom row must be (0, 0, 0, 1), got {m[i, 3].tolist()}")
+    r = m[:, :3, :3]
+    ortho = np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)).max(axis=(1, 2)) > tol
+    if ortho.any():
+        i = int(np.argmax(ortho))
+        raise ValueError(f"transform {i}: not rigid (rotation part is not orthonormal: scale or shear)")
+    det = np.linalg.det(r)
+    if (det < 0).any():
+        i = int(np.argmax(det < 0))
+        raise ValueError(f"transform {i}: not rigid (reflection, determinant {det[i]:.3g})")
+    out = np.empty((num_objects, 7), np.float64)
+    out[:, :3] = m[:, :3, 3]
+    out[:, 3:] = _matrix_to_quat(r)
+    if not np.isfinite(out.astype(np.float32)).all():
+        raise ValueError("transforms: translations overflow float32")
+    return out.astype(np.float32)
+
+
+class Scene:
+    """Shapes, instances, poses and world vertices of ``N`` objects on one device.
+
+    Most users build scenes with :meth:`random` or :meth:`from_meshes`.
+
+    Args:
+        shapes: sequence of ``(vertices (n, 3), triangles (m, 3))`` meshes, each validated.
+        instance_shape: ``(N,)`` shape id of each object.
+        instance_scale: ``(N,)`` uniform scale of each object (default 1).
+        poses: ``(N, 7)`` rows ``(px, py, pz, qx, qy, qz, qw)`` (default identity).
+        motion: optional :class:`EllipseMotion`; then :meth:`advance` moves the objects.
+        deforming: when True the caller writes world vertices (:meth:`set_world_vertices`).
+        device: Warp device (default: Warp's default device).
+    """
+
+    def __init__(
+        self,
+        shapes: Sequence,
+        instance_shape,
+        *,
+        instance_scale=None,
+        poses=None,
+        motion: EllipseMotion | None = None,
+        deforming: bool = False,
+        device=None,
+    ):
+        self.device = wp.get_device(device)
+        self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}") for k, (v, t) in enumerate(shapes)]
+        num_shapes = len(self.shape_meshes)
+        inst = np.asarray(instance_shape, dtype=np.int64).reshape(-1)
+        if inst.size and (inst.min() < 0 or inst.max() >= num_shapes):
+            raise ValueError(f"instance_shape: ids must lie in [0, {num_shapes}), got {inst.min()}..{inst.max()}")
+        n = inst.size
+        self.num_objects = n
+        self.num_shapes = num_shapes
+        self.deforming = bool(deforming)
+        self.motion = motion
+        self.time = 0.0
+        if motion is not None and motion.num_objects != n:
+            raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
+
+        scale = np.ones(n, np.float32) if instance_scale is None else np.asarray(instance_scale, np.float32)
+        if scale.shape != (n,) or not np.isfinite(scale).all() or (scale <= 0).any():
+            raise ValueError(f"instance_scale: expected ({n},) finite positive values")
+        if poses is None:
+            poses = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (n, 1))
+        poses = np.asarray(poses, np.float32)
+        if poses.shape != (n, 7):
+            raise ValueError(f"poses: expected shape ({n}, 7), got {poses.shape}")
+
+        # Host-side topology (static): offsets of shapes and instances.
+        shape_nv = np.array([v.shape[0] for v, _ in self.shape_meshes], np.int64)
+        shape_nt = np.array([t.shape[0] for _, t in self.shape_meshes], np.int64)
+        self.shape_vertex_start_np = np.concatenate([[0], np.cumsum(shape_nv)]).astype(np.int32)
+        self.shape_triangle_start_np = np.concatenate([[0], np.cumsum(shape_nt)]).astype(np.int32)
+        self.instance_shape_np = inst.astype(np.int32)
+        inst_nv = shape_nv[inst] if n else np.zeros(0, np.int64)
+        inst_nt = shape_nt[inst] if n else np.zeros(0, np.int64)
+        vstart = np.concatenate([[0], np.cumsum(inst_nv)])
+        tstart = np.concatenate([[0], np.cumsum(inst_nt)])
+        if vstart[-1] >= 2**31 or tstart[-1] >= 2**31:
+            raise ValueError(f"scene too large: {vstart[-1]} vertices, {tstart[-1]} triangles (limit 2**31 - 1)")
+        self.instance_vertex_start_np = vstart.astype(np.int32)
+        self.instance_triangle_start_np = tstart.astype(np.int32)
+        self.num_world_vertices = int(vstart[-1])
+        self.num_triangles = int(tstart[-1])
+        self.instance_scale_np = scale
+
+        d = self.device
+        cat_v = np.concatenate([v for v, _ in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.float32)
+        cat_t = np.concatenate([t for _, t in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.int32)
+        self.shape_vertex = wp.array(cat_v, dtype=wp.vec3, device=d)
+        self.shape_triangle = wp.array(cat_t, dtype=wp.vec3i, device=d)
+        self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
+        self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
+        self.instance_shape = wp.array(self.instance_shape_np, dtype=wp.int32, device=d)
+        self.instance_scale = wp.array(scale, dtype=wp.float32, device=d)
+        self.instance_pose = wp.array(poses, dtype=wp.transform, device=d)
+        self.instance_vertex_start = wp.array(self.instance_vertex_start_np, dtype=wp.int32, device=d)
+        self.instance_triangle_start = wp.array(self.instance_triangle_start_np, dtype=wp.int32, device=d)
+        self.vertex_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
+        self.world_vertex = wp.zeros(self.num_world_vertices, dtype=wp.vec3, device=d)
+        if motion is not None:
+            motion.launch(self.time, self.instance_pose)
+        self.update_world_vertices()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def random(
+        cls,
+        num_objects: int,
+        seed: int = 0,
+        shapes: Sequence[str] = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron"),
+        density: float = 0.04,
+        size_range: tuple[float, float] = (0.5, 1.5),
+        device=None,
+    ) -> Scene:
+        """Seeded polyhedra moving on inclined ellipses, spread at constant density.
+
+        Object radii are ``U(size_range)``; centres are uniform in a cube whose side is chosen so
+        that the objects' bounding spheres fill ``density`` of its volume. Each object orbits a few
+        of its own sizes, so the fraction of objects in contact stays about the same for any
+        ``num_objects``.
+
+        Args:
+            num_objects: ``N >= 0``.
+            seed: random seed (same seed, same scene).
+            shapes: shape names (see :func:`warp_ccd.shapes.shape`), chosen uniformly.
+            density: volume fraction of bounding spheres, in ``(0, 1)``.
+            size_range: ``(min, max)`` radius in scene units.
+            device: Warp device.
+        """
+        if not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
+            raise ValueError(f"num_objects must be a non-negative integer, got {num_objects!r}")
+        if not 0.0 < density < 1.0:
+            raise ValueError(f"density must lie in (0, 1), got {density!r}")
+        lo, hi = size_range
+        if not 0.0 < lo <= hi or not np.isfinite(hi):
+            raise ValueError(f"size_range must be 0 < min <= max, got {size_range!r}")
+        if len(shapes) == 0:
+            raise ValueError("shapes: at least one shape name is needed")
+        meshes = [_named_shape(s) for s in shapes]
+        rng = np.random.default_rng(seed)
+        n = int(num_objects)
+        inst = rng.integers(0, len(meshes), size=n)
+        radius = rng.uniform(lo, hi, size=n)
+        volume = (4.0 / 3.0) * np.pi * float(np.sum(radius**3))
+        side = (volume / density) ** (1.0 / 3.0) if n else 1.0
+        centre = rng.uniform(-0.5 * side, 0.5 * side, size=(n, 3))
+        motion = EllipseMotion.random(rng, centre, radius, device=device)
+        scene = cls(meshes, inst, instance_scale=radius, motion=motion, device=device)
+        scene.box_side = side
+        return scene
+
+    @classmethod
+    def from_meshes(cls, meshes: Sequence, transforms=None, *, deforming: bool = False, device=None) -> Scene:
+        """A scene of user meshes, one object per mesh.
+
+        Meshes passed as the very same array objects share one shape (instancing).
+
+        Args:
+            meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``.
+            transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
+            deforming: the caller will write world vertices every frame (:meth:`set_world_vertices`).
+            device: Warp device.
+        """
+        if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
+            raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
+        shapes, inst, seen = [], [], {}
+        for i, m in enumerate(meshes):
+            if not isinstance(m, (tuple, list)) or len(m) != 2:
+                raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(m).__name__}")
+            key = (id(m[0]), id(m[1]))
+            if key in seen and not deforming:
+                inst.append(seen[key])
+                continue
+            shapes.append(validate_mesh(m[0], m[1], name=f"mesh {i}"))
+            seen[key] = len(shapes) - 1
+            inst.append(len(shapes) - 1)
+        n = len(inst)
+        poses = None
+        if transforms is not None:
+            if deforming:
+                raise ValueError("transforms: a deforming scene takes world vertices, not transforms")
+            poses = transforms_to_poses(transforms, n)
+        return cls(shapes, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device)
+
+    # ------------------------------------------------------------------ motion
+    def update_world_vertices(self) -> None:
+        """Recomputes ``world_vertex`` from the poses (not for deforming scenes)."""
+        if self.deforming or self.num_world_vertices == 0:
+            return
+        wp.launch(
+            world_vertex_kernel,
+            dim=self.num_world_vertices,
+            inputs=[
+                self.shape_vertex,
+                self.shape_vertex_start,
+                self.instance_shape,
+                self.instance_scale,
+                self.instance_pose,
+                self.instance_vertex_start,
+                self.vertex_instance,
+            ],
+            outputs=[self.world_vertex],
+            device=self.device,
+        )
+
+    def advance(self, dt: float) -> None:
+        """Moves time forward by ``dt`` seconds: poses, then world vertices, all in kernels."""
+        if self.motion is None:
+            raise ValueError("advance: this scene has no motion (use set_transforms or set_world_vertices)")
+        if not np.isfinite(dt):
+            raise ValueError(f"advance: dt must be finite, got {dt!r}")
+        self.time += float(dt)
+        if self.num_objects:
+            self.motion.launch(self.time, self.instance_pose)
+        self.update_world_vertices()
+
+    def set_transforms(self, transforms) -> None:
+        """Places the objects with ``(N, 4, 4)`` rigid transforms (validated) and updates world vertices."""
+        if self.deforming:
+            raise ValueError("set_transforms: a deforming scene takes world vertices")
+        self.instance_pose.assign(transforms_to_poses(transforms, self.num_objects))
+        self.update_world_vertices()
+
+    def set_poses(self, poses: wp.array) -> None:
+        """Copies ``(N,)`` ``wp.transform`` poses already on this device, then updates world vertices."""
+        if not isinstance(poses, wp.array) or poses.dtype != wp.transform or poses.shape != (self.num_objects,):
+            raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} wp.transform")
+        if poses.device != self.device:
+            raise ValueError(f"set_poses: poses are on {poses.device}, the scene on {self.device}")
+        wp.copy(self.instance_pose, poses)
+        self.update_world_vertices()
+
+    def set_world_vertices(self, vertices) -> None:
+        """Writes world vertices ``(V, 3)`` of all objects, concatenated (deforming meshes).
+
+        Accepts a numpy array (validated: shape and finiteness) or a ``wp.array`` of ``wp.vec3``
+        on this device (copied as is).
+        """
+        if isinstance(vertices, wp.array):
+            if vertices.dtype != wp.vec3 or vertices.shape != (self.num_world_vertices,):
+                raise ValueError(f"set_world_vertices: expected {self.num_world_vertices} wp.vec3")
+            if vertices.device != self.device:
+                raise ValueError(f"set_world_vertices: vertices are on {vertices.device}, the scene on {self.device}")
+            wp.copy(self.world_vertex, vertices)
+            return
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.shape != (self.num_world_vertices, 3):
+            raise ValueError(f"set_world_vertices: expected shape ({self.num_world_vertices}, 3), got {v.shape}")
+        if not np.isfinite(v).all():
+            bad = int(np.argmin(np.isfinite(v).all(axis=1)))
+            obj = int(np.searchsorted(self.instance_vertex_start_np, bad, side="right") - 1)
+            raise ValueError(f"set_world_vertices: vertex {bad} (object {obj}) is not finite")
+        self.world_vertex.assign(v.astype(np.float32))
+
+    # ------------------------------------------------------------------ views
+    def mesh_view(self) -> MeshView:
+        """The :class:`MeshView` struct of this scene for kernels."""
+        view = MeshView()
+        view.shape_triangle = self.shape_triangle
+        view.shape_triangle_start = self.shape_triangle_start
+        view.instance_shape = self.instance_shape
+        view.instance_vertex_start = self.instance_vertex_start
+        view.world_vertex = self.world_vertex
+        return view
+
+    def object_triangle_counts(self) -> np.ndarray:
+        """``(N,)`` number of triangles of each object (host)."""
+        return np.diff(self.instance_triangle_start_np)
+
+    def world_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per object ``(world vertices (n, 3) float32, triangles (m, 3) int32)``, copied to the host."""
+        wv = self.world_vertex.numpy()
+        out = []
+        for i in range(self.num_objects):
+            v = wv[self.instance_vertex_start_np[i] : self.instance_vertex_start_np[i + 1]]
+            out.append((v, self.shape_meshes[self.instance_shape_np[i]][1]))
+        return out

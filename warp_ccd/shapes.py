@@ -1,0 +1,230 @@
+"""Polyhedra the scenes are built from, and validation of user meshes.
+
+Every shape is returned as ``(vertices, triangles)``: ``vertices`` a ``(n, 3)`` float32 array of
+positions in local coordinates (unit size: every vertex lies on the unit sphere, so the
+circumradius is 1), ``triangles`` an ``(m, 3)`` int32 array of vertex indices wound
+counter-clockwise seen from outside (the normal ``(b - a) x (c - a)`` points outward).
+
+All meshes that enter the library pass :func:`validate_mesh`, which raises a ``ValueError``
+naming the object and the problem instead of letting malformed data reach a kernel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "SHAPES",
+    "cube",
+    "dodecahedron",
+    "icosahedron",
+    "icosphere",
+    "octahedron",
+    "shape",
+    "tetrahedron",
+    "triangle",
+    "validate_mesh",
+]
+
+
+def _orient_outward(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Flips triangles of a convex, origin-centred mesh so that their normals point outward."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    inward = np.einsum("ij,ij->i", normal, a + b + c) < 0.0
+    out = triangles.copy()
+    out[inward] = out[inward][:, [0, 2, 1]]
+    return out
+
+
+def _finish(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(vertices, dtype=np.float64)
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    t = _orient_outward(v, np.asarray(triangles, dtype=np.int32))
+    return v.astype(np.float32), t.astype(np.int32)
+
+
+def tetrahedron() -> tuple[np.ndarray, np.ndarray]:
+    """Regular tetrahedron: 4 vertices, 4 triangles."""
+    v = [[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]
+    t = [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]
+    return _finish(v, t)
+
+
+def cube() -> tuple[np.ndarray, np.ndarray]:
+    """Cube: 8 vertices, 12 triangles (two per face)."""
+    v = [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]  # index = 4*ix + 2*iy + iz
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    t = [tri for a, b, c, d in quads for tri in ([a, b, c], [a, c, d])]
+    return _finish(v, t)
+
+
+def octahedron() -> tuple[np.ndarray, np.ndarray]:
+    """Regular octahedron: 6 vertices, 8 triangles."""
+    v = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+    t = [[x, y, z] for x in (0, 1) for y in (2, 3) for z in (4, 5)]
+    return _finish(v, t)
+
+
+def _icosahedron_raw() -> tuple[np.ndarray, np.ndarray]:
+    phi = (1.0 + 5.0**0.5) / 2.0
+    v = []
+    for a in (-1.0, 1.0):
+        for b in (-phi, phi):
+            v += [[0.0, a, b], [a, b, 0.0], [b, 0.0, a]]
+    v = np.asarray(v)
+    d = np.linalg.norm(v[:, None] - v[None], axis=2)
+    edge = 2.0  # edge length of this icosahedron
+    near = np.abs(d - edge) < 1e-9
+    t = [
+        [i, j, k]
+        for i in range(12)
+        for j in range(i + 1, 12)
+        for k in range(j + 1, 12)
+        if near[i, j] and near[j, k] and near[i, k]
+    ]
+    return v, np.asarray(t)
+
+
+def icosahedron() -> tuple[np.ndarray, np.ndarray]:
+    """Regular icosahedron: 12 vertices, 20 triangles."""
+    return _finish(*_icosahedron_raw())
+
+
+def dodecahedron() -> tuple[np.ndarray, np.ndarray]:
+    """Regular dodecahedron: 20 vertices, 36 triangles (each pentagon fanned into three).
+
+    Built as the dual of the icosahedron: one vertex per icosahedron face, one pentagon per
+    icosahedron vertex.
+    """
+    iv, it = _icosahedron_raw()
+    iv = iv / np.linalg.norm(iv, axis=1, keepdims=True)
+    centre = iv[it].mean(axis=1)
+    centre /= np.linalg.norm(centre, axis=1, keepdims=True)
+    t = []
+    for k in range(12):
+        ring = np.nonzero((it == k).any(axis=1))[0]  # the 5 faces around icosahedron vertex k
+        axis = iv[k]
+        ref = centre[ring[0]] - axis * np.dot(centre[ring[0]], axis)
+        other = np.cross(axis, ref)
+        ang = np.arctan2(centre[ring] @ other, centre[ring] @ ref)
+        ring = ring[np.argsort(ang)]
+        t += [[ring[0], ring[i], ring[i + 1]] for i in range(1, 4)]
+    return _finish(centre, t)
+
+
+def triangle() -> tuple[np.ndarray, np.ndarray]:
+    """One equilateral triangle in the z = 0 plane, normal +z, circumradius 1."""
+    ang = np.array([0.0, 2.0, 4.0]) * np.pi / 3.0
+    v = np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], axis=1).astype(np.float32)
+    return v, np.array([[0, 1, 2]], dtype=np.int32)
+
+
+def icosphere(level: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Unit sphere approximated by a subdivided icosahedron.
+
+    Args:
+        level: number of subdivisions; the mesh has ``20 * 4**level`` triangles
+            (level 1: 80, level 3: 1,280, level 4: 5,120).
+
+    Returns:
+        ``(vertices (n, 3) float32, triangles (20 * 4**level, 3) int32)``.
+    """
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= 8:
+        raise ValueError(f"icosphere: level must be an integer in [0, 8], got {level!r}")
+    v, t = _icosahedron_raw()
+    v = list(v / np.linalg.norm(v, axis=1, keepdims=True))
+    t = [list(tri) for tri in t]
+    for _ in range(level):
+        midpoint: dict[tuple[int, int], int] = {}
+
+        def mid(a: int, b: int) -> int:
+            key = (min(a, b), max(a, b))
+            if key not in midpoint:
+                p = v[a] + v[b]
+                v.append(p / np.linalg.norm(p))
+                midpoint[key] = len(v) - 1
+            return midpoint[key]
+
+        new = []
+        for a, b, c in t:
+            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+            new += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        t = new
+    return _finish(np.asarray(v), t)
+
+
+SHAPES = {
+    "tetrahedron": tetrahedron,
+    "cube": cube,
+    "octahedron": octahedron,
+    "dodecahedron": dodecahedron,
+    "icosahedron": icosahedron,
+    "triangle": triangle,
+}
+"""Name -> factory of the fixed polyhedra; ``icosphere`` takes a level (also named ``icosphereN``)."""
+
+
+def shape(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Returns the shape called ``name``: a key of :data:`SHAPES` or ``"icosphere<level>"``."""
+    if name in SHAPES:
+        return SHAPES[name]()
+    if isinstance(name, str) and name.startswith("icosphere"):
+        rest = name[len("icosphere") :]
+        if rest == "":
+            return icosphere(1)
+        if rest.isdigit():
+            return icosphere(int(rest))
+    known = ", ".join([*SHAPES, "icosphere<level>"])
+    raise ValueError(f"unknown shape {name!r}; known shapes: {known}")
+
+
+def validate_mesh(vertices, triangles, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
+    """Checks one triangle mesh and returns it as contiguous float32 / int32 arrays.
+
+    Args:
+        vertices: ``(n, 3)`` array-like of finite positions.
+        triangles: ``(m, 3)`` array-like of integer vertex indices in ``[0, n)``, ``m >= 1``.
+        name: how the object is called in error messages (e.g. ``"mesh 3"``).
+
+    Returns:
+        ``(vertices (n, 3) float32, triangles (m, 3) int32)``.
+
+    Raises:
+        ValueError: naming ``name`` and the problem: wrong shape, non-numeric or non-finite
+            vertices, non-integer triangle indices, indices out of range, no triangles.
+    """
+    try:
+        v = np.asarray(vertices)
+    except Exception as exc:  # ragged nested lists and the like
+        raise ValueError(f"{name}: vertices are not an array of numbers ({exc})") from None
+    if not (np.issubdtype(v.dtype, np.integer) or np.issubdtype(v.dtype, np.floating)):
+        raise ValueError(f"{name}: vertices must be real numbers, got dtype {v.dtype}")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"{name}: vertices must have shape (n, 3), got {v.shape}")
+    if v.shape[0] < 3:
+        raise ValueError(f"{name}: a mesh needs at least 3 vertices, got {v.shape[0]}")
+    if not np.all(np.isfinite(v)):
+        bad = int(np.nonzero(~np.isfinite(v).all(axis=1))[0][0])
+        raise ValueError(f"{name}: vertex {bad} is not finite ({v[bad].tolist()})")
+    v32 = v.astype(np.float32)
+    if not np.all(np.isfinite(v32)):
+        raise ValueError(f"{name}: vertices overflow float32 (largest magnitude {np.abs(v).max():.3g})")
+
+    try:
+        t = np.asarray(triangles)
+    except Exception as exc:
+        raise ValueError(f"{name}: triangles are not an array of integers ({exc})") from None
+    if t.dtype == bool or not np.issubdtype(t.dtype, np.integer):
+        raise ValueError(f"{name}: triangles must be integer vertex indices, got dtype {t.dtype}")
+    if t.ndim != 2 or t.shape[1] != 3:
+        raise ValueError(f"{name}: triangles must have shape (m, 3), got {t.shape}")
+    if t.shape[0] == 0:
+        raise ValueError(f"{name}: the mesh has no triangles")
+    lo, hi = int(t.min()), int(t.max())
+    if lo < 0 or hi >= v.shape[0]:
+        bad = int(np.nonzero(((t < 0) | (t >= v.shape[0])).any(axis=1))[0][0])
+        raise ValueError(
+            f"{name}: triangle {bad} has vertex index out of range [0, {v.shape[0]}): {t[bad].tolist()}"
+        )
+    return np.ascontiguousarray(v32), np.ascontiguousarray(t.astype(np.int32))
