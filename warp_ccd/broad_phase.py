@@ -507,7 +507,8 @@ def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
     if not np.isfinite(arr).all():
         bad = int(np.argmin(np.isfinite(arr).all(axis=1)))
         raise ValueError(f"{name}: box {bad} is not finite ({arr[bad].tolist()})")
-    f32 = arr.astype(np.float32)
+    with np.errstate(over="ignore"):
+        f32 = arr.astype(np.float32)
     if not np.isfinite(f32).all():
         raise ValueError(f"{name}: coordinates overflow float32")
     if arr.dtype != np.float32:

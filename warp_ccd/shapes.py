@@ -207,7 +207,8 @@ def validate_mesh(vertices, triangles, name: str = "mesh") -> tuple[np.ndarray, 
     if not np.all(np.isfinite(v)):
         bad = int(np.nonzero(~np.isfinite(v).all(axis=1))[0][0])
         raise ValueError(f"{name}: vertex {bad} is not finite ({v[bad].tolist()})")
-    v32 = v.astype(np.float32)
+    with np.errstate(over="ignore"):
+        v32 = v.astype(np.float32)
     if not np.all(np.isfinite(v32)):
         raise ValueError(f"{name}: vertices overflow float32 (largest magnitude {np.abs(v).max():.3g})")
 

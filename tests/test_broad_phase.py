@@ -1,0 +1,163 @@
+"""Broad phases against numpy truth on many box distributions, on every device."""
+
+import numpy as np
+import pytest
+
+import warp_ccd as wc
+from oracles import box_pairs_numpy
+
+
+def boxes_random(rng, n, spread=10.0, size=(0.1, 1.0)):
+    c = rng.uniform(-spread, spread, size=(n, 3))
+    h = rng.uniform(*size, size=(n, 3)) / 2
+    return (c - h).astype(np.float32), (c + h).astype(np.float32)
+
+
+def boxes_clustered(rng, n):
+    centres = rng.uniform(-50, 50, size=(5, 3))
+    c = centres[rng.integers(0, 5, n)] + rng.normal(scale=1.0, size=(n, 3))
+    h = rng.uniform(0.05, 0.5, size=(n, 3))
+    return (c - h).astype(np.float32), (c + h).astype(np.float32)
+
+
+def boxes_line(rng, n):
+    c = np.zeros((n, 3))
+    c[:, 0] = rng.uniform(0, 100, n)
+    h = rng.uniform(0.1, 1.0, size=(n, 3))
+    return (c - h).astype(np.float32), (c + h).astype(np.float32)
+
+
+def boxes_plane(rng, n):
+    c = np.zeros((n, 3))
+    c[:, [0, 2]] = rng.uniform(0, 30, (n, 2))
+    h = rng.uniform(0.1, 1.0, size=(n, 3))
+    h[:, 1] = 0.0  # flat boxes in one plane
+    return (c - h).astype(np.float32), (c + h).astype(np.float32)
+
+
+def boxes_identical(rng, n):
+    lo = np.tile(np.float32([1, 2, 3]), (n, 1))
+    return lo, lo + np.float32(0.5)
+
+
+def boxes_mixed(rng, n):
+    lo, hi = boxes_random(rng, n, spread=20.0, size=(0.01, 0.5))
+    big = rng.choice(n, size=max(1, n // 50), replace=False)
+    c = (lo[big] + hi[big]) / 2
+    lo[big] = c - rng.uniform(5, 30, (len(big), 3)).astype(np.float32)
+    hi[big] = c + rng.uniform(5, 30, (len(big), 3)).astype(np.float32)
+    return lo, hi
+
+
+def boxes_touching(rng, n):
+    """A grid of unit cubes that touch their neighbours exactly (faces, edges, corners)."""
+    k = int(np.ceil(n ** (1 / 3)))
+    idx = np.stack(np.meshgrid(np.arange(k), np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 3)[:n]
+    lo = idx.astype(np.float32) * np.float32(0.5)
+    return lo, lo + np.float32(0.5)
+
+
+def boxes_far(rng, n):
+    lo, hi = boxes_random(rng, n, spread=5.0, size=(0.5, 2.0))
+    off = np.float32([1e6, -1e6, 1e6])
+    return lo + off, hi + off
+
+
+def boxes_degenerate_points(rng, n):
+    p = rng.integers(0, 4, size=(n, 3)).astype(np.float32)  # many repeated points
+    return p, p.copy()
+
+
+DISTRIBUTIONS = {
+    "random": boxes_random,
+    "clustered": boxes_clustered,
+    "line": boxes_line,
+    "plane": boxes_plane,
+    "identical": boxes_identical,
+    "mixed_huge_tiny": boxes_mixed,
+    "touching": boxes_touching,
+    "far_1e6": boxes_far,
+    "points": boxes_degenerate_points,
+}
+
+
+@pytest.mark.parametrize("method", ["sap", "nxn"])
+@pytest.mark.parametrize("dist", sorted(DISTRIBUTIONS))
+def test_equals_numpy(device, method, dist):
+    rng = np.random.default_rng(abs(hash(dist)) % 2**32)
+    n = 200 if dist == "identical" else 1500
+    lo, hi = DISTRIBUTIONS[dist](rng, n)
+    got = wc.broad_phase_pairs(lo, hi, method=method, device=device)
+    want = box_pairs_numpy(lo, hi)
+    assert got.dtype == np.int32 and got.shape[1] == 2
+    assert np.array_equal(got, want), f"{dist}/{method}: {len(got)} pairs, truth {len(want)}"
+    if dist in ("touching", "identical", "points"):
+        assert len(want) > 0
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3])
+def test_tiny_counts(device, n):
+    rng = np.random.default_rng(n)
+    lo, hi = boxes_random(rng, n, spread=0.1)
+    for method in ("sap", "nxn"):
+        got = wc.broad_phase_pairs(lo.reshape(-1, 3), hi.reshape(-1, 3), method=method, device=device)
+        assert np.array_equal(got.reshape(-1, 2), box_pairs_numpy(lo, hi).reshape(-1, 2))
+
+
+def test_capacity_one_is_complete(device):
+    """Starting from buffers of capacity 1, every pair is still returned (buffers grow)."""
+    import warp as wp
+
+    from warp_ccd.buffers import GrowableBuffer, read_counts
+
+    rng = np.random.default_rng(3)
+    lo, hi = boxes_clustered(rng, 800)
+    want = box_pairs_numpy(lo, hi)
+    wlo = wp.array(lo, dtype=wp.vec3, device=device)
+    whi = wp.array(hi, dtype=wp.vec3, device=device)
+    for bp in (wc.BroadPhaseSAP(device=device), wc.BroadPhaseNxN(device=device)):
+        pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
+        buffers = [pairs, *getattr(bp, "counters", [])]
+        for b in buffers[1:]:
+            b._allocate(1)
+        rounds = 0
+        while True:
+            rounds += 1
+            for b in buffers:
+                b.reset()
+            bp.launch(wlo, whi, pairs)
+            counts = read_counts([b.count for b in buffers], device)
+            if not any([b.ensure(c) for b, c in zip(buffers, counts)]):
+                break
+        got = pairs.numpy(counts[0])
+        got = got[np.lexsort((got[:, 1], got[:, 0]))]
+        assert rounds >= 2
+        assert np.array_equal(got, want)
+
+
+def test_float64_input_rounds_outward(device):
+    lo = np.array([[0.0, 0, 0], [1.0 + 1e-12, 0, 0]])
+    hi = np.array([[1.0, 1, 1], [2.0, 1, 1]])
+    # float32 cannot tell 1 + 1e-12 from 1: rounding outward keeps the pair (never loses one)
+    assert wc.broad_phase_pairs(lo, hi, device=device).tolist() == [[0, 1]]
+
+
+@pytest.mark.parametrize(
+    "lower, upper, match",
+    [
+        (np.zeros((2, 3)), np.ones((3, 3)), "shapes differ"),
+        (np.zeros((2, 2)), np.ones((2, 2)), r"shape \(N, 3\)"),
+        (np.array([[0, 0, np.nan], [0, 0, 0]]), np.ones((2, 3)), "box 0 is not finite"),
+        (np.zeros((2, 3)), np.array([[1, 1, 1], [np.inf, 1, 1]]), "box 1 is not finite"),
+        (np.array([[0, 0, 0], [2, 0, 0]]), np.ones((2, 3)), "box 1: lower"),
+        (np.array([["a"] * 3] * 2), np.ones((2, 3)), "real numbers"),
+    ],
+)
+def test_bad_input(lower, upper, match):
+    with pytest.raises(ValueError, match=match):
+        wc.broad_phase_pairs(lower, upper, device="cpu" if "cpu" in [str(d) for d in __import__("warp").get_devices()] else None)
+
+
+def test_unknown_method():
+    with pytest.raises(ValueError, match="'sap' or 'nxn'"):
+        wc.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")

@@ -1,0 +1,123 @@
+"""Triangle tests against crafted cases, each other, and Warp's float64 built-in."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+from oracles import intersect_tri_tri_f64
+from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
+
+
+def run_test(ta, tb, device, method="moller", tol=TOLERANCE):
+    ta = np.asarray(ta, np.float32).reshape(-1, 3, 3)
+    tb = np.asarray(tb, np.float32).reshape(-1, 3, 3)
+    out = wp.zeros(len(ta), dtype=wp.int32, device=device)
+    wp.launch(
+        tri_tri_batch_kernel,
+        dim=len(ta),
+        inputs=[wp.array(ta, dtype=wp.vec3, device=device), wp.array(tb, dtype=wp.vec3, device=device),
+                NARROW_METHODS[method], tol],
+        outputs=[out],
+        device=device,
+    )
+    return out.numpy().astype(bool)
+
+
+T1 = [[0, 0, 0], [2, 0, 0], [0, 2, 0]]
+CASES = {
+    "crossing": ([[0.5, -1, -1], [0.5, 3, -1], [0.5, 0.5, 1]], True),
+    "separated": ([[0.5, -1, 1], [0.5, 3, 1], [0.5, 0.5, 3]], False),
+    "piercing_edge_only": ([[2.5, -1, -1], [2.5, 3, -1], [2.5, 0.5, 1]], False),
+    "vertex_on_vertex": ([[0, 0, 0], [1, 0, 1], [0, 1, 1]], True),
+    "vertex_on_face": ([[0.5, 0.5, 0], [1, 0.5, 1], [0.5, 1, 1]], True),
+    "vertex_above_face": ([[0.5, 0.5, 0.0625], [1, 0.5, 1], [0.5, 1, 1]], False),
+    "shared_edge": ([[0, 0, 0], [2, 0, 0], [1, -1, -1]], True),
+    "edge_on_face": ([[0.5, 0.5, 0], [1.0, 0.25, 0], [0.75, 0.5, 1]], True),
+    "edge_edge": ([[1, 1, -1], [1, 1, 1], [2, 2, 0]], True),
+    "edge_edge_apart": ([[1.0625, 1.0625, -1], [1.0625, 1.0625, 1], [2, 2, 0]], False),
+    "coplanar_overlap": ([[0.5, 0.5, 0], [3, 0.5, 0], [0.5, 3, 0]], True),
+    "coplanar_contained": ([[0.25, 0.25, 0], [0.75, 0.25, 0], [0.25, 0.75, 0]], True),
+    "coplanar_containing": ([[-1, -1, 0], [5, -1, 0], [-1, 5, 0]], True),
+    "coplanar_disjoint": ([[3, 3, 0], [4, 3, 0], [3, 4, 0]], False),
+    "coplanar_vertex_touch": ([[2, 0, 0], [3, 0, 0], [3, 1, 0]], True),
+    "coplanar_edge_touch": ([[2, 0, 0], [0, 2, 0], [2, 2, 0]], True),
+    "coplanar_near_miss": ([[2.0625, 0, 0], [3, 0, 0], [3, 1, 0]], False),
+    "parallel_planes": ([[0, 0, 0.5], [2, 0, 0.5], [0, 2, 0.5]], False),
+    "identical": (T1, True),
+    "degenerate_collinear_crossing": ([[0.5, 0.5, -1], [0.5, 0.5, 1], [0.5, 0.5, 0]], False),
+    "degenerate_point": ([[0.5, 0.5, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]], False),
+    "degenerate_repeated_vertex": ([[0.5, 0.5, -1], [0.5, 0.5, -1], [0.5, 0.5, 1]], False),
+}
+NAMES = sorted(CASES)
+
+
+def crafted(offset=(0.0, 0.0, 0.0), scale=1.0):
+    ta = np.array([T1] * len(NAMES), np.float64) * scale + offset
+    tb = np.array([CASES[n][0] for n in NAMES], np.float64) * scale + offset
+    expect = np.array([CASES[n][1] for n in NAMES])
+    return ta, tb, expect
+
+
+@pytest.mark.parametrize("method", sorted(NARROW_METHODS))
+@pytest.mark.parametrize(
+    "offset, scale",
+    [((0, 0, 0), 1.0), ((1e4, -1e4, 1e4), 1.0), ((0, 0, 0), 1e-4), ((3e-4, 1e-4, -2e-4), 1e-4), ((0, 0, 0), 1e3)],
+    ids=["unit", "far", "tiny", "tiny_offset", "huge"],
+)
+def test_crafted_cases(device, method, offset, scale):
+    ta, tb, expect = crafted(offset, scale)
+    got = run_test(ta, tb, device, method)
+    wrong = [n for n, g, e in zip(NAMES, got, expect) if g != e]
+    assert not wrong, f"{method}: wrong answers for {wrong}"
+    # symmetric: swapping the triangles, and cycling a triangle's vertices, change nothing
+    assert (run_test(tb, ta, device, method) == expect).all()
+    assert (run_test(ta[:, [1, 2, 0]], tb[:, [2, 0, 1]], device, method) == expect).all()
+
+
+def test_crafted_cases_match_warp_float64(device):
+    """The crafted truths agree with Warp's float64 test where it has no snapping issue."""
+    ta, tb, expect = crafted(scale=10.0)
+    degenerate = np.array([n.startswith("degenerate") for n in NAMES])
+    got = intersect_tri_tri_f64(ta, tb, device=device)
+    assert (got[~degenerate] == expect[~degenerate]).all()
+
+
+def random_pairs(rng, n):
+    ta = rng.uniform(-1, 1, size=(n, 3, 3))
+    tb = rng.uniform(-1, 1, size=(n, 3, 3)) + rng.uniform(-0.5, 0.5, size=(n, 1, 3))
+    return ta.astype(np.float32), tb.astype(np.float32)
+
+
+def test_random_pairs_agree(device):
+    """Möller, edge-face and Warp's float64 test agree on 10^5 random pairs away from the band."""
+    rng = np.random.default_rng(7)
+    ta, tb = random_pairs(rng, 100_000)
+    res = {
+        (m, tol): run_test(ta, tb, device, m, tol)
+        for m in NARROW_METHODS
+        for tol in (0.0, 1e-3)
+    }
+    # A pair is in the tolerance band when some test changes its answer between the tolerances
+    # (no tolerance at all, and 100 times the default).
+    stable = np.ones(len(ta), bool)
+    for m in NARROW_METHODS:
+        stable &= res[(m, 0.0)] == res[(m, 1e-3)]
+    assert stable.mean() > 0.99
+    moller = run_test(ta, tb, device, "moller")
+    edge_face = run_test(ta, tb, device, "edge_face")
+    assert np.array_equal(moller[stable], edge_face[stable])
+    oracle = intersect_tri_tri_f64(ta.astype(np.float64) * 10.0, tb.astype(np.float64) * 10.0, device=device)
+    assert np.array_equal(moller[stable], oracle[stable])
+    assert 0.2 < moller.mean() < 0.8  # the sample holds both answers
+
+
+def test_random_pairs_far_and_scaled(device):
+    """Translation by 1e4 and scaling by 1e-4 keep the answers away from the band."""
+    rng = np.random.default_rng(8)
+    ta, tb = random_pairs(rng, 20_000)
+    base = run_test(ta, tb, device)
+    stable = base == run_test(ta, tb, device, tol=1e-2)
+    for off, s in [((1e4, 1e4, -1e4), 1.0), ((0, 0, 0), 1e-4)]:
+        got = run_test(ta.astype(np.float64) * s + off, tb.astype(np.float64) * s + off, device)
+        mismatch = (got != base) & stable
+        assert mismatch.mean() < 1e-3, f"offset {off} scale {s}: {mismatch.sum()} changed"

@@ -1,0 +1,217 @@
+"""The whole frame against independent oracles, and the public API's contract."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warp_ccd as wc
+from oracles import triangle_pairs_fcl, triangle_pairs_warp64
+
+
+def check_against_oracles(scene, result, device):
+    meshes = scene.world_meshes()
+    fcl_pairs = triangle_pairs_fcl(meshes)
+    w64 = triangle_pairs_warp64(meshes, scale=20.0, device=device)
+    got = result.triangle_pairs
+    assert np.array_equal(got, w64), f"ours {len(got)} vs warp float64 {len(w64)}"
+    assert np.array_equal(got, fcl_pairs), f"ours {len(got)} vs fcl {len(fcl_pairs)}"
+    obj = np.unique(got[:, [0, 2]], axis=0) if len(got) else np.zeros((0, 2), np.int32)
+    assert np.array_equal(result.object_pairs, obj)
+    flags = np.zeros(scene.num_objects, bool)
+    flags[obj.ravel()] = True
+    assert np.array_equal(result.colliding, flags)
+
+
+@pytest.mark.parametrize("num_objects, seed", [(60, 0), (300, 1), (1000, 2)])
+def test_random_scene_matches_oracles(device, num_objects, seed):
+    scene = wc.Scene.random(num_objects, seed=seed, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    frames = 3 if num_objects < 1000 else 1
+    for _ in range(frames):
+        scene.advance(0.13)
+        res = pipe.detect()
+        assert res.num_triangle_pairs > 0
+        check_against_oracles(scene, res, device)
+
+
+@pytest.mark.parametrize(
+    "options",
+    [dict(broad_phase="nxn"), dict(narrow_phase="edge_face"),
+     dict(pair_capacity=1, candidate_capacity=1, hit_capacity=1)],
+    ids=["nxn", "edge_face", "capacity_1"],
+)
+def test_pipeline_options_agree(device, options):
+    scene = wc.Scene.random(400, seed=5, device=device)
+    scene.advance(0.5)
+    ref = wc.CollisionPipeline(scene).detect()
+    got = wc.CollisionPipeline(scene, **options).detect()
+    assert ref.num_triangle_pairs > 0
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+    assert np.array_equal(got.colliding, ref.colliding)
+
+
+def test_timings(device):
+    scene = wc.Scene.random(100, seed=1, device=device)
+    res = wc.CollisionPipeline(scene, timings=True).detect()
+    assert set(res.timings) >= {"bounds", "broad", "mid", "narrow", "total"}
+    assert all(v >= 0 for v in res.timings.values())
+    assert wc.CollisionPipeline(scene).detect().timings is None
+
+
+def cube_at(x, y=0.0, z=0.0, s=1.0):
+    v, t = wc.shape("cube")
+    return (v * s + np.float32([x, y, z]), t)
+
+
+def test_collide_world_space(device):
+    meshes = [cube_at(0), cube_at(1.0), cube_at(10), cube_at(11.0)]
+    res = wc.collide(meshes, device=device)
+    assert res.object_pairs.tolist() == [[0, 1], [2, 3]]
+    assert res.colliding.tolist() == [True, True, True, True]
+    t = res.triangle_pairs
+    assert t.dtype == np.int32 and t.shape[1] == 4
+    assert (t[:, 0] < t[:, 2]).all()
+    assert np.array_equal(t, t[np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))])
+
+
+def test_collide_with_transforms_matches_fcl(device):
+    rng = np.random.default_rng(4)
+    shapes = [wc.icosphere(2), wc.shape("dodecahedron"), wc.shape("cube"), wc.shape("tetrahedron")]
+    meshes = [shapes[i % 4] for i in range(40)]  # shared arrays: instanced shapes
+    transforms = np.tile(np.eye(4), (40, 1, 1))
+    q = rng.normal(size=(40, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    transforms[:, :3, :3] = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+    transforms[:, :3, 3] = rng.uniform(-4, 4, size=(40, 3))
+    res = wc.collide(meshes, transforms, device=device)
+    world = [((v.astype(np.float64) @ m[:3, :3].T) + m[:3, 3], t) for (v, t), m in zip(meshes, transforms)]
+    want = triangle_pairs_fcl(world)
+    assert len(want) > 0
+    assert np.array_equal(res.triangle_pairs, want)
+
+
+def test_touching_cubes_count(device):
+    """Face-touching cubes collide (closed sets); cubes a hair apart do not."""
+    v, t = wc.shape("cube")
+    side = float(v[:, 0].max() - v[:, 0].min())
+    res = wc.collide([cube_at(0), cube_at(side)], device=device)
+    assert res.object_pairs.tolist() == [[0, 1]]
+    res = wc.collide([cube_at(0), cube_at(side * 1.001)], device=device)
+    assert res.object_pairs.tolist() == []
+
+
+def test_far_from_origin_and_tiny(device):
+    scene = wc.Scene.random(150, seed=9, device=device)
+    scene.advance(0.2)
+    meshes = scene.world_meshes()
+    ref = wc.collide(meshes, device=device).triangle_pairs
+    assert len(ref) > 0
+    far = [(v.astype(np.float64) + 1e4, t) for v, t in meshes]
+    tiny = [(v.astype(np.float64) * 1e-4, t) for v, t in meshes]
+    for moved in (far, tiny):
+        got = wc.collide(moved, device=device).triangle_pairs
+        # float32 rounding of the moved input can only shift pairs inside the tolerance band
+        diff = set(map(tuple, got)) ^ set(map(tuple, ref))
+        assert len(diff) <= max(1, len(ref) // 200)
+
+
+def test_containment_is_not_surface_contact(device):
+    big = cube_at(0, s=5.0)
+    small = cube_at(0, s=0.5)
+    res = wc.collide([big, small], device=device)
+    assert res.object_pairs.shape == (0, 2)
+
+
+def test_empty_and_single(device):
+    res = wc.collide([], device=device)
+    assert res.object_pairs.shape == (0, 2) and res.triangle_pairs.shape == (0, 4) and res.colliding.shape == (0,)
+    res = wc.collide([cube_at(0)], device=device)
+    assert res.colliding.tolist() == [False]
+    scene = wc.Scene.random(0, device=device)
+    scene.advance(0.1)
+    assert wc.CollisionPipeline(scene).detect().triangle_pairs.shape == (0, 4)
+
+
+def test_deforming_scene(device):
+    """World vertices written by the caller: results follow the written geometry."""
+    v, t = wc.icosphere(2)
+    scene = wc.Scene.from_meshes([(v, t), (v + np.float32([3, 0, 0]), t)], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    assert pipe.detect().object_pairs.tolist() == []
+    for k, r in enumerate([1.0, 2.4, 0.7]):
+        ang = 0.3 * k
+        rot = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1]])
+        pulsed = (v.astype(np.float64) * r * (1 + 0.1 * v[:, 2:3])) @ rot.T
+        world = np.concatenate([pulsed, v + np.float32([3, 0, 0])])
+        scene.set_world_vertices(world)
+        res = pipe.detect()
+        meshes = scene.world_meshes()
+        assert np.array_equal(res.triangle_pairs, triangle_pairs_warp64(meshes, scale=10.0, device=device))
+        assert (len(res.object_pairs) > 0) == (r > 2.0)
+
+
+def test_device_arrays_stay_on_device(device):
+    scene = wc.Scene.random(50, seed=3, device=device)
+    res = wc.CollisionPipeline(scene).detect()
+    assert res.device_colliding.device == wp.get_device(device)
+    assert res.device_triangle_pairs.device == wp.get_device(device)
+
+
+BAD_MESHES = [
+    ("not a sequence", TypeError, "sequence"),
+    ([(np.zeros((3, 3)),)], ValueError, "mesh 0"),
+    ([cube_at(0), (np.full((8, 3), np.nan), wc.shape("cube")[1])], ValueError, "mesh 1: vertex 0 is not finite"),
+    ([cube_at(0), (wc.shape("cube")[0], wc.shape("cube")[1] + 1)], ValueError, "mesh 1: triangle .* out of range"),
+    ([cube_at(0), (wc.shape("cube")[0], np.zeros((0, 3), int))], ValueError, "mesh 1: the mesh has no triangles"),
+    ([cube_at(0), (wc.shape("cube")[0], wc.shape("cube")[1].astype(float))], ValueError, "mesh 1: .*integer"),
+]
+
+
+@pytest.mark.parametrize("meshes, err, match", BAD_MESHES)
+def test_bad_meshes(meshes, err, match):
+    with pytest.raises(err, match=match):
+        wc.collide(meshes)
+
+
+def test_bad_transforms():
+    meshes = [cube_at(0), cube_at(1)]
+    eye = np.tile(np.eye(4), (2, 1, 1))
+    with pytest.raises(ValueError, match="expected shape"):
+        wc.collide(meshes, np.eye(4))
+    bad = eye.copy()
+    bad[1, 0, 3] = np.nan
+    with pytest.raises(ValueError, match="transform 1: contains NaN"):
+        wc.collide(meshes, bad)
+    bad = eye.copy()
+    bad[0, :3, :3] *= 2.0
+    with pytest.raises(ValueError, match="transform 0: not rigid"):
+        wc.collide(meshes, bad)
+    bad = eye.copy()
+    bad[1, 2, 2] = -1.0
+    with pytest.raises(ValueError, match="transform 1: not rigid .*reflection"):
+        wc.collide(meshes, bad)
+    bad = eye.copy()
+    bad[1, 3, 0] = 1.0
+    with pytest.raises(ValueError, match="transform 1: bottom row"):
+        wc.collide(meshes, bad)
+
+
+def test_bad_options():
+    scene = wc.Scene.random(3)
+    with pytest.raises(ValueError, match="broad phase"):
+        wc.CollisionPipeline(scene, broad_phase="octree")
+    with pytest.raises(ValueError, match="narrow_phase"):
+        wc.CollisionPipeline(scene, narrow_phase="gjk")
+    with pytest.raises(ValueError, match="tolerance"):
+        wc.CollisionPipeline(scene, tolerance=-1.0)
+    with pytest.raises(TypeError, match="Scene"):
+        wc.CollisionPipeline("scene")
+    with pytest.raises(ValueError, match="num_objects"):
+        wc.Scene.random(-1)
+    with pytest.raises(ValueError, match="density"):
+        wc.Scene.random(10, density=2.0)
