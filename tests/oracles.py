@@ -35,6 +35,17 @@ def box_pairs_numpy(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     return p[np.lexsort((p[:, 1], p[:, 0]))]
 
 
+def box_pairs_between(lo_a, hi_a, lo_b, hi_b) -> np.ndarray:
+    """``(K, 2)`` index pairs ``(i, j)`` with box ``i`` of set a overlapping box ``j`` of set b."""
+    out = []
+    chunk = max(1, 2_000_000 // max(len(lo_b), 1))
+    for s in range(0, len(lo_a), chunk):
+        ov = np.all((lo_a[s : s + chunk, None] <= hi_b[None]) & (lo_b[None] <= hi_a[s : s + chunk, None]), axis=2)
+        i, j = np.nonzero(ov)
+        out.append(np.stack([i + s, j], axis=1))
+    return np.concatenate(out) if out else np.zeros((0, 2), np.int64)
+
+
 @wp.kernel
 def _tri_tri_f64_kernel(
     va: wp.array2d[wp.vec3d], vb: wp.array2d[wp.vec3d], out: wp.array[wp.int32]
@@ -74,8 +85,15 @@ def triangle_pairs_warp64(meshes, scale: float = 1.0, device="cpu") -> np.ndarra
     upper = np.array([t.reshape(-1, 3).max(0) for t in tris])
     rows, ta, tb = [], [], []
     for a, b in box_pairs_numpy(lower, upper):
-        ia, ib = np.meshgrid(np.arange(len(tris[a])), np.arange(len(tris[b])), indexing="ij")
-        ia, ib = ia.ravel(), ib.ravel()
+        # Triangle pairs whose (exact, closed) boxes overlap: a necessary condition.
+        lo_a, hi_a = tris[a].min(axis=1), tris[a].max(axis=1)
+        lo_b, hi_b = tris[b].min(axis=1), tris[b].max(axis=1)
+        sel_a = np.nonzero(np.all((lo_a <= upper[b]) & (lower[b] <= hi_a), axis=1))[0]
+        sel_b = np.nonzero(np.all((lo_b <= upper[a]) & (lower[a] <= hi_b), axis=1))[0]
+        if len(sel_a) == 0 or len(sel_b) == 0:
+            continue
+        pairs = box_pairs_between(lo_a[sel_a], hi_a[sel_a], lo_b[sel_b], hi_b[sel_b])
+        ia, ib = sel_a[pairs[:, 0]], sel_b[pairs[:, 1]]
         rows.append(np.stack([np.full_like(ia, a), ia, np.full_like(ib, b), ib], 1))
         ta.append(tris[a][ia])
         tb.append(tris[b][ib])

@@ -53,14 +53,14 @@ class InstanceBounds:
         self.lower = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
         self.upper = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
 
-    def launch(self, world_vertex: wp.array, instance_vertex_start: wp.array) -> None:
-        """Computes the boxes from world vertices ``(V,)`` and offsets ``(N + 1,)``."""
+    def launch(self, scene) -> None:
+        """Computes the boxes from ``scene.world_vertex`` and ``scene.instance_vertex_start``."""
         if self.lower.shape[0] == 0:
             return
         wp.launch(
             instance_bounds_kernel,
             dim=self.lower.shape[0],
-            inputs=[world_vertex, instance_vertex_start, self.margin_rel],
+            inputs=[scene.world_vertex, scene.instance_vertex_start, self.margin_rel],
             outputs=[self.lower, self.upper],
             device=self.device,
         )

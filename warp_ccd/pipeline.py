@@ -1,4 +1,4 @@
-"""The frame: bounds -> broad phase -> mid phase -> narrow phase -> result.
+"""The frame: refit (object bounds) -> broad phase -> mid phase -> narrow phase -> result.
 
 :class:`CollisionPipeline` owns one object of each stage and chains their launches on the scene's
 device. Between stages the host reads nothing; at the end of the frame it reads the stages'
@@ -17,13 +17,16 @@ import warp as wp
 from .aabb import InstanceBounds
 from .broad_phase import make_broad_phase
 from .buffers import GrowableBuffer, read_counts
-from .mid_phase import MidPhaseAllPairs
+from .bvh import SceneBVH
+from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .narrow_phase import TOLERANCE, NarrowPhase
 from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
-STAGES = ("bounds", "broad", "mid", "narrow")
+STAGES = ("refit", "broad", "mid", "narrow")
+"""Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
+with the all-pairs mid phase)."""
 
 
 class CollisionResult:
@@ -31,7 +34,7 @@ class CollisionResult:
 
     Attributes:
         num_objects: ``N``.
-        timings: per-stage wall times in ms (``bounds``, ``broad``, ``mid``, ``narrow``,
+        timings: per-stage wall times in ms (``refit``, ``broad``, ``mid``, ``narrow``,
             ``total``) when the pipeline was asked for them, else None.
         device_triangle_pairs: ``(M,)`` ``wp.vec4i`` on the device, unsorted.
         device_colliding: ``(N,)`` int32 flags on the device.
@@ -87,10 +90,12 @@ class CollisionPipeline:
     Args:
         scene: the scene; its world vertices are read at each :meth:`detect`.
         broad_phase: ``"sap"`` (default) or ``"nxn"`` (reference).
-        mid_phase: ``"all_pairs"`` (reference: every triangle pair of each object pair).
+        mid_phase: ``"bvh"`` (default: tree-vs-tree traversal) or ``"all_pairs"`` (reference:
+            every triangle pair of each object pair).
         narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
         tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
         timings: when True, synchronise after each stage and report ms per stage.
+        leaf_size: triangles per tree leaf (``bvh`` mid phase).
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
     """
 
@@ -99,27 +104,32 @@ class CollisionPipeline:
         scene: Scene,
         *,
         broad_phase: str = "sap",
-        mid_phase: str = "all_pairs",
+        mid_phase: str = "bvh",
         narrow_phase: str = "moller",
         tolerance: float = TOLERANCE,
         timings: bool = False,
+        leaf_size: int = 1,
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
         hit_capacity: int | None = None,
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
-        if mid_phase != "all_pairs":
-            raise ValueError(f"mid_phase must be 'all_pairs', got {mid_phase!r}")
+        if mid_phase not in ("bvh", "all_pairs"):
+            raise ValueError(f"mid_phase must be 'bvh' or 'all_pairs', got {mid_phase!r}")
         self.scene = scene
         self.device = scene.device
         n = scene.num_objects
         d = self.device
         self.timings = bool(timings)
-        self.bounds = InstanceBounds(n, device=d, margin_rel=tolerance)
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
-        self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
+        if mid_phase == "bvh":
+            self.bounds = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
+            self.mid = MidPhaseBVH(self.bounds, capacity=candidate_capacity or max(1024, 16 * n), device=d)
+        else:
+            self.bounds = InstanceBounds(n, device=d, margin_rel=tolerance)
+            self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
         self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
                                   capacity=hit_capacity or max(256, 4 * n), device=d)
 
@@ -145,8 +155,8 @@ class CollisionPipeline:
             wp.synchronize_device(self.device)
             t0 = time.perf_counter()
         t = t0
-        self.bounds.launch(scene.world_vertex, scene.instance_vertex_start)
-        t = mark("bounds", t)
+        self.bounds.launch(scene)
+        t = mark("refit", t)
         self.broad.launch(self.bounds.lower, self.bounds.upper, self.pairs)
         t = mark("broad", t)
         self.mid.launch(scene, self.pairs)

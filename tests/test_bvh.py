@@ -1,0 +1,155 @@
+"""Trees: build invariants, refit bounds, traversal completeness, scenes with big meshes."""
+
+import numpy as np
+import pytest
+
+import warp_ccd as wc
+from oracles import triangle_pairs_fcl, triangle_pairs_warp64
+from warp_ccd.bvh import build_tree
+
+
+def tree_invariants(tree, vertices, triangles, leaf_size):
+    m = len(triangles)
+    assert sorted(tree.tri_order.tolist()) == list(range(m))
+    in_leaves = []
+    centroid = vertices[triangles].astype(np.float64).mean(axis=1)
+    for node in range(tree.num_nodes):
+        start, count = tree.node_triangle[node]
+        left, right = tree.node_child[node]
+        if left < 0:
+            assert 1 <= count <= leaf_size
+            in_leaves += tree.tri_order[start : start + count].tolist()
+            continue
+        assert tree.node_parent[left] == node and tree.node_parent[right] == node
+        (s0, c0), (s1, c1) = tree.node_triangle[left], tree.node_triangle[right]
+        assert s0 == start and s1 == start + c0 and c0 + c1 == count
+        assert c0 == count // 2  # median split: balanced
+        a = centroid[tree.tri_order[s0 : s0 + c0]]
+        b = centroid[tree.tri_order[s1 : s1 + c1]]
+        assert any(a[:, k].max() <= b[:, k].min() for k in range(3))  # separated along some axis
+    assert sorted(in_leaves) == list(range(m))  # each triangle in exactly one leaf
+    # breadth-first levels: children on the next level
+    for level in range(tree.depth - 1):
+        for node in range(tree.level_start[level], tree.level_start[level + 1]):
+            left, right = tree.node_child[node]
+            if left >= 0:
+                assert tree.level_start[level + 1] <= left < right < tree.level_start[level + 2]
+    assert tree.depth <= int(np.ceil(np.log2(max(1, m / leaf_size)))) + 1
+
+
+@pytest.mark.parametrize("leaf_size", [1, 3])
+@pytest.mark.parametrize("mesh", ["tetrahedron", "triangle", "dodecahedron", "icosphere3", "random_soup"])
+def test_build_invariants(mesh, leaf_size):
+    if mesh == "random_soup":
+        rng = np.random.default_rng(0)
+        v = rng.normal(size=(999, 3)).astype(np.float32)
+        t = np.arange(999).reshape(-1, 3)
+    else:
+        v, t = wc.shape(mesh)
+    tree_invariants(build_tree(v, t, leaf_size), v, t, leaf_size)
+
+
+def test_build_identical_triangles():
+    v = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    t = np.zeros((17, 3), np.int32) + [0, 1, 2]
+    tree_invariants(build_tree(v, t, 1), v, t, 1)
+
+
+def refit_contains(scene, bvh):
+    """Every node box contains its children's boxes and its triangles."""
+    wv = scene.world_vertex.numpy()
+    lo = bvh.tree.node_lower.numpy()
+    hi = bvh.tree.node_upper.numpy()
+    start = bvh.tree.instance_node_start.numpy()
+    for i in range(scene.num_objects):
+        tr = bvh.trees[scene.instance_shape_np[i]]
+        base = start[i]
+        tri = scene.shape_meshes[scene.instance_shape_np[i]][1]
+        vs = wv[scene.instance_vertex_start_np[i] :]
+        for node in range(tr.num_nodes):
+            left, right = tr.node_child[node]
+            if left >= 0:
+                for c in (left, right):
+                    assert (lo[base + node] <= lo[base + c]).all() and (hi[base + c] <= hi[base + node]).all()
+            else:
+                s, c = tr.node_triangle[node]
+                p = vs[tri[tr.tri_order[s : s + c]].ravel()]
+                assert (lo[base + node] <= p.min(0)).all() and (p.max(0) <= hi[base + node]).all()
+    # roots are the object boxes
+    assert np.array_equal(lo[start[:-1]], bvh.lower.numpy())
+
+
+def mixed_scene(device, n=40, seed=0):
+    return wc.Scene.random(
+        n, seed=seed, shapes=("cube", "icosahedron", "icosphere3", "icosphere4", "tetrahedron"), density=0.08,
+        device=device,
+    )
+
+
+def test_refit_bounds_contain(device):
+    scene = mixed_scene(device, n=12)
+    pipe = wc.CollisionPipeline(scene)
+    for _ in range(2):
+        scene.advance(0.3)
+        pipe.detect()
+        refit_contains(scene, pipe.bounds)
+
+
+def test_candidates_contain_exact_pairs(device):
+    scene = mixed_scene(device, n=40, seed=1)
+    scene.advance(0.2)
+    pipe = wc.CollisionPipeline(scene)
+    res = pipe.detect()
+    cand = pipe.mid.candidates.numpy(res.num_candidates)
+    exact = triangle_pairs_warp64(scene.world_meshes(), scale=20.0, device=device)
+    assert len(exact) > 0
+    assert set(map(tuple, exact)) <= set(map(tuple, cand))
+    ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
+    assert res.num_candidates < ref.num_candidates / 10  # the trees prune
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_mixed_scene_matches_oracles(device, seed):
+    scene = mixed_scene(device, n=60, seed=seed)
+    pipe = wc.CollisionPipeline(scene)
+    for _ in range(2):
+        scene.advance(0.25)
+        res = pipe.detect()
+        meshes = scene.world_meshes()
+        want = triangle_pairs_fcl(meshes)
+        assert len(want) > 0
+        assert np.array_equal(res.triangle_pairs, want)
+        assert np.array_equal(res.triangle_pairs, triangle_pairs_warp64(meshes, scale=20.0, device=device))
+
+
+@pytest.mark.parametrize("leaf_size", [2, 4])
+def test_leaf_size_same_result(device, leaf_size):
+    scene = mixed_scene(device, n=30, seed=4)
+    scene.advance(0.4)
+    ref = wc.CollisionPipeline(scene).detect()
+    got = wc.CollisionPipeline(scene, leaf_size=leaf_size).detect()
+    assert ref.num_triangle_pairs > 0
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+
+
+def test_deforming_twisting_sphere(device):
+    """A pulsating, twisting icosphere among rigid ones: refit alone keeps results exact."""
+    v, t = wc.icosphere(3)
+    others = [(v * 0.6 + np.float32(c), t) for c in ([2.2, 0, 0], [0, -2.0, 0.3], [-1.5, 1.5, 0])]
+    scene = wc.Scene.from_meshes([(v, t), *others], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    rest = np.concatenate([m[0] for m in others])
+    hits = 0
+    for k in range(6):
+        phase = 0.7 * k
+        r = 1.0 + 0.5 * np.sin(phase)
+        ang = 1.5 * v[:, 2:3] * np.sin(phase)  # twist about z, growing with height
+        x = v[:, 0:1] * np.cos(ang) - v[:, 1:2] * np.sin(ang)
+        y = v[:, 0:1] * np.sin(ang) + v[:, 1:2] * np.cos(ang)
+        deformed = np.concatenate([x, y, v[:, 2:3]], axis=1) * r
+        scene.set_world_vertices(np.concatenate([deformed, rest]))
+        res = pipe.detect()
+        want = triangle_pairs_warp64(scene.world_meshes(), scale=10.0, device=device)
+        assert np.array_equal(res.triangle_pairs, want)
+        hits += len(want) > 0
+    assert hits >= 2

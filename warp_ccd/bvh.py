@@ -1,0 +1,301 @@
+"""Bounding-volume trees: built once per shape (median split), refit per instance every frame.
+
+Build (host, numpy, once per shape, vectorised level by level): the root holds all triangles;
+each node with more than ``leaf_size`` triangles is split at the median of its triangles'
+centroids along the longest axis of its bounds (the seed's balanced strategy), so the tree is
+balanced with depth ``ceil(log2(m / leaf_size))``. Triangles are presorted by centroid along each
+axis once; splitting a level is then a stable partition of the three sorted lists (O(m) per
+level, O(m log m) in all; about 0.5 s for a 1M-triangle shape).
+
+Stored flat, topology shared by every instance of a shape:
+
+* nodes in breadth-first order (a node's children are on the next level), ``shape_level_start``
+  gives each level's first node, so refit can run level by level from the deepest up;
+* ``node_child`` ``(left, right)`` or ``(-1, -1)`` for a leaf, ``node_parent`` (-1 at the root);
+* ``node_triangle`` ``(start, count)``: the node's triangles are ``tri_order[start:start + count]``
+  (every subtree is one contiguous range).
+
+Refit (device, every frame): per instance, node bounds ``node_lower`` / ``node_upper`` at
+``instance_node_start[i] + node``. One launch per level, deepest first, each covering all
+instances of all shapes; leaf boxes come from the world vertices of their triangles, padded by the
+narrow phase's tolerance times their longest edge; inner boxes are the union of their children.
+The root's box is the object's AABB: no separate bounds pass. Deforming meshes need nothing else:
+the caller writes world vertices, refit does the rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .scene import MeshView, mesh_triangle
+
+__all__ = ["SceneBVH", "ShapeTree", "build_tree", "refit_level_kernel"]
+
+
+class ShapeTree:
+    """The tree of one shape (host arrays).
+
+    Attributes:
+        node_child: ``(K, 2)`` int32 children (local node ids), ``-1`` for leaves.
+        node_parent: ``(K,)`` int32 parent, ``-1`` at the root.
+        node_triangle: ``(K, 2)`` int32 ``(start, count)`` into ``tri_order``.
+        tri_order: ``(m,)`` int32 triangle ids, each subtree contiguous.
+        level_start: ``(D + 1,)`` int32 first node of each level (breadth-first order).
+        depth: ``D``, the number of levels.
+    """
+
+    def __init__(self, node_child, node_parent, node_triangle, tri_order, level_start):
+        self.node_child = node_child
+        self.node_parent = node_parent
+        self.node_triangle = node_triangle
+        self.tri_order = tri_order
+        self.level_start = level_start
+        self.depth = len(level_start) - 1
+
+    @property
+    def num_nodes(self) -> int:
+        return len(self.node_child)
+
+
+def build_tree(vertices: np.ndarray, triangles: np.ndarray, leaf_size: int = 1) -> ShapeTree:
+    """Median-split tree of one triangle mesh.
+
+    Args:
+        vertices: ``(n, 3)`` positions.
+        triangles: ``(m, 3)`` vertex indices, ``m >= 1``.
+        leaf_size: largest number of triangles in a leaf.
+
+    Returns:
+        The :class:`ShapeTree`.
+    """
+    v = np.asarray(vertices, np.float64)
+    tri = v[np.asarray(triangles)]
+    m = tri.shape[0]
+    centroid = np.ascontiguousarray(tri.mean(axis=1).T)  # (3, m): one contiguous row per axis
+    # One list per axis, sorted by centroid on that axis; all three grouped by node, same blocks.
+    lists = [np.argsort(centroid[a], kind="stable").astype(np.int32) for a in range(3)]
+
+    child, parent, tri_range, level_start = [], [], [], [0]
+    # Nodes of the current level: start, count (their block in the lists), parent id.
+    cur_start = np.array([0], np.int32)
+    cur_count = np.array([m], np.int32)
+    cur_parent = np.array([-1], np.int64)
+    next_id = 1
+    while len(cur_start):
+        k = len(cur_start)
+        base = next_id - k  # id of the first node of this level
+        split = cur_count > leaf_size
+        # Children ids, breadth-first: the split nodes' children in order.
+        nsplit = int(split.sum())
+        first_child = np.full(k, -1, np.int64)
+        first_child[split] = next_id + 2 * np.arange(nsplit)
+        node_child = np.stack([first_child, np.where(split, first_child + 1, -1)], axis=1)
+        child.append(node_child)
+        parent.append(cur_parent)
+        tri_range.append(np.stack([cur_start, cur_count], axis=1))
+        next_id += 2 * nsplit
+        level_start.append(next_id - 2 * nsplit)
+        if nsplit == 0:
+            break
+        # Items of the split nodes in "item space": their blocks back to back.
+        sp_start = cur_start[split]
+        sp_count = cur_count[split]
+        sp_left = sp_count // 2
+        item_first = np.cumsum(sp_count) - sp_count
+        node_of = np.repeat(np.arange(nsplit, dtype=np.int32), sp_count)
+        rank = np.arange(int(sp_count.sum()), dtype=np.int32) - item_first[node_of]  # rank within the node block
+        start_of = sp_start[node_of]
+        pos = start_of + rank  # list position of each item
+        left_of = sp_left[node_of]
+        # Longest axis of the bounds of each node's centroids: the first and last of its block in
+        # each sorted list (O(nodes), where the bounds of the triangles themselves cost O(m)).
+        last = sp_start + sp_count - 1
+        extent = np.stack([centroid[a][lists[a][last]] - centroid[a][lists[a][sp_start]] for a in range(3)], axis=1)
+        node_axis = np.argmax(extent, axis=1)
+        axis_of = node_axis[node_of]
+        # Side of each triangle: right when its rank along its node's axis reaches the median.
+        right_side = rank >= left_of
+        side = np.zeros(m, np.bool_)
+        for a in range(3):
+            mine = axis_of == a
+            side[lists[a][pos[mine]]] = right_side[mine]
+        # Stable partition of each sorted list within each split node: left block, then right.
+        for a in range(3):
+            seg = lists[a][pos]
+            right = side[seg]
+            before = np.cumsum(right, dtype=np.int32)
+            before -= right
+            c1 = before - before[item_first][node_of]  # right items before this one in its node
+            lists[a][np.where(right, start_of + left_of + c1, pos - c1)] = seg
+        # Next level: children of split nodes.
+        pid = (base + np.arange(k))[split]
+        cur_start = np.stack([sp_start, sp_start + sp_left], axis=1).reshape(-1)
+        cur_count = np.stack([sp_left, sp_count - sp_left], axis=1).reshape(-1)
+        cur_parent = np.repeat(pid, 2)
+    node_child = np.concatenate(child).astype(np.int32)
+    node_parent = np.concatenate(parent).astype(np.int32)
+    node_triangle = np.concatenate(tri_range).astype(np.int32)
+    return ShapeTree(node_child, node_parent, node_triangle, lists[0].astype(np.int32), np.asarray(level_start, np.int32))
+
+
+@wp.struct
+class TreeView:
+    """What the refit and traversal kernels need: topology per shape, bounds per instance."""
+
+    shape_node_start: wp.array[wp.int32]
+    shape_tri_order_start: wp.array[wp.int32]
+    node_child: wp.array[wp.vec2i]
+    node_triangle: wp.array[wp.vec2i]
+    tri_order: wp.array[wp.int32]
+    instance_node_start: wp.array[wp.int32]
+    node_lower: wp.array[wp.vec3]
+    node_upper: wp.array[wp.vec3]
+
+
+@wp.kernel
+def refit_level_kernel(
+    mesh: MeshView,
+    tree: TreeView,
+    block_start: wp.array[wp.int32],
+    level_first: wp.array[wp.int32],
+    level_count: wp.array[wp.int32],
+    shape_instance: wp.array[wp.int32],
+    shape_instance_start: wp.array[wp.int32],
+    margin_rel: float,
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per (instance, node of this level): leaf box from triangles, else children union.
+
+    Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
+    (its instances times its nodes on this level).
+    """
+    t = wp.tid()
+    lo_s = int(0)
+    hi_s = block_start.shape[0] - 1
+    while lo_s + 1 < hi_s:  # last s with block_start[s] <= t
+        mid = (lo_s + hi_s) / 2
+        if block_start[mid] <= t:
+            lo_s = mid
+        else:
+            hi_s = mid
+    s = lo_s
+    local = t - block_start[s]
+    cnt = level_count[s]
+    inst = shape_instance[shape_instance_start[s] + local / cnt]
+    node = level_first[s] + local % cnt
+    shape_node = tree.shape_node_start[s] + node
+    slot = tree.instance_node_start[inst] + node
+    child = tree.node_child[shape_node]
+    lo = wp.vec3(0.0)
+    hi = wp.vec3(0.0)
+    if child[0] < 0:
+        rng = tree.node_triangle[shape_node]
+        base = tree.shape_tri_order_start[s]
+        lo = wp.vec3(1.0e30)
+        hi = wp.vec3(-1.0e30)
+        for k in range(rng[0], rng[0] + rng[1]):
+            a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
+            edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+            pad = wp.vec3(margin_rel * edge)
+            lo = wp.min(lo, wp.min(wp.min(a, b), c) - pad)
+            hi = wp.max(hi, wp.max(wp.max(a, b), c) + pad)
+    else:
+        base_slot = tree.instance_node_start[inst]
+        lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
+        hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
+    tree.node_lower[slot] = lo
+    tree.node_upper[slot] = hi
+    if node == 0:
+        instance_lower[inst] = lo
+        instance_upper[inst] = hi
+
+
+class SceneBVH:
+    """Trees of all shapes of a scene, and per-instance node bounds refit every frame.
+
+    Args:
+        scene: the :class:`~warp_ccd.scene.Scene`.
+        leaf_size: largest number of triangles per leaf.
+        margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
+            tolerance, so that tree culling never rejects a pair the narrow phase accepts).
+
+    Attributes:
+        lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`launch`.
+        tree: the :class:`TreeView` struct for kernels.
+        trees: per-shape :class:`ShapeTree` (host).
+    """
+
+    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0):
+        if leaf_size < 1:
+            raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
+        self.device = scene.device
+        self.margin_rel = float(margin_rel)
+        self.leaf_size = int(leaf_size)
+        d = self.device
+        self.trees = [build_tree(v, t, leaf_size) for v, t in scene.shape_meshes]
+        num_shapes = len(self.trees)
+        n = scene.num_objects
+        nodes = np.array([tr.num_nodes for tr in self.trees], np.int64)
+        self.shape_node_start_np = np.concatenate([[0], np.cumsum(nodes)]).astype(np.int32)
+        inst_nodes = nodes[scene.instance_shape_np] if n else np.zeros(0, np.int64)
+        inode = np.concatenate([[0], np.cumsum(inst_nodes)])
+        if inode[-1] >= 2**31:
+            raise ValueError(f"scene too large for the BVH: {inode[-1]} tree nodes (limit 2**31 - 1)")
+        self.num_node_slots = int(inode[-1])
+        self.max_depth = max((tr.depth for tr in self.trees), default=0)
+
+        # Instances grouped by shape, and per level the work blocks of each shape.
+        order = np.argsort(scene.instance_shape_np, kind="stable").astype(np.int32)
+        per_shape = np.bincount(scene.instance_shape_np, minlength=num_shapes) if n else np.zeros(num_shapes, np.int64)
+        self.shape_instance = wp.array(order, dtype=wp.int32, device=d)
+        self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32), device=d)
+        self.levels = []  # (items, block_start, level_first, level_count) per level
+        for level in range(self.max_depth):
+            first = np.array([tr.level_start[level] if level < tr.depth else 0 for tr in self.trees], np.int64)
+            count = np.array(
+                [tr.level_start[level + 1] - tr.level_start[level] if level < tr.depth else 0 for tr in self.trees],
+                np.int64,
+            )
+            items = count * per_shape
+            block = np.concatenate([[0], np.cumsum(items)])
+            if block[-1] >= 2**31:
+                raise ValueError("scene too large for the BVH refit (2**31 work items on one level)")
+            self.levels.append((
+                int(block[-1]),
+                wp.array(block.astype(np.int32), device=d),
+                wp.array(first.astype(np.int32), device=d),
+                wp.array(np.maximum(count, 1).astype(np.int32), device=d),
+            ))
+
+        tv = TreeView()
+        tv.shape_node_start = wp.array(self.shape_node_start_np, dtype=wp.int32, device=d)
+        tri_len = np.array([len(tr.tri_order) for tr in self.trees], np.int64)
+        tv.shape_tri_order_start = wp.array(np.concatenate([[0], np.cumsum(tri_len)]).astype(np.int32), device=d)
+        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape, np.int32))
+        tv.node_child = wp.array(cat([tr.node_child for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
+        tv.node_triangle = wp.array(cat([tr.node_triangle for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
+        tv.tri_order = wp.array(cat([tr.tri_order for tr in self.trees], (0,)), dtype=wp.int32, device=d)
+        tv.instance_node_start = wp.array(inode.astype(np.int32), dtype=wp.int32, device=d)
+        tv.node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
+        tv.node_upper = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
+        self.tree = tv
+        self.lower = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.upper = wp.zeros(n, dtype=wp.vec3, device=d)
+
+    def launch(self, scene) -> None:
+        """Refits all node bounds from ``scene.world_vertex``, deepest level first."""
+        view = scene.mesh_view()
+        for items, block, first, count in reversed(self.levels):
+            if items == 0:
+                continue
+            wp.launch(
+                refit_level_kernel,
+                dim=items,
+                inputs=[view, self.tree, block, first, count, self.shape_instance, self.shape_instance_start,
+                        self.margin_rel],
+                outputs=[self.lower, self.upper],
+                device=self.device,
+            )
