@@ -19,7 +19,7 @@ from .broad_phase import make_broad_phase
 from .buffers import GrowableBuffer, read_counts
 from .bvh import SceneBVH
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .narrow_phase import TOLERANCE, NarrowPhase
+from .narrow_phase import TOLERANCE, NarrowPhase, containment_kernel
 from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
@@ -41,10 +41,12 @@ class CollisionResult:
     """
 
     def __init__(self, num_objects: int, device_triangle_pairs: wp.array, device_colliding: wp.array,
-                 timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0):
+                 timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
+                 device_contained: wp.array | None = None):
         self.num_objects = num_objects
         self.device_triangle_pairs = device_triangle_pairs
         self.device_colliding = device_colliding
+        self.device_contained = device_contained
         self.timings = timings
         self.num_candidates = num_candidates
         self.num_broad_pairs = num_broad_pairs
@@ -75,9 +77,25 @@ class CollisionResult:
         return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
 
     @property
+    def containment_pairs(self) -> np.ndarray | None:
+        """``(C, 2)`` int32 rows ``(inner, outer)``: ``inner`` lies wholly inside ``outer`` with no
+        surface intersection; sorted. None unless the pipeline was built with ``containment=True``."""
+        if self.device_contained is None:
+            return None
+        c = self.device_contained.numpy().reshape(-1, 2).astype(np.int32)
+        if len(c) and len(self.triangle_pairs):
+            surface = set(map(tuple, self.object_pairs))
+            c = c[[(min(a, b), max(a, b)) not in surface for a, b in c]].reshape(-1, 2)
+        return c[np.lexsort((c[:, 1], c[:, 0]))]
+
+    @property
     def colliding(self) -> np.ndarray:
-        """``(N,)`` bool: the object's surface intersects another object's."""
-        return self.device_colliding.numpy().astype(bool)
+        """``(N,)`` bool: the object's surface intersects another object's (or, with containment
+        asked for, it contains or lies inside another)."""
+        flags = self.device_colliding.numpy().astype(bool)
+        if self.device_contained is not None:
+            flags[self.containment_pairs.ravel()] = True
+        return flags
 
     def __repr__(self) -> str:
         return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}, "
@@ -96,6 +114,8 @@ class CollisionPipeline:
         tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
         timings: when True, synchronise after each stage and report ms per stage.
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
+        containment: also report objects wholly inside another (winding number of one vertex,
+            for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
     """
 
@@ -109,6 +129,7 @@ class CollisionPipeline:
         tolerance: float = TOLERANCE,
         timings: bool = False,
         leaf_size: int = 1,
+        containment: bool = False,
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
         hit_capacity: int | None = None,
@@ -132,9 +153,11 @@ class CollisionPipeline:
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
         self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
                                   capacity=hit_capacity or max(256, 4 * n), device=d)
+        self.contained = GrowableBuffer(wp.vec2i, max(16, n // 8), d, "contained pairs") if containment else None
 
     def _buffers(self) -> list[GrowableBuffer]:
-        return [self.pairs, *getattr(self.broad, "counters", []), self.mid.candidates, self.narrow.hits]
+        extra = [self.contained] if self.contained is not None else []
+        return [self.pairs, *getattr(self.broad, "counters", []), *extra, self.mid.candidates, self.narrow.hits]
 
     def _run_frame(self) -> dict | None:
         scene = self.scene
@@ -162,6 +185,15 @@ class CollisionPipeline:
         self.mid.launch(scene, self.pairs)
         t = mark("mid", t)
         self.narrow.launch(scene.mesh_view(), self.mid.candidates)
+        if self.contained is not None:
+            wp.launch(
+                containment_kernel,
+                dim=self.pairs.capacity,
+                inputs=[scene.mesh_view(), scene.instance_triangle_start, self.bounds.lower, self.bounds.upper,
+                        self.pairs.data, self.pairs.count, self.pairs.capacity, self.contained.capacity],
+                outputs=[self.contained.data, self.contained.count],
+                device=self.device,
+            )
         mark("narrow", t)
         if times is not None:
             times["total"] = sum(times[s] for s in STAGES)
@@ -176,8 +208,10 @@ class CollisionPipeline:
         n = self.scene.num_objects
         d = self.device
         if n < 2:
+            empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.contained is not None else None
             return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
-                                   {s: 0.0 for s in (*STAGES, "total")} if self.timings else None)
+                                   {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
+                                   device_contained=empty)
         buffers = self._buffers()
         while True:
             times = self._run_frame()
@@ -186,6 +220,10 @@ class CollisionPipeline:
             if not any(grew):
                 break
         num_hits = counts[-1]
+        contained = None
+        if self.contained is not None:
+            nc = counts[len(buffers) - 3]
+            contained = wp.clone(self.contained.data[:nc]) if nc else wp.zeros(0, dtype=wp.vec2i, device=d)
         return CollisionResult(
             n,
             wp.clone(self.narrow.hits.data[:num_hits]) if num_hits else wp.zeros(0, dtype=wp.vec4i, device=d),
@@ -193,6 +231,7 @@ class CollisionPipeline:
             times,
             num_candidates=counts[-2],
             num_broad_pairs=counts[0],
+            device_contained=contained,
         )
 
 
