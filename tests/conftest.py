@@ -8,6 +8,7 @@ import pytest
 import warp as wp
 
 wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING
 wp.init()
 
 sys.path.insert(0, os.path.dirname(__file__))

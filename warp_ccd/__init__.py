@@ -17,13 +17,16 @@ from .motion import EllipseMotion
 from .narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
 from .pipeline import CollisionPipeline, CollisionResult, collide
 from .scene import Scene
+from .preview import render_frame, save_preview
 from .shapes import SHAPES, icosphere, shape, validate_mesh
+from .usd import UsdAnimationWriter
 
 __version__ = "0.1.0"
 
 __all__ = [
     "SHAPES",
     "TOLERANCE",
+    "UsdAnimationWriter",
     "BroadPhaseNxN",
     "BroadPhaseSAP",
     "CollisionPipeline",
@@ -38,6 +41,8 @@ __all__ = [
     "build_tree",
     "collide",
     "icosphere",
+    "render_frame",
+    "save_preview",
     "shape",
     "tri_tri_edge_face",
     "tri_tri_moller",

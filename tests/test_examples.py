@@ -1,0 +1,101 @@
+"""Every example runs with one frame (and few objects), in process on each device and as a script."""
+
+import importlib.util
+import os
+import subprocess
+import sys
+
+import pytest
+import warp as wp
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLES = os.path.join(ROOT, "examples")
+
+
+def load_example(name):
+    spec = importlib.util.spec_from_file_location(name, os.path.join(EXAMPLES, f"{name}.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_script(name, *args, cwd):
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, os.path.join(EXAMPLES, f"{name}.py"), *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_example_collision_one_frame(tmp_path, device):
+    pxr = pytest.importorskip("pxr")
+    module = load_example("example_collision")
+    path = tmp_path / "collision.usda"
+    with wp.ScopedDevice(device):
+        example = module.Example(stage_path=str(path), num_objects=20)
+        example.step()
+        example.render()
+        example.close()
+    assert example.result.colliding.shape == (20,)
+    stage = pxr.Usd.Stage.Open(str(path))
+    positions = pxr.UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Objects")).GetPositionsAttr()
+    assert positions.GetNumTimeSamples() == 1
+
+
+def test_example_collision_without_stage(device):
+    module = load_example("example_collision")
+    with wp.ScopedDevice(device):
+        example = module.Example(stage_path=None, num_objects=10)
+        example.step()
+        example.render()
+        example.close()
+    assert example.writer is None
+
+
+def test_example_user_meshes_one_frame(tmp_path, device):
+    pxr = pytest.importorskip("pxr")
+    module = load_example("example_user_meshes")
+    path = tmp_path / "user.usda"
+    with wp.ScopedDevice(device):
+        example = module.Example(stage_path=str(path))
+        example.step()
+        example.render()
+        example.close()
+    assert example.rigid.num_objects == 5 and example.deforming.deforming
+    rigid = pxr.Usd.Stage.Open(str(path))
+    assert rigid.GetPrimAtPath("/World/Objects").GetTypeName() == "PointInstancer"
+    deforming = pxr.Usd.Stage.Open(str(tmp_path / "user_deforming.usda"))
+    assert len(deforming.GetPrimAtPath("/World/Objects").GetChildren()) == 7
+
+
+def test_example_user_meshes_collide_over_time():
+    # Both scenes are built to collide part of the time: the rigid one at its first frames, the
+    # pulsating sphere at the top of its first pulse (frame 30, t = 0.5 s).
+    module = load_example("example_user_meshes")
+    with wp.ScopedDevice("cpu"):
+        example = module.Example(stage_path=None)
+        rigid, deforming = set(), set()
+        for _ in range(30):
+            example.step()
+            rigid.add(bool(example.rigid_result.colliding.any()))
+            deforming.add(bool(example.deforming_result.colliding.any()))
+    assert True in rigid
+    assert deforming == {True, False}
+
+
+@pytest.mark.parametrize(
+    "name, args, files",
+    [
+        ("example_collision", ["--num-objects", "10"], ["example_collision.usd"]),
+        ("example_user_meshes", [], ["example_user_meshes.usd", "example_user_meshes_deforming.usd"]),
+    ],
+)
+def test_example_scripts_run_one_frame(tmp_path, name, args, files):
+    proc = run_script(name, "--device", "cpu", "--num-frames", "1", *args, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(files)  # default stage path(s)
+
+
+def test_example_script_stage_path_none(tmp_path):
+    proc = run_script("example_collision", "--device", "cpu", "--num-frames", "1", "--num-objects", "5",
+                      "--stage-path", "None", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,7 @@
+"""``python -m warp_ccd``: the ``warp-ccd`` command (see :mod:`warp_ccd.cli`)."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

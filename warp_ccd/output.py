@@ -1,0 +1,139 @@
+"""Output files: checking a destination early, and replacing it in one step.
+
+Every file the library writes (USD stages, preview images) goes through here:
+
+* :func:`check_output_path` checks a destination when the writer is created, before any
+  simulation runs: a known extension, an existing folder, and a real probe that a file can be
+  created there (permission bits alone say little, e.g. for root or on read-only mounts).
+* :class:`PendingFile` is written as a hidden temporary file in the destination's folder and
+  renamed over the destination only when complete (``os.replace``, atomic on one file system), so
+  an interrupted run never leaves a partial file at the destination, and a file already there
+  stays as it was until the new one is whole.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import weakref
+
+__all__ = ["PendingFile", "check_output_path"]
+
+
+def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str, str]:
+    """Checks that a file of one of ``extensions`` can be written at ``path``, without writing it.
+
+    Args:
+        path: destination (str or path-like).
+        extensions: accepted lower-case extensions with their dot, e.g. ``(".png", ".gif")``.
+        kind: what the file is, for messages (``"USD"``, ``"preview"``).
+
+    Returns:
+        ``(absolute path, lower-case extension)``.
+
+    Raises:
+        ValueError: one line naming the path and the problem: an unknown extension, a missing
+            folder, a folder where the file should be, a read-only file, or a folder in which no
+            file can be created.
+    """
+    try:
+        text = os.fsdecode(os.fspath(path))
+    except TypeError:
+        raise ValueError(f"{kind} path: expected a file path, got {type(path).__name__}") from None
+    if not text:
+        raise ValueError(f"{kind} path: empty")
+    ext = os.path.splitext(text)[1].lower()
+    if ext not in extensions:
+        raise ValueError(
+            f"cannot write {text}: unknown {kind} extension {ext or '(none)'!r} (use {', '.join(extensions)})"
+        )
+    full = os.path.abspath(text)
+    folder = os.path.dirname(full)
+    if not os.path.isdir(folder):
+        raise ValueError(f"cannot write {text}: folder {folder} does not exist")
+    if os.path.isdir(full):
+        raise ValueError(f"cannot write {text}: it is a folder")
+    if os.path.exists(full) and not os.access(full, os.W_OK):
+        raise ValueError(f"cannot write {text}: the file exists and is read-only")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".warp_ccd-probe-", dir=folder)
+    except OSError as exc:
+        raise ValueError(f"cannot write {text}: cannot create files in {folder} ({exc.strerror or exc})") from None
+    os.close(fd)
+    os.remove(probe)
+    return full, ext
+
+
+def _remove_quietly(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+
+
+class PendingFile:
+    """A hidden temporary file beside ``path`` that becomes ``path`` on :meth:`commit`.
+
+    The temporary file keeps the destination's extension (file-format plugins pick the format
+    by extension). It is removed by :meth:`discard`, or when this object is garbage collected or
+    the interpreter exits without a commit.
+
+    Args:
+        path: absolute destination path (checked with :func:`check_output_path`).
+
+    Attributes:
+        path: the destination.
+        temp_path: where to write until :meth:`commit`.
+
+    Raises:
+        ValueError: the temporary file cannot be created.
+    """
+
+    def __init__(self, path: str):
+        self.path = path
+        folder, name = os.path.split(path)
+        ext = os.path.splitext(name)[1]
+        try:
+            fd, self.temp_path = tempfile.mkstemp(prefix=f".{name}.", suffix=f".partial{ext}", dir=folder)
+        except OSError as exc:
+            raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+        os.close(fd)
+        self._cleanup = weakref.finalize(self, _remove_quietly, self.temp_path)
+        self.done = False
+
+    def commit(self) -> str:
+        """Renames the temporary file to the destination, with ordinary permission bits.
+
+        The new file gets the permission bits of the file it replaces, or ``0o666 & ~umask``
+        (``mkstemp`` creates ``0o600``).
+
+        Returns:
+            The destination path.
+
+        Raises:
+            ValueError: the rename failed (the temporary file is removed).
+        """
+        try:
+            os.chmod(self.temp_path, _new_file_mode(self.path))
+            os.replace(self.temp_path, self.path)
+        except OSError as exc:
+            self.discard()
+            raise ValueError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._cleanup.detach()
+        self.done = True
+        return self.path
+
+    def discard(self) -> None:
+        """Removes the temporary file; the destination is left as it was."""
+        self._cleanup()
+        self.done = True
+
+
+def _new_file_mode(path: str) -> int:
+    """Permission bits of the file at ``path`` if there is one, else ``0o666 & ~umask``."""
+    try:
+        return os.stat(path).st_mode & 0o777
+    except OSError:
+        mask = os.umask(0)
+        os.umask(mask)
+        return 0o666 & ~mask
