@@ -10,7 +10,19 @@ from __future__ import annotations
 
 import warp as wp
 
-__all__ = ["InstanceBounds", "instance_bounds_kernel"]
+__all__ = ["InstanceBounds", "instance_bounds_kernel", "vertex_bounds"]
+
+
+@wp.func
+def vertex_bounds(world_vertex: wp.array[wp.vec3], start: int, end: int):
+    """Exact ``(lower, upper)`` of ``world_vertex[start:end]`` (``end > start``)."""
+    lo = world_vertex[start]
+    hi = lo
+    for v in range(start + 1, end):
+        p = world_vertex[v]
+        lo = wp.min(lo, p)
+        hi = wp.max(hi, p)
+    return lo, hi
 
 
 @wp.kernel
@@ -24,14 +36,7 @@ def instance_bounds_kernel(
 ):
     """One thread per object: padded AABB of its world vertices."""
     i = wp.tid()
-    start = instance_vertex_start[i]
-    end = instance_vertex_start[i + 1]
-    lo = world_vertex[start]
-    hi = lo
-    for v in range(start + 1, end):
-        p = world_vertex[v]
-        lo = wp.min(lo, p)
-        hi = wp.max(hi, p)
+    lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
     pad = margin_rel * wp.length(hi - lo)
     m = wp.vec3(pad, pad, pad)
     instance_lower[i] = lo - m

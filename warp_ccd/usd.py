@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .aabb import vertex_bounds
 from .output import PendingFile, check_output_path
 
 __all__ = [
@@ -111,14 +112,7 @@ def usd_box_polyline_kernel(
     ``box_path_corner`` holds 16 corner numbers ``4*x + 2*y + z``; ``box_point`` has ``16 * N`` entries.
     """
     i = wp.tid()
-    start = instance_vertex_start[i]
-    end = instance_vertex_start[i + 1]
-    lo = world_vertex[start]
-    hi = lo
-    for v in range(start + 1, end):
-        p = world_vertex[v]
-        lo = wp.min(lo, p)
-        hi = wp.max(hi, p)
+    lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
     bounds_lower[i] = lo
     bounds_upper[i] = hi
     for k in range(16):
