@@ -172,3 +172,66 @@ def test_triangle_test_properties(device, a, b, perm, seed, method):
     area = min(np.linalg.norm(np.cross(x[0, 1] - x[0, 0], x[0, 2] - x[0, 0])) for x in (ta, tb))
     if area > 1e-3:
         assert intersect_tri_tri_f64(ta * 10, tb * 10, device=device)[0] == base
+
+
+# ---------------------------------------------------------------------------------------------
+# Precision
+
+
+def test_float64_translation_invariance(device):
+    """At float64 the result is unchanged when the whole scene moves 1e5 (float32 cannot do it)."""
+    scene = wc.Scene.random(300, seed=21, device=device)
+    scene.advance(0.4)
+    meshes = [(v.astype(np.float64), t) for v, t in scene.world_meshes()]
+    ref = wc.collide(meshes, device=device, precision="float64")
+    assert ref.num_triangle_pairs > 0
+    assert np.array_equal(ref.triangle_pairs, wc.collide(meshes, device=device).triangle_pairs)
+    for offset in ([1e5, -1e5, 1e5], [3e7, 0, -2e7]):
+        far = [(v + np.array(offset), t) for v, t in meshes]
+        got = wc.collide(far, device=device, precision="float64")
+        assert np.array_equal(got.triangle_pairs, ref.triangle_pairs), offset
+
+
+def test_float64_transforms_far_away(device):
+    """Rigid transforms with large translations, float64 scene: same pairs as near the origin."""
+    meshes, transforms = crowded_cubes(n=40, seed=3)
+    transforms[:, :3, 3] *= 40.0  # spread them out: some pairs, not all
+    near = wc.collide(meshes, transforms, device=device, precision="float64")
+    far_t = transforms.copy()
+    far_t[:, :3, 3] += [2e5, -1e5, 7e4]
+    far = wc.collide(meshes, far_t, device=device, precision="float64")
+    assert 0 < len(near.object_pairs) < 40 * 39 // 2
+    assert np.array_equal(far.triangle_pairs, near.triangle_pairs)
+
+
+def test_float64_moving_scene_matches_fcl(device):
+    from oracles import triangle_pairs_fcl
+
+    scene = wc.Scene.random(200, seed=8, device=device, precision="float64")
+    pipe = wc.CollisionPipeline(scene, containment=True)
+    scene.advance(0.25)
+    res = pipe.detect()
+    assert scene.world_vertex.dtype == wp.vec3d
+    assert np.array_equal(res.triangle_pairs, triangle_pairs_fcl(scene.world_meshes()))
+
+
+@pytest.mark.parametrize("method", ["moller", "edge_face"])
+def test_float64_crafted_cases_far(device, method):
+    from test_narrow_phase import crafted
+
+    from warp_ccd.narrow_phase import NARROW_METHODS, NARROW_TYPES
+
+    ta, tb, expect = crafted(offset=(1e8, -3e8, 2e8), scale=1.0)
+    out = wp.zeros(len(ta), dtype=wp.int32, device=device)
+    wp.launch(NARROW_TYPES["float64"].tri_tri_batch_kernel, dim=len(ta),
+              inputs=[wp.array(ta, dtype=wp.vec3d, device=device), wp.array(tb, dtype=wp.vec3d, device=device),
+                      NARROW_METHODS[method], wp.float64(1e-5)], outputs=[out], device=device)
+    assert np.array_equal(out.numpy().astype(bool), expect)
+
+
+def test_precision_validation():
+    with pytest.raises(ValueError, match="precision"):
+        wc.Scene.random(3, precision="float16")
+    scene = wc.Scene.random(3, precision="float64")
+    with pytest.raises(ValueError, match="wp.transformd|transformd"):
+        scene.set_poses(wp.zeros(3, dtype=wp.transform, device=scene.device))

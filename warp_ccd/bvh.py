@@ -23,12 +23,12 @@ The root's box is the object's AABB: no separate bounds pass. Deforming meshes n
 the caller writes world vertices, refit does the rest.
 """
 
-from __future__ import annotations
 
 import numpy as np
 import warp as wp
 
-from .scene import MeshView, mesh_triangle
+from .aabb import make_box_rounding
+from .scene import SCENE_TYPES
 
 __all__ = ["SceneBVH", "ShapeTree", "build_tree", "refit_level_kernel"]
 
@@ -153,64 +153,79 @@ class TreeView:
     node_upper: wp.array[wp.vec3]
 
 
-@wp.kernel
-def refit_level_kernel(
-    mesh: MeshView,
-    tree: TreeView,
-    block_start: wp.array[wp.int32],
-    level_first: wp.array[wp.int32],
-    level_count: wp.array[wp.int32],
-    shape_instance: wp.array[wp.int32],
-    shape_instance_start: wp.array[wp.int32],
-    margin_rel: float,
-    # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
-):
-    """One thread per (instance, node of this level): leaf box from triangles, else children union.
+def _make_refit_kernel(types):
+    S = types.scalar
+    V3 = types.vec3
+    View = types.MeshView
+    mesh_triangle = types.mesh_triangle
+    lower32, upper32 = make_box_rounding(S, V3)
 
-    Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
-    (its instances times its nodes on this level).
-    """
-    t = wp.tid()
-    lo_s = int(0)
-    hi_s = block_start.shape[0] - 1
-    while lo_s + 1 < hi_s:  # last s with block_start[s] <= t
-        mid = (lo_s + hi_s) / 2
-        if block_start[mid] <= t:
-            lo_s = mid
+    @wp.kernel
+    def refit_level_kernel(
+        mesh: View,
+        tree: TreeView,
+        block_start: wp.array[wp.int32],
+        level_first: wp.array[wp.int32],
+        level_count: wp.array[wp.int32],
+        shape_instance: wp.array[wp.int32],
+        shape_instance_start: wp.array[wp.int32],
+        margin_rel: S,
+        # Outputs
+        instance_lower: wp.array[wp.vec3],
+        instance_upper: wp.array[wp.vec3],
+    ):
+        """One thread per (instance, node of this level): leaf box from triangles, else children union.
+
+        Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
+        (its instances times its nodes on this level).
+        """
+        t = wp.tid()
+        lo_s = int(0)
+        hi_s = block_start.shape[0] - 1
+        while lo_s + 1 < hi_s:  # last s with block_start[s] <= t
+            mid = (lo_s + hi_s) / 2
+            if block_start[mid] <= t:
+                lo_s = mid
+            else:
+                hi_s = mid
+        s = lo_s
+        local = t - block_start[s]
+        cnt = level_count[s]
+        inst = shape_instance[shape_instance_start[s] + local / cnt]
+        node = level_first[s] + local % cnt
+        shape_node = tree.shape_node_start[s] + node
+        slot = tree.instance_node_start[inst] + node
+        child = tree.node_child[shape_node]
+        lo = wp.vec3(0.0)
+        hi = wp.vec3(0.0)
+        if child[0] < 0:
+            rng = tree.node_triangle[shape_node]
+            base = tree.shape_tri_order_start[s]
+            lo = wp.vec3(1.0e30)
+            hi = wp.vec3(-1.0e30)
+            for k in range(rng[0], rng[0] + rng[1]):
+                a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
+                edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+                pad = V3(margin_rel * edge, margin_rel * edge, margin_rel * edge)
+                lo = wp.min(lo, lower32(wp.min(wp.min(a, b), c) - pad))
+                hi = wp.max(hi, upper32(wp.max(wp.max(a, b), c) + pad))
         else:
-            hi_s = mid
-    s = lo_s
-    local = t - block_start[s]
-    cnt = level_count[s]
-    inst = shape_instance[shape_instance_start[s] + local / cnt]
-    node = level_first[s] + local % cnt
-    shape_node = tree.shape_node_start[s] + node
-    slot = tree.instance_node_start[inst] + node
-    child = tree.node_child[shape_node]
-    lo = wp.vec3(0.0)
-    hi = wp.vec3(0.0)
-    if child[0] < 0:
-        rng = tree.node_triangle[shape_node]
-        base = tree.shape_tri_order_start[s]
-        lo = wp.vec3(1.0e30)
-        hi = wp.vec3(-1.0e30)
-        for k in range(rng[0], rng[0] + rng[1]):
-            a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
-            edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
-            pad = wp.vec3(margin_rel * edge)
-            lo = wp.min(lo, wp.min(wp.min(a, b), c) - pad)
-            hi = wp.max(hi, wp.max(wp.max(a, b), c) + pad)
-    else:
-        base_slot = tree.instance_node_start[inst]
-        lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
-        hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
-    tree.node_lower[slot] = lo
-    tree.node_upper[slot] = hi
-    if node == 0:
-        instance_lower[inst] = lo
-        instance_upper[inst] = hi
+            base_slot = tree.instance_node_start[inst]
+            lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
+            hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
+        tree.node_lower[slot] = lo
+        tree.node_upper[slot] = hi
+        if node == 0:
+            instance_lower[inst] = lo
+            instance_upper[inst] = hi
+
+    return refit_level_kernel
+
+
+REFIT_KERNELS = {p: _make_refit_kernel(SCENE_TYPES[p]) for p in SCENE_TYPES}
+"""Refit kernels by scene precision (node boxes are float32, rounded outward)."""
+
+refit_level_kernel = REFIT_KERNELS["float32"]
 
 
 class SceneBVH:
@@ -292,10 +307,10 @@ class SceneBVH:
             if items == 0:
                 continue
             wp.launch(
-                refit_level_kernel,
+                REFIT_KERNELS[scene.precision],
                 dim=items,
                 inputs=[view, self.tree, block, first, count, self.shape_instance, self.shape_instance_start,
-                        self.margin_rel],
+                        scene.types.scalar(self.margin_rel)],
                 outputs=[self.lower, self.upper],
                 device=self.device,
             )

@@ -11,37 +11,51 @@ inclined by the rotation ``tilt``; the object spins about its own ``spin_axis`` 
 One kernel computes the poses of all objects; cost O(N), no host work.
 """
 
-from __future__ import annotations
 
 import numpy as np
 import warp as wp
 
-__all__ = ["EllipseMotion", "motion_pose_kernel"]
+__all__ = ["MOTION_KERNELS", "EllipseMotion", "motion_pose_kernel"]
 
 
-@wp.kernel
-def motion_pose_kernel(
-    time: float,
-    motion_centre: wp.array[wp.vec3],
-    motion_axes: wp.array[wp.vec2],
-    motion_orbit: wp.array[wp.vec2],
-    motion_tilt: wp.array[wp.quat],
-    motion_spin_axis: wp.array[wp.vec3],
-    motion_spin: wp.array[wp.vec2],
-    motion_base: wp.array[wp.quat],
-    # Outputs
-    instance_pose: wp.array[wp.transform],
-):
-    """One thread per object: pose at ``time`` (see the module docstring)."""
-    i = wp.tid()
-    axes = motion_axes[i]
-    orbit = motion_orbit[i]
-    theta = orbit[0] * time + orbit[1]
-    local = wp.vec3(axes[0] * wp.cos(theta), axes[1] * wp.sin(theta), 0.0)
-    pos = motion_centre[i] + wp.quat_rotate(motion_tilt[i], local)
-    spin = motion_spin[i]
-    rot = wp.quat_from_axis_angle(motion_spin_axis[i], spin[0] * time + spin[1]) * motion_base[i]
-    instance_pose[i] = wp.transform(pos, wp.normalize(rot))
+def _make_motion_kernel(S, V3, Q, T):
+    """The pose kernel computing in scalar type ``S`` (``wp.float32`` or ``wp.float64``)."""
+
+    @wp.kernel
+    def motion_pose_kernel(
+        time: S,
+        motion_centre: wp.array[V3],
+        motion_axes: wp.array[wp.vec2],
+        motion_orbit: wp.array[wp.vec2],
+        motion_tilt: wp.array[wp.quat],
+        motion_spin_axis: wp.array[wp.vec3],
+        motion_spin: wp.array[wp.vec2],
+        motion_base: wp.array[wp.quat],
+        # Outputs
+        instance_pose: wp.array[T],
+    ):
+        """One thread per object: pose at ``time`` (see the module docstring)."""
+        i = wp.tid()
+        axes = motion_axes[i]
+        orbit = motion_orbit[i]
+        theta = S(orbit[0]) * time + S(orbit[1])
+        local = V3(S(axes[0]) * wp.cos(theta), S(axes[1]) * wp.sin(theta), S(0.0))
+        pos = motion_centre[i] + wp.quat_rotate(Q(motion_tilt[i]), local)
+        spin = motion_spin[i]
+        angle = S(spin[0]) * time + S(spin[1])
+        rot = wp.quat_from_axis_angle(V3(motion_spin_axis[i]), angle) * Q(motion_base[i])
+        instance_pose[i] = T(pos, wp.normalize(rot))
+
+    return motion_pose_kernel
+
+
+MOTION_KERNELS = {
+    "float32": _make_motion_kernel(wp.float32, wp.vec3, wp.quat, wp.transform),
+    "float64": _make_motion_kernel(wp.float64, wp.vec3d, wp.quatd, wp.transformd),
+}
+"""Pose kernels by precision (positions and poses in float32 or float64)."""
+
+motion_pose_kernel = MOTION_KERNELS["float32"]
 
 
 def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -67,13 +81,16 @@ class EllipseMotion:
         spin: ``(N, 2)`` spin rate (rad/s) and phase (rad).
         base: ``(N, 4)`` base orientation quaternions.
         device: Warp device of the arrays.
+        precision: ``"float32"`` or ``"float64"``: type of the centres and of the poses written.
     """
 
-    def __init__(self, centre, axes, orbit, tilt, spin_axis, spin, base, device=None):
+    def __init__(self, centre, axes, orbit, tilt, spin_axis, spin, base, device=None, precision: str = "float32"):
         self.device = wp.get_device(device)
         self.num_objects = len(centre)
+        self.precision = precision
         d = self.device
-        self.motion_centre = wp.array(np.asarray(centre, np.float32), dtype=wp.vec3, device=d)
+        vec = wp.vec3d if precision == "float64" else wp.vec3
+        self.motion_centre = wp.array(np.asarray(centre, np.float64), dtype=vec, device=d)
         self.motion_axes = wp.array(np.asarray(axes, np.float32), dtype=wp.vec2, device=d)
         self.motion_orbit = wp.array(np.asarray(orbit, np.float32), dtype=wp.vec2, device=d)
         self.motion_tilt = wp.array(np.asarray(tilt, np.float32), dtype=wp.quat, device=d)
@@ -90,7 +107,8 @@ class EllipseMotion:
         *,
         orbit_scale: float = 2.0,
         device=None,
-    ) -> EllipseMotion:
+        precision: str = "float32",
+    ) -> "EllipseMotion":
         """Random ellipses around given centres.
 
         Args:
@@ -100,22 +118,25 @@ class EllipseMotion:
                 so objects travel a few of their own sizes and the density stays constant.
             orbit_scale: semi-axis scale relative to the object radius.
             device: Warp device.
+            precision: ``"float32"`` or ``"float64"``.
         """
         n = len(centre)
         axes = rng.uniform(0.5, 1.0, size=(n, 2)) * orbit_scale * np.asarray(radius)[:, None]
         orbit = np.stack([rng.uniform(0.5, 2.0, n) * rng.choice([-1.0, 1.0], n), rng.uniform(0, 2 * np.pi, n)], 1)
         spin = np.stack([rng.uniform(0.5, 3.0, n) * rng.choice([-1.0, 1.0], n), rng.uniform(0, 2 * np.pi, n)], 1)
         return cls(
-            centre, axes, orbit, _random_quat(rng, n), _random_unit(rng, n), spin, _random_quat(rng, n), device=device
+            centre, axes, orbit, _random_quat(rng, n), _random_unit(rng, n), spin, _random_quat(rng, n), device=device,
+            precision=precision,
         )
 
     def launch(self, time: float, instance_pose: wp.array) -> None:
         """Writes the poses of all objects at ``time`` (seconds) into ``instance_pose`` ``(N,)``."""
+        kernel = MOTION_KERNELS[self.precision]
         wp.launch(
-            motion_pose_kernel,
+            kernel,
             dim=self.num_objects,
             inputs=[
-                float(time),
+                wp.float64(time) if self.precision == "float64" else float(time),
                 self.motion_centre,
                 self.motion_axes,
                 self.motion_orbit,

@@ -29,15 +29,17 @@ Semantics shared by both:
   closed mesh its edges are also edges of its neighbours, so contacts are still found there.
 """
 
-from __future__ import annotations
+
+from types import SimpleNamespace
 
 import warp as wp
 
 from .buffers import GrowableBuffer
-from .scene import MeshView, mesh_triangle
+from .scene import SCENE_TYPES
 
 __all__ = [
     "NARROW_METHODS",
+    "NARROW_TYPES",
     "NarrowPhase",
     "TOLERANCE",
     "narrow_phase_kernel",
@@ -51,426 +53,471 @@ TOLERANCE = 1.0e-5
 NARROW_METHODS = {"moller": 0, "edge_face": 1}
 
 
-@wp.func
-def _snap(d: float, eps: float) -> float:
-    if wp.abs(d) <= eps:
-        return 0.0
-    return d
+def _make_narrow(types):
+    """The triangle tests and their kernels for vertices of the scene type ``types.vec3``."""
+    S = types.scalar
+    V3 = types.vec3
+    V2 = wp.vec2d if S == wp.float64 else wp.vec2
+    View = types.MeshView
+    mesh_triangle = types.mesh_triangle
+
+    @wp.func
+    def _snap(d: S, eps: S) -> S:
+        if wp.abs(d) <= eps:
+            return S(0.0)
+        return d
 
 
-@wp.func
-def _one_side(d0: float, d1: float, d2: float) -> bool:
-    """All three distances strictly positive, or all strictly negative."""
-    return (d0 > 0.0 and d1 > 0.0 and d2 > 0.0) or (d0 < 0.0 and d1 < 0.0 and d2 < 0.0)
+    @wp.func
+    def _one_side(d0: S, d1: S, d2: S) -> bool:
+        """All three distances strictly positive, or all strictly negative."""
+        return (d0 > S(0.0) and d1 > S(0.0) and d2 > S(0.0)) or (d0 < S(0.0) and d1 < S(0.0) and d2 < S(0.0))
 
 
-@wp.func
-def _max_edge(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
-    return wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+    @wp.func
+    def _max_edge(a: V3, b: V3, c: V3) -> S:
+        return wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
 
 
-@wp.func
-def _cross2(a: wp.vec2, b: wp.vec2) -> float:
-    return a[0] * b[1] - a[1] * b[0]
+    @wp.func
+    def _cross2(a: V2, b: V2) -> S:
+        return a[0] * b[1] - a[1] * b[0]
 
 
-@wp.func
-def _point_segment_dist(p: wp.vec2, a: wp.vec2, b: wp.vec2) -> float:
-    ab = b - a
-    den = wp.dot(ab, ab)
-    t = float(0.0)
-    if den > 0.0:
-        t = wp.clamp(wp.dot(p - a, ab) / den, 0.0, 1.0)
-    return wp.length(p - (a + ab * t))
+    @wp.func
+    def _point_segment_dist(p: V2, a: V2, b: V2) -> S:
+        ab = b - a
+        den = wp.dot(ab, ab)
+        t = S(0.0)
+        if den > S(0.0):
+            t = wp.clamp(wp.dot(p - a, ab) / den, S(0.0), S(1.0))
+        return wp.length(p - (a + ab * t))
 
 
-@wp.func
-def _segments_within_2d(p: wp.vec2, q: wp.vec2, r: wp.vec2, s: wp.vec2, eps: float) -> bool:
-    """Closed segments ``pq`` and ``rs`` in a plane are within ``eps`` of each other."""
-    o1 = _cross2(q - p, r - p)
-    o2 = _cross2(q - p, s - p)
-    o3 = _cross2(s - r, p - r)
-    o4 = _cross2(s - r, q - r)
-    if o1 * o2 < 0.0 and o3 * o4 < 0.0:
-        return True
-    d = wp.min(
-        wp.min(_point_segment_dist(p, r, s), _point_segment_dist(q, r, s)),
-        wp.min(_point_segment_dist(r, p, q), _point_segment_dist(s, p, q)),
-    )
-    return d <= eps
-
-
-@wp.func
-def _inside_edge_2d(p: wp.vec2, a: wp.vec2, b: wp.vec2, orient: float, eps: float) -> bool:
-    e = b - a
-    le = wp.length(e)
-    if le == 0.0:
-        return True
-    return orient * _cross2(e, p - a) / le >= -eps
-
-
-@wp.func
-def _point_in_triangle_2d(p: wp.vec2, a: wp.vec2, b: wp.vec2, c: wp.vec2, eps: float) -> bool:
-    """``p`` inside the closed triangle ``abc`` or within ``eps`` of its edge lines."""
-    orient = wp.sign(_cross2(b - a, c - a))
-    return (
-        _inside_edge_2d(p, a, b, orient, eps)
-        and _inside_edge_2d(p, b, c, orient, eps)
-        and _inside_edge_2d(p, c, a, orient, eps)
-    )
-
-
-@wp.func
-def _to_plane(p: wp.vec3, e1: wp.vec3, e2: wp.vec3) -> wp.vec2:
-    return wp.vec2(wp.dot(p, e1), wp.dot(p, e2))
-
-
-@wp.func
-def _coplanar_overlap(
-    a0: wp.vec3, a1: wp.vec3, a2: wp.vec3, b0: wp.vec3, b1: wp.vec3, b2: wp.vec3, n: wp.vec3, eps: float
-) -> bool:
-    """Both triangles in the plane of unit normal ``n``: 2D overlap test, isometric projection."""
-    e1 = wp.normalize(a1 - a0)
-    if wp.length(a2 - a1) > wp.length(a1 - a0):
-        e1 = wp.normalize(a2 - a1)
-    e2 = wp.cross(n, e1)
-    p0 = _to_plane(a0, e1, e2)
-    p1 = _to_plane(a1, e1, e2)
-    p2 = _to_plane(a2, e1, e2)
-    q0 = _to_plane(b0, e1, e2)
-    q1 = _to_plane(b1, e1, e2)
-    q2 = _to_plane(b2, e1, e2)
-    if _point_in_triangle_2d(p0, q0, q1, q2, eps) or _point_in_triangle_2d(q0, p0, p1, p2, eps):
-        return True
-    # Otherwise they overlap only if their boundaries meet.
-    for i in range(3):
-        pa = p0
-        pb = p1
-        if i == 1:
-            pa = p1
-            pb = p2
-        elif i == 2:
-            pa = p2
-            pb = p0
-        if (
-            _segments_within_2d(pa, pb, q0, q1, eps)
-            or _segments_within_2d(pa, pb, q1, q2, eps)
-            or _segments_within_2d(pa, pb, q2, q0, eps)
-        ):
+    @wp.func
+    def _segments_within_2d(p: V2, q: V2, r: V2, s: V2, eps: S) -> bool:
+        """Closed segments ``pq`` and ``rs`` in a plane are within ``eps`` of each other."""
+        o1 = _cross2(q - p, r - p)
+        o2 = _cross2(q - p, s - p)
+        o3 = _cross2(s - r, p - r)
+        o4 = _cross2(s - r, q - r)
+        if o1 * o2 < S(0.0) and o3 * o4 < S(0.0):
             return True
-    return False
-
-
-@wp.func
-def _push(p: wp.vec3, q: wp.vec3, count: int, x: wp.vec3):
-    if count == 0:
-        return x, x, 1
-    return p, x, count + 1
-
-
-@wp.func
-def _plane_section(a: wp.vec3, b: wp.vec3, c: wp.vec3, da: float, db: float, dc: float):
-    """Segment ``(p, q)`` where triangle ``abc`` meets a plane, from its snapped signed distances
-    (not all zero, not all of one strict sign). Returns ``(p, q)`` (``p == q`` for a point)."""
-    p = a
-    q = a
-    count = int(0)
-    if da == 0.0:
-        p, q, count = _push(p, q, count, a)
-    if db == 0.0:
-        p, q, count = _push(p, q, count, b)
-    if dc == 0.0:
-        p, q, count = _push(p, q, count, c)
-    if da * db < 0.0:
-        p, q, count = _push(p, q, count, a + (b - a) * (da / (da - db)))
-    if db * dc < 0.0:
-        p, q, count = _push(p, q, count, b + (c - b) * (db / (db - dc)))
-    if dc * da < 0.0:
-        p, q, count = _push(p, q, count, c + (a - c) * (dc / (dc - da)))
-    return p, q
-
-
-@wp.func
-def _collinear_overlap(pa: wp.vec3, qa: wp.vec3, pb: wp.vec3, qb: wp.vec3, eps: float) -> bool:
-    """Overlap of two segments lying on one line, within ``eps``."""
-    da = qa - pa
-    db = qb - pb
-    origin = pa
-    d = da
-    if wp.dot(db, db) > wp.dot(da, da):
-        origin = pb
-        d = db
-    ld = wp.length(d)
-    if ld <= eps:
-        return wp.length((pa + qa) * 0.5 - (pb + qb) * 0.5) <= 2.0 * eps
-    u = d / ld
-    ta0 = wp.dot(pa - origin, u)
-    ta1 = wp.dot(qa - origin, u)
-    tb0 = wp.dot(pb - origin, u)
-    tb1 = wp.dot(qb - origin, u)
-    lo = wp.max(wp.min(ta0, ta1), wp.min(tb0, tb1))
-    hi = wp.min(wp.max(ta0, ta1), wp.max(tb0, tb1))
-    return lo <= hi + eps
-
-
-@wp.func
-def tri_tri_moller(
-    v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, u0: wp.vec3, u1: wp.vec3, u2: wp.vec3, tol_rel: float
-) -> bool:
-    """Möller's test: do the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)`` intersect?
-
-    Args:
-        v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units).
-        tol_rel: tolerance relative to the longest edge (see the module docstring).
-
-    Returns:
-        True when they intersect or touch within the tolerance; False for degenerate triangles.
-    """
-    o = (v0 + v1 + v2 + u0 + u1 + u2) / 6.0
-    a0 = v0 - o
-    a1 = v1 - o
-    a2 = v2 - o
-    b0 = u0 - o
-    b1 = u1 - o
-    b2 = u2 - o
-    la = _max_edge(a0, a1, a2)
-    lb = _max_edge(b0, b1, b2)
-    eps = tol_rel * wp.max(la, lb)
-    na = wp.cross(a1 - a0, a2 - a0)
-    nb = wp.cross(b1 - b0, b2 - b0)
-    lna = wp.length(na)
-    lnb = wp.length(nb)
-    if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
-        return False
-    na = na / lna
-    nb = nb / lnb
-    # 1. Triangle b against the plane of a, then a against the plane of b.
-    db0 = _snap(wp.dot(na, b0 - a0), eps)
-    db1 = _snap(wp.dot(na, b1 - a0), eps)
-    db2 = _snap(wp.dot(na, b2 - a0), eps)
-    if _one_side(db0, db1, db2):
-        return False
-    da0 = _snap(wp.dot(nb, a0 - b0), eps)
-    da1 = _snap(wp.dot(nb, a1 - b0), eps)
-    da2 = _snap(wp.dot(nb, a2 - b0), eps)
-    if _one_side(da0, da1, da2):
-        return False
-    if db0 == 0.0 and db1 == 0.0 and db2 == 0.0:
-        return _coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps)
-    if da0 == 0.0 and da1 == 0.0 and da2 == 0.0:
-        return _coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps)
-    # 2. Where each triangle crosses the other's plane.
-    pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
-    pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
-    # 3. Overlap of the two intervals on the common line.
-    return _collinear_overlap(pa, qa, pb, qb, eps)
-
-
-@wp.func
-def _point_in_triangle_3d(x: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, n: wp.vec3, eps: float) -> bool:
-    """``x`` (on the plane of unit normal ``n``) inside the closed triangle ``abc`` within ``eps``."""
-    ok = True
-    for i in range(3):
-        p = a
-        q = b
-        if i == 1:
-            p = b
-            q = c
-        elif i == 2:
-            p = c
-            q = a
-        m = wp.cross(n, q - p)
-        if wp.dot(m, x - p) / wp.length(m) < -eps:
-            ok = False
-    return ok
-
-
-@wp.func
-def _segment_triangle(
-    p: wp.vec3, q: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3, n: wp.vec3, eps: float
-) -> bool:
-    """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
-    dp = _snap(wp.dot(n, p - a), eps)
-    dq = _snap(wp.dot(n, q - a), eps)
-    if dp * dq > 0.0:
-        return False
-    if dp == 0.0 and dq == 0.0:
-        e1 = wp.normalize(b - a)
-        if wp.length(c - b) > wp.length(b - a):
-            e1 = wp.normalize(c - b)
-        e2 = wp.cross(n, e1)
-        p2 = _to_plane(p, e1, e2)
-        q2 = _to_plane(q, e1, e2)
-        ta = _to_plane(a, e1, e2)
-        tb = _to_plane(b, e1, e2)
-        tc = _to_plane(c, e1, e2)
-        return (
-            _point_in_triangle_2d(p2, ta, tb, tc, eps)
-            or _segments_within_2d(p2, q2, ta, tb, eps)
-            or _segments_within_2d(p2, q2, tb, tc, eps)
-            or _segments_within_2d(p2, q2, tc, ta, eps)
+        d = wp.min(
+            wp.min(_point_segment_dist(p, r, s), _point_segment_dist(q, r, s)),
+            wp.min(_point_segment_dist(r, p, q), _point_segment_dist(s, p, q)),
         )
-    x = p
-    if dq == 0.0:
-        x = q
-    elif dp != 0.0:
-        x = p + (q - p) * (dp / (dp - dq))
-    return _point_in_triangle_3d(x, a, b, c, n, eps)
+        return d <= eps
 
 
-@wp.func
-def tri_tri_edge_face(
-    v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, u0: wp.vec3, u1: wp.vec3, u2: wp.vec3, tol_rel: float
-) -> bool:
-    """Edge-vs-face test (the seed's cross-check): some edge of either triangle meets the other.
+    @wp.func
+    def _inside_edge_2d(p: V2, a: V2, b: V2, orient: S, eps: S) -> bool:
+        e = b - a
+        le = wp.length(e)
+        if le == S(0.0):
+            return True
+        return orient * _cross2(e, p - a) / le >= -eps
 
-    Same arguments, tolerance and semantics as :func:`tri_tri_moller`.
-    """
-    o = (v0 + v1 + v2 + u0 + u1 + u2) / 6.0
-    a0 = v0 - o
-    a1 = v1 - o
-    a2 = v2 - o
-    b0 = u0 - o
-    b1 = u1 - o
-    b2 = u2 - o
-    la = _max_edge(a0, a1, a2)
-    lb = _max_edge(b0, b1, b2)
-    eps = tol_rel * wp.max(la, lb)
-    na = wp.cross(a1 - a0, a2 - a0)
-    nb = wp.cross(b1 - b0, b2 - b0)
-    lna = wp.length(na)
-    lnb = wp.length(nb)
-    if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
+
+    @wp.func
+    def _point_in_triangle_2d(p: V2, a: V2, b: V2, c: V2, eps: S) -> bool:
+        """``p`` inside the closed triangle ``abc`` or within ``eps`` of its edge lines."""
+        orient = wp.sign(_cross2(b - a, c - a))
+        return (
+            _inside_edge_2d(p, a, b, orient, eps)
+            and _inside_edge_2d(p, b, c, orient, eps)
+            and _inside_edge_2d(p, c, a, orient, eps)
+        )
+
+
+    @wp.func
+    def _to_plane(p: V3, e1: V3, e2: V3) -> V2:
+        return V2(wp.dot(p, e1), wp.dot(p, e2))
+
+
+    @wp.func
+    def _coplanar_overlap(
+        a0: V3, a1: V3, a2: V3, b0: V3, b1: V3, b2: V3, n: V3, eps: S
+    ) -> bool:
+        """Both triangles in the plane of unit normal ``n``: 2D overlap test, isometric projection."""
+        e1 = wp.normalize(a1 - a0)
+        if wp.length(a2 - a1) > wp.length(a1 - a0):
+            e1 = wp.normalize(a2 - a1)
+        e2 = wp.cross(n, e1)
+        p0 = _to_plane(a0, e1, e2)
+        p1 = _to_plane(a1, e1, e2)
+        p2 = _to_plane(a2, e1, e2)
+        q0 = _to_plane(b0, e1, e2)
+        q1 = _to_plane(b1, e1, e2)
+        q2 = _to_plane(b2, e1, e2)
+        if _point_in_triangle_2d(p0, q0, q1, q2, eps) or _point_in_triangle_2d(q0, p0, p1, p2, eps):
+            return True
+        # Otherwise they overlap only if their boundaries meet.
+        for i in range(3):
+            pa = p0
+            pb = p1
+            if i == 1:
+                pa = p1
+                pb = p2
+            elif i == 2:
+                pa = p2
+                pb = p0
+            if (
+                _segments_within_2d(pa, pb, q0, q1, eps)
+                or _segments_within_2d(pa, pb, q1, q2, eps)
+                or _segments_within_2d(pa, pb, q2, q0, eps)
+            ):
+                return True
         return False
-    na = na / lna
-    nb = nb / lnb
-    return (
-        _segment_triangle(a0, a1, b0, b1, b2, nb, eps)
-        or _segment_triangle(a1, a2, b0, b1, b2, nb, eps)
-        or _segment_triangle(a2, a0, b0, b1, b2, nb, eps)
-        or _segment_triangle(b0, b1, a0, a1, a2, na, eps)
-        or _segment_triangle(b1, b2, a0, a1, a2, na, eps)
-        or _segment_triangle(b2, b0, a0, a1, a2, na, eps)
+
+
+    @wp.func
+    def _push(p: V3, q: V3, count: int, x: V3):
+        if count == 0:
+            return x, x, 1
+        return p, x, count + 1
+
+
+    @wp.func
+    def _plane_section(a: V3, b: V3, c: V3, da: S, db: S, dc: S):
+        """Segment ``(p, q)`` where triangle ``abc`` meets a plane, from its snapped signed distances
+        (not all zero, not all of one strict sign). Returns ``(p, q)`` (``p == q`` for a point)."""
+        p = a
+        q = a
+        count = int(0)
+        if da == S(0.0):
+            p, q, count = _push(p, q, count, a)
+        if db == S(0.0):
+            p, q, count = _push(p, q, count, b)
+        if dc == S(0.0):
+            p, q, count = _push(p, q, count, c)
+        if da * db < S(0.0):
+            p, q, count = _push(p, q, count, a + (b - a) * (da / (da - db)))
+        if db * dc < S(0.0):
+            p, q, count = _push(p, q, count, b + (c - b) * (db / (db - dc)))
+        if dc * da < S(0.0):
+            p, q, count = _push(p, q, count, c + (a - c) * (dc / (dc - da)))
+        return p, q
+
+
+    @wp.func
+    def _collinear_overlap(pa: V3, qa: V3, pb: V3, qb: V3, eps: S) -> bool:
+        """Overlap of two segments lying on one line, within ``eps``."""
+        da = qa - pa
+        db = qb - pb
+        origin = pa
+        d = da
+        if wp.dot(db, db) > wp.dot(da, da):
+            origin = pb
+            d = db
+        ld = wp.length(d)
+        if ld <= eps:
+            return wp.length((pa + qa) * S(0.5) - (pb + qb) * S(0.5)) <= S(2.0) * eps
+        u = d / ld
+        ta0 = wp.dot(pa - origin, u)
+        ta1 = wp.dot(qa - origin, u)
+        tb0 = wp.dot(pb - origin, u)
+        tb1 = wp.dot(qb - origin, u)
+        lo = wp.max(wp.min(ta0, ta1), wp.min(tb0, tb1))
+        hi = wp.min(wp.max(ta0, ta1), wp.max(tb0, tb1))
+        return lo <= hi + eps
+
+
+    @wp.func
+    def tri_tri_moller(
+        v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
+    ) -> bool:
+        """Möller's test: do the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)`` intersect?
+
+        Args:
+            v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units).
+            tol_rel: tolerance relative to the longest edge (see the module docstring).
+
+        Returns:
+            True when they intersect or touch within the tolerance; False for degenerate triangles.
+        """
+        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
+        a0 = v0 - o
+        a1 = v1 - o
+        a2 = v2 - o
+        b0 = u0 - o
+        b1 = u1 - o
+        b2 = u2 - o
+        la = _max_edge(a0, a1, a2)
+        lb = _max_edge(b0, b1, b2)
+        eps = tol_rel * wp.max(la, lb)
+        na = wp.cross(a1 - a0, a2 - a0)
+        nb = wp.cross(b1 - b0, b2 - b0)
+        lna = wp.length(na)
+        lnb = wp.length(nb)
+        if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
+            return False
+        na = na / lna
+        nb = nb / lnb
+        # S(1.) Triangle b against the plane of a, then a against the plane of b.
+        db0 = _snap(wp.dot(na, b0 - a0), eps)
+        db1 = _snap(wp.dot(na, b1 - a0), eps)
+        db2 = _snap(wp.dot(na, b2 - a0), eps)
+        if _one_side(db0, db1, db2):
+            return False
+        da0 = _snap(wp.dot(nb, a0 - b0), eps)
+        da1 = _snap(wp.dot(nb, a1 - b0), eps)
+        da2 = _snap(wp.dot(nb, a2 - b0), eps)
+        if _one_side(da0, da1, da2):
+            return False
+        if db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0):
+            return _coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps)
+        if da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0):
+            return _coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps)
+        # S(2.) Where each triangle crosses the other's plane.
+        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
+        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
+        # S(3.) Overlap of the two intervals on the common line.
+        return _collinear_overlap(pa, qa, pb, qb, eps)
+
+
+    @wp.func
+    def _point_in_triangle_3d(x: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
+        """``x`` (on the plane of unit normal ``n``) inside the closed triangle ``abc`` within ``eps``."""
+        ok = True
+        for i in range(3):
+            p = a
+            q = b
+            if i == 1:
+                p = b
+                q = c
+            elif i == 2:
+                p = c
+                q = a
+            m = wp.cross(n, q - p)
+            if wp.dot(m, x - p) / wp.length(m) < -eps:
+                ok = False
+        return ok
+
+
+    @wp.func
+    def _segment_triangle(
+        p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S
+    ) -> bool:
+        """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
+        dp = _snap(wp.dot(n, p - a), eps)
+        dq = _snap(wp.dot(n, q - a), eps)
+        if dp * dq > S(0.0):
+            return False
+        if dp == S(0.0) and dq == S(0.0):
+            e1 = wp.normalize(b - a)
+            if wp.length(c - b) > wp.length(b - a):
+                e1 = wp.normalize(c - b)
+            e2 = wp.cross(n, e1)
+            p2 = _to_plane(p, e1, e2)
+            q2 = _to_plane(q, e1, e2)
+            ta = _to_plane(a, e1, e2)
+            tb = _to_plane(b, e1, e2)
+            tc = _to_plane(c, e1, e2)
+            return (
+                _point_in_triangle_2d(p2, ta, tb, tc, eps)
+                or _segments_within_2d(p2, q2, ta, tb, eps)
+                or _segments_within_2d(p2, q2, tb, tc, eps)
+                or _segments_within_2d(p2, q2, tc, ta, eps)
+            )
+        x = p
+        if dq == S(0.0):
+            x = q
+        elif dp != S(0.0):
+            x = p + (q - p) * (dp / (dp - dq))
+        return _point_in_triangle_3d(x, a, b, c, n, eps)
+
+
+    @wp.func
+    def tri_tri_edge_face(
+        v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
+    ) -> bool:
+        """Edge-vs-face test (the seed's cross-check): some edge of either triangle meets the other.
+
+        Same arguments, tolerance and semantics as :func:`tri_tri_moller`.
+        """
+        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
+        a0 = v0 - o
+        a1 = v1 - o
+        a2 = v2 - o
+        b0 = u0 - o
+        b1 = u1 - o
+        b2 = u2 - o
+        la = _max_edge(a0, a1, a2)
+        lb = _max_edge(b0, b1, b2)
+        eps = tol_rel * wp.max(la, lb)
+        na = wp.cross(a1 - a0, a2 - a0)
+        nb = wp.cross(b1 - b0, b2 - b0)
+        lna = wp.length(na)
+        lnb = wp.length(nb)
+        if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
+            return False
+        na = na / lna
+        nb = nb / lnb
+        return (
+            _segment_triangle(a0, a1, b0, b1, b2, nb, eps)
+            or _segment_triangle(a1, a2, b0, b1, b2, nb, eps)
+            or _segment_triangle(a2, a0, b0, b1, b2, nb, eps)
+            or _segment_triangle(b0, b1, a0, a1, a2, na, eps)
+            or _segment_triangle(b1, b2, a0, a1, a2, na, eps)
+            or _segment_triangle(b2, b0, a0, a1, a2, na, eps)
+        )
+
+
+    @wp.func
+    def tri_tri_test(
+        method: int, v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
+    ) -> bool:
+        """``method`` 0: :func:`tri_tri_moller`; 1: :func:`tri_tri_edge_face`."""
+        if method == 0:
+            return tri_tri_moller(v0, v1, v2, u0, u1, u2, tol_rel)
+        return tri_tri_edge_face(v0, v1, v2, u0, u1, u2, tol_rel)
+
+
+    @wp.kernel
+    def narrow_phase_kernel(
+        view: View,
+        candidate: wp.array[wp.vec4i],
+        candidate_count: wp.array[wp.int32],
+        candidate_capacity: int,
+        method: int,
+        tol_rel: S,
+        hit_capacity: int,
+        # Outputs
+        hit: wp.array[wp.vec4i],
+        hit_count: wp.array[wp.int32],
+        object_colliding: wp.array[wp.int32],
+    ):
+        """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: exact test, append hits."""
+        k = wp.tid()
+        if k >= wp.min(candidate_count[0], candidate_capacity):
+            return
+        c = candidate[k]
+        a0, a1, a2 = mesh_triangle(view, c[0], c[1])
+        b0, b1, b2 = mesh_triangle(view, c[2], c[3])
+        if tri_tri_test(method, a0, a1, a2, b0, b1, b2, tol_rel):
+            slot = wp.atomic_add(hit_count, 0, 1)
+            if slot < hit_capacity:
+                hit[slot] = c
+            object_colliding[c[0]] = 1
+            object_colliding[c[2]] = 1
+
+
+    @wp.kernel
+    def tri_tri_batch_kernel(
+        tri_a: wp.array2d[V3],
+        tri_b: wp.array2d[V3],
+        method: int,
+        tol_rel: S,
+        # Outputs
+        result: wp.array[wp.int32],
+    ):
+        """One thread per pair of triangles given directly as ``(P, 3)`` vertex arrays (tests, tools)."""
+        k = wp.tid()
+        r = tri_tri_test(method, tri_a[k, 0], tri_a[k, 1], tri_a[k, 2], tri_b[k, 0], tri_b[k, 1], tri_b[k, 2], tol_rel)
+        result[k] = wp.where(r, 1, 0)
+
+
+    @wp.func
+    def winding_number(view: View, instance: int, num_triangles: int, p: V3) -> S:
+        """Generalised winding number of point ``p`` w.r.t. object ``instance``'s closed mesh.
+
+        Sum of the solid angles of its triangles seen from ``p`` over 4 pi (Van Oosterom and
+        Strackee's formula): about 1 inside, 0 outside, with no special cases for rays through
+        edges or vertices. O(m).
+        """
+        total = S(0.0)
+        for t in range(num_triangles):
+            a, b, c = mesh_triangle(view, instance, t)
+            a = a - p
+            b = b - p
+            c = c - p
+            la = wp.length(a)
+            lb = wp.length(b)
+            lc = wp.length(c)
+            num = wp.dot(a, wp.cross(b, c))
+            den = la * lb * lc + wp.dot(a, b) * lc + wp.dot(a, c) * lb + wp.dot(b, c) * la
+            total += S(2.0) * wp.atan2(num, den)
+        return total / S(12.566370614359172)
+
+
+    @wp.func
+    def _box_inside(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
+        """Box a lies within box b."""
+        return (
+            lo_b[0] <= lo_a[0] and hi_a[0] <= hi_b[0]
+            and lo_b[1] <= lo_a[1] and hi_a[1] <= hi_b[1]
+            and lo_b[2] <= lo_a[2] and hi_a[2] <= hi_b[2]
+        )
+
+
+    @wp.kernel
+    def containment_kernel(
+        view: View,
+        instance_triangle_start: wp.array[wp.int32],
+        instance_lower: wp.array[wp.vec3],
+        instance_upper: wp.array[wp.vec3],
+        pair: wp.array[wp.vec2i],
+        pair_count: wp.array[wp.int32],
+        pair_capacity: int,
+        contained_capacity: int,
+        # Outputs
+        contained: wp.array[wp.vec2i],
+        contained_count: wp.array[wp.int32],
+    ):
+        """One thread per object pair whose boxes nest: is the inner object's first vertex inside
+        the outer object (winding number above 1/2)? Writes ``(inner, outer)``."""
+        k = wp.tid()
+        if k >= wp.min(pair_count[0], pair_capacity):
+            return
+        p = pair[k]
+        for side in range(2):
+            inner = p[side]
+            outer = p[1 - side]
+            if _box_inside(instance_lower[inner], instance_upper[inner], instance_lower[outer], instance_upper[outer]):
+                point = view.world_vertex[view.instance_vertex_start[inner]]
+                m = instance_triangle_start[outer + 1] - instance_triangle_start[outer]
+                if winding_number(view, outer, m, point) > S(0.5):
+                    slot = wp.atomic_add(contained_count, 0, 1)
+                    if slot < contained_capacity:
+                        contained[slot] = wp.vec2i(inner, outer)
+
+    return SimpleNamespace(
+        _snap=_snap,
+        _one_side=_one_side,
+        _max_edge=_max_edge,
+        _cross2=_cross2,
+        _point_segment_dist=_point_segment_dist,
+        _segments_within_2d=_segments_within_2d,
+        _inside_edge_2d=_inside_edge_2d,
+        _point_in_triangle_2d=_point_in_triangle_2d,
+        _to_plane=_to_plane,
+        _coplanar_overlap=_coplanar_overlap,
+        _push=_push,
+        _plane_section=_plane_section,
+        _collinear_overlap=_collinear_overlap,
+        tri_tri_moller=tri_tri_moller,
+        _point_in_triangle_3d=_point_in_triangle_3d,
+        _segment_triangle=_segment_triangle,
+        tri_tri_edge_face=tri_tri_edge_face,
+        tri_tri_test=tri_tri_test,
+        narrow_phase_kernel=narrow_phase_kernel,
+        tri_tri_batch_kernel=tri_tri_batch_kernel,
+        winding_number=winding_number,
+        _box_inside=_box_inside,
+        containment_kernel=containment_kernel,
     )
 
 
-@wp.func
-def tri_tri_test(
-    method: int, v0: wp.vec3, v1: wp.vec3, v2: wp.vec3, u0: wp.vec3, u1: wp.vec3, u2: wp.vec3, tol_rel: float
-) -> bool:
-    """``method`` 0: :func:`tri_tri_moller`; 1: :func:`tri_tri_edge_face`."""
-    if method == 0:
-        return tri_tri_moller(v0, v1, v2, u0, u1, u2, tol_rel)
-    return tri_tri_edge_face(v0, v1, v2, u0, u1, u2, tol_rel)
+NARROW_TYPES = {p: _make_narrow(SCENE_TYPES[p]) for p in SCENE_TYPES}
+"""Per scene precision: the tests (``tri_tri_moller`` ...) and kernels, computing in float32 or float64."""
 
-
-@wp.kernel
-def narrow_phase_kernel(
-    view: MeshView,
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int32],
-    candidate_capacity: int,
-    method: int,
-    tol_rel: float,
-    hit_capacity: int,
-    # Outputs
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int32],
-    object_colliding: wp.array[wp.int32],
-):
-    """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: exact test, append hits."""
-    k = wp.tid()
-    if k >= wp.min(candidate_count[0], candidate_capacity):
-        return
-    c = candidate[k]
-    a0, a1, a2 = mesh_triangle(view, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(view, c[2], c[3])
-    if tri_tri_test(method, a0, a1, a2, b0, b1, b2, tol_rel):
-        slot = wp.atomic_add(hit_count, 0, 1)
-        if slot < hit_capacity:
-            hit[slot] = c
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
-
-
-@wp.kernel
-def tri_tri_batch_kernel(
-    tri_a: wp.array2d[wp.vec3],
-    tri_b: wp.array2d[wp.vec3],
-    method: int,
-    tol_rel: float,
-    # Outputs
-    result: wp.array[wp.int32],
-):
-    """One thread per pair of triangles given directly as ``(P, 3)`` vertex arrays (tests, tools)."""
-    k = wp.tid()
-    r = tri_tri_test(method, tri_a[k, 0], tri_a[k, 1], tri_a[k, 2], tri_b[k, 0], tri_b[k, 1], tri_b[k, 2], tol_rel)
-    result[k] = wp.where(r, 1, 0)
-
-
-@wp.func
-def winding_number(view: MeshView, instance: int, num_triangles: int, p: wp.vec3) -> float:
-    """Generalised winding number of point ``p`` w.r.t. object ``instance``'s closed mesh.
-
-    Sum of the solid angles of its triangles seen from ``p`` over 4 pi (Van Oosterom and
-    Strackee's formula): about 1 inside, 0 outside, with no special cases for rays through
-    edges or vertices. O(m).
-    """
-    total = float(0.0)
-    for t in range(num_triangles):
-        a, b, c = mesh_triangle(view, instance, t)
-        a = a - p
-        b = b - p
-        c = c - p
-        la = wp.length(a)
-        lb = wp.length(b)
-        lc = wp.length(c)
-        num = wp.dot(a, wp.cross(b, c))
-        den = la * lb * lc + wp.dot(a, b) * lc + wp.dot(a, c) * lb + wp.dot(b, c) * la
-        total += 2.0 * wp.atan2(num, den)
-    return total / (4.0 * wp.pi)
-
-
-@wp.func
-def _box_inside(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
-    """Box a lies within box b."""
-    return (
-        lo_b[0] <= lo_a[0] and hi_a[0] <= hi_b[0]
-        and lo_b[1] <= lo_a[1] and hi_a[1] <= hi_b[1]
-        and lo_b[2] <= lo_a[2] and hi_a[2] <= hi_b[2]
-    )
-
-
-@wp.kernel
-def containment_kernel(
-    view: MeshView,
-    instance_triangle_start: wp.array[wp.int32],
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
-    pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
-    pair_capacity: int,
-    contained_capacity: int,
-    # Outputs
-    contained: wp.array[wp.vec2i],
-    contained_count: wp.array[wp.int32],
-):
-    """One thread per object pair whose boxes nest: is the inner object's first vertex inside
-    the outer object (winding number above 1/2)? Writes ``(inner, outer)``."""
-    k = wp.tid()
-    if k >= wp.min(pair_count[0], pair_capacity):
-        return
-    p = pair[k]
-    for side in range(2):
-        inner = p[side]
-        outer = p[1 - side]
-        if _box_inside(instance_lower[inner], instance_upper[inner], instance_lower[outer], instance_upper[outer]):
-            point = view.world_vertex[view.instance_vertex_start[inner]]
-            m = instance_triangle_start[outer + 1] - instance_triangle_start[outer]
-            if winding_number(view, outer, m, point) > 0.5:
-                slot = wp.atomic_add(contained_count, 0, 1)
-                if slot < contained_capacity:
-                    contained[slot] = wp.vec2i(inner, outer)
+tri_tri_moller = NARROW_TYPES["float32"].tri_tri_moller
+tri_tri_edge_face = NARROW_TYPES["float32"].tri_tri_edge_face
+tri_tri_test = NARROW_TYPES["float32"].tri_tri_test
+tri_tri_batch_kernel = NARROW_TYPES["float32"].tri_tri_batch_kernel
+narrow_phase_kernel = NARROW_TYPES["float32"].narrow_phase_kernel
+containment_kernel = NARROW_TYPES["float32"].containment_kernel
 
 
 class NarrowPhase:
@@ -496,15 +543,15 @@ class NarrowPhase:
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
 
-    def launch(self, view: MeshView, candidates: GrowableBuffer) -> None:
-        """Tests the candidates; appends hits ``(obj_a, tri_a, obj_b, tri_b)`` and sets flags."""
+    def launch(self, scene, candidates: GrowableBuffer) -> None:
+        """Tests the candidates of ``scene``; appends hits ``(obj_a, tri_a, obj_b, tri_b)``, sets flags."""
         self.hits.reset()
         self.object_colliding.zero_()
         wp.launch(
-            narrow_phase_kernel,
+            NARROW_TYPES[scene.precision].narrow_phase_kernel,
             dim=candidates.capacity,
-            inputs=[view, candidates.data, candidates.count, candidates.capacity,
-                    NARROW_METHODS[self.method], self.tolerance, self.hits.capacity],
+            inputs=[scene.mesh_view(), candidates.data, candidates.count, candidates.capacity,
+                    NARROW_METHODS[self.method], scene.types.scalar(self.tolerance), self.hits.capacity],
             outputs=[self.hits.data, self.hits.count, self.object_colliding],
             device=self.device,
         )

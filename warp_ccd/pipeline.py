@@ -19,7 +19,7 @@ from .broad_phase import make_broad_phase
 from .buffers import GrowableBuffer, read_counts
 from .bvh import SceneBVH
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .narrow_phase import TOLERANCE, NarrowPhase, containment_kernel
+from .narrow_phase import NARROW_TYPES, TOLERANCE, NarrowPhase
 from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
@@ -184,10 +184,10 @@ class CollisionPipeline:
         t = mark("broad", t)
         self.mid.launch(scene, self.pairs)
         t = mark("mid", t)
-        self.narrow.launch(scene.mesh_view(), self.mid.candidates)
+        self.narrow.launch(scene, self.mid.candidates)
         if self.contained is not None:
             wp.launch(
-                containment_kernel,
+                NARROW_TYPES[scene.precision].containment_kernel,
                 dim=self.pairs.capacity,
                 inputs=[scene.mesh_view(), scene.instance_triangle_start, self.bounds.lower, self.bounds.upper,
                         self.pairs.data, self.pairs.count, self.pairs.capacity, self.contained.capacity],
@@ -235,13 +235,15 @@ class CollisionPipeline:
         )
 
 
-def collide(meshes: Sequence, transforms=None, device=None, **options) -> CollisionResult:
+def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", **options) -> CollisionResult:
     """One-shot collision detection among meshes (like trimesh's ``CollisionManager``).
 
     Args:
         meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
         transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
         device: Warp device (default: Warp's default device).
+        precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test in
+            double precision (for scenes far from the origin).
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``narrow_phase``,
             ``tolerance``, ``timings``, capacities).
 
@@ -251,5 +253,5 @@ def collide(meshes: Sequence, transforms=None, device=None, **options) -> Collis
     Raises:
         ValueError / TypeError: naming the bad mesh or transform and the problem.
     """
-    scene = Scene.from_meshes(meshes, transforms, device=device)
+    scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     return CollisionPipeline(scene, **options).detect()

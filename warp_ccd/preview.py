@@ -176,7 +176,8 @@ class PreviewRenderer:
         self.triangle_object = wp.array(triangle_object, dtype=wp.int32, device=d)
         self._indices = wp.array(indices, dtype=wp.int32, device=d)
         same_device = scene.world_vertex.device == d
-        self._points = scene.world_vertex if same_device else wp.zeros_like(scene.world_vertex, device=d)
+        points = scene.world_vertex32()
+        self._points = points if same_device else wp.zeros_like(points, device=d)
         self._mesh = None
         self.pixel = wp.zeros((self.height, self.width), dtype=wp.vec3, device=d)
         self._colliding = wp.zeros(max(scene.num_objects, 1), dtype=wp.int32, device=d)
@@ -223,8 +224,9 @@ class PreviewRenderer:
             self.pixel.zero_()
             mesh_id = wp.uint64(0)
         else:
-            if self._points is not scene.world_vertex:
-                wp.copy(self._points, scene.world_vertex)
+            points = scene.world_vertex32()
+            if self._points is not points:
+                wp.copy(self._points, points)
             if self._mesh is None:
                 self._mesh = wp.Mesh(points=self._points, indices=self._indices)
             else:

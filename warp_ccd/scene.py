@@ -18,9 +18,9 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 ``world_vertex`` directly (``set_world_vertices`` or a kernel of one's own) for deforming meshes.
 """
 
-from __future__ import annotations
 
 from collections.abc import Sequence
+from types import SimpleNamespace
 
 import numpy as np
 import warp as wp
@@ -29,51 +29,79 @@ from .motion import EllipseMotion
 from .shapes import shape as _named_shape
 from .shapes import validate_mesh
 
-__all__ = ["MeshView", "Scene", "mesh_triangle", "world_vertex_kernel", "transforms_to_poses"]
+__all__ = ["PRECISIONS", "SCENE_TYPES", "MeshView", "Scene", "mesh_triangle", "transforms_to_poses", "world_vertex_kernel"]
 
 
-@wp.struct
-class MeshView:
-    """What a kernel needs to fetch the world vertices of triangle ``(instance, local id)``."""
-
-    shape_triangle: wp.array[wp.vec3i]
-    shape_triangle_start: wp.array[wp.int32]
-    instance_shape: wp.array[wp.int32]
-    instance_vertex_start: wp.array[wp.int32]
-    world_vertex: wp.array[wp.vec3]
+PRECISIONS = ("float32", "float64")
+"""Scene precisions: the type of shape vertices, poses and world vertices (boxes stay float32)."""
 
 
-@wp.func
-def mesh_triangle(view: MeshView, instance: int, tri: int):
-    """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
-    s = view.instance_shape[instance]
-    idx = view.shape_triangle[view.shape_triangle_start[s] + tri]
-    base = view.instance_vertex_start[instance]
-    return (
-        view.world_vertex[base + idx[0]],
-        view.world_vertex[base + idx[1]],
-        view.world_vertex[base + idx[2]],
+def _make_scene_types(S, V3, T):
+    """Struct, fetch function and world-vertex kernel for vertices of type ``V3``."""
+
+    @wp.struct
+    class MeshView:
+        """What a kernel needs to fetch the world vertices of triangle ``(instance, local id)``."""
+
+        shape_triangle: wp.array[wp.vec3i]
+        shape_triangle_start: wp.array[wp.int32]
+        instance_shape: wp.array[wp.int32]
+        instance_vertex_start: wp.array[wp.int32]
+        world_vertex: wp.array[V3]
+
+    @wp.func
+    def mesh_triangle(view: MeshView, instance: int, tri: int):
+        """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
+        s = view.instance_shape[instance]
+        idx = view.shape_triangle[view.shape_triangle_start[s] + tri]
+        base = view.instance_vertex_start[instance]
+        return (
+            view.world_vertex[base + idx[0]],
+            view.world_vertex[base + idx[1]],
+            view.world_vertex[base + idx[2]],
+        )
+
+    @wp.kernel
+    def world_vertex_kernel(
+        shape_vertex: wp.array[V3],
+        shape_vertex_start: wp.array[wp.int32],
+        instance_shape: wp.array[wp.int32],
+        instance_scale: wp.array[wp.float32],
+        instance_pose: wp.array[T],
+        instance_vertex_start: wp.array[wp.int32],
+        vertex_instance: wp.array[wp.int32],
+        # Outputs
+        world_vertex: wp.array[V3],
+    ):
+        """One thread per world vertex: ``pose * (scale * local vertex)``."""
+        v = wp.tid()
+        i = vertex_instance[v]
+        local = v - instance_vertex_start[i]
+        p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
+        world_vertex[v] = wp.transform_point(instance_pose[i], p * S(instance_scale[i]))
+
+    return SimpleNamespace(
+        scalar=S, vec3=V3, transform=T, MeshView=MeshView, mesh_triangle=mesh_triangle,
+        world_vertex_kernel=world_vertex_kernel,
     )
 
 
+SCENE_TYPES = {
+    "float32": _make_scene_types(wp.float32, wp.vec3, wp.transform),
+    "float64": _make_scene_types(wp.float64, wp.vec3d, wp.transformd),
+}
+"""Per precision: ``MeshView`` struct, ``mesh_triangle`` function, ``world_vertex_kernel``."""
+
 @wp.kernel
-def world_vertex_kernel(
-    shape_vertex: wp.array[wp.vec3],
-    shape_vertex_start: wp.array[wp.int32],
-    instance_shape: wp.array[wp.int32],
-    instance_scale: wp.array[wp.float32],
-    instance_pose: wp.array[wp.transform],
-    instance_vertex_start: wp.array[wp.int32],
-    vertex_instance: wp.array[wp.int32],
-    # Outputs
-    world_vertex: wp.array[wp.vec3],
-):
-    """One thread per world vertex: ``pose * (scale * local vertex)``."""
+def vertex_to_float32_kernel(src: wp.array[wp.vec3d], dst: wp.array[wp.vec3]):
+    """One thread per vertex: float64 to float32 (nearest)."""
     v = wp.tid()
-    i = vertex_instance[v]
-    local = v - instance_vertex_start[i]
-    p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
-    world_vertex[v] = wp.transform_point(instance_pose[i], p * instance_scale[i])
+    dst[v] = wp.vec3(src[v])
+
+
+MeshView = SCENE_TYPES["float32"].MeshView
+mesh_triangle = SCENE_TYPES["float32"].mesh_triangle
+world_vertex_kernel = SCENE_TYPES["float32"].world_vertex_kernel
 
 
 def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
@@ -117,7 +145,7 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
         tol: tolerance of the rigidity checks.
 
     Returns:
-        ``(N, 7)`` float32 rows ``(px, py, pz, qx, qy, qz, qw)``.
+        ``(N, 7)`` float64 rows ``(px, py, pz, qx, qy, qz, qw)``.
 
     Raises:
         ValueError: naming the first bad transform and what is wrong with it.
@@ -129,7 +157,7 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
     if m.shape != (num_objects, 4, 4):
         raise ValueError(f"transforms: expected shape ({num_objects}, 4, 4) for {num_objects} objects, got {m.shape}")
     if num_objects == 0:
-        return np.zeros((0, 7), np.float32)
+        return np.zeros((0, 7), np.float64)
     finite = np.isfinite(m).all(axis=(1, 2))
     if not finite.all():
         raise ValueError(f"transform {int(np.argmin(finite))}: contains NaN or inf")
@@ -149,9 +177,10 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
     out = np.empty((num_objects, 7), np.float64)
     out[:, :3] = m[:, :3, 3]
     out[:, 3:] = _matrix_to_quat(r)
-    if not np.isfinite(out.astype(np.float32)).all():
-        raise ValueError("transforms: translations overflow float32")
-    return out.astype(np.float32)
+    with np.errstate(over="ignore"):
+        if not np.isfinite(out.astype(np.float32)).all():
+            raise ValueError("transforms: translations overflow float32")
+    return out
 
 
 class Scene:
@@ -167,6 +196,9 @@ class Scene:
         motion: optional :class:`EllipseMotion`; then :meth:`advance` moves the objects.
         deforming: when True the caller writes world vertices (:meth:`set_world_vertices`).
         device: Warp device (default: Warp's default device).
+        precision: ``"float32"`` (default) or ``"float64"``: type of shape vertices, poses and
+            world vertices, and of the exact triangle test. Object and node boxes stay float32,
+            rounded outward.
     """
 
     def __init__(
@@ -179,9 +211,15 @@ class Scene:
         motion: EllipseMotion | None = None,
         deforming: bool = False,
         device=None,
+        precision: str = "float32",
     ):
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
         self.device = wp.get_device(device)
-        self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}") for k, (v, t) in enumerate(shapes)]
+        self.precision = precision
+        self.types = SCENE_TYPES[precision]
+        fdtype = np.float64 if precision == "float64" else np.float32
+        self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}", dtype=fdtype) for k, (v, t) in enumerate(shapes)]
         num_shapes = len(self.shape_meshes)
         inst = np.asarray(instance_shape, dtype=np.int64).reshape(-1)
         if inst.size and (inst.min() < 0 or inst.max() >= num_shapes):
@@ -194,13 +232,15 @@ class Scene:
         self.time = 0.0
         if motion is not None and motion.num_objects != n:
             raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
+        if motion is not None and motion.precision != precision:
+            raise ValueError(f"motion: precision {motion.precision}, scene {precision}")
 
         scale = np.ones(n, np.float32) if instance_scale is None else np.asarray(instance_scale, np.float32)
         if scale.shape != (n,) or not np.isfinite(scale).all() or (scale <= 0).any():
             raise ValueError(f"instance_scale: expected ({n},) finite positive values")
         if poses is None:
-            poses = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float32), (n, 1))
-        poses = np.asarray(poses, np.float32)
+            poses = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float64), (n, 1))
+        poses = np.asarray(poses, fdtype)
         if poses.shape != (n, 7):
             raise ValueError(f"poses: expected shape ({n}, 7), got {poses.shape}")
 
@@ -223,19 +263,20 @@ class Scene:
         self.instance_scale_np = scale
 
         d = self.device
-        cat_v = np.concatenate([v for v, _ in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.float32)
+        cat_v = np.concatenate([v for v, _ in self.shape_meshes]) if num_shapes else np.zeros((0, 3), fdtype)
         cat_t = np.concatenate([t for _, t in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.int32)
-        self.shape_vertex = wp.array(cat_v, dtype=wp.vec3, device=d)
+        vec3 = self.types.vec3
+        self.shape_vertex = wp.array(cat_v, dtype=vec3, device=d)
         self.shape_triangle = wp.array(cat_t, dtype=wp.vec3i, device=d)
         self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
         self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
         self.instance_shape = wp.array(self.instance_shape_np, dtype=wp.int32, device=d)
         self.instance_scale = wp.array(scale, dtype=wp.float32, device=d)
-        self.instance_pose = wp.array(poses, dtype=wp.transform, device=d)
+        self.instance_pose = wp.array(poses, dtype=self.types.transform, device=d)
         self.instance_vertex_start = wp.array(self.instance_vertex_start_np, dtype=wp.int32, device=d)
         self.instance_triangle_start = wp.array(self.instance_triangle_start_np, dtype=wp.int32, device=d)
         self.vertex_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
-        self.world_vertex = wp.zeros(self.num_world_vertices, dtype=wp.vec3, device=d)
+        self.world_vertex = wp.zeros(self.num_world_vertices, dtype=vec3, device=d)
         if motion is not None:
             motion.launch(self.time, self.instance_pose)
         self.update_world_vertices()
@@ -250,7 +291,8 @@ class Scene:
         density: float = 0.04,
         size_range: tuple[float, float] = (0.5, 1.5),
         device=None,
-    ) -> Scene:
+        precision: str = "float32",
+    ) -> "Scene":
         """Seeded polyhedra moving on inclined ellipses, spread at constant density.
 
         Object radii are ``U(size_range)``; centres are uniform in a cube whose side is chosen so
@@ -265,6 +307,7 @@ class Scene:
             density: volume fraction of bounding spheres, in ``(0, 1)``.
             size_range: ``(min, max)`` radius in scene units.
             device: Warp device.
+            precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
         """
         if not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
             raise ValueError(f"num_objects must be a non-negative integer, got {num_objects!r}")
@@ -283,13 +326,15 @@ class Scene:
         volume = (4.0 / 3.0) * np.pi * float(np.sum(radius**3))
         side = (volume / density) ** (1.0 / 3.0) if n else 1.0
         centre = rng.uniform(-0.5 * side, 0.5 * side, size=(n, 3))
-        motion = EllipseMotion.random(rng, centre, radius, device=device)
-        scene = cls(meshes, inst, instance_scale=radius, motion=motion, device=device)
+        motion = EllipseMotion.random(rng, centre, radius, device=device, precision=precision)
+        scene = cls(meshes, inst, instance_scale=radius, motion=motion, device=device, precision=precision)
         scene.box_side = side
         return scene
 
     @classmethod
-    def from_meshes(cls, meshes: Sequence, transforms=None, *, deforming: bool = False, device=None) -> Scene:
+    def from_meshes(
+        cls, meshes: Sequence, transforms=None, *, deforming: bool = False, device=None, precision: str = "float32"
+    ) -> "Scene":
         """A scene of user meshes, one object per mesh.
 
         Meshes passed as the very same array objects share one shape (instancing).
@@ -299,6 +344,7 @@ class Scene:
             transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
             deforming: the caller will write world vertices every frame (:meth:`set_world_vertices`).
             device: Warp device.
+            precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
         """
         if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
             raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
@@ -310,7 +356,7 @@ class Scene:
             if key in seen and not deforming:
                 inst.append(seen[key])
                 continue
-            shapes.append(validate_mesh(m[0], m[1], name=f"mesh {i}"))
+            shapes.append(validate_mesh(m[0], m[1], name=f"mesh {i}", dtype=np.float64))
             seen[key] = len(shapes) - 1
             inst.append(len(shapes) - 1)
         n = len(inst)
@@ -319,7 +365,8 @@ class Scene:
             if deforming:
                 raise ValueError("transforms: a deforming scene takes world vertices, not transforms")
             poses = transforms_to_poses(transforms, n)
-        return cls(shapes, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device)
+        return cls(shapes, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
+                   precision=precision)
 
     # ------------------------------------------------------------------ motion
     def update_world_vertices(self) -> None:
@@ -327,7 +374,7 @@ class Scene:
         if self.deforming or self.num_world_vertices == 0:
             return
         wp.launch(
-            world_vertex_kernel,
+            self.types.world_vertex_kernel,
             dim=self.num_world_vertices,
             inputs=[
                 self.shape_vertex,
@@ -357,13 +404,16 @@ class Scene:
         """Places the objects with ``(N, 4, 4)`` rigid transforms (validated) and updates world vertices."""
         if self.deforming:
             raise ValueError("set_transforms: a deforming scene takes world vertices")
-        self.instance_pose.assign(transforms_to_poses(transforms, self.num_objects))
+        poses = transforms_to_poses(transforms, self.num_objects)
+        self.instance_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
 
     def set_poses(self, poses: wp.array) -> None:
-        """Copies ``(N,)`` ``wp.transform`` poses already on this device, then updates world vertices."""
-        if not isinstance(poses, wp.array) or poses.dtype != wp.transform or poses.shape != (self.num_objects,):
-            raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} wp.transform")
+        """Copies ``(N,)`` poses already on this device (``wp.transform``, or ``wp.transformd`` for a
+        float64 scene), then updates world vertices."""
+        t = self.types.transform
+        if not isinstance(poses, wp.array) or poses.dtype != t or poses.shape != (self.num_objects,):
+            raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} {t.__name__}")
         if poses.device != self.device:
             raise ValueError(f"set_poses: poses are on {poses.device}, the scene on {self.device}")
         wp.copy(self.instance_pose, poses)
@@ -372,12 +422,13 @@ class Scene:
     def set_world_vertices(self, vertices) -> None:
         """Writes world vertices ``(V, 3)`` of all objects, concatenated (deforming meshes).
 
-        Accepts a numpy array (validated: shape and finiteness) or a ``wp.array`` of ``wp.vec3``
-        on this device (copied as is).
+        Accepts a numpy array (validated: shape and finiteness) or a ``wp.array`` of the scene's
+        vector type (``wp.vec3``, or ``wp.vec3d`` at float64) on this device (copied as is).
         """
         if isinstance(vertices, wp.array):
-            if vertices.dtype != wp.vec3 or vertices.shape != (self.num_world_vertices,):
-                raise ValueError(f"set_world_vertices: expected {self.num_world_vertices} wp.vec3")
+            vec3 = self.types.vec3
+            if vertices.dtype != vec3 or vertices.shape != (self.num_world_vertices,):
+                raise ValueError(f"set_world_vertices: expected {self.num_world_vertices} {vec3.__name__}")
             if vertices.device != self.device:
                 raise ValueError(f"set_world_vertices: vertices are on {vertices.device}, the scene on {self.device}")
             wp.copy(self.world_vertex, vertices)
@@ -389,12 +440,16 @@ class Scene:
             bad = int(np.argmin(np.isfinite(v).all(axis=1)))
             obj = int(np.searchsorted(self.instance_vertex_start_np, bad, side="right") - 1)
             raise ValueError(f"set_world_vertices: vertex {bad} (object {obj}) is not finite")
-        self.world_vertex.assign(v.astype(np.float32))
+        with np.errstate(over="ignore"):
+            v = v.astype(np.float64 if self.precision == "float64" else np.float32)
+        if not np.isfinite(v).all():
+            raise ValueError("set_world_vertices: vertices overflow float32")
+        self.world_vertex.assign(v)
 
     # ------------------------------------------------------------------ views
-    def mesh_view(self) -> MeshView:
-        """The :class:`MeshView` struct of this scene for kernels."""
-        view = MeshView()
+    def mesh_view(self):
+        """The ``MeshView`` struct of this scene for kernels (of its precision)."""
+        view = self.types.MeshView()
         view.shape_triangle = self.shape_triangle
         view.shape_triangle_start = self.shape_triangle_start
         view.instance_shape = self.instance_shape
@@ -402,12 +457,24 @@ class Scene:
         view.world_vertex = self.world_vertex
         return view
 
+    def world_vertex32(self) -> wp.array:
+        """World vertices as float32 ``wp.vec3`` (for rendering and export): ``world_vertex`` itself
+        in a float32 scene, a copy rounded to nearest (refreshed on each call) in a float64 one."""
+        if self.precision == "float32":
+            return self.world_vertex
+        if getattr(self, "_world_vertex32", None) is None:
+            self._world_vertex32 = wp.zeros(self.num_world_vertices, dtype=wp.vec3, device=self.device)
+        if self.num_world_vertices:
+            wp.launch(vertex_to_float32_kernel, dim=self.num_world_vertices, inputs=[self.world_vertex],
+                      outputs=[self._world_vertex32], device=self.device)
+        return self._world_vertex32
+
     def object_triangle_counts(self) -> np.ndarray:
         """``(N,)`` number of triangles of each object (host)."""
         return np.diff(self.instance_triangle_start_np)
 
     def world_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per object ``(world vertices (n, 3) float32, triangles (m, 3) int32)``, copied to the host."""
+        """Per object ``(world vertices (n, 3) float32 or float64, triangles (m, 3) int32)``, on the host."""
         wv = self.world_vertex.numpy()
         out = []
         for i in range(self.num_objects):

@@ -179,16 +179,18 @@ def shape(name: str) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"unknown shape {name!r}; known shapes: {known}")
 
 
-def validate_mesh(vertices, triangles, name: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
-    """Checks one triangle mesh and returns it as contiguous float32 / int32 arrays.
+def validate_mesh(vertices, triangles, name: str = "mesh", dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+    """Checks one triangle mesh and returns it as contiguous ``dtype`` / int32 arrays.
 
     Args:
         vertices: ``(n, 3)`` array-like of finite positions.
         triangles: ``(m, 3)`` array-like of integer vertex indices in ``[0, n)``, ``m >= 1``.
         name: how the object is called in error messages (e.g. ``"mesh 3"``).
+        dtype: ``np.float32`` (default) or ``np.float64``: type of the returned vertices (they
+            must be finite in float32 either way).
 
     Returns:
-        ``(vertices (n, 3) float32, triangles (m, 3) int32)``.
+        ``(vertices (n, 3) dtype, triangles (m, 3) int32)``.
 
     Raises:
         ValueError: naming ``name`` and the problem: wrong shape, non-numeric or non-finite
@@ -228,4 +230,5 @@ def validate_mesh(vertices, triangles, name: str = "mesh") -> tuple[np.ndarray, 
         raise ValueError(
             f"{name}: triangle {bad} has vertex index out of range [0, {v.shape[0]}): {t[bad].tolist()}"
         )
-    return np.ascontiguousarray(v32), np.ascontiguousarray(t.astype(np.int32))
+    out = v32 if dtype == np.float32 else v.astype(dtype)
+    return np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32))

@@ -300,7 +300,7 @@ class UsdAnimationWriter:
         colors = self._palette[colliding.view(np.uint8)]  # (N, 3): one colour per object
         with Sdf.ChangeBlock():
             if self.deforming:
-                self._write_meshes(time, self.scene.world_vertex.numpy(), colors)
+                self._write_meshes(time, self.scene.world_vertex32().numpy(), colors)
             else:
                 self._write_instancer(time, colors)
             if self.aabb:
@@ -315,7 +315,7 @@ class UsdAnimationWriter:
 
         pose = self.scene.instance_pose.numpy().reshape(-1, 7)
         scale = self.scene.instance_scale.numpy().astype(np.float32).reshape(-1)
-        position = np.ascontiguousarray(pose[:, :3])
+        position = np.ascontiguousarray(pose[:, :3], dtype=np.float32)
         # wp.transform stores (x, y, z, w), the memory layout of GfQuath (imaginary, then real).
         orientation = np.ascontiguousarray(pose[:, 3:7], dtype=np.float16)
         self._positions.Set(Vt.Vec3fArray.FromNumpy(position), time)
@@ -352,7 +352,7 @@ class UsdAnimationWriter:
         wp.launch(
             usd_box_polyline_kernel,
             dim=n,
-            inputs=[scene.world_vertex, scene.instance_vertex_start, self._box_corner],
+            inputs=[scene.world_vertex32(), scene.instance_vertex_start, self._box_corner],
             outputs=[self._box_lower, self._box_upper, self._box_point],
             device=d,
         )
