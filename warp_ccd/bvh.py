@@ -116,13 +116,14 @@ def build_tree(vertices: np.ndarray, triangles: np.ndarray, leaf_size: int = 1) 
         axis_of = node_axis[node_of]
         # Side of each triangle: right when its rank along its node's axis reaches the median.
         right_side = rank >= left_of
+        segs = [lists[a][pos] for a in range(3)]  # triangles of the items, in each list's order
         side = np.zeros(m, np.bool_)
         for a in range(3):
             mine = axis_of == a
-            side[lists[a][pos[mine]]] = right_side[mine]
+            side[segs[a][mine]] = right_side[mine]
         # Stable partition of each sorted list within each split node: left block, then right.
         for a in range(3):
-            seg = lists[a][pos]
+            seg = segs[a]
             right = side[seg]
             before = np.cumsum(right, dtype=np.int32)
             before -= right
