@@ -38,7 +38,7 @@ import warp as wp
 
 from .buffers import GrowableBuffer, read_counts
 
-__all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "make_broad_phase"]
+__all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase"]
 
 NXN_MAX_BOXES = 65536
 """The reference enumerates pair indices in int32: at most ``65536 * 65535 / 2 < 2**31`` pairs."""
@@ -495,6 +495,28 @@ def make_broad_phase(method: str, *, device=None):
     raise ValueError(f"broad phase method must be 'sap' or 'nxn', got {method!r}")
 
 
+def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> int:
+    """Runs a broad phase until its buffers hold everything; returns the number of pairs.
+
+    Resets ``pairs`` and the broad phase's own ``counters`` (if any), launches, reads all
+    counters with one synchronisation, grows what overflowed and launches again if needed.
+
+    Args:
+        broad: an object with ``launch(lower, upper, pairs)`` (and optionally ``counters``).
+        lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
+        pairs: ``wp.vec2i`` output buffer.
+    """
+    buffers = [pairs, *getattr(broad, "counters", [])]
+    while True:
+        for b in buffers:
+            b.reset()
+        broad.launch(lower, upper, pairs)
+        counts = read_counts([b.count for b in buffers], pairs.device)
+        grew = [b.ensure(c) for b, c in zip(buffers, counts)]
+        if not any(grew):
+            return counts[0]
+
+
 def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
     try:
         arr = np.asarray(a)
@@ -551,14 +573,6 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
     pairs = GrowableBuffer(wp.vec2i, 4 * n, device, "broad-phase pairs")
-    buffers = [pairs, *getattr(bp, "counters", [])]
-    while True:
-        for b in buffers:
-            b.reset()
-        bp.launch(wlo, whi, pairs)
-        counts = read_counts([b.count for b in buffers], device)
-        grew = [b.ensure(c) for b, c in zip(buffers, counts)]
-        if not any(grew):
-            break
-    out = pairs.numpy(counts[0]).reshape(-1, 2).astype(np.int32)
+    count = find_pairs(bp, wlo, whi, pairs)
+    out = pairs.numpy(count).reshape(-1, 2).astype(np.int32)
     return out[np.lexsort((out[:, 1], out[:, 0]))]

@@ -96,7 +96,7 @@ def _resolve_device(name: str | None):
     return wp.get_device(name)
 
 
-def _quiet_warp() -> None:
+def quiet_warp() -> None:
     """Keeps Warp's start-up banner and module-load messages out of the command's output."""
     import warp as wp
 
@@ -121,7 +121,7 @@ def _run_demo(args) -> int:
     except ImportError:
         raise CliError(f"{PROG} demo: error: usd-core is not installed (pip install usd-core)", EXIT_ERROR) from None
 
-    _quiet_warp()
+    quiet_warp()
     import numpy as np
     from tqdm import tqdm
 

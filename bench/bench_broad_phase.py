@@ -1,0 +1,225 @@
+"""Benchmark: the broad phase alone, ms per frame against the number of boxes, with peers.
+
+Boxes like the scaling scene's: cubes whose half sides are uniform in [0.5, 1.5] (the scene's
+object radii), centres uniform in a cube of side ``L`` chosen so that each box overlaps
+``--overlaps`` others on average, whatever ``N``. Two such cubes overlap when their centres are
+within ``h_i + h_j`` on every axis, so a box expects ``(N - 1) * E[(2 (h_i + h_j))^3] / L^3 =
+72 (N - 1) / L^3`` partners (``E[(h_i + h_j)^3] = 9``), hence ``L = (72 (N - 1) / overlaps)^(1/3)``
+(a little fewer near the walls; the measured mean is printed).
+
+Methods, in the same run on the same boxes, each frame in turn:
+
+* ``sap``: this package's :class:`~warp_ccd.broad_phase.BroadPhaseSAP`, the reference;
+* ``nxn``: this package's :class:`~warp_ccd.broad_phase.BroadPhaseNxN`, for ``N <= --nxn-max``;
+* ``warp_bvh``: Warp's ``wp.Bvh`` over the boxes, rebuilt every frame, one ``wp.bvh_query_aabb``
+  per box (:class:`~warp_ccd.peers.WarpBvhBroadPhase`);
+* ``warp_bvh_refit``: the same tree only refit every frame (boxes do not move here, so this is
+  refitting's best case);
+* ``newton_sap``: newton's ``BroadPhaseSAP`` when newton is installed, for ``N <= --newton-max``.
+
+A frame is: reset the buffers, launch, read the counters (one synchronisation); a buffer that
+overflowed grows and the frame runs again. ``--warmup`` frames grow the buffers and load the
+kernels; only the ``--frames`` after them are timed (the steady state). Every method's pair set
+must equal ``sap``'s (rows sorted); a difference ends the run with status 3.
+
+    PYTHONPATH=. python bench/bench_broad_phase.py                             # CPU: N = 1e3..1e5
+    PYTHONPATH=. python bench/bench_broad_phase.py --device cuda:0 --max-n 1e7  # N = 1e3..1e7
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from warp_ccd.bench import (
+    StageTimes,
+    environment,
+    resolve_device,
+    synced_ms,
+    write_json,
+)
+from warp_ccd.broad_phase import NXN_MAX_BOXES, BroadPhaseNxN, BroadPhaseSAP, find_pairs
+from warp_ccd.buffers import GrowableBuffer
+from warp_ccd.compare import compare_exact
+from warp_ccd.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
+
+METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
+REFERENCE = "sap"
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def random_boxes(num_boxes: int, overlaps: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Cubes with half sides ``U(0.5, 1.5)`` spread so each overlaps ``overlaps`` others on average.
+
+    Returns:
+        ``(lower, upper)``, ``(N, 3)`` float32 each (scene units).
+    """
+    rng = np.random.default_rng(seed)
+    half = rng.uniform(0.5, 1.5, size=(num_boxes, 1))
+    side = (72.0 * max(num_boxes - 1, 1) / overlaps) ** (1.0 / 3.0)
+    centre = rng.uniform(0.0, side, size=(num_boxes, 3))
+    return (centre - half).astype(np.float32), (centre + half).astype(np.float32)
+
+
+def make_method(name: str, device):
+    """The broad phase called ``name`` (:data:`METHODS`); PeerUnavailable when its library is missing."""
+    if name == "sap":
+        return BroadPhaseSAP(device=device)
+    if name == "nxn":
+        return BroadPhaseNxN(device=device)
+    if name == "warp_bvh":
+        return WarpBvhBroadPhase(device=device)
+    if name == "warp_bvh_refit":
+        return WarpBvhBroadPhase(device=device, refit=True)
+    if name == "newton_sap":
+        return NewtonBroadPhaseSAP(device=device)
+    raise ValueError(f"unknown method {name!r}")
+
+
+def run_size(num_boxes: int, methods: list[str], args, device) -> dict:
+    """Times every method on one box set; returns times, pair counts, checks and notes."""
+    lo, hi = random_boxes(num_boxes, args.overlaps, args.seed)
+    lower = wp.array(lo, dtype=wp.vec3, device=device)
+    upper = wp.array(hi, dtype=wp.vec3, device=device)
+    notes, runners = [], {}
+    for name in methods:
+        if name == "nxn" and num_boxes > args.nxn_max:
+            notes.append(f"nxn skipped: {num_boxes} boxes > --nxn-max {args.nxn_max}")
+            continue
+        if name == "newton_sap" and args.newton_max is not None and num_boxes > args.newton_max:
+            notes.append(f"newton_sap skipped: {num_boxes} boxes > --newton-max {args.newton_max}")
+            continue
+        try:
+            broad = make_method(name, device)
+        except PeerUnavailable as exc:
+            notes.append(f"{name} skipped: {exc}")
+            continue
+        runners[name] = (broad, GrowableBuffer(wp.vec2i, max(64, 2 * num_boxes), device, f"{name} pairs"))
+    times = {name: StageTimes() for name in runners}
+    counts = {}
+    for frame in range(args.warmup + args.frames):
+        for name, (broad, pairs) in runners.items():
+
+            def launch(broad=broad, pairs=pairs, name=name):
+                counts[name] = find_pairs(broad, lower, upper, pairs)
+
+            ms = synced_ms(launch, device)
+            if frame >= args.warmup:
+                times[name].add({"broad": ms})
+    results = {name: pairs.numpy(counts[name]).reshape(-1, 2) for name, (_, pairs) in runners.items()}
+    checks = [compare_exact(REFERENCE, results[REFERENCE], name, rows, "box pairs")
+              for name, rows in results.items() if name != REFERENCE]
+    return {"times": times, "counts": counts, "checks": checks, "notes": notes}
+
+
+def decades(low: int, high: int) -> list[int]:
+    """``low, 10 low, ...`` up to ``high`` (``high`` itself last if it is not a decade step)."""
+    out, n = [], low
+    while n <= high:
+        out.append(n)
+        n *= 10
+    if out[-1] != high:
+        out.append(high)
+    return out
+
+
+def _count(text: str) -> int:
+    value = float(text.replace("_", ""))
+    if value != int(value) or value < 2:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 2, got {text!r}")
+    return int(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
+    parser.add_argument("--min-n", type=_count, default=1000, help="smallest number of boxes (default: %(default)s)")
+    parser.add_argument("--max-n", type=_count, default=None,
+                        help="largest number of boxes, decades from --min-n (default: 1e5 on CPU, 1e6 on CUDA)")
+    parser.add_argument("--n", type=_count, nargs="+", default=None, help="explicit box counts (instead of decades)")
+    parser.add_argument("--overlaps", type=float, default=2.0, help="mean number of boxes each box overlaps (default: %(default)s)")
+    parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of %(default)s (default: all)")
+    parser.add_argument("--nxn-max", type=_count, default=None,
+                        help=f"largest N for nxn (default: 10000 on CPU, {NXN_MAX_BOXES} on CUDA)")
+    parser.add_argument("--newton-max", type=_count, default=None, help="largest N for newton_sap (default: all)")
+    parser.add_argument("--frames", type=int, default=5, help="timed frames (default: %(default)s)")
+    parser.add_argument("--warmup", type=int, default=2, help="untimed frames before them, at least 1 (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the boxes (default: %(default)s)")
+    parser.add_argument("--out", default=None,
+                        help="JSON file (default: bench/results/broad_phase_<device>.json)")
+    args = parser.parse_args(argv)
+    wp.config.quiet = True
+    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        parser.error(f"--methods: unknown {', '.join(bad) or '(none)'}; known: {', '.join(METHODS)}")
+    if REFERENCE not in methods:
+        methods.insert(0, REFERENCE)
+    if args.frames < 1 or args.warmup < 1 or args.overlaps <= 0:
+        parser.error("--frames and --warmup must be at least 1, --overlaps positive")
+    try:
+        device = resolve_device(args.device)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.nxn_max is None:
+        args.nxn_max = NXN_MAX_BOXES if device.is_cuda else 10000
+    max_n = args.max_n or (1_000_000 if device.is_cuda else 100_000)
+    if args.n is None and max_n < args.min_n:
+        parser.error(f"--max-n {max_n} is below --min-n {args.min_n}")
+    sizes = args.n or decades(args.min_n, max_n)
+    out = args.out
+    if out is None:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        out = str(RESULTS / f"broad_phase_{str(device).replace(':', '')}.json")
+
+    env = environment(device)
+    print(f"broad phase on {device} ({env['device_name']}), {args.overlaps} overlaps per box, "
+          f"{args.frames} frames after {args.warmup} warm-up; ms per frame min / median")
+    width = 24
+    print(f"{'boxes':>11}" + "".join(f"{m:>{width}}" for m in methods) + f"{'pairs':>12}{'overlaps/box':>14}")
+    rows, checks, notes, ok = [], [], [], True
+    for n in sorted(sizes):
+        res = run_size(n, methods, args, device)
+        line = f"{n:>11,}"
+        ref_med = res["times"][REFERENCE].summary()["broad"][1]
+        for m in methods:
+            st = res["times"].get(m)
+            if st is None:
+                line += f" {'-':>{width - 1}}"
+                continue
+            lo, med = st.summary()["broad"]
+            ratio = "" if m == REFERENCE else f" {med / ref_med:.1f}x"
+            line += f" {f'{lo:.3f}/{med:.3f}{ratio}':>{width - 1}}"
+            rows.append({"method": m, "n_boxes": n, "ms_min": lo, "ms_median": med, "pairs": res["counts"][m],
+                         "frames": len(st.ms["broad"])})
+        pairs = res["counts"][REFERENCE]
+        print(line + f"{pairs:>12,}{2 * pairs / n:>14.2f}", flush=True)
+        for note in res["notes"]:
+            print(f"    note: {note}")
+            notes.append({"n_boxes": n, "note": note})
+        for check in res["checks"]:
+            if not check.ok:
+                ok = False
+                print(f"    MISMATCH: {check.summary()}")
+                for m in check.mismatches:
+                    print(f"      {m}")
+            checks.append({"n_boxes": n, **check.to_dict()})
+        agree = ", ".join(c.peer for c in res["checks"] if c.ok)
+        print(f"    VERDICT {n:,} boxes: {'OK' if all(c.ok for c in res['checks']) else 'MISMATCH'}"
+              + (f" ({agree} agree with {REFERENCE})" if agree else ""))
+        write_json(out, {**env, "config": {**vars(args), "methods": methods, "sizes": sorted(sizes)},
+                         "rows": rows, "checks": checks, "notes": notes, "ok": ok})
+    print(f"results written to {out}")
+    if not ok:
+        print("bench_broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)
+        return 3
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,209 @@
+"""The benchmark harness: the command end to end at tiny sizes, its peers, and its comparisons."""
+
+import importlib.util
+import json
+import os
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warp_ccd as wc
+from warp_ccd import bench
+from warp_ccd.broad_phase import find_pairs
+from warp_ccd.buffers import GrowableBuffer
+from warp_ccd.compare import classify_triangle_pairs, compare_exact, compare_triangle_pairs, triangle_distance
+from warp_ccd.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",
+            "triangle_pairs"}
+HAS_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
+
+
+def load_script(name):
+    spec = importlib.util.spec_from_file_location(name, os.path.join(ROOT, "bench", f"{name}.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bench_end_to_end(device, tmp_path, capsys):
+    out = tmp_path / "results.json"
+    plot = tmp_path / "scaling.png"
+    status = bench.main(["--device", device, "--objects", "30", "150", "--triangles", "poly", "80",
+                         "--frames", "2", "--warmup", "1", "--out", str(out), "--plot", str(plot)])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    doc = json.loads(out.read_text())
+    assert {"device", "date", "versions", "git_commit", "rows", "memory", "checks"} <= set(doc)
+    assert doc["device"] == device and doc["versions"]["warp"] == wp.__version__
+    rows = doc["rows"]
+    assert rows and all(ROW_KEYS <= set(r) for r in rows)
+    assert all(0 <= r["ms_min"] <= r["ms_median"] for r in rows)
+    totals = {(r["n_objects"], r["triangles"]) for r in rows if r["method"] == "warp_ccd" and r["stage"] == "total"}
+    assert totals == {(30, "poly"), (150, "poly"), (30, "80"), (150, "80")}
+    assert {r["triangles_per_object"] for r in rows if r["triangles"] == "80"} == {80}
+    stages = {r["stage"] for r in rows if r["method"] == "warp_ccd"}
+    assert {"motion", "detect", "total"} <= stages and len(stages) >= 5  # plus the pipeline's own stages
+    assert {"warp_ccd", "warp_builtin", "warp_ccd_nxn"} <= {r["method"] for r in rows}
+    assert len(doc["memory"]) == 4 and all(m["pipeline_peak_bytes"] > 0 for m in doc["memory"])
+    assert doc["checks"] and all(c["ok"] for c in doc["checks"]) and doc["ok"]
+    assert text.count("VERDICT") == 4
+    if HAS_MATPLOTLIB:
+        assert plot.stat().st_size > 1000
+    else:
+        assert not plot.exists() and "plot skipped" in text
+
+
+@pytest.mark.parametrize("argv", [["--triangles", "81"], ["--peers", "builtin,bullet"], ["--objects", "1"],
+                                  ["--device", "tpu:7"], ["--out", "results.txt"]])
+def test_bench_bad_arguments(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        bench.main(argv)
+    assert exc.value.code == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_bench_exit_status_on_mismatch_and_peer_failure(device, monkeypatch, capsys):
+    argv = ["--device", device, "--objects", "40",
+            "--triangles", "poly", "--frames", "1", "--warmup", "0", "--peers", "builtin", "--no-memory"]
+    real = bench.compare_triangle_pairs
+
+    def disagreeing(*args, **kwargs):
+        check = real(*args, **kwargs)
+        check.mismatches.append("made up for the test")
+        return check
+
+    monkeypatch.setattr(bench, "compare_triangle_pairs", disagreeing)
+    assert bench.main(argv) == bench.EXIT_MISMATCH
+    captured = capsys.readouterr()
+    assert "VERDICT 40 objects, triangles poly: MISMATCH" in captured.out and "MISMATCH" in captured.err
+    monkeypatch.setattr(bench, "compare_triangle_pairs", real)
+
+    def broken(self):
+        raise RuntimeError("peer broke")
+
+    monkeypatch.setattr(WarpMeshPipeline, "query", broken)
+    assert bench.main(argv) == bench.EXIT_PEER_FAILED
+    captured = capsys.readouterr()
+    assert "ERROR warp_builtin failed at frame 0: RuntimeError: peer broke" in captured.out
+
+
+def test_parse_triangles():
+    assert bench.parse_triangles("poly") == ("poly", None)
+    assert bench.parse_triangles("80") == ("80", ("icosphere1",))
+    assert bench.parse_triangles("1280") == ("1280", ("icosphere3",))
+    assert bench.parse_triangles("icosphere2") == ("320", ("icosphere2",))
+    with pytest.raises(ValueError):
+        bench.parse_triangles("100")
+
+
+def test_builtin_peer_agrees_with_pipeline(device):
+    scene = wc.Scene.random(300, seed=3, shapes=("icosphere1", "cube", "dodecahedron"), device=device)
+    scene.advance(0.4)
+    ours = wc.CollisionPipeline(scene).detect()
+    peer = WarpMeshPipeline(scene, capacity=1)  # grows on the first frame
+    bench.run_stages(peer.stages(), peer.finish, device)
+    got = peer.triangle_pairs()
+    assert got.shape[1] == 4 and len(got) > 10 and peer.hits.capacity >= len(got)
+    check = compare_triangle_pairs(scene, "warp_ccd", ours.triangle_pairs, "warp_builtin", got)
+    assert check.ok, check.mismatches
+    ref_obj, peer_obj, common = check.object_pairs
+    assert common > 0 and ref_obj - common + peer_obj - common == check.explained
+
+
+def test_broad_phase_peers_agree(device):
+    script = load_script("bench_broad_phase")
+    lo, hi = script.random_boxes(3000, overlaps=2.0, seed=1)
+    lower = wp.array(lo, dtype=wp.vec3, device=device)
+    upper = wp.array(hi, dtype=wp.vec3, device=device)
+    ref_pairs = GrowableBuffer(wp.vec2i, 16, device, "reference")
+    n_ref = find_pairs(wc.BroadPhaseSAP(device=device), lower, upper, ref_pairs)
+    ref = ref_pairs.numpy(n_ref)
+    assert 2 * n_ref / 3000 > 1.0  # about the requested 2 overlaps per box
+    peers = {"warp_bvh": WarpBvhBroadPhase(device=device), "warp_bvh_refit": WarpBvhBroadPhase(device=device, refit=True)}
+    try:
+        peers["newton_sap"] = NewtonBroadPhaseSAP(device=device)
+    except PeerUnavailable:
+        pass
+    for name, broad in peers.items():
+        pairs = GrowableBuffer(wp.vec2i, 16, device, name)
+        for _ in range(2):  # build, then rebuild or refit
+            count = find_pairs(broad, lower, upper, pairs)
+        check = compare_exact("sap", ref, name, pairs.numpy(count), "box pairs")
+        assert check.ok, check.mismatches
+
+
+def test_bench_scripts_run(device, tmp_path, capsys):
+    broad = load_script("bench_broad_phase")
+    out = tmp_path / "broad.json"
+    assert broad.main(["--device", device, "--n", "300", "3000", "--frames", "1", "--warmup", "1",
+                       "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert {"device", "date", "rows", "checks"} <= set(doc) and doc["ok"]
+    assert {r["method"] for r in doc["rows"]} >= {"sap", "nxn", "warp_bvh", "warp_bvh_refit"}
+    pipeline = load_script("bench_pipeline")
+    out = tmp_path / "pipeline.json"
+    assert pipeline.main(["--device", device, "--objects", "20", "--triangles", "80", "--frames", "1",
+                          "--warmup", "1", "--no-memory", "--out", str(out), "--plot", str(tmp_path / "p.png")]) == 0
+    doc = json.loads(out.read_text())
+    assert {r["method"] for r in doc["rows"]} == {"warp_ccd", "warp_builtin"}
+    capsys.readouterr()
+
+
+# ---------------------------------------------------------------------------------------------
+# The comparisons' arbiter and verdicts
+
+
+def tri(*points):
+    return np.array(points, np.float64)
+
+
+def test_classify_triangle_pairs(device):
+    base = tri([0, 0, 0], [1, 0, 0], [0, 1, 0])
+    cases = {
+        "intersecting": tri([0.2, 0.2, -0.5], [0.3, 0.2, 0.5], [0.2, 0.3, 0.5]),
+        "grazing": tri([1, 0, 0], [2, 0, 1], [2, 1, -1]),  # shares one vertex only
+        "near": base + [0, 0, 1e-4],  # parallel, 1e-4 of an edge above
+        "apart": base + [0, 0, 0.5],
+    }
+    got = classify_triangle_pairs(np.stack([base] * 4), np.stack(list(cases.values())), device=device)
+    assert got.tolist() == list(cases)
+
+
+def test_triangle_distance():
+    a = tri([0, 0, 0], [1, 0, 0], [0, 1, 0])
+    b = np.stack([a + [0, 0, 0.25], tri([2, 0, 0], [3, 0, 0], [2, 1, 0]), tri([0.5, 0.5, 1], [0.5, 0.5, 2], [1, 1, 2])])
+    d = triangle_distance(np.stack([a] * 3), b)
+    assert np.allclose(d, [0.25, 1.0, 1.0])
+
+
+def test_compare_triangle_pairs_verdicts(device):
+    cube = wc.shape("cube")
+    meshes = [(cube[0] + np.float32([x, 0, 0]), cube[1]) for x in (0.0, 0.5, 5.0)]  # 0-1 overlap, 2 far away
+    scene = wc.Scene.from_meshes(meshes, device=device)
+    ours = wc.CollisionPipeline(scene).detect().triangle_pairs
+    assert set(map(tuple, ours[:, [0, 2]].tolist())) == {(0, 1)}
+    same = compare_triangle_pairs(scene, "a", ours, "b", ours)
+    assert same.ok and same.num_common == len(ours)
+    missed = compare_triangle_pairs(scene, "a", ours, "b", np.zeros((0, 4), np.int32))
+    assert not missed.ok and "b misses 1 object pairs" in missed.mismatches[0]
+    spurious = compare_triangle_pairs(scene, "a", ours, "b", np.concatenate([ours, [[1, 0, 2, 0]]]))
+    assert not spurious.ok and "clearly apart" in spurious.mismatches[0] and spurious.classes["b only: apart"] == 1
+
+
+def test_compare_exact():
+    ref = np.array([[0, 1], [2, 5], [3, 4]])
+    assert compare_exact("a", ref, "b", ref[::-1][:, ::-1], "box pairs").ok  # any order, either way round
+    check = compare_exact("a", ref, "b", np.array([[0, 1], [2, 6], [3, 4], [3, 4]]), "box pairs")
+    assert len(check.mismatches) == 3  # one missing, one extra, one duplicate
+
+
+def test_tracker_peak_parse():
+    text = ("Allocation Tracking Report\n  Total allocations:\n    cpu              46 (364.29 KB)\n"
+            "  Peak usage:\n    cpu              348.27 KB\n    cuda:0           1.50 GB\n  Live allocations:\n")
+    assert bench._tracker_peak(text, "cpu") == int(348.27 * 1024)
+    assert bench._tracker_peak(text, "cuda:0") == int(1.5 * 1024**3)
+    assert bench._tracker_peak(text, "cuda:1") is None
+    assert bench._tracker_peak("nothing", "cpu") is None

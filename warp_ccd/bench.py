@@ -1,0 +1,925 @@
+"""Benchmarks: ms per frame against the number of objects, per stage, with peers in the same run.
+
+``warp-ccd bench`` and ``python -m warp_ccd.bench`` run :func:`main`. For each triangle count
+(``--triangles``) and each object count ``N`` (``--objects``), on the scaling scene
+``Scene.random(N, seed, shapes)`` (constant density, so the work per object does not depend on
+``N``):
+
+1. **Frames.** ``--warmup`` frames (kernel loading, buffers growing), then ``--frames`` timed
+   ones. Each frame moves the scene once (``scene.advance``, timed as ``motion``) and then runs
+   every method on the same world vertices. Times are wall-clock ms with
+   ``wp.synchronize_device`` before and after what is timed; each row gives the min and the
+   median over the timed frames.
+2. **Methods.**
+
+   * ``warp_ccd``: this package's :class:`~warp_ccd.pipeline.CollisionPipeline`, twice: with
+     ``timings=True`` for the stages it reports (whatever their names; it synchronises after each,
+     and the sum is ``detect_synced``), and with ``timings=False`` timed around ``detect()``
+     (``detect``, the number to quote). ``total`` is ``motion + detect`` of the same frame.
+   * ``warp_builtin`` (peer ``builtin``): Warp's own tools, :class:`~warp_ccd.peers.WarpMeshPipeline`.
+   * ``fcl`` (peer ``fcl``): python-fcl, :class:`~warp_ccd.peers.FclPipeline`, on the host, for
+     ``N <= --fcl-max-objects``.
+   * ``warp_ccd_nxn`` (peer ``nxn``): this pipeline with the all-pairs broad phase, for
+     ``N <= --nxn-max-objects``.
+   * ``newton_sap`` (peer ``newton``): newton's ``BroadPhaseSAP`` alone, on the object boxes this
+     pipeline's broad phase saw (stage ``broad``; compare with ``warp_ccd``'s ``broad``).
+
+   Peers report ``detect`` (their stages, synchronised after each, plus the counter read) and
+   ``total`` (``motion + detect``). A peer whose library is missing is skipped with a note.
+3. **Checks**, on the last frame (:mod:`warp_ccd.compare`): ``warp_builtin`` and ``fcl`` must
+   find the same object pairs as ``warp_ccd`` up to near-touching pairs, their triangle-level
+   differences are classified and counted; ``warp_ccd_nxn`` must find the very same triangle
+   pairs and as many broad-phase pairs; ``newton_sap`` the very same box pairs as this package's
+   :class:`~warp_ccd.broad_phase.BroadPhaseSAP` on the same boxes. A real mismatch ends the
+   command with status 3 after everything is written.
+4. **Memory** of a fresh ``warp_ccd`` pipeline over two frames: the peak of Warp's allocation
+   tracker (``wp.ScopedMemoryTracker``; it sees every Warp allocation, native trees included), on
+   CUDA also the memory pool's high-water mark when it rose, and the bytes of the arrays the
+   pipeline and the scene hold; per scene triangle too.
+
+Output: a table per case and a summary on stdout (ratios are a peer's median over
+``warp_ccd``'s for the same stage: above 1, ``warp_ccd`` is faster), a JSON file (``--out``:
+device, date, versions, git commit, ``rows`` of ``method, n_objects, triangles,
+triangles_per_object, stage, ms_min, ms_median, object_pairs, triangle_pairs`` (for a broad phase
+alone, ``object_pairs`` counts its box pairs), ``memory``, ``checks``, ``notes``; rewritten after
+each case so that a long run that dies keeps what it measured) and a log-log plot of ms per frame
+against ``N`` (``--plot``, needs matplotlib).
+
+Exit status: 0 all agree, 1 a peer failed to run, 2 bad arguments, 3 a real mismatch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.metadata
+import json
+import math
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+from . import __version__
+from .broad_phase import find_pairs, make_broad_phase
+from .buffers import GrowableBuffer
+from .compare import PairCheck, compare_exact, compare_triangle_pairs
+from .output import PendingFile, check_output_path
+from .peers import FclPipeline, NewtonBroadPhaseSAP, PeerUnavailable, WarpMeshPipeline
+from .pipeline import CollisionPipeline
+from .scene import Scene
+
+__all__ = [
+    "PEERS",
+    "BenchReport",
+    "PipelineMethod",
+    "StageTimes",
+    "array_bytes",
+    "build_parser",
+    "environment",
+    "main",
+    "measure_pipeline_memory",
+    "parse_triangles",
+    "resolve_device",
+    "run_case",
+    "run_stages",
+    "synced_ms",
+    "write_json",
+]
+
+EXIT_OK = 0
+EXIT_PEER_FAILED = 1
+EXIT_MISMATCH = 3
+
+PEERS = ("builtin", "fcl", "nxn", "newton")
+"""Peer names accepted by ``--peers``."""
+
+REFERENCE = "warp_ccd"
+"""Name of this package's pipeline in rows and checks."""
+
+DT = 1.0 / 60.0
+"""Time step of a frame, s."""
+
+JSON_EXTENSIONS = (".json",)
+PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
+
+NXN_MAX_OBJECTS = {"cpu": 3000, "cuda": 20000}
+"""Default ``--nxn-max-objects`` per device kind: the all-pairs broad phase is O(N^2)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Timing
+
+
+def synced_ms(fn, device) -> float:
+    """Wall-clock ms of ``fn()``, with the device synchronised before and after."""
+    wp.synchronize_device(device)
+    start = time.perf_counter()
+    fn()
+    wp.synchronize_device(device)
+    return (time.perf_counter() - start) * 1e3
+
+
+def run_stages(stages: list, finish, device) -> dict:
+    """Runs a peer's frame: its stages in order, each synchronised and timed, then ``finish()``.
+
+    Args:
+        stages: ``(name, callable)`` pairs.
+        finish: reads the frame's counters; returns True when a buffer grew (the frame reruns).
+        device: Warp device to synchronise.
+
+    Returns:
+        ms per stage name, plus ``detect`` (stages and ``finish`` together), of the last run.
+    """
+    while True:
+        times = {}
+        wp.synchronize_device(device)
+        start = time.perf_counter()
+        t = start
+        for name, fn in stages:
+            fn()
+            wp.synchronize_device(device)
+            now = time.perf_counter()
+            times[name] = (now - t) * 1e3
+            t = now
+        rerun = finish()
+        times["detect"] = (time.perf_counter() - start) * 1e3
+        if not rerun:
+            return times
+
+
+@dataclass
+class StageTimes:
+    """ms per stage over the timed frames of one method."""
+
+    ms: dict = field(default_factory=dict)
+
+    def add(self, times: dict) -> None:
+        """Appends one frame's ``{stage: ms}``."""
+        for stage, value in times.items():
+            self.ms.setdefault(stage, []).append(float(value))
+
+    def summary(self) -> dict:
+        """``{stage: (ms_min, ms_median)}``."""
+        return {s: (float(np.min(v)), float(np.median(v))) for s, v in self.ms.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Methods run on a scene
+
+
+class PipelineMethod:
+    """This package's pipeline, timed per stage (``timings=True``) and as a whole (``timings=False``).
+
+    Args:
+        name: row name.
+        scene: the scene.
+        **options: :class:`~warp_ccd.pipeline.CollisionPipeline` options (e.g. ``broad_phase``).
+    """
+
+    def __init__(self, name: str, scene: Scene, **options):
+        self.name = name
+        self.device = scene.device
+        self.staged = CollisionPipeline(scene, timings=True, **options)
+        self.plain = CollisionPipeline(scene, **options)
+        self.result = None
+
+    def run(self) -> dict:
+        """One frame; ms per stage, ``detect_synced`` and ``detect``."""
+        staged = self.staged.detect()
+        times = {("detect_synced" if k == "total" else k): v for k, v in (staged.timings or {}).items()}
+
+        def detect():
+            self.result = self.plain.detect()
+
+        times["detect"] = synced_ms(detect, self.device)
+        return times
+
+    def triangle_pairs(self) -> np.ndarray:
+        """``(M, 4)`` rows of the last frame."""
+        return self.result.triangle_pairs
+
+    def object_boxes(self) -> tuple:
+        """``(lower, upper)`` ``(N,)`` object boxes the broad phase saw in the last frame."""
+        return self.plain.bounds.lower, self.plain.bounds.upper
+
+    def counts(self) -> tuple:
+        """``(object pairs, triangle pairs)`` of the last frame."""
+        return len(self.result.object_pairs), self.result.num_triangle_pairs
+
+
+class PeerMethod:
+    """A scene peer of :mod:`warp_ccd.peers` (named by its ``name``) timed through :func:`run_stages`."""
+
+    def __init__(self, peer, device):
+        self.name = peer.name
+        self.peer = peer
+        self.device = device
+
+    def run(self) -> dict:
+        """One frame; ms per peer stage and ``detect``."""
+        return run_stages(self.peer.stages(), self.peer.finish, self.device)
+
+    def triangle_pairs(self) -> np.ndarray:
+        """``(M, 4)`` rows of the last frame."""
+        return self.peer.triangle_pairs()
+
+    def counts(self) -> tuple:
+        """``(object pairs, triangle pairs)`` of the last frame."""
+        t = self.triangle_pairs()
+        return (len(np.unique(t[:, [0, 2]], axis=0)) if len(t) else 0), len(t)
+
+
+class BroadPhaseMethod:
+    """A broad phase alone on the object boxes of ``source`` (run after it in each frame)."""
+
+    def __init__(self, name: str, broad, source: PipelineMethod, device):
+        self.name = name
+        self.broad = broad
+        self.source = source
+        self.device = device
+        n = source.plain.scene.num_objects
+        self.pairs = GrowableBuffer(wp.vec2i, max(64, 4 * n), device, f"{name} pairs")
+        self.num_pairs = 0
+
+    def run(self) -> dict:
+        """One frame; ms of ``broad`` (launch and counter read)."""
+        lower, upper = self.source.object_boxes()
+
+        def broad():
+            self.num_pairs = find_pairs(self.broad, lower, upper, self.pairs)
+
+        return {"broad": synced_ms(broad, self.device)}
+
+    def box_pairs(self) -> np.ndarray:
+        """``(K, 2)`` box pairs of the last frame, as the broad phase wrote them."""
+        return self.pairs.numpy(self.num_pairs).reshape(-1, 2)
+
+    def reference_box_pairs(self) -> np.ndarray:
+        """``(K, 2)`` pairs of this package's :class:`~warp_ccd.broad_phase.BroadPhaseSAP` on the same boxes."""
+        lower, upper = self.source.object_boxes()
+        pairs = GrowableBuffer(wp.vec2i, self.pairs.capacity, self.device, "reference box pairs")
+        count = find_pairs(make_broad_phase("sap", device=self.device), lower, upper, pairs)
+        return pairs.numpy(count).reshape(-1, 2)
+
+    def counts(self) -> tuple:
+        """``(box pairs, None)`` of the last frame."""
+        return self.num_pairs, None
+
+
+# ---------------------------------------------------------------------------------------------
+# Memory
+
+
+def array_bytes(*roots, exclude: set | None = None) -> tuple[int, set]:
+    """Bytes of the distinct ``wp.array`` buffers reachable from ``roots``.
+
+    Follows attributes of this package's objects (its ``wp.struct`` instances too), lists, tuples
+    and dicts. Views are not counted
+    twice: an array without its own allocation counts only when it lies outside every counted one.
+
+    Args:
+        roots: objects to walk (a scene, a pipeline...).
+        exclude: buffer addresses not to count (e.g. the scene's, when measuring a pipeline).
+
+    Returns:
+        ``(bytes, addresses counted)``.
+    """
+    exclude = set(exclude or ())
+    seen, arrays, stack = set(), {}, list(roots)
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, wp.array):
+            if obj.ptr and obj.ptr not in exclude:
+                arrays[obj.ptr] = max(arrays.get(obj.ptr, (0, False)), (int(obj.capacity), obj.deleter is not None))
+        elif isinstance(obj, (list, tuple, set)):
+            stack.extend(obj)
+        elif isinstance(obj, dict):
+            stack.extend(obj.values())
+        elif hasattr(obj, "__dict__") and any(c.__module__.startswith("warp_ccd") for c in type(obj).__mro__):
+            stack.extend(vars(obj).values())  # this package's objects, and instances of its wp.structs
+    owners = sorted((p, c) for p, (c, owns) in arrays.items() if owns)
+    total = sum(c for _, c in owners)
+    starts = np.array([p for p, _ in owners], np.uint64)
+    ends = np.array([p + c for p, c in owners], np.uint64)
+    for p, (c, owns) in arrays.items():
+        if not owns:
+            k = int(np.searchsorted(starts, np.uint64(p), side="right")) - 1
+            if k < 0 or p >= int(ends[k]):
+                total += c
+    return total, set(arrays)
+
+
+_UNITS = {"B": 1, "KB": 1024, "MB": 1024**2, "GB": 1024**3, "TB": 1024**4}
+
+
+def _tracker_peak(text: str, device) -> int | None:
+    """The ``Peak usage`` of ``device`` in a Warp allocation-tracker report, in bytes."""
+    lines = text.splitlines()
+    try:
+        start = next(k for k, line in enumerate(lines) if line.strip() == "Peak usage:")
+    except StopIteration:
+        return None
+    for line in lines[start + 1:]:
+        parts = line.split()
+        if len(parts) != 3 or parts[2] not in _UNITS:
+            break
+        if parts[0] == str(device):
+            try:
+                return int(float(parts[1]) * _UNITS[parts[2]])
+            except ValueError:
+                return None
+    return None
+
+
+def measure_pipeline_memory(scene: Scene, frames: int = 2) -> dict:
+    """Memory of a fresh default :class:`~warp_ccd.pipeline.CollisionPipeline` over ``frames`` frames.
+
+    Returns:
+        ``scene_bytes`` (arrays the scene holds), ``pipeline_resident_bytes`` (arrays the
+        pipeline holds afterwards), on CUDA ``mempool_peak_bytes`` (the pool's high-water mark
+        minus its use before, when the mark rose, else None), ``pipeline_peak_bytes`` (the peak
+        of Warp's allocation tracker while building and running the pipeline; else the pool's;
+        else the resident bytes) with its ``peak_source``, and the byte counts per scene triangle.
+    """
+    device = scene.device
+    scene_bytes, scene_ptrs = array_bytes(scene)
+    wp.synchronize_device(device)
+    use_pool = device.is_cuda and wp.is_mempool_enabled(device)
+    if use_pool:
+        pool_used, pool_high = wp.get_mempool_used_mem_current(device), wp.get_mempool_used_mem_high(device)
+
+    def build_and_run():
+        pipe = CollisionPipeline(scene)
+        for _ in range(frames):
+            pipe.detect()
+        wp.synchronize_device(device)
+        return pipe
+
+    peak = None
+    tracker = getattr(wp, "ScopedMemoryTracker", None)
+    if tracker is not None:
+        reports = []
+        with tracker("warp_ccd.bench", print=False, report_func=reports.append) as t:
+            t.clear()
+            pipe = build_and_run()
+            t.report(max_items=0)
+        peak = _tracker_peak(reports[-1], device) if reports else None
+    else:
+        pipe = build_and_run()
+    out = {"scene_bytes": scene_bytes}
+    out["pipeline_resident_bytes"], _ = array_bytes(pipe, exclude=scene_ptrs)
+    if use_pool:
+        high = wp.get_mempool_used_mem_high(device)
+        out["mempool_peak_bytes"] = int(high - pool_used) if high > pool_high else None
+    if peak is not None:
+        out["pipeline_peak_bytes"], out["peak_source"] = peak, "warp alloc tracker"
+    elif out.get("mempool_peak_bytes"):
+        out["pipeline_peak_bytes"], out["peak_source"] = out["mempool_peak_bytes"], "CUDA mempool high-water mark"
+    else:
+        out["pipeline_peak_bytes"], out["peak_source"] = out["pipeline_resident_bytes"], "resident arrays"
+    tri = max(scene.num_triangles, 1)
+    for key in ("scene_bytes", "pipeline_resident_bytes", "pipeline_peak_bytes"):
+        out[key.replace("_bytes", "_bytes_per_triangle")] = out[key] / tri
+    del pipe
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# One case: one scene, all methods
+
+
+def parse_triangles(spec: str) -> tuple[str, tuple | None]:
+    """``"poly"`` -> the seed polyhedra; ``"80"`` (``20 * 4**L``) or ``"icosphereL"`` -> icosphere level L.
+
+    Returns:
+        ``(label, shapes)``: ``shapes`` for :meth:`Scene.random` (None: its default polyhedra).
+
+    Raises:
+        ValueError: an unknown spec.
+    """
+    text = str(spec).strip().lower()
+    if text == "poly":
+        return "poly", None
+    if text.startswith("icosphere") and text[len("icosphere"):].isdigit():
+        level = int(text[len("icosphere"):])
+        return str(20 * 4**level), (f"icosphere{level}",)
+    if text.isdigit():
+        count = int(text)
+        for level in range(9):
+            if 20 * 4**level == count:
+                return text, (f"icosphere{level}",)
+    known = ", ".join(str(20 * 4**k) for k in range(6))
+    raise ValueError(f"--triangles: {spec!r} is neither 'poly' nor an icosphere's triangle count ({known}, ...)")
+
+
+@dataclass
+class CaseResult:
+    """Everything measured for one ``(triangles, N)``."""
+
+    label: str
+    num_objects: int
+    num_triangles: int
+    times: dict  # method -> StageTimes
+    counts: dict  # method -> (object pairs, triangle pairs)
+    checks: list  # PairCheck
+    memory: dict | None
+    notes: list
+    peer_failed: bool = False
+
+    @property
+    def ok(self) -> bool:
+        """No real mismatch."""
+        return all(c.ok for c in self.checks)
+
+
+def _make_peers(scene: Scene, peers: list, ours: PipelineMethod, args, notes: list) -> list:
+    device = scene.device
+    n = scene.num_objects
+    methods = []
+    for peer in peers:
+        try:
+            if peer == "builtin":
+                methods.append(PeerMethod(WarpMeshPipeline(scene), device))
+            elif peer == "fcl":
+                if n > args.fcl_max_objects:
+                    notes.append(f"fcl skipped: {n} objects > --fcl-max-objects {args.fcl_max_objects}")
+                    continue
+                methods.append(PeerMethod(FclPipeline(scene), device))
+            elif peer == "nxn":
+                limit = args.nxn_max_objects
+                if limit is None:
+                    limit = NXN_MAX_OBJECTS["cuda" if device.is_cuda else "cpu"]
+                if n > limit:
+                    notes.append(f"nxn skipped: {n} objects > --nxn-max-objects {limit}")
+                    continue
+                methods.append(PipelineMethod("warp_ccd_nxn", scene, broad_phase="nxn"))
+            elif peer == "newton":
+                methods.append(BroadPhaseMethod("newton_sap", NewtonBroadPhaseSAP(device=device), ours, device))
+        except PeerUnavailable as exc:
+            notes.append(f"{peer} skipped: {exc}")
+    return methods
+
+
+def _checks(scene: Scene, ours: PipelineMethod, methods: list) -> list[PairCheck]:
+    checks = []
+    ours_rows = ours.triangle_pairs()
+    for m in methods:
+        if isinstance(m, BroadPhaseMethod):
+            checks.append(compare_exact("warp_ccd_sap", m.reference_box_pairs(), m.name, m.box_pairs(), "box pairs"))
+        elif isinstance(m, PipelineMethod):
+            check = compare_exact(REFERENCE, ours_rows, m.name, m.triangle_pairs(), "triangle pairs", width=4)
+            ours_broad, peer_broad = ours.result.num_broad_pairs, m.result.num_broad_pairs
+            if ours_broad != peer_broad:
+                check.mismatches.append(f"{m.name} finds {peer_broad} broad-phase pairs, {REFERENCE} {ours_broad}")
+            checks.append(check)
+        else:
+            checks.append(compare_triangle_pairs(scene, REFERENCE, ours_rows, m.name, m.triangle_pairs()))
+    return checks
+
+
+def run_case(num_objects: int, triangles: str, args, device) -> CaseResult:
+    """Builds the scaling scene, runs all methods frame by frame, checks and measures memory.
+
+    Args:
+        num_objects: ``N``.
+        triangles: a ``--triangles`` spec (see :func:`parse_triangles`).
+        args: parsed options (``seed``, ``frames``, ``warmup``, ``peers``, limits, ``memory``).
+        device: Warp device.
+    """
+    label, shapes = parse_triangles(triangles)
+    kwargs = {} if shapes is None else {"shapes": shapes}
+    scene = Scene.random(num_objects, seed=args.seed, device=device, **kwargs)
+    notes = []
+    ours = PipelineMethod(REFERENCE, scene)
+    methods = [ours, *_make_peers(scene, args.peers, ours, args, notes)]
+    times = {m.name: StageTimes() for m in methods}
+    failed = set()
+    for frame in range(args.warmup + args.frames):
+        motion = synced_ms(lambda: scene.advance(DT), device)
+        for m in methods:
+            if m.name in failed:
+                continue
+            try:
+                t = m.run()
+            except Exception as exc:  # a peer failing must not lose the other measurements
+                if m is ours:
+                    raise
+                failed.add(m.name)
+                notes.append(f"ERROR {m.name} failed at frame {frame}: {type(exc).__name__}: {exc}")
+                continue
+            if m is ours:
+                t = {"motion": motion, **t}
+            if "detect" in t:
+                t["total"] = motion + t["detect"]
+            if frame >= args.warmup:
+                times[m.name].add(t)
+    live = [m for m in methods if m.name not in failed]
+    checks = _checks(scene, ours, live[1:])
+    counts = {m.name: m.counts() for m in live}
+    memory = measure_pipeline_memory(scene) if args.memory else None
+    return CaseResult(label, num_objects, scene.num_triangles, {m.name: times[m.name] for m in live},
+                      counts, checks, memory, notes, peer_failed=bool(failed))
+
+
+# ---------------------------------------------------------------------------------------------
+# Report: rows, tables, JSON, plot
+
+
+def _bytes(n: float | None) -> str:
+    if n is None:
+        return "-"
+    for unit, size in (("GB", 1024**3), ("MB", 1024**2), ("KB", 1024)):
+        if n >= size:
+            return f"{n / size:.2f} {unit}"
+    return f"{int(n)} B"
+
+
+def _git_commit() -> tuple[str | None, bool | None]:
+    """``(HEAD commit, tracked files modified)`` of the checkout this package runs from, or Nones."""
+    root = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
+        if commit.returncode != 0:
+            return None, None
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=10)
+        return commit.stdout.strip(), bool(dirty.stdout.strip())
+    except (OSError, subprocess.SubprocessError):
+        return None, None
+
+
+def environment(device) -> dict:
+    """What a result file records about where it was measured.
+
+    Returns:
+        ``device``, ``device_name``, ``date`` (UTC, ISO 8601), ``versions`` (Python, platform,
+        warp_ccd, Warp, numpy and the optional peers' packages, None when missing),
+        ``git_commit`` and ``git_dirty``.
+    """
+    versions = {"python": platform.python_version(), "platform": platform.platform(), "warp_ccd": __version__,
+                "warp": wp.__version__, "numpy": np.__version__}
+    for dist in ("python-fcl", "newton", "matplotlib"):
+        try:
+            versions[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            versions[dist] = None
+    commit, dirty = _git_commit()
+    return {
+        "device": str(device),
+        "device_name": getattr(device, "name", None),
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "versions": versions,
+        "git_commit": commit,
+        "git_dirty": dirty,
+    }
+
+
+def write_json(path: str, document: dict) -> None:
+    """Writes ``document`` to ``path``, replaced in one step (see :mod:`warp_ccd.output`).
+
+    Raises:
+        ValueError: ``path`` is not a writable ``.json`` destination.
+    """
+    full, _ = check_output_path(path, JSON_EXTENSIONS, "JSON")
+    pending = PendingFile(full)
+    with open(pending.temp_path, "w") as f:
+        json.dump(document, f, indent=1)
+        f.write("\n")
+    pending.commit()
+
+
+class BenchReport:
+    """Collects cases; prints tables; writes JSON and the plot.
+
+    Args:
+        device: Warp device.
+        config: options to record (JSON-ready).
+        reference: the method ratios are taken against.
+    """
+
+    def __init__(self, device, config: dict, reference: str = REFERENCE):
+        self.device = device
+        self.config = config
+        self.reference = reference
+        self.cases: list[CaseResult] = []
+        self.environment = environment(device)
+
+    def add(self, case: CaseResult) -> None:
+        """Adds a measured case."""
+        self.cases.append(case)
+
+    @property
+    def ok(self) -> bool:
+        """No real mismatch in any case."""
+        return all(c.ok for c in self.cases)
+
+    @property
+    def peer_failed(self) -> bool:
+        """Some peer raised while running."""
+        return any(c.peer_failed for c in self.cases)
+
+    def rows(self) -> list[dict]:
+        """One dict per ``(method, N, triangles, stage)``."""
+        out = []
+        for c in self.cases:
+            for method, st in c.times.items():
+                obj, tri = c.counts.get(method, (None, None))
+                for stage, (lo, med) in st.summary().items():
+                    out.append({
+                        "method": method, "n_objects": c.num_objects, "triangles": c.label,
+                        "triangles_per_object": round(c.num_triangles / max(c.num_objects, 1), 3),
+                        "stage": stage, "ms_min": lo, "ms_median": med,
+                        "object_pairs": obj, "triangle_pairs": tri, "frames": len(st.ms[stage]),
+                    })
+        return out
+
+    def to_json(self) -> dict:
+        """The JSON document."""
+        return {
+            **self.environment,
+            "config": self.config,
+            "rows": self.rows(),
+            "memory": [{"method": self.reference, "n_objects": c.num_objects, "triangles": c.label,
+                        "num_triangles": c.num_triangles, **c.memory} for c in self.cases if c.memory],
+            "checks": [{"n_objects": c.num_objects, "triangles": c.label, **k.to_dict()}
+                       for c in self.cases for k in c.checks],
+            "notes": [{"n_objects": c.num_objects, "triangles": c.label, "note": note}
+                      for c in self.cases for note in c.notes],
+            "ok": self.ok,
+        }
+
+    def write_json(self, path: str) -> None:
+        """Writes :meth:`to_json` to ``path``."""
+        write_json(path, self.to_json())
+
+    def case_table(self, c: CaseResult) -> str:
+        """The table of one case, its memory, checks and verdict."""
+        ref = c.times.get(self.reference)
+        ref_med = {s: m for s, (_, m) in ref.summary().items()} if ref else {}
+        lines = [
+            f"== {c.num_objects:,} objects, triangles {c.label} ({c.num_triangles / max(c.num_objects, 1):.1f} per "
+            f"object, {c.num_triangles:,} in all) on {self.device}, {self.config['frames']} frames after "
+            f"{self.config['warmup']} warm-up",
+            f"{'method':<14}{'stage':<15}{'ms min':>10}{'ms median':>11}{'/' + self.reference:>14}"
+            f"{'object pairs':>14}{'tri pairs':>11}",
+        ]
+        for method, st in c.times.items():
+            obj, tri = c.counts.get(method, (None, None))
+            summary = st.summary()
+            for k, (stage, (lo, med)) in enumerate(summary.items()):
+                ratio = ""
+                if method != self.reference and stage in ref_med and ref_med[stage] > 0:
+                    ratio = f"{med / ref_med[stage]:.2f}x"
+                last = k == len(summary) - 1
+                lines.append(f"{method if k == 0 else '':<14}{stage:<15}{lo:>10.3f}{med:>11.3f}{ratio:>14}"
+                             f"{(obj if last and obj is not None else ''):>14}{(tri if last and tri is not None else ''):>11}")
+        if c.memory:
+            m = c.memory
+            pool = f", CUDA pool high-water {_bytes(m['mempool_peak_bytes'])}" if m.get("mempool_peak_bytes") else ""
+            lines.append(f"memory: {self.reference} pipeline peak {_bytes(m['pipeline_peak_bytes'])} "
+                         f"({m['pipeline_peak_bytes_per_triangle']:.1f} B/triangle, {m['peak_source']}{pool}), "
+                         f"resident {_bytes(m['pipeline_resident_bytes'])}; scene {_bytes(m['scene_bytes'])} "
+                         f"({m['scene_bytes_per_triangle']:.1f} B/triangle)")
+        lines += [f"note: {n}" for n in c.notes]
+        lines += [f"check: {k.summary()}" for k in c.checks]
+        for k in c.checks:
+            lines += [f"  MISMATCH: {m}" for m in k.mismatches]
+        agreeing = ", ".join(k.peer for k in c.checks if k.ok)
+        verdict = "OK" if c.ok else "MISMATCH"
+        lines.append(f"VERDICT {c.num_objects:,} objects, triangles {c.label}: {verdict}"
+                     + (f" ({agreeing} agree with {self.reference})" if c.ok and agreeing else "")
+                     + ("" if c.checks else " (no peer to compare with)"))
+        return "\n".join(lines)
+
+    def summary_table(self, stage: str = "total") -> str:
+        """Medians of ``stage`` per N and method, with each peer's ratio to the reference."""
+        methods = []
+        for c in self.cases:
+            for m, st in c.times.items():
+                if stage in st.ms and m not in methods:
+                    methods.append(m)
+        broad = [m for c in self.cases for m, st in c.times.items() if "detect" not in st.ms and "broad" in st.ms]
+        broad = list(dict.fromkeys(([self.reference] if broad else []) + broad))
+        width = 22
+        head = f"{'triangles':<10}{'objects':>10}" + "".join(f"{m:>{width}}" for m in methods)
+        if broad:
+            head += "   | broad:" + "".join(f"{m:>{width}}" for m in broad)
+        lines = [f"ms per frame, median ({stage} = motion + detection; in brackets: peer / {self.reference}), "
+                 f"{self.device}",
+                 head]
+
+        def cell(c, m, s):
+            st = c.times.get(m)
+            if st is None or s not in st.ms:
+                return f"{'-':>{width}}"
+            med = st.summary()[s][1]
+            ref = c.times.get(self.reference)
+            text = f"{med:.3f}"
+            if m != self.reference and ref is not None and s in ref.ms and ref.summary()[s][1] > 0:
+                text += f" ({med / ref.summary()[s][1]:.2f}x)"
+            return f"{text:>{width}}"
+
+        for c in self.cases:
+            line = f"{c.label:<10}{c.num_objects:>10,}" + "".join(cell(c, m, stage) for m in methods)
+            if broad:
+                line += "   |       " + "".join(cell(c, m, "broad") for m in broad)
+            lines.append(line)
+        return "\n".join(lines)
+
+    def plot(self, path: str) -> str | None:
+        """Log-log ms per frame (median ``total``; broad phases dashed) against N; returns a note
+        when matplotlib is missing (then nothing is written)."""
+        try:
+            from matplotlib.figure import Figure
+        except ImportError as exc:
+            return f"plot skipped: matplotlib is not installed ({exc})"
+        fig = Figure(figsize=(8, 5.5), dpi=120)
+        ax = fig.subplots()
+        methods = list(dict.fromkeys(m for c in self.cases for m in c.times))
+        labels = list(dict.fromkeys(c.label for c in self.cases))
+        colours = {m: f"C{k % 10}" for k, m in enumerate(methods)}
+        markers = {t: "osD^vP*X"[k % 8] for k, t in enumerate(labels)}
+        series = {}
+        for c in self.cases:
+            for m, st in c.times.items():
+                summary = st.summary()
+                # Whole frames solid; broad phases dashed (this package's too, beside newton's).
+                for stage, style in (("total", "-"), ("broad", "--")):
+                    if stage not in summary or (stage == "broad" and m != self.reference and "total" in summary):
+                        continue
+                    series.setdefault((m, stage, c.label, style), []).append((c.num_objects, summary[stage][1]))
+        for (m, stage, label, style), pts in series.items():
+            pts.sort()
+            what = "frame" if stage == "total" else "broad phase"
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], style, color=colours[m], marker=markers[label],
+                    markersize=4, label=f"{m} ({what}), triangles {label}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("objects N")
+        ax.set_ylabel("ms per frame (median)")
+        ax.set_title(f"warp_ccd scaling on {getattr(self.device, 'name', self.device)} ({self.environment['date'][:10]})")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        full, _ = check_output_path(path, PLOT_EXTENSIONS, "plot")
+        pending = PendingFile(full)
+        fig.savefig(pending.temp_path)
+        pending.commit()
+        return None
+
+
+# ---------------------------------------------------------------------------------------------
+# Command line
+
+
+def _count(text: str) -> int:
+    """An object count: ``1000``, ``1e5``, ``100_000``."""
+    try:
+        value = float(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a count, got {text!r}") from None
+    if not math.isfinite(value) or value != int(value) or value < 2:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 2, got {text!r}")
+    return int(value)
+
+
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> int:
+    value = _non_negative(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return value
+
+
+def _peers(text: str) -> list[str]:
+    if text.strip().lower() in ("", "none"):
+        return []
+    names = [t.strip().lower() for t in text.split(",") if t.strip()]
+    bad = [t for t in names if t not in PEERS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown peer(s) {', '.join(bad)}; known: {', '.join(PEERS)} or none")
+    return list(dict.fromkeys(names))
+
+
+def _triangles(text: str) -> str:
+    try:
+        parse_triangles(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
+    """The options of :func:`main` (defaults sized for about a minute on one CPU thread)."""
+    parser = argparse.ArgumentParser(
+        prog=prog,
+        description="Collision detection ms per frame against the number of objects, per stage, with Warp's "
+        "built-in pipeline, python-fcl, the all-pairs broad phase and newton's sweep and prune in the same run.",
+    )
+    parser.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
+    parser.add_argument("--objects", type=_count, nargs="+", default=[100, 1000, 3000, 10000],
+                        help="object counts N; 1e5 is accepted (default: %(default)s)")
+    parser.add_argument("--triangles", type=_triangles, nargs="+", default=["poly", "80"],
+                        help="triangles per object: 'poly' (the seed polyhedra, 4 to 36) or an icosphere's "
+                        "count 20*4**L (80: icosphere1, 1280: icosphere3) (default: %(default)s)")
+    parser.add_argument("--frames", type=_positive, default=10, help="timed frames per case (default: %(default)s)")
+    parser.add_argument("--warmup", type=_non_negative, default=2,
+                        help="untimed frames before them (default: %(default)s)")
+    parser.add_argument("--peers", type=_peers, default=list(PEERS),
+                        help=f"comma-separated peers among {','.join(PEERS)}, or none (default: all)")
+    parser.add_argument("--fcl-max-objects", type=_count, default=10000,
+                        help="largest N run with python-fcl (default: %(default)s)")
+    parser.add_argument("--nxn-max-objects", type=_count, default=None,
+                        help="largest N run with the all-pairs broad phase (default: 3000 on CPU, 20000 on CUDA)")
+    parser.add_argument("--seed", type=_non_negative, default=0, help="seed of the scenes (default: %(default)s)")
+    parser.add_argument("--no-memory", dest="memory", action="store_false", help="skip the memory measurement")
+    parser.add_argument("--out", default=None, help="JSON file to write (default: none)")
+    parser.add_argument("--plot", default=None, help="log-log plot to write: .png, .svg or .pdf (default: none)")
+    return parser
+
+
+def resolve_device(name: str | None):
+    """``None`` -> Warp's preferred device; else the named one (ValueError naming those available)."""
+    if name is None:
+        return wp.get_preferred_device()
+    available = [str(d) for d in wp.get_devices()]
+    try:
+        device = wp.get_device(name)
+    except Exception:
+        device = None
+    if device is None or str(device) not in available:
+        raise ValueError(f"unknown device {name!r} (available: {', '.join(available)})")
+    return device
+
+
+def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
+    """Runs the benchmark (see module docs).
+
+    Args:
+        argv: arguments without the program name (default: ``sys.argv[1:]``).
+        prog: program name in usage and messages.
+
+    Returns:
+        Exit status: 0 all agree, 1 a peer failed to run, 2 bad arguments, 3 a real mismatch.
+    """
+    parser = build_parser(prog)
+    args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    from .cli import quiet_warp
+
+    quiet_warp()
+    try:
+        device = resolve_device(args.device)
+        # Fail on a bad destination now, not after the measurements.
+        if args.out:
+            check_output_path(args.out, JSON_EXTENSIONS, "JSON")
+        if args.plot:
+            check_output_path(args.plot, PLOT_EXTENSIONS, "plot")
+    except ValueError as exc:
+        parser.error(str(exc))
+    config = {k: v for k, v in vars(args).items() if k not in ("device",)}
+    report = BenchReport(device, config)
+    print(f"{prog}: {device} ({getattr(device, 'name', '')}), objects {args.objects}, triangles {args.triangles}, "
+          f"peers {','.join(args.peers) or 'none'}, {args.frames} frames after {args.warmup} warm-up", flush=True)
+    for triangles in args.triangles:
+        for n in sorted(args.objects):
+            case = run_case(n, triangles, args, device)
+            report.add(case)
+            print(report.case_table(case) + "\n", flush=True)
+            if args.out:
+                report.write_json(args.out)
+    print(report.summary_table())
+    if args.out:
+        print(f"results written to {args.out}")
+    if args.plot:
+        note = report.plot(args.plot)
+        print(note if note else f"plot written to {args.plot}")
+    if not report.ok:
+        bad = [f"{c.num_objects} objects, triangles {c.label}" for c in report.cases if not c.ok]
+        print(f"{prog}: MISMATCH between methods in: {'; '.join(bad)} (see the check lines above)", file=sys.stderr)
+        return EXIT_MISMATCH
+    if report.peer_failed:
+        print(f"{prog}: a peer failed to run (see the ERROR notes above)", file=sys.stderr)
+        return EXIT_PEER_FAILED
+    return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main(prog="python -m warp_ccd.bench"))
