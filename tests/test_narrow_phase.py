@@ -121,3 +121,39 @@ def test_random_pairs_far_and_scaled(device):
         got = run_test(ta.astype(np.float64) * s + off, tb.astype(np.float64) * s + off, device)
         mismatch = (got != base) & stable
         assert mismatch.mean() < 1e-3, f"offset {off} scale {s}: {mismatch.sum()} changed"
+
+
+def near_parallel_pairs(rng, n, lift=0.0):
+    """Triangle b tilted by 1e-6..1e-3 rad from triangle a's plane, through a's centroid, which lies
+    deep inside both: every pair intersects (``lift`` = 0), or lies wholly above a's plane."""
+    ta = np.zeros((n, 3, 3))
+    ta[:, :, :2] = rng.uniform(-1, 1, size=(n, 3, 2))
+    area = np.cross(ta[:, 1] - ta[:, 0], ta[:, 2] - ta[:, 0])[:, 2]
+    keep = np.abs(area) > 0.3
+    ta = ta[keep]
+    m = len(ta)
+    centre = ta.mean(axis=1)
+    ang = rng.uniform(0, 2 * np.pi, size=(m, 1)) + np.array([0.0, 2.0, 4.0]) * np.pi / 3
+    tb = np.stack([0.3 * np.cos(ang), 0.3 * np.sin(ang), np.zeros_like(ang)], axis=2)
+    tilt = 10.0 ** rng.uniform(-6, -3, size=m)
+    axis = rng.uniform(0, 2 * np.pi, size=m)
+    u = np.stack([np.cos(axis), np.sin(axis)], 1)  # tilt about the in-plane axis u
+    along = tb[:, :, 0] * -u[:, None, 1] + tb[:, :, 1] * u[:, None, 0]  # coordinate across the axis
+    tb[:, :, 2] = along * np.sin(tilt)[:, None] + lift
+    tb += centre[:, None, :]
+    # rigid motion of both, so that no plane is axis-aligned
+    from test_robustness import random_rotations
+
+    r = random_rotations(rng, m)
+    return np.einsum("nij,nkj->nki", r, ta), np.einsum("nij,nkj->nki", r, tb)
+
+
+@pytest.mark.parametrize("method", sorted(NARROW_METHODS))
+def test_near_parallel_crossings(device, method):
+    """Snapping vertices within the tolerance to a nearly parallel plane must not lose a crossing."""
+    rng = np.random.default_rng(17)
+    ta, tb = near_parallel_pairs(rng, 20_000)
+    got = run_test(ta, tb, device, method)
+    assert got.all(), f"{(~got).sum()} of {len(got)} intersecting pairs missed"
+    ta, tb = near_parallel_pairs(rng, 20_000, lift=2e-3)
+    assert not run_test(ta, tb, device, method).any()

@@ -254,25 +254,39 @@ def _make_narrow(types):
             return False
         na = na / lna
         nb = nb / lnb
-        # S(1.) Triangle b against the plane of a, then a against the plane of b.
-        db0 = _snap(wp.dot(na, b0 - a0), eps)
-        db1 = _snap(wp.dot(na, b1 - a0), eps)
-        db2 = _snap(wp.dot(na, b2 - a0), eps)
+        # 1. Triangle b against the plane of a, then a against the plane of b.
+        rb0 = wp.dot(na, b0 - a0)
+        rb1 = wp.dot(na, b1 - a0)
+        rb2 = wp.dot(na, b2 - a0)
+        db0 = _snap(rb0, eps)
+        db1 = _snap(rb1, eps)
+        db2 = _snap(rb2, eps)
         if _one_side(db0, db1, db2):
             return False
-        da0 = _snap(wp.dot(nb, a0 - b0), eps)
-        da1 = _snap(wp.dot(nb, a1 - b0), eps)
-        da2 = _snap(wp.dot(nb, a2 - b0), eps)
+        ra0 = wp.dot(nb, a0 - b0)
+        ra1 = wp.dot(nb, a1 - b0)
+        ra2 = wp.dot(nb, a2 - b0)
+        da0 = _snap(ra0, eps)
+        da1 = _snap(ra1, eps)
+        da2 = _snap(ra2, eps)
         if _one_side(da0, da1, da2):
             return False
         if db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0):
             return _coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps)
         if da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0):
             return _coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps)
-        # S(2.) Where each triangle crosses the other's plane.
+        # 2. Where each triangle crosses the other's plane, and 3. overlap of the two intervals on
+        # the common line. First with the exact distances when both triangles truly straddle the
+        # other's plane: with nearly parallel planes, snapping a vertex within eps to the plane can
+        # move a section far along the line and lose a real crossing.
+        if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
+            pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
+            pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
+            if _collinear_overlap(pa, qa, pb, qb, eps):
+                return True
+        # Then with the snapped distances: contacts within the tolerance (touching).
         pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
         pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
-        # S(3.) Overlap of the two intervals on the common line.
         return _collinear_overlap(pa, qa, pb, qb, eps)
 
 
@@ -300,8 +314,10 @@ def _make_narrow(types):
         p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S
     ) -> bool:
         """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
-        dp = _snap(wp.dot(n, p - a), eps)
-        dq = _snap(wp.dot(n, q - a), eps)
+        rp = wp.dot(n, p - a)
+        rq = wp.dot(n, q - a)
+        dp = _snap(rp, eps)
+        dq = _snap(rq, eps)
         if dp * dq > S(0.0):
             return False
         if dp == S(0.0) and dq == S(0.0):
@@ -320,6 +336,11 @@ def _make_narrow(types):
                 or _segments_within_2d(p2, q2, tb, tc, eps)
                 or _segments_within_2d(p2, q2, tc, ta, eps)
             )
+        # The exact crossing first (a segment nearly parallel to the plane may cross it far from
+        # an endpoint that lies within eps of it), then the endpoint within the tolerance.
+        if rp * rq < S(0.0):
+            if _point_in_triangle_3d(p + (q - p) * (rp / (rp - rq)), a, b, c, n, eps):
+                return True
         x = p
         if dq == S(0.0):
             x = q
