@@ -235,3 +235,21 @@ def test_precision_validation():
     scene = wc.Scene.random(3, precision="float64")
     with pytest.raises(ValueError, match="wp.transformd|transformd"):
         scene.set_poses(wp.zeros(3, dtype=wp.transform, device=scene.device))
+
+
+def test_counters_do_not_wrap(device):
+    """Counters are int64: past 2**31 items a stage raises OverflowError instead of wrapping."""
+    from warp_ccd.broad_phase import BroadPhaseNxN
+    from warp_ccd.buffers import GrowableBuffer, read_counts
+
+    lo = np.zeros((4, 3), np.float32)
+    hi = np.ones((4, 3), np.float32)
+    pairs = GrowableBuffer(wp.vec2i, 2, device, "pairs")
+    pairs.count.assign(np.array([2**31 - 3], np.int64))  # as if 2**31 - 3 pairs came before
+    BroadPhaseNxN(device=device).launch(wp.array(lo, dtype=wp.vec3, device=device),
+                                        wp.array(hi, dtype=wp.vec3, device=device), pairs)
+    (count,) = read_counts([pairs.count], device)
+    assert count == 2**31 - 3 + 6
+    assert (pairs.numpy(0).shape == (0, 2))
+    with pytest.raises(OverflowError, match="pairs"):
+        pairs.ensure(count)

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .buffers import GrowableBuffer, read_counts
+from .buffers import GrowableBuffer, read_counts, reserve_slot, used_count
 
 __all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase"]
 
@@ -58,10 +58,10 @@ def boxes_overlap(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) ->
 
 
 @wp.func
-def emit_pair(a: int, b: int, pair: wp.array[wp.vec2i], pair_count: wp.array[wp.int32], pair_capacity: int):
+def emit_pair(a: int, b: int, pair: wp.array[wp.vec2i], pair_count: wp.array[wp.int64], pair_capacity: int):
     """Appends ``(min, max)`` through the capacity + counter protocol."""
-    slot = wp.atomic_add(pair_count, 0, 1)
-    if slot < pair_capacity:
+    slot = reserve_slot(pair_count, pair_capacity)
+    if slot >= 0:
         pair[slot] = wp.vec2i(wp.min(a, b), wp.max(a, b))
 
 
@@ -76,7 +76,7 @@ def nxn_kernel(
     pair_capacity: int,
     # Outputs
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
 ):
     """One thread per pair index ``k``: pair ``(j, i)`` with ``k = i (i - 1) / 2 + j``, ``j < i``."""
     k = wp.int64(wp.tid())
@@ -263,7 +263,7 @@ def sap_count_kernel(
     grid: wp.array[SapGrid],
     max_cells_per_box: int,
     # Outputs
-    entry_count: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
     big_box: wp.array[wp.int32],
     big_count: wp.array[wp.int32],
 ):
@@ -275,10 +275,10 @@ def sap_count_kernel(
     cy = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny) - _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny) + 1
     cz = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz) - _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz) + 1
     if cy * cz > max_cells_per_box:
-        entry_count[i] = 0
+        entry_count[i] = wp.int64(0)
         big_box[wp.atomic_add(big_count, 0, 1)] = i
     else:
-        entry_count[i] = cy * cz
+        entry_count[i] = wp.int64(cy * cz)
 
 
 @wp.kernel
@@ -292,20 +292,19 @@ def sap_emit_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
-    entry_count: wp.array[wp.int32],
-    entry_start: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
+    entry_start: wp.array[wp.int64],
     entry_capacity: int,
     # Outputs
     entry_key: wp.array[wp.int64],
     entry_box: wp.array[wp.int32],
-    entry_total: wp.array[wp.int32],
+    entry_total: wp.array[wp.int64],
 ):
     """One thread per box: one (key, box) entry per covered cell."""
     i = wp.tid()
     if i == entry_count.shape[0] - 1:
         entry_total[0] = entry_start[i] + entry_count[i]
-    n = entry_count[i]
-    if n == 0:
+    if entry_count[i] == wp.int64(0):
         return
     g = grid[0]
     lo = lower[i]
@@ -318,11 +317,11 @@ def sap_emit_kernel(
     slot = entry_start[i]
     for y in range(y0, y1 + 1):
         for z in range(z0, z1 + 1):
-            if slot < entry_capacity:
+            if slot < wp.int64(entry_capacity):
                 cell = wp.int64(y * g.nz + z)
-                entry_key[slot] = cell * wp.int64(4294967296) + q
-                entry_box[slot] = i
-            slot += 1
+                entry_key[int(slot)] = cell * wp.int64(4294967296) + q
+                entry_box[int(slot)] = i
+            slot += wp.int64(1)
 
 
 @wp.kernel
@@ -332,16 +331,16 @@ def sap_sweep_kernel(
     grid: wp.array[SapGrid],
     entry_key: wp.array[wp.int64],
     entry_box: wp.array[wp.int32],
-    entry_total: wp.array[wp.int32],
+    entry_total: wp.array[wp.int64],
     entry_capacity: int,
     pair_capacity: int,
     # Outputs
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
 ):
     """One thread per sorted entry: sweep forward within the cell, report owned pairs."""
     e = wp.tid()
-    total = wp.min(entry_total[0], entry_capacity)
+    total = used_count(entry_total, entry_capacity)
     if e >= total:
         return
     g = grid[0]
@@ -374,13 +373,13 @@ def sap_sweep_kernel(
 def sap_big_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
-    entry_count: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
     big_box: wp.array[wp.int32],
     big_count: wp.array[wp.int32],
     pair_capacity: int,
     # Outputs
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
 ):
     """One thread per box ``j``: test it against every big box ``i`` (pairs of two big boxes once)."""
     j = wp.tid()
@@ -389,7 +388,7 @@ def sap_big_kernel(
         return
     lo_j = lower[j]
     hi_j = upper[j]
-    j_big = entry_count[j] == 0
+    j_big = entry_count[j] == wp.int64(0)
     for b in range(nb):
         i = big_box[b]
         if i == j or (j_big and j < i):
@@ -432,8 +431,8 @@ class BroadPhaseSAP:
             return
         d = self.device
         self.num_boxes = n
-        self.entry_count = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
-        self.entry_start = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+        self.entry_count = wp.zeros(max(n, 1), dtype=wp.int64, device=d)
+        self.entry_start = wp.zeros(max(n, 1), dtype=wp.int64, device=d)
         self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
         self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
         self.entry.ensure(2 * n + 1024)

@@ -1,7 +1,8 @@
 """Output buffers with a capacity and a counter.
 
-A kernel that emits items reserves a slot with ``wp.atomic_add(count, 0, 1)`` and writes only
-while the slot is below the capacity; the counter keeps counting past it. After the frame the
+A kernel that emits items reserves a slot with :func:`reserve_slot` (an atomic add on the int64
+counter) and writes only while the slot is below the capacity; the counter keeps counting past it,
+in 64 bits, so it cannot wrap. After the frame the
 host reads the counter once: if it passed the capacity, the buffer grows and the stage runs
 again, so no item is ever dropped silently.
 """
@@ -11,14 +12,29 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-__all__ = ["GrowableBuffer", "read_counts"]
+__all__ = ["COUNT_LIMIT", "GrowableBuffer", "read_counts", "reserve_slot", "used_count"]
 
 COUNT_LIMIT = 2**31 - 1
-"""Counters are int32; a stage that would need more items than this raises instead of wrapping."""
+"""Items are indexed in int32: a stage that would need more items than this raises OverflowError."""
+
+
+@wp.func
+def reserve_slot(count: wp.array[wp.int64], capacity: int) -> int:
+    """Counts one item; returns its slot, or -1 when the buffer is full (the count goes on)."""
+    slot = wp.atomic_add(count, 0, wp.int64(1))
+    if slot < wp.int64(capacity):
+        return int(slot)
+    return -1
+
+
+@wp.func
+def used_count(count: wp.array[wp.int64], capacity: int) -> int:
+    """Number of items actually stored: the counter, at most the capacity."""
+    return int(wp.min(count[0], wp.int64(capacity)))
 
 
 class GrowableBuffer:
-    """``data`` (capacity items of ``dtype``) plus ``count`` (int32, one element) on one device.
+    """``data`` (capacity items of ``dtype``) plus ``count`` (int64, one element) on one device.
 
     Args:
         dtype: Warp dtype of the items.
@@ -34,7 +50,7 @@ class GrowableBuffer:
         self.name = name
         self.factor = factor
         self.capacity = 0
-        self.count = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self.count = wp.zeros(1, dtype=wp.int64, device=self.device)
         self._allocate(max(1, int(capacity)))
 
     def _allocate(self, capacity: int) -> None:
@@ -49,10 +65,10 @@ class GrowableBuffer:
         """Grows the buffer when ``needed`` items do not fit; returns True if it grew.
 
         Raises:
-            OverflowError: when ``needed`` reaches the int32 counter limit.
+            OverflowError: when ``needed`` reaches :data:`COUNT_LIMIT`.
         """
         if needed >= COUNT_LIMIT:
-            raise OverflowError(f"{self.name}: {needed} items reach the int32 counter limit")
+            raise OverflowError(f"{self.name}: {needed} items exceed the limit of {COUNT_LIMIT} per buffer")
         if needed <= self.capacity:
             return False
         self._allocate(int(min(COUNT_LIMIT - 1, max(needed + needed // 4 + 16, 2 * self.capacity))))
@@ -70,9 +86,9 @@ class GrowableBuffer:
 
 
 def read_counts(counts: list[wp.array], device) -> list[int]:
-    """Reads several one-element int32 counters with a single host synchronisation."""
+    """Reads several one-element int64 counters with a single host synchronisation."""
     device = wp.get_device(device)
-    host = wp.empty(len(counts), dtype=wp.int32, device="cpu", pinned=device.is_cuda)
+    host = wp.empty(len(counts), dtype=wp.int64, device="cpu", pinned=device.is_cuda)
     for k, c in enumerate(counts):
         wp.copy(host, c, dest_offset=k, src_offset=0, count=1)
     wp.synchronize_device(device)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import warp as wp
 
 from .broad_phase import boxes_overlap
-from .buffers import COUNT_LIMIT, GrowableBuffer
+from .buffers import GrowableBuffer, reserve_slot, used_count
 from .bvh import SceneBVH, TreeView
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "all_pairs_count_kernel", "all_pairs_write_kernel", "traverse_kernel"]
@@ -40,16 +40,16 @@ def traverse_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
     pair_capacity: int,
     candidate_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int32],
+    candidate_count: wp.array[wp.int64],
 ):
     """One thread per object pair: simultaneous descent of both trees."""
     k = wp.tid()
-    if k >= wp.min(pair_count[0], pair_capacity):
+    if k >= used_count(pair_count, pair_capacity):
         return
     p = pair[k]
     a = p[0]
@@ -84,8 +84,8 @@ def traverse_kernel(
             rb = tree.node_triangle[shape_b + nb]
             for i in range(ra[0], ra[0] + ra[1]):
                 for j in range(rb[0], rb[0] + rb[1]):
-                    slot = wp.atomic_add(candidate_count, 0, 1)
-                    if slot < candidate_capacity:
+                    slot = reserve_slot(candidate_count, candidate_capacity)
+                    if slot >= 0:
                         candidate[slot] = wp.vec4i(a, tree.tri_order[tri_a + i], b, tree.tri_order[tri_b + j])
             continue
         open_a = cb[0] < 0 or (ca[0] >= 0 and _volume(lo_a, hi_a) >= _volume(lo_b, hi_b))
@@ -133,7 +133,7 @@ class MidPhaseBVH:
 @wp.kernel
 def all_pairs_count_kernel(
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
     pair_capacity: int,
     instance_triangle_start: wp.array[wp.int32],
     # Outputs
@@ -141,7 +141,7 @@ def all_pairs_count_kernel(
 ):
     """One thread per pair slot: ``m_a * m_b`` triangle pairs, 0 past the counter."""
     k = wp.tid()
-    if k >= wp.min(pair_count[0], pair_capacity):
+    if k >= used_count(pair_count, pair_capacity):
         pair_work[k] = wp.int64(0)
         return
     p = pair[k]
@@ -157,17 +157,16 @@ def all_pairs_write_kernel(
     pair_work_end: wp.array[wp.int64],
     instance_triangle_start: wp.array[wp.int32],
     candidate_capacity: int,
-    count_limit: wp.int64,
     # Outputs
     candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int32],
+    candidate_count: wp.array[wp.int64],
 ):
     """One thread per candidate slot: binary search of its pair in the inclusive scan."""
     c = wp.tid()
     num_slots = pair_work_end.shape[0]
     total = pair_work_end[num_slots - 1]
     if c == 0:
-        candidate_count[0] = int(wp.min(total, count_limit))
+        candidate_count[0] = total
     if wp.int64(c) >= total:
         return
     lo = int(0)
@@ -209,5 +208,5 @@ class MidPhaseAllPairs:
         wp.utils.array_scan(self._work, self._work_end, inclusive=True)
         wp.launch(all_pairs_write_kernel, dim=self.candidates.capacity,
                   inputs=[pairs.data, self._work, self._work_end, scene.instance_triangle_start,
-                          self.candidates.capacity, wp.int64(COUNT_LIMIT)],
+                          self.candidates.capacity],
                   outputs=[self.candidates.data, self.candidates.count], device=d)

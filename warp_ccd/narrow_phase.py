@@ -34,7 +34,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from .buffers import GrowableBuffer
+from .buffers import GrowableBuffer, reserve_slot, used_count
 from .scene import SCENE_TYPES
 
 __all__ = [
@@ -399,26 +399,26 @@ def _make_narrow(types):
     def narrow_phase_kernel(
         view: View,
         candidate: wp.array[wp.vec4i],
-        candidate_count: wp.array[wp.int32],
+        candidate_count: wp.array[wp.int64],
         candidate_capacity: int,
         method: int,
         tol_rel: S,
         hit_capacity: int,
         # Outputs
         hit: wp.array[wp.vec4i],
-        hit_count: wp.array[wp.int32],
+        hit_count: wp.array[wp.int64],
         object_colliding: wp.array[wp.int32],
     ):
         """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: exact test, append hits."""
         k = wp.tid()
-        if k >= wp.min(candidate_count[0], candidate_capacity):
+        if k >= used_count(candidate_count, candidate_capacity):
             return
         c = candidate[k]
         a0, a1, a2 = mesh_triangle(view, c[0], c[1])
         b0, b1, b2 = mesh_triangle(view, c[2], c[3])
         if tri_tri_test(method, a0, a1, a2, b0, b1, b2, tol_rel):
-            slot = wp.atomic_add(hit_count, 0, 1)
-            if slot < hit_capacity:
+            slot = reserve_slot(hit_count, hit_capacity)
+            if slot >= 0:
                 hit[slot] = c
             object_colliding[c[0]] = 1
             object_colliding[c[2]] = 1
@@ -479,17 +479,17 @@ def _make_narrow(types):
         instance_lower: wp.array[wp.vec3],
         instance_upper: wp.array[wp.vec3],
         pair: wp.array[wp.vec2i],
-        pair_count: wp.array[wp.int32],
+        pair_count: wp.array[wp.int64],
         pair_capacity: int,
         contained_capacity: int,
         # Outputs
         contained: wp.array[wp.vec2i],
-        contained_count: wp.array[wp.int32],
+        contained_count: wp.array[wp.int64],
     ):
         """One thread per object pair whose boxes nest: is the inner object's first vertex inside
         the outer object (winding number above 1/2)? Writes ``(inner, outer)``."""
         k = wp.tid()
-        if k >= wp.min(pair_count[0], pair_capacity):
+        if k >= used_count(pair_count, pair_capacity):
             return
         p = pair[k]
         for side in range(2):
@@ -499,8 +499,8 @@ def _make_narrow(types):
                 point = view.world_vertex[view.instance_vertex_start[inner]]
                 m = instance_triangle_start[outer + 1] - instance_triangle_start[outer]
                 if winding_number(view, outer, m, point) > S(0.5):
-                    slot = wp.atomic_add(contained_count, 0, 1)
-                    if slot < contained_capacity:
+                    slot = reserve_slot(contained_count, contained_capacity)
+                    if slot >= 0:
                         contained[slot] = wp.vec2i(inner, outer)
 
     return SimpleNamespace(

@@ -39,7 +39,7 @@ import numpy as np
 import warp as wp
 
 from .broad_phase import boxes_overlap, emit_pair
-from .buffers import GrowableBuffer, read_counts
+from .buffers import GrowableBuffer, read_counts, reserve_slot
 from .scene import Scene
 
 __all__ = [
@@ -84,6 +84,12 @@ def scene_triangle_vertex_index(scene: Scene, triangles=None) -> np.ndarray:
     return tri.astype(np.int32)
 
 
+@wp.kernel
+def count_to_int64_kernel(count32: wp.array[wp.int32], count: wp.array[wp.int64]):
+    """Copies newton's int32 pair counter into our int64 one."""
+    count[0] = wp.int64(count32[0])
+
+
 # ---------------------------------------------------------------------------------------------
 # Warp's built-in pipeline: wp.Mesh + wp.mesh_query_aabb + wp.intersect_tri_tri
 
@@ -98,7 +104,7 @@ def mesh_triangle_pairs_kernel(
     hit_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int32],
+    hit_count: wp.array[wp.int64],
 ):
     """One thread per global triangle ``t``: query the mesh with the triangle's box, test each
     later triangle ``f > t`` of another object with ``wp.intersect_tri_tri`` (float32).
@@ -123,8 +129,8 @@ def mesh_triangle_pairs_kernel(
                 b1 = point[index[3 * f + 1]]
                 b2 = point[index[3 * f + 2]]
                 if wp.intersect_tri_tri(a0, a1, a2, b0, b1, b2) != 0:
-                    slot = wp.atomic_add(hit_count, 0, 1)
-                    if slot < hit_capacity:
+                    slot = reserve_slot(hit_count, hit_capacity)
+                    if slot >= 0:
                         hit[slot] = wp.vec4i(obj, t - instance_triangle_start[obj],
                                              obj_f, f - instance_triangle_start[obj_f])
 
@@ -292,7 +298,7 @@ def bvh_box_pairs_kernel(
     pair_capacity: int,
     # Outputs
     pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int32],
+    pair_count: wp.array[wp.int64],
 ):
     """One thread per box ``i``: query the tree with the box, keep exact overlaps with ``j > i``."""
     i = wp.tid()
@@ -377,6 +383,7 @@ class NewtonBroadPhaseSAP:
         d = self.device
         self.num_boxes = n
         self.sap = self._sap_class(np.zeros(n, np.int32), device=d)
+        self.count32 = wp.zeros(1, dtype=wp.int32, device=d)  # newton counts in int32
         self.shape_group = wp.array(np.ones(n, np.int32), dtype=wp.int32, device=d)
         self.shape_world = wp.array(np.zeros(n, np.int32), dtype=wp.int32, device=d)
 
@@ -387,4 +394,5 @@ class NewtonBroadPhaseSAP:
             return
         self._resize(n)
         self.sap.launch(lower, upper, None, self.shape_group, self.shape_world, n,
-                        pairs.data, pairs.count, device=self.device)
+                        pairs.data, self.count32, device=self.device)
+        wp.launch(count_to_int64_kernel, dim=1, inputs=[self.count32], outputs=[pairs.count], device=self.device)
