@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 
 def box_pairs_numpy(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """``(K, 2)`` int32 sorted pairs ``a < b`` of overlapping closed boxes (chunked O(N^2))."""

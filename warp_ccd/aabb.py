@@ -11,6 +11,8 @@ from typing import Any
 
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["BOUNDS_KERNELS", "InstanceBounds", "instance_bounds_kernel", "make_box_rounding", "vertex_bounds"]
 
 

@@ -38,6 +38,8 @@ import warp as wp
 
 from .buffers import GrowableBuffer, read_counts, reserve_slot, used_count
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase"]
 
 NXN_MAX_BOXES = 65536

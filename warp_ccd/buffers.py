@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["COUNT_LIMIT", "GrowableBuffer", "read_counts", "reserve_slot", "used_count"]
 
 COUNT_LIMIT = 2**31 - 1

@@ -30,6 +30,8 @@ import warp as wp
 from .aabb import make_box_rounding
 from .scene import SCENE_TYPES
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["SceneBVH", "ShapeTree", "build_tree", "refit_level_kernel"]
 
 

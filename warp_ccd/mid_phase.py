@@ -21,6 +21,8 @@ from .broad_phase import boxes_overlap
 from .buffers import GrowableBuffer, reserve_slot, used_count
 from .bvh import SceneBVH, TreeView
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "all_pairs_count_kernel", "all_pairs_write_kernel", "traverse_kernel"]
 
 STACK_SIZE = 64

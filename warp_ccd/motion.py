@@ -15,6 +15,8 @@ One kernel computes the poses of all objects; cost O(N), no host work.
 import numpy as np
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["MOTION_KERNELS", "EllipseMotion", "motion_pose_kernel"]
 
 

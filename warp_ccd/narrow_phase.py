@@ -37,6 +37,8 @@ import warp as wp
 from .buffers import GrowableBuffer, reserve_slot, used_count
 from .scene import SCENE_TYPES
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = [
     "NARROW_METHODS",
     "NARROW_TYPES",

@@ -42,6 +42,8 @@ from .broad_phase import boxes_overlap, emit_pair
 from .buffers import GrowableBuffer, read_counts, reserve_slot
 from .scene import Scene
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = [
     "FclPipeline",
     "NewtonBroadPhaseSAP",

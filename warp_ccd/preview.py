@@ -21,6 +21,8 @@ import warp as wp
 
 from .output import PendingFile, check_output_path
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = [
     "PREVIEW_EXTENSIONS",
     "PreviewRenderer",

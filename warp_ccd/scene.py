@@ -29,6 +29,8 @@ from .motion import EllipseMotion
 from .shapes import shape as _named_shape
 from .shapes import validate_mesh
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = ["PRECISIONS", "SCENE_TYPES", "MeshView", "Scene", "mesh_triangle", "transforms_to_poses", "world_vertex_kernel"]
 
 

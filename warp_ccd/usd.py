@@ -41,6 +41,8 @@ import warp as wp
 from .aabb import vertex_bounds
 from .output import PendingFile, check_output_path
 
+wp.set_module_options({"enable_backward": False})  # forward kernels only
+
 __all__ = [
     "COLOR_COLLIDING",
     "COLOR_FREE",
