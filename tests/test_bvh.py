@@ -153,3 +153,24 @@ def test_deforming_twisting_sphere(device):
         assert np.array_equal(res.triangle_pairs, want)
         hits += len(want) > 0
     assert hits >= 2
+
+
+def test_refit_paths_agree(device):
+    """One thread per instance (small trees) and level by level give the same boxes."""
+    from warp_ccd.bvh import SceneBVH
+
+    scene = mixed_scene(device, n=25, seed=6)
+    scene.advance(0.3)
+    per_level = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=0)
+    per_instance = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=10**9)
+    mixed = SceneBVH(scene, margin_rel=1e-5)
+    assert per_level.small_instance.shape[0] == 0 and per_instance.small_instance.shape[0] == 25
+    assert 0 < mixed.small_instance.shape[0] < 25
+    for bvh in (per_level, per_instance, mixed):
+        bvh.launch(scene)
+    ref = per_level.tree.node_lower.numpy(), per_level.tree.node_upper.numpy(), per_level.lower.numpy()
+    for bvh in (per_instance, mixed):
+        assert np.array_equal(bvh.tree.node_lower.numpy(), ref[0])
+        assert np.array_equal(bvh.tree.node_upper.numpy(), ref[1])
+        assert np.array_equal(bvh.lower.numpy(), ref[2])
+    refit_contains(scene, mixed)

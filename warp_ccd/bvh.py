@@ -16,13 +16,18 @@ Stored flat, topology shared by every instance of a shape:
   (every subtree is one contiguous range).
 
 Refit (device, every frame): per instance, node bounds ``node_lower`` / ``node_upper`` at
-``instance_node_start[i] + node``. One launch per level, deepest first, each covering all
-instances of all shapes; leaf boxes come from the world vertices of their triangles, padded by the
-narrow phase's tolerance times their longest edge; inner boxes are the union of their children.
+``instance_node_start[i] + node``. Leaf boxes come from the world vertices of their triangles,
+padded by the narrow phase's tolerance times their longest edge; inner boxes are the union of
+their children. Instances of small trees (up to 255 nodes: polyhedra, 80-triangle spheres) are
+refit by one thread each, all nodes children first, in a single launch; bigger trees one launch
+per level, deepest first, one thread per (instance, node), so a few big meshes still spread over
+the whole device.
 The root's box is the object's AABB: no separate bounds pass. Deforming meshes need nothing else:
 the caller writes world vertices, refit does the rest.
 """
 
+
+from types import SimpleNamespace
 
 import numpy as np
 import warp as wp
@@ -163,6 +168,45 @@ def _make_refit_kernel(types):
     mesh_triangle = types.mesh_triangle
     lower32, upper32 = make_box_rounding(S, V3)
 
+    @wp.func
+    def _refit_node(
+        mesh: View,
+        tree: TreeView,
+        s: int,
+        inst: int,
+        node: int,
+        margin_rel: S,
+        instance_lower: wp.array[wp.vec3],
+        instance_upper: wp.array[wp.vec3],
+    ):
+        """Box of ``node`` (local id in shape ``s``) of instance ``inst``: from its triangles (leaf,
+        padded by the tolerance) or its children's boxes; the root's box is the object's box."""
+        shape_node = tree.shape_node_start[s] + node
+        slot = tree.instance_node_start[inst] + node
+        child = tree.node_child[shape_node]
+        lo = wp.vec3(0.0)
+        hi = wp.vec3(0.0)
+        if child[0] < 0:
+            rng = tree.node_triangle[shape_node]
+            base = tree.shape_tri_order_start[s]
+            lo = wp.vec3(1.0e30)
+            hi = wp.vec3(-1.0e30)
+            for k in range(rng[0], rng[0] + rng[1]):
+                a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
+                edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+                pad = V3(margin_rel * edge, margin_rel * edge, margin_rel * edge)
+                lo = wp.min(lo, lower32(wp.min(wp.min(a, b), c) - pad))
+                hi = wp.max(hi, upper32(wp.max(wp.max(a, b), c) + pad))
+        else:
+            base_slot = tree.instance_node_start[inst]
+            lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
+            hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
+        tree.node_lower[slot] = lo
+        tree.node_upper[slot] = hi
+        if node == 0:
+            instance_lower[inst] = lo
+            instance_upper[inst] = hi
+
     @wp.kernel
     def refit_level_kernel(
         mesh: View,
@@ -196,39 +240,33 @@ def _make_refit_kernel(types):
         cnt = level_count[s]
         inst = shape_instance[shape_instance_start[s] + local / cnt]
         node = level_first[s] + local % cnt
-        shape_node = tree.shape_node_start[s] + node
-        slot = tree.instance_node_start[inst] + node
-        child = tree.node_child[shape_node]
-        lo = wp.vec3(0.0)
-        hi = wp.vec3(0.0)
-        if child[0] < 0:
-            rng = tree.node_triangle[shape_node]
-            base = tree.shape_tri_order_start[s]
-            lo = wp.vec3(1.0e30)
-            hi = wp.vec3(-1.0e30)
-            for k in range(rng[0], rng[0] + rng[1]):
-                a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
-                edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
-                pad = V3(margin_rel * edge, margin_rel * edge, margin_rel * edge)
-                lo = wp.min(lo, lower32(wp.min(wp.min(a, b), c) - pad))
-                hi = wp.max(hi, upper32(wp.max(wp.max(a, b), c) + pad))
-        else:
-            base_slot = tree.instance_node_start[inst]
-            lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
-            hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
-        tree.node_lower[slot] = lo
-        tree.node_upper[slot] = hi
-        if node == 0:
-            instance_lower[inst] = lo
-            instance_upper[inst] = hi
+        _refit_node(mesh, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
 
-    return refit_level_kernel
+    @wp.kernel
+    def refit_instance_kernel(
+        mesh: View,
+        tree: TreeView,
+        small_instance: wp.array[wp.int32],
+        margin_rel: S,
+        # Outputs
+        instance_lower: wp.array[wp.vec3],
+        instance_upper: wp.array[wp.vec3],
+    ):
+        """One thread per instance of a small shape: all its nodes, children before parents
+        (reverse breadth-first order). One launch instead of one per level."""
+        inst = small_instance[wp.tid()]
+        s = mesh.instance_shape[inst]
+        num_nodes = tree.shape_node_start[s + 1] - tree.shape_node_start[s]
+        for k in range(num_nodes):
+            _refit_node(mesh, tree, s, inst, num_nodes - 1 - k, margin_rel, instance_lower, instance_upper)
+
+    return SimpleNamespace(level=refit_level_kernel, instance=refit_instance_kernel)
 
 
 REFIT_KERNELS = {p: _make_refit_kernel(SCENE_TYPES[p]) for p in SCENE_TYPES}
-"""Refit kernels by scene precision (node boxes are float32, rounded outward)."""
+"""Refit kernels by scene precision (``level``, ``instance``); node boxes are float32, rounded outward."""
 
-refit_level_kernel = REFIT_KERNELS["float32"]
+refit_level_kernel = REFIT_KERNELS["float32"].level
 
 
 class SceneBVH:
@@ -239,6 +277,9 @@ class SceneBVH:
         leaf_size: largest number of triangles per leaf.
         margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
             tolerance, so that tree culling never rejects a pair the narrow phase accepts).
+        instance_refit_max_nodes: instances of shapes with at most this many nodes are refit by
+            one thread each, all their nodes in one launch (cheap for small trees); bigger trees
+            are refit level by level, one thread per node.
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`launch`.
@@ -246,7 +287,7 @@ class SceneBVH:
         trees: per-shape :class:`ShapeTree` (host).
     """
 
-    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0):
+    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255):
         if leaf_size < 1:
             raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
         self.device = scene.device
@@ -265,9 +306,15 @@ class SceneBVH:
         self.num_node_slots = int(inode[-1])
         self.max_depth = max((tr.depth for tr in self.trees), default=0)
 
-        # Instances grouped by shape, and per level the work blocks of each shape.
+        # Instances of small trees: one thread each. The others grouped by shape, and per level the
+        # work blocks of each shape.
+        small = nodes <= instance_refit_max_nodes
+        is_small = small[scene.instance_shape_np] if n else np.zeros(0, bool)
+        self.small_instance = wp.array(np.nonzero(is_small)[0].astype(np.int32), dtype=wp.int32, device=d)
         order = np.argsort(scene.instance_shape_np, kind="stable").astype(np.int32)
         per_shape = np.bincount(scene.instance_shape_np, minlength=num_shapes) if n else np.zeros(num_shapes, np.int64)
+        per_shape = np.where(small, 0, per_shape)  # small shapes own no level work
+        order = order[~is_small[order]] if n else order
         self.shape_instance = wp.array(order, dtype=wp.int32, device=d)
         self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32), device=d)
         self.levels = []  # (items, block_start, level_first, level_count) per level
@@ -304,16 +351,22 @@ class SceneBVH:
         self.upper = wp.zeros(n, dtype=wp.vec3, device=d)
 
     def launch(self, scene) -> None:
-        """Refits all node bounds from ``scene.world_vertex``, deepest level first."""
+        """Refits all node bounds from ``scene.world_vertex``: small trees in one launch, the
+        others deepest level first."""
         view = scene.mesh_view()
+        kernels = REFIT_KERNELS[scene.precision]
+        margin = scene.types.scalar(self.margin_rel)
+        if self.small_instance.shape[0]:
+            wp.launch(kernels.instance, dim=self.small_instance.shape[0],
+                      inputs=[view, self.tree, self.small_instance, margin],
+                      outputs=[self.lower, self.upper], device=self.device)
         for items, block, first, count in reversed(self.levels):
             if items == 0:
                 continue
             wp.launch(
-                REFIT_KERNELS[scene.precision],
+                kernels.level,
                 dim=items,
-                inputs=[view, self.tree, block, first, count, self.shape_instance, self.shape_instance_start,
-                        scene.types.scalar(self.margin_rel)],
+                inputs=[view, self.tree, block, first, count, self.shape_instance, self.shape_instance_start, margin],
                 outputs=[self.lower, self.upper],
                 device=self.device,
             )
