@@ -122,12 +122,15 @@ def test_mixed_scene_matches_oracles(device, seed):
         assert np.array_equal(res.triangle_pairs, triangle_pairs_warp64(meshes, scale=20.0, device=device))
 
 
-@pytest.mark.parametrize("leaf_size", [2, 4])
-def test_leaf_size_same_result(device, leaf_size):
+@pytest.mark.parametrize(
+    "options", [dict(leaf_size=2), dict(leaf_size=4), dict(traversal_split=0), dict(traversal_split=2),
+                dict(traversal_split=8), dict(traversal_split=32), dict(traversal_split=8, candidate_capacity=1)],
+    ids=["leaf2", "leaf4", "split0", "split2", "split8", "split32", "split8_capacity1"])
+def test_options_same_result(device, options):
     scene = mixed_scene(device, n=30, seed=4)
     scene.advance(0.4)
-    ref = wc.CollisionPipeline(scene).detect()
-    got = wc.CollisionPipeline(scene, leaf_size=leaf_size).detect()
+    ref = wc.CollisionPipeline(scene, traversal_split=0).detect()
+    got = wc.CollisionPipeline(scene, **options).detect()
     assert ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
 
@@ -174,3 +177,15 @@ def test_refit_paths_agree(device):
         assert np.array_equal(bvh.tree.node_upper.numpy(), ref[1])
         assert np.array_equal(bvh.lower.numpy(), ref[2])
     refit_contains(scene, mixed)
+
+
+def test_work_items_grow(device):
+    """The traversal's work-item buffer grows like every other buffer."""
+    scene = mixed_scene(device, n=30, seed=4)
+    scene.advance(0.4)
+    ref = wc.CollisionPipeline(scene, traversal_split=0).detect()
+    pipe = wc.CollisionPipeline(scene, traversal_split=8)
+    pipe.mid.work._allocate(1)
+    got = pipe.detect()
+    assert pipe.mid.work.capacity > 1
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)

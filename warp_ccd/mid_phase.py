@@ -23,7 +23,14 @@ from .bvh import SceneBVH, TreeView
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "all_pairs_count_kernel", "all_pairs_write_kernel", "traverse_kernel"]
+__all__ = [
+    "MidPhaseAllPairs",
+    "MidPhaseBVH",
+    "all_pairs_count_kernel",
+    "all_pairs_write_kernel",
+    "traverse_kernel",
+    "traverse_work_kernel",
+]
 
 STACK_SIZE = 64
 """Traversal stack entries per thread: enough for two trees of depth 31 (2**31 triangles each)."""
@@ -37,6 +44,97 @@ def _volume(lo: wp.vec3, hi: wp.vec3) -> float:
     return d[0] * d[1] * d[2]
 
 
+@wp.func
+def _emit_leaves(
+    tree: TreeView,
+    a: int,
+    b: int,
+    sa: int,
+    sb: int,
+    leaf_a: int,
+    leaf_b: int,
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+    candidate_capacity: int,
+):
+    """All triangle pairs of two overlapping leaves (shape-global node ids) become candidates."""
+    ra = tree.node_triangle[leaf_a]
+    rb = tree.node_triangle[leaf_b]
+    base_a = tree.shape_tri_order_start[sa]
+    base_b = tree.shape_tri_order_start[sb]
+    for i in range(ra[0], ra[0] + ra[1]):
+        for j in range(rb[0], rb[0] + rb[1]):
+            slot = reserve_slot(candidate_count, candidate_capacity)
+            if slot >= 0:
+                candidate[slot] = wp.vec4i(a, tree.tri_order[base_a + i], b, tree.tri_order[base_b + j])
+
+
+@wp.func
+def _step(
+    tree: TreeView,
+    shape_a: int,
+    shape_b: int,
+    slot_a: int,
+    slot_b: int,
+    na: int,
+    nb: int,
+):
+    """Visits node pair ``(na, nb)``: returns ``(kind, n1a, n1b, n2a, n2b)`` with kind 0 (boxes
+    apart), 1 (two leaves: emit) or 2 (push the two child pairs ``(n1a, n1b)``, ``(n2a, n2b)``).
+    The bigger box (by volume) is opened, the smaller one when the bigger is a leaf."""
+    lo_a = tree.node_lower[slot_a + na]
+    hi_a = tree.node_upper[slot_a + na]
+    lo_b = tree.node_lower[slot_b + nb]
+    hi_b = tree.node_upper[slot_b + nb]
+    if not boxes_overlap(lo_a, hi_a, lo_b, hi_b):
+        return 0, na, nb, na, nb
+    ca = tree.node_child[shape_a + na]
+    cb = tree.node_child[shape_b + nb]
+    if ca[0] < 0 and cb[0] < 0:
+        return 1, na, nb, na, nb
+    if cb[0] < 0 or (ca[0] >= 0 and _volume(lo_a, hi_a) >= _volume(lo_b, hi_b)):
+        return 2, ca[0], nb, ca[1], nb
+    return 2, na, cb[0], na, cb[1]
+
+
+@wp.func
+def _descend(
+    tree: TreeView,
+    instance_shape: wp.array[wp.int32],
+    item: wp.vec4i,
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+    candidate_capacity: int,
+):
+    """Depth-first simultaneous descent from node pair ``(item[2], item[3])`` of objects
+    ``(item[0], item[1])``, with a bounded stack; leaf pairs become candidates."""
+    a = item[0]
+    b = item[1]
+    sa = instance_shape[a]
+    sb = instance_shape[b]
+    shape_a = tree.shape_node_start[sa]
+    shape_b = tree.shape_node_start[sb]
+    slot_a = tree.instance_node_start[a]
+    slot_b = tree.instance_node_start[b]
+    stack_a = vec_stack()
+    stack_b = vec_stack()
+    stack_a[0] = item[2]
+    stack_b[0] = item[3]
+    top = int(1)
+    while top > 0:
+        top -= 1
+        kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, stack_a[top], stack_b[top])
+        if kind == 1:
+            _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
+                         candidate_capacity)
+        elif kind == 2:
+            stack_a[top] = n1a
+            stack_b[top] = n1b
+            stack_a[top + 1] = n2a
+            stack_b[top + 1] = n2b
+            top += 2
+
+
 @wp.kernel
 def traverse_kernel(
     tree: TreeView,
@@ -44,64 +142,73 @@ def traverse_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
+    split: int,
     candidate_capacity: int,
+    work_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
+    work: wp.array[wp.vec4i],
+    work_count: wp.array[wp.int64],
 ):
-    """One thread per object pair: simultaneous descent of both trees."""
+    """One thread per object pair. With ``split <= 1`` the whole traversal. Otherwise a
+    breadth-first expansion from the roots until ``split`` overlapping node pairs wait (or none),
+    which are written as work items ``(a, b, node_a, node_b)`` for :func:`traverse_work_kernel`:
+    big trees then spread over many threads, in pieces of about equal depth."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
         return
     p = pair[k]
     a = p[0]
     b = p[1]
+    if split <= 1:
+        _descend(tree, instance_shape, wp.vec4i(a, b, 0, 0), candidate, candidate_count, candidate_capacity)
+        return
     sa = instance_shape[a]
     sb = instance_shape[b]
     shape_a = tree.shape_node_start[sa]
     shape_b = tree.shape_node_start[sb]
     slot_a = tree.instance_node_start[a]
     slot_b = tree.instance_node_start[b]
-    tri_a = tree.shape_tri_order_start[sa]
-    tri_b = tree.shape_tri_order_start[sb]
-    stack_a = vec_stack()
-    stack_b = vec_stack()
-    stack_a[0] = 0
-    stack_b[0] = 0
-    top = int(1)
-    while top > 0:
-        top -= 1
-        na = stack_a[top]
-        nb = stack_b[top]
-        lo_a = tree.node_lower[slot_a + na]
-        hi_a = tree.node_upper[slot_a + na]
-        lo_b = tree.node_lower[slot_b + nb]
-        hi_b = tree.node_upper[slot_b + nb]
-        if not boxes_overlap(lo_a, hi_a, lo_b, hi_b):
-            continue
-        ca = tree.node_child[shape_a + na]
-        cb = tree.node_child[shape_b + nb]
-        if ca[0] < 0 and cb[0] < 0:
-            ra = tree.node_triangle[shape_a + na]
-            rb = tree.node_triangle[shape_b + nb]
-            for i in range(ra[0], ra[0] + ra[1]):
-                for j in range(rb[0], rb[0] + rb[1]):
-                    slot = reserve_slot(candidate_count, candidate_capacity)
-                    if slot >= 0:
-                        candidate[slot] = wp.vec4i(a, tree.tri_order[tri_a + i], b, tree.tri_order[tri_b + j])
-            continue
-        open_a = cb[0] < 0 or (ca[0] >= 0 and _volume(lo_a, hi_a) >= _volume(lo_b, hi_b))
-        if open_a:
-            stack_a[top] = ca[0]
-            stack_b[top] = nb
-            stack_a[top + 1] = ca[1]
-            stack_b[top + 1] = nb
-        else:
-            stack_a[top] = na
-            stack_b[top] = cb[0]
-            stack_a[top + 1] = na
-            stack_b[top + 1] = cb[1]
-        top += 2
+    queue_a = vec_stack()
+    queue_b = vec_stack()
+    head = int(0)
+    tail = int(1)  # queue_a/b[0] = root pair (0, 0)
+    while head < tail and tail - head < split and tail + 2 <= STACK_SIZE:
+        kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, queue_a[head], queue_b[head])
+        head += 1
+        if kind == 1:
+            _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
+                         candidate_capacity)
+        elif kind == 2:
+            queue_a[tail] = n1a
+            queue_b[tail] = n1b
+            queue_a[tail + 1] = n2a
+            queue_b[tail + 1] = n2b
+            tail += 2
+    for q in range(head, tail):
+        slot = reserve_slot(work_count, work_capacity)
+        if slot >= 0:
+            work[slot] = wp.vec4i(a, b, queue_a[q], queue_b[q])
+
+
+@wp.kernel
+def traverse_work_kernel(
+    tree: TreeView,
+    instance_shape: wp.array[wp.int32],
+    work: wp.array[wp.vec4i],
+    work_count: wp.array[wp.int64],
+    work_capacity: int,
+    candidate_capacity: int,
+    # Outputs
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+):
+    """One thread per work item ``(a, b, node_a, node_b)``: depth-first descent from there."""
+    k = wp.tid()
+    if k >= used_count(work_count, work_capacity):
+        return
+    _descend(tree, instance_shape, work[k], candidate, candidate_count, candidate_capacity)
 
 
 class MidPhaseBVH:
@@ -110,26 +217,48 @@ class MidPhaseBVH:
     Args:
         bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
+        split: work items per object pair: 0 or 1 traverses each pair in one thread; ``k > 1``
+            first expands each pair breadth-first into about ``k`` node pairs, each traversed by
+            its own thread (balances big meshes against small ones). Default: 8 on CUDA, 0 on CPU,
+            where there is one thread anyway.
         device: Warp device.
     """
 
-    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):
+    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, split: int | None = None, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if 2 * bvh.max_depth + 2 > STACK_SIZE:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
+        self.split = (8 if self.device.is_cuda else 0) if split is None else int(split)
+        if not 0 <= self.split <= STACK_SIZE // 2:
+            raise ValueError(f"split must lie in [0, {STACK_SIZE // 2}], got {split}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
+        self.work = GrowableBuffer(wp.vec4i, max(1024, capacity // 4), self.device, "traversal work items")
+
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers whose counters the caller checks after :meth:`launch` (the work items)."""
+        return [self.work] if self.split > 1 else []
 
     def launch(self, scene, pairs: GrowableBuffer) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`."""
         wp.launch(
             traverse_kernel,
             dim=pairs.capacity,
-            inputs=[self.bvh.tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity,
-                    self.candidates.capacity],
-            outputs=[self.candidates.data, self.candidates.count],
+            inputs=[self.bvh.tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self.split,
+                    self.candidates.capacity, self.work.capacity],
+            outputs=[self.candidates.data, self.candidates.count, self.work.data, self.work.count],
             device=self.device,
         )
+        if self.split > 1:
+            wp.launch(
+                traverse_work_kernel,
+                dim=self.work.capacity,
+                inputs=[self.bvh.tree, scene.instance_shape, self.work.data, self.work.count, self.work.capacity,
+                        self.candidates.capacity],
+                outputs=[self.candidates.data, self.candidates.count],
+                device=self.device,
+            )
 
 
 @wp.kernel

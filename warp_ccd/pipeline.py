@@ -114,6 +114,8 @@ class CollisionPipeline:
         tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
         timings: when True, synchronise after each stage and report ms per stage.
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
+        traversal_split: work items per object pair in the tree traversal (see
+            :class:`~warp_ccd.mid_phase.MidPhaseBVH`; default 8 on CUDA, 0 on CPU).
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
@@ -129,6 +131,7 @@ class CollisionPipeline:
         tolerance: float = TOLERANCE,
         timings: bool = False,
         leaf_size: int = 1,
+        traversal_split: int | None = None,
         containment: bool = False,
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
@@ -147,7 +150,8 @@ class CollisionPipeline:
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
             self.bounds = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
-            self.mid = MidPhaseBVH(self.bounds, capacity=candidate_capacity or max(1024, 16 * n), device=d)
+            self.mid = MidPhaseBVH(self.bounds, capacity=candidate_capacity or max(1024, 16 * n),
+                                   split=traversal_split, device=d)
         else:
             self.bounds = InstanceBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
@@ -156,8 +160,10 @@ class CollisionPipeline:
         self.contained = GrowableBuffer(wp.vec2i, max(16, n // 8), d, "contained pairs") if containment else None
 
     def _buffers(self) -> list[GrowableBuffer]:
+        """Every buffer of the frame; the pipeline checks all their counters after it."""
         extra = [self.contained] if self.contained is not None else []
-        return [self.pairs, *getattr(self.broad, "counters", []), *extra, self.mid.candidates, self.narrow.hits]
+        stages = [*getattr(self.broad, "counters", []), *getattr(self.mid, "counters", []), *extra]
+        return [self.pairs, self.mid.candidates, self.narrow.hits, *stages]
 
     def _run_frame(self) -> dict | None:
         scene = self.scene
@@ -219,17 +225,17 @@ class CollisionPipeline:
             grew = [b.ensure(c) for b, c in zip(buffers, counts)]
             if not any(grew):
                 break
-        num_hits = counts[-1]
+        num_hits = counts[2]
         contained = None
         if self.contained is not None:
-            nc = counts[len(buffers) - 3]
+            nc = counts[-1]
             contained = wp.clone(self.contained.data[:nc]) if nc else wp.zeros(0, dtype=wp.vec2i, device=d)
         return CollisionResult(
             n,
             wp.clone(self.narrow.hits.data[:num_hits]) if num_hits else wp.zeros(0, dtype=wp.vec4i, device=d),
             wp.clone(self.narrow.object_colliding),
             times,
-            num_candidates=counts[-2],
+            num_candidates=counts[1],
             num_broad_pairs=counts[0],
             device_contained=contained,
         )
