@@ -98,6 +98,16 @@ def _step(
 
 
 @wp.func
+def _pair_layout(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int):
+    """Shapes of objects ``a``, ``b``, their first nodes in the topology, and their first node
+    slots in the per-instance bounds."""
+    sa = instance_shape[a]
+    sb = instance_shape[b]
+    return (sa, sb, tree.shape_node_start[sa], tree.shape_node_start[sb],
+            tree.instance_node_start[a], tree.instance_node_start[b])
+
+
+@wp.func
 def _descend(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
@@ -110,12 +120,7 @@ def _descend(
     ``(item[0], item[1])``, with a bounded stack; leaf pairs become candidates."""
     a = item[0]
     b = item[1]
-    sa = instance_shape[a]
-    sb = instance_shape[b]
-    shape_a = tree.shape_node_start[sa]
-    shape_b = tree.shape_node_start[sb]
-    slot_a = tree.instance_node_start[a]
-    slot_b = tree.instance_node_start[b]
+    sa, sb, shape_a, shape_b, slot_a, slot_b = _pair_layout(tree, instance_shape, a, b)
     stack_a = vec_stack()
     stack_b = vec_stack()
     stack_a[0] = item[2]
@@ -164,12 +169,7 @@ def traverse_kernel(
     if split <= 1:
         _descend(tree, instance_shape, wp.vec4i(a, b, 0, 0), candidate, candidate_count, candidate_capacity)
         return
-    sa = instance_shape[a]
-    sb = instance_shape[b]
-    shape_a = tree.shape_node_start[sa]
-    shape_b = tree.shape_node_start[sb]
-    slot_a = tree.instance_node_start[a]
-    slot_b = tree.instance_node_start[b]
+    sa, sb, shape_a, shape_b, slot_a, slot_b = _pair_layout(tree, instance_shape, a, b)
     queue_a = vec_stack()
     queue_b = vec_stack()
     head = int(0)

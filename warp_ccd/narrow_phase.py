@@ -226,18 +226,9 @@ def _make_narrow(types):
 
 
     @wp.func
-    def tri_tri_moller(
-        v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
-    ) -> bool:
-        """Möller's test: do the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)`` intersect?
-
-        Args:
-            v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units).
-            tol_rel: tolerance relative to the longest edge (see the module docstring).
-
-        Returns:
-            True when they intersect or touch within the tolerance; False for degenerate triangles.
-        """
+    def _centre_pair(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
+        """Shared set-up of both tests: vertices relative to the pair's centroid, unit normals
+        ``na``, ``nb``, the tolerance ``eps``, and whether either triangle is degenerate."""
         o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
         a0 = v0 - o
         a1 = v1 - o
@@ -252,10 +243,28 @@ def _make_narrow(types):
         nb = wp.cross(b1 - b0, b2 - b0)
         lna = wp.length(na)
         lnb = wp.length(nb)
-        if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
+        degenerate = lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb
+        if not degenerate:
+            na = na / lna
+            nb = nb / lnb
+        return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate
+
+    @wp.func
+    def tri_tri_moller(
+        v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
+    ) -> bool:
+        """Möller's test: do the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)`` intersect?
+
+        Args:
+            v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units).
+            tol_rel: tolerance relative to the longest edge (see the module docstring).
+
+        Returns:
+            True when they intersect or touch within the tolerance; False for degenerate triangles.
+        """
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
+        if degenerate:
             return False
-        na = na / lna
-        nb = nb / lnb
         # 1. Triangle b against the plane of a, then a against the plane of b.
         rb0 = wp.dot(na, b0 - a0)
         rb1 = wp.dot(na, b1 - a0)
@@ -359,24 +368,9 @@ def _make_narrow(types):
 
         Same arguments, tolerance and semantics as :func:`tri_tri_moller`.
         """
-        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
-        a0 = v0 - o
-        a1 = v1 - o
-        a2 = v2 - o
-        b0 = u0 - o
-        b1 = u1 - o
-        b2 = u2 - o
-        la = _max_edge(a0, a1, a2)
-        lb = _max_edge(b0, b1, b2)
-        eps = tol_rel * wp.max(la, lb)
-        na = wp.cross(a1 - a0, a2 - a0)
-        nb = wp.cross(b1 - b0, b2 - b0)
-        lna = wp.length(na)
-        lnb = wp.length(nb)
-        if lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb:
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
+        if degenerate:
             return False
-        na = na / lna
-        nb = nb / lnb
         return (
             _segment_triangle(a0, a1, b0, b1, b2, nb, eps)
             or _segment_triangle(a1, a2, b0, b1, b2, nb, eps)
