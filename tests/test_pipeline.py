@@ -216,3 +216,48 @@ def test_bad_options():
         wc.Scene.random(-1)
     with pytest.raises(ValueError, match="density"):
         wc.Scene.random(10, density=2.0)
+
+
+def point_triangle_distance(x, tri):
+    """Distance from point ``x`` to the closed triangle ``tri`` (3, 3), float64 (by sampling the
+    plane projection and the edges)."""
+    a, b, c = tri
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n)
+    p = x - n * (n @ (x - a))
+    inside = all(np.cross(v1 - v0, p - v0) @ n >= 0 for v0, v1 in ((a, b), (b, c), (c, a)))
+    if inside:
+        return abs(n @ (x - a))
+    best = np.inf
+    for v0, v1 in ((a, b), (b, c), (c, a)):
+        t = np.clip((x - v0) @ (v1 - v0) / ((v1 - v0) @ (v1 - v0)), 0, 1)
+        best = min(best, np.linalg.norm(x - (v0 + t * (v1 - v0))))
+    return best
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_segments_lie_on_both_triangles(device, precision):
+    scene = wc.Scene.random(200, seed=12, device=device, precision=precision)
+    scene.advance(0.3)
+    res = wc.CollisionPipeline(scene, segments=True).detect()
+    seg, pairs = res.segments, res.triangle_pairs
+    assert seg.shape == (len(pairs), 2, 3) and len(pairs) > 0
+    assert np.array_equal(pairs, wc.CollisionPipeline(scene).detect().triangle_pairs)
+    meshes = scene.world_meshes()
+    for (a, ta, b, tb), ends in zip(pairs, seg):
+        if np.isnan(ends).any():
+            continue
+        for obj, t in ((a, ta), (b, tb)):
+            tri = meshes[obj][0][meshes[obj][1][t]].astype(np.float64)
+            for x in ends:
+                assert point_triangle_distance(x, tri) < 1e-4
+    assert wc.CollisionPipeline(scene).detect().segments is None
+
+
+def test_segment_of_crossing_triangles(device):
+    t = np.array([[0, 1, 2]])
+    flat = (np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0]], np.float32), t)
+    upright = (np.array([[0.5, -1, -1], [0.5, 3, -1], [0.5, 0.5, 1]], np.float32), t)
+    res = wc.CollisionPipeline(wc.Scene.from_meshes([flat, upright], device=device), segments=True).detect()
+    ends = sorted(map(tuple, res.segments[0].round(5)))
+    assert ends == [(0.5, 0.0, 0.0), (0.5, 1.5, 0.0)]

@@ -47,6 +47,7 @@ __all__ = [
     "narrow_phase_kernel",
     "tri_tri_edge_face",
     "tri_tri_moller",
+    "tri_tri_segment",
 ]
 
 TOLERANCE = 1.0e-5
@@ -203,8 +204,9 @@ def _make_narrow(types):
 
 
     @wp.func
-    def _collinear_overlap(pa: V3, qa: V3, pb: V3, qb: V3, eps: S) -> bool:
-        """Overlap of two segments lying on one line, within ``eps``."""
+    def _collinear_interval(pa: V3, qa: V3, pb: V3, qb: V3, eps: S):
+        """Overlap of two segments lying on one line, within ``eps``: ``(hit, p, q)``, ``pq`` the
+        common part (a point when they only touch)."""
         da = qa - pa
         db = qb - pb
         origin = pa
@@ -214,7 +216,8 @@ def _make_narrow(types):
             d = db
         ld = wp.length(d)
         if ld <= eps:
-            return wp.length((pa + qa) * S(0.5) - (pb + qb) * S(0.5)) <= S(2.0) * eps
+            mid = (pa + qa + pb + qb) * S(0.25)
+            return wp.length((pa + qa) * S(0.5) - (pb + qb) * S(0.5)) <= S(2.0) * eps, mid, mid
         u = d / ld
         ta0 = wp.dot(pa - origin, u)
         ta1 = wp.dot(qa - origin, u)
@@ -222,7 +225,17 @@ def _make_narrow(types):
         tb1 = wp.dot(qb - origin, u)
         lo = wp.max(wp.min(ta0, ta1), wp.min(tb0, tb1))
         hi = wp.min(wp.max(ta0, ta1), wp.max(tb0, tb1))
-        return lo <= hi + eps
+        hit = lo <= hi + eps
+        if lo > hi:  # touching within eps: one point between the two ends
+            lo = (lo + hi) * S(0.5)
+            hi = lo
+        return hit, origin + u * lo, origin + u * hi
+
+    @wp.func
+    def _collinear_overlap(pa: V3, qa: V3, pb: V3, qb: V3, eps: S) -> bool:
+        """Overlap of two segments lying on one line, within ``eps``."""
+        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+        return hit
 
 
     @wp.func
@@ -300,6 +313,47 @@ def _make_narrow(types):
         pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
         return _collinear_overlap(pa, qa, pb, qb, eps)
 
+
+    @wp.func
+    def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
+        """Where two triangles that :func:`tri_tri_moller` calls intersecting meet: ``(kind, p, q)``.
+
+        ``kind`` 1: the segment ``pq`` where they cross or touch (a point when ``p == q``), in the
+        input frame; 2: coplanar contact (an area, no segment; ``p``, ``q`` are the centroid of the
+        pair); 0: no contact.
+        """
+        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
+        if degenerate:
+            return 0, o, o
+        rb0 = wp.dot(na, b0 - a0)
+        rb1 = wp.dot(na, b1 - a0)
+        rb2 = wp.dot(na, b2 - a0)
+        ra0 = wp.dot(nb, a0 - b0)
+        ra1 = wp.dot(nb, a1 - b0)
+        ra2 = wp.dot(nb, a2 - b0)
+        db0 = _snap(rb0, eps)
+        db1 = _snap(rb1, eps)
+        db2 = _snap(rb2, eps)
+        da0 = _snap(ra0, eps)
+        da1 = _snap(ra1, eps)
+        da2 = _snap(ra2, eps)
+        if _one_side(db0, db1, db2) or _one_side(da0, da1, da2):
+            return 0, o, o
+        if (db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0)) or (da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0)):
+            return 2, o, o
+        if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
+            pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
+            pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
+            hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+            if hit:
+                return 1, p + o, q + o
+        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
+        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
+        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+        if hit:
+            return 1, p + o, q + o
+        return 0, o, o
 
     @wp.func
     def _point_in_triangle_3d(x: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
@@ -435,6 +489,31 @@ def _make_narrow(types):
         result[k] = wp.where(r, 1, 0)
 
 
+    @wp.kernel
+    def segment_kernel(
+        view: View,
+        hit: wp.array[wp.vec4i],
+        hit_count: wp.array[wp.int64],
+        hit_capacity: int,
+        tol_rel: S,
+        # Outputs
+        segment: wp.array2d[V3],
+    ):
+        """One thread per triangle pair found: its intersection segment (NaN for coplanar areas)."""
+        k = wp.tid()
+        if k >= used_count(hit_count, hit_capacity):
+            return
+        c = hit[k]
+        a0, a1, a2 = mesh_triangle(view, c[0], c[1])
+        b0, b1, b2 = mesh_triangle(view, c[2], c[3])
+        kind, p, q = tri_tri_segment(a0, a1, a2, b0, b1, b2, tol_rel)
+        if kind != 1:
+            nan = S(wp.nan)
+            p = V3(nan, nan, nan)
+            q = p
+        segment[k, 0] = p
+        segment[k, 1] = q
+
     @wp.func
     def winding_number(view: View, instance: int, num_triangles: int, p: V3) -> S:
         """Generalised winding number of point ``p`` w.r.t. object ``instance``'s closed mesh.
@@ -500,28 +579,14 @@ def _make_narrow(types):
                         contained[slot] = wp.vec2i(inner, outer)
 
     return SimpleNamespace(
-        _snap=_snap,
-        _one_side=_one_side,
-        _max_edge=_max_edge,
-        _cross2=_cross2,
-        _point_segment_dist=_point_segment_dist,
-        _segments_within_2d=_segments_within_2d,
-        _inside_edge_2d=_inside_edge_2d,
-        _point_in_triangle_2d=_point_in_triangle_2d,
-        _to_plane=_to_plane,
-        _coplanar_overlap=_coplanar_overlap,
-        _push=_push,
-        _plane_section=_plane_section,
-        _collinear_overlap=_collinear_overlap,
         tri_tri_moller=tri_tri_moller,
-        _point_in_triangle_3d=_point_in_triangle_3d,
-        _segment_triangle=_segment_triangle,
         tri_tri_edge_face=tri_tri_edge_face,
         tri_tri_test=tri_tri_test,
+        tri_tri_segment=tri_tri_segment,
+        winding_number=winding_number,
         narrow_phase_kernel=narrow_phase_kernel,
         tri_tri_batch_kernel=tri_tri_batch_kernel,
-        winding_number=winding_number,
-        _box_inside=_box_inside,
+        segment_kernel=segment_kernel,
         containment_kernel=containment_kernel,
     )
 
@@ -535,6 +600,7 @@ tri_tri_test = NARROW_TYPES["float32"].tri_tri_test
 tri_tri_batch_kernel = NARROW_TYPES["float32"].tri_tri_batch_kernel
 narrow_phase_kernel = NARROW_TYPES["float32"].narrow_phase_kernel
 containment_kernel = NARROW_TYPES["float32"].containment_kernel
+tri_tri_segment = NARROW_TYPES["float32"].tri_tri_segment
 
 
 class NarrowPhase:

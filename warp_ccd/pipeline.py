@@ -42,8 +42,9 @@ class CollisionResult:
 
     def __init__(self, num_objects: int, device_triangle_pairs: wp.array, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained: wp.array | None = None):
+                 device_contained: wp.array | None = None, device_segments: wp.array | None = None):
         self.num_objects = num_objects
+        self.device_segments = device_segments
         self.device_triangle_pairs = device_triangle_pairs
         self.device_colliding = device_colliding
         self.device_contained = device_contained
@@ -65,8 +66,19 @@ class CollisionResult:
         """
         if self._tri is None:
             t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
-            self._tri = t[np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))]
+            self._order = np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))
+            self._tri = t[self._order]
         return self._tri
+
+    @property
+    def segments(self) -> np.ndarray | None:
+        """``(M, 2, 3)`` end points of the intersection segment of each row of
+        :attr:`triangle_pairs` (same order; a point when they only touch; NaN for coplanar
+        contacts, whose intersection is an area). None unless asked for with ``segments=True``."""
+        if self.device_segments is None:
+            return None
+        self.triangle_pairs  # noqa: B018 (computes the row order)
+        return self.device_segments.numpy().reshape(-1, 2, 3)[self._order]
 
     @property
     def object_pairs(self) -> np.ndarray:
@@ -116,6 +128,8 @@ class CollisionPipeline:
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
         traversal_split: work items per object pair in the tree traversal (see
             :class:`~warp_ccd.mid_phase.MidPhaseBVH`; default 8 on CUDA, 0 on CPU).
+        segments: also compute the intersection segment of each triangle pair
+            (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
@@ -132,6 +146,7 @@ class CollisionPipeline:
         timings: bool = False,
         leaf_size: int = 1,
         traversal_split: int | None = None,
+        segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
@@ -157,6 +172,8 @@ class CollisionPipeline:
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
         self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
                                   capacity=hit_capacity or max(256, 4 * n), device=d)
+        self.segments = bool(segments)
+        self._segment = None
         self.contained = GrowableBuffer(wp.vec2i, max(16, n // 8), d, "contained pairs") if containment else None
 
     def _buffers(self) -> list[GrowableBuffer]:
@@ -191,6 +208,17 @@ class CollisionPipeline:
         self.mid.launch(scene, self.pairs)
         t = mark("mid", t)
         self.narrow.launch(scene, self.mid.candidates)
+        if self.segments:
+            hits = self.narrow.hits
+            if self._segment is None or self._segment.shape[0] != hits.capacity:
+                self._segment = wp.zeros((hits.capacity, 2), dtype=scene.types.vec3, device=self.device)
+            wp.launch(
+                NARROW_TYPES[scene.precision].segment_kernel,
+                dim=hits.capacity,
+                inputs=[scene.mesh_view(), hits.data, hits.count, hits.capacity, scene.types.scalar(self.narrow.tolerance)],
+                outputs=[self._segment],
+                device=self.device,
+            )
         if self.contained is not None:
             wp.launch(
                 NARROW_TYPES[scene.precision].containment_kernel,
@@ -215,9 +243,10 @@ class CollisionPipeline:
         d = self.device
         if n < 2:
             empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.contained is not None else None
+            no_segments = wp.zeros((0, 2), dtype=self.scene.types.vec3, device=d) if self.segments else None
             return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                    {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
-                                   device_contained=empty)
+                                   device_contained=empty, device_segments=no_segments)
         buffers = self._buffers()
         while True:
             times = self._run_frame()
@@ -230,6 +259,9 @@ class CollisionPipeline:
         if self.contained is not None:
             nc = counts[-1]
             contained = wp.clone(self.contained.data[:nc]) if nc else wp.zeros(0, dtype=wp.vec2i, device=d)
+        segments = None
+        if self.segments:
+            segments = wp.clone(self._segment[:num_hits]) if num_hits else wp.zeros((0, 2), dtype=self.scene.types.vec3, device=d)
         return CollisionResult(
             n,
             wp.clone(self.narrow.hits.data[:num_hits]) if num_hits else wp.zeros(0, dtype=wp.vec4i, device=d),
@@ -238,6 +270,7 @@ class CollisionPipeline:
             num_candidates=counts[1],
             num_broad_pairs=counts[0],
             device_contained=contained,
+            device_segments=segments,
         )
 
 
