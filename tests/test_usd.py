@@ -314,3 +314,28 @@ def test_orientation_layout_matches_gf_quath():
     q = Vt.QuathArray.FromNumpy(np.array([[0.1, 0.2, 0.3, 0.9]], np.float16))[0]
     assert q == Gf.Quath(np.float16(0.9), np.float16(0.1), np.float16(0.2), np.float16(0.3))
     assert wp.transform(wp.vec3(), wp.quat(0.1, 0.2, 0.3, 0.9)).q[3] == pytest.approx(0.9)
+
+
+def test_segment_markers(tmp_path, device):
+    import warp_ccd as wc
+    from pxr import Usd, UsdGeom
+
+    scene = wc.Scene.random(150, seed=3, device=device)
+    pipe = wc.CollisionPipeline(scene, segments=True)
+    path = tmp_path / "segments.usda"
+    counts = []
+    with wc.UsdAnimationWriter(path, scene, segments=True) as writer:
+        for frame in range(3):
+            scene.advance(0.2)
+            res = pipe.detect()
+            counts.append(int(np.isfinite(res.segments).all(axis=(1, 2)).sum()))
+            writer.add_frame(frame, res)
+    stage = Usd.Stage.Open(str(path))
+    curves = UsdGeom.BasisCurves(stage.GetPrimAtPath("/World/Segments"))
+    for frame, n in enumerate(counts):
+        assert len(curves.GetCurveVertexCountsAttr().Get(frame)) == n
+        assert len(curves.GetPointsAttr().Get(frame)) == 2 * n
+    assert sum(counts) > 0
+    with pytest.raises(ValueError, match="segments=True"):
+        with wc.UsdAnimationWriter(tmp_path / "x.usd", scene, segments=True) as writer:
+            writer.add_frame(0, wc.CollisionPipeline(scene).detect())

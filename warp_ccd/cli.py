@@ -78,6 +78,7 @@ def _build_parser() -> _Parser:
                       help="also render a preview: .png the last frame, .gif the whole animation (default: none)")
     demo.add_argument("--seed", type=_count(0), default=0, help="random seed of the scene (default: %(default)s)")
     demo.add_argument("--aabb", action="store_true", help="also write each object's bounding box as a wireframe")
+    demo.add_argument("--segments", action="store_true", help="also write the intersection segments as line markers")
 
     sub.add_parser("bench", help="benchmarks (arguments after 'bench' go to warp_ccd.bench)", add_help=False)
     return parser
@@ -134,8 +135,8 @@ def _run_demo(args) -> int:
     dt = 1.0 / 60.0
     start = time.perf_counter()
     scene = Scene.random(args.num_objects, seed=args.seed, device=device)
-    pipe = CollisionPipeline(scene, timings=True)
-    writer = UsdAnimationWriter(args.out, scene, fps=60, aabb=args.aabb)
+    pipe = CollisionPipeline(scene, timings=True, segments=args.segments)
+    writer = UsdAnimationWriter(args.out, scene, fps=60, aabb=args.aabb, segments=args.segments)
     renderer = None
     gif = args.preview is not None and args.preview.lower().endswith(".gif")
     frames = []

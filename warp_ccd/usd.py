@@ -6,6 +6,8 @@ Stage layout (``defaultPrim`` is ``/World``)::
       /World/Objects             PointInstancer (rigid scenes)
         /World/Objects/Prototypes          Scope
           /World/Objects/Prototypes/shape_0  Mesh, one per shape, in local coordinates
+      /World/Segments            BasisCurves (optional): the intersection segments of each frame,
+                                 two points each, points and counts time-sampled
       /World/Bounds              BasisCurves (optional): each object's AABB, 12 edges as 4 linear
                                  polylines (16 points per box), points time-sampled
 
@@ -57,6 +59,9 @@ STAGE_EXTENSIONS = (".usd", ".usdc", ".usda")
 
 COLOR_FREE = (0.62, 0.62, 0.62)
 """displayColor (linear RGB in [0, 1]) of an object that touches nothing."""
+
+COLOR_SEGMENT = (1.0, 0.9, 0.1)
+"""displayColor of the intersection segment markers."""
 
 COLOR_COLLIDING = (0.95, 0.22, 0.08)
 """displayColor (linear RGB in [0, 1]) of an object whose surface intersects another's."""
@@ -150,6 +155,8 @@ class UsdAnimationWriter:
         scene: the scene whose poses (or world vertices, when deforming) are recorded.
         fps: frames per second of the animation (time codes per second as well).
         aabb: also write each object's axis-aligned bounding box as a wireframe.
+        segments: also write the intersection segments of each frame as line markers (the
+            pipeline must be built with ``segments=True``).
         up_axis: ``"Y"`` or ``"Z"``, stage metadata for viewers.
         meters_per_unit: length of one scene unit in metres, stage metadata.
 
@@ -157,8 +164,8 @@ class UsdAnimationWriter:
         ValueError: bad path (see :func:`validate_stage_path`) or bad option.
     """
 
-    def __init__(self, path, scene, *, fps: float = 60.0, aabb: bool = False, up_axis: str = "Y",
-                 meters_per_unit: float = 1.0):
+    def __init__(self, path, scene, *, fps: float = 60.0, aabb: bool = False, segments: bool = False,
+                 up_axis: str = "Y", meters_per_unit: float = 1.0):
         self.path, self._ext = validate_stage_path(path)
         if not np.isfinite(fps) or fps <= 0:
             raise ValueError(f"fps must be a positive number, got {fps!r}")
@@ -176,6 +183,7 @@ class UsdAnimationWriter:
         self.scene = scene
         self.fps = float(fps)
         self.aabb = bool(aabb)
+        self.segments = bool(segments)
         self.deforming = bool(getattr(scene, "deforming", False))
         self.num_objects = int(scene.num_objects)
         self.num_frames = 0
@@ -269,6 +277,17 @@ class UsdAnimationWriter:
             curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
             self._curves = curves
 
+        if self.segments:
+            marks = UsdGeom.BasisCurves.Define(stage, "/World/Segments")
+            marks.CreateTypeAttr(UsdGeom.Tokens.linear)
+            marks.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*COLOR_SEGMENT)]))
+            self._segment_counts = marks.CreateCurveVertexCountsAttr()
+            self._segment_points = marks.CreatePointsAttr()
+            self._segment_extent = marks.CreateExtentAttr()
+            widths = self._shape_radius[self._instance_shape] * self.scene.instance_scale_np if self.num_objects else [1.0]
+            marks.CreateWidthsAttr(Vt.FloatArray([max(float(np.median(widths)) * 0.03, 1e-6)]))
+            marks.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+
     # ------------------------------------------------------------------ frames
     def _colliding(self, result) -> np.ndarray:
         flags = getattr(result, "colliding", result)
@@ -307,6 +326,8 @@ class UsdAnimationWriter:
                 self._write_instancer(time, colors)
             if self.aabb:
                 self._write_bounds(time)
+            if self.segments:
+                self._write_segments(time, result)
         self.num_frames += 1
         f = int(frame_index)
         self._first = f if self._first is None else min(self._first, f)
@@ -366,6 +387,22 @@ class UsdAnimationWriter:
             # Line width: 1 % of the median box size of the first frame, constant over time.
             size = float(np.median(np.max(upper - lower, axis=1)))
             self._bounds_widths.Set(Vt.FloatArray([max(size * 0.01, 1e-6)]))
+
+    def _write_segments(self, time, result) -> None:
+        from pxr import Vt
+
+        seg = getattr(result, "segments", None)
+        if seg is None:
+            raise ValueError("add_frame: segments=True needs results of a CollisionPipeline(..., segments=True)")
+        seg = np.asarray(seg, dtype=np.float64).reshape(-1, 2, 3)
+        seg = seg[np.isfinite(seg).all(axis=(1, 2))].astype(np.float32)  # coplanar contacts have none
+        points = seg.reshape(-1, 3)
+        self._segment_counts.Set(Vt.IntArray.FromNumpy(np.full(len(seg), 2, np.int32)), time)
+        self._segment_points.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points)), time)
+        if len(points):
+            self._segment_extent.Set(_extent(points.min(axis=0), points.max(axis=0)), time)
+        else:
+            self._segment_extent.Set(_extent(np.zeros(3), np.zeros(3)), time)
 
     # ------------------------------------------------------------------ closing
     def close(self) -> str:
