@@ -214,6 +214,12 @@ def test_bad_options():
         wc.CollisionPipeline("scene")
     with pytest.raises(ValueError, match="num_objects"):
         wc.Scene.random(-1)
+    with pytest.raises(ValueError, match="num_objects"):
+        wc.Scene.random(True)
+    with pytest.raises(ValueError, match="tolerance"):
+        wc.CollisionPipeline(scene, tolerance="a")
+    with pytest.raises(ValueError, match="traversal split"):
+        wc.CollisionPipeline(scene, traversal_split=-1)
     with pytest.raises(ValueError, match="density"):
         wc.Scene.random(10, density=2.0)
 

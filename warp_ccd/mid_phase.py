@@ -231,7 +231,7 @@ class MidPhaseBVH:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
         self.split = (8 if self.device.is_cuda else 0) if split is None else int(split)
         if not 0 <= self.split <= STACK_SIZE // 2:
-            raise ValueError(f"split must lie in [0, {STACK_SIZE // 2}], got {split}")
+            raise ValueError(f"traversal split must lie in [0, {STACK_SIZE // 2}], got {split}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.work = GrowableBuffer(wp.vec4i, max(1024, capacity // 4), self.device, "traversal work items")
 

@@ -154,6 +154,9 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
+                or not 0.0 <= float(tolerance) < 0.1:
+            raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
         if mid_phase not in ("bvh", "all_pairs"):
             raise ValueError(f"mid_phase must be 'bvh' or 'all_pairs', got {mid_phase!r}")
         self.scene = scene

@@ -311,7 +311,7 @@ class Scene:
             device: Warp device.
             precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
         """
-        if not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
+        if isinstance(num_objects, bool) or not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
             raise ValueError(f"num_objects must be a non-negative integer, got {num_objects!r}")
         if not 0.0 < density < 1.0:
             raise ValueError(f"density must lie in (0, 1), got {density!r}")
