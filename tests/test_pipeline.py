@@ -218,7 +218,7 @@ def test_bad_options():
         wc.Scene.random(True)
     with pytest.raises(ValueError, match="tolerance"):
         wc.CollisionPipeline(scene, tolerance="a")
-    with pytest.raises(ValueError, match="traversal split"):
+    with pytest.raises(ValueError, match="traversal_split"):
         wc.CollisionPipeline(scene, traversal_split=-1)
     with pytest.raises(ValueError, match="density"):
         wc.Scene.random(10, density=2.0)
@@ -267,3 +267,27 @@ def test_segment_of_crossing_triangles(device):
     res = wc.CollisionPipeline(wc.Scene.from_meshes([flat, upright], device=device), segments=True).detect()
     ends = sorted(map(tuple, res.segments[0].round(5)))
     assert ends == [(0.5, 0.0, 0.0), (0.5, 1.5, 0.0)]
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda s: wc.CollisionPipeline(s, leaf_size=1.5), "leaf_size"),
+        (lambda s: wc.CollisionPipeline(s, leaf_size=True), "leaf_size"),
+        (lambda s: wc.CollisionPipeline(s, traversal_split=1.5), "traversal_split"),
+        (lambda s: wc.CollisionPipeline(s, pair_capacity=0), "pair_capacity"),
+        (lambda s: wc.CollisionPipeline(s, candidate_capacity="big"), "candidate_capacity"),
+        (lambda s: wc.Scene.random(5, density="x"), "density"),
+        (lambda s: wc.Scene.random(5, size_range=(1,)), "size_range"),
+        (lambda s: wc.Scene.random(5, seed=-1), "seed"),
+        (lambda s: s.advance("a"), "dt"),
+        (lambda s: s.advance(None), "dt"),
+        (lambda s: wc.Scene([wc.shape("cube")], [0.7, 0.2]), "instance_shape"),
+        (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[0, 0, 0, 0, 0, 0, 3]]), "poses: row 0"),
+        (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[np.nan, 0, 0, 0, 0, 0, 1]]), "poses: row 0"),
+    ],
+)
+def test_bad_arguments_name_the_argument(call, match):
+    scene = wc.Scene.random(5, seed=0)
+    with pytest.raises(ValueError, match=match):
+        call(scene)

@@ -10,7 +10,7 @@ touching boxes overlap):
 
 Sweep and prune, as run on the device each frame:
 
-1. Statistics of the boxes (one strided pass, a few atomics per thread block): bounds of the
+1. Statistics of the boxes (one strided pass, a few atomics per thread): bounds of the
    scene, mean extent, variance of the centres per axis.
 2. The sweep axis is the axis of greatest variance of the centres; the plane perpendicular to it
    is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
@@ -27,7 +27,7 @@ Sweep and prune, as run on the device each frame:
    there), so no pair is reported twice and none is lost.
 
 Cost per frame: O(N) work plus the output, O(log N)-depth sort; everything stays on the device and
-the host reads nothing. Counters are int32 and every buffer grows: the entry buffer and the pair
+the host reads nothing. Counters are int64 and every buffer grows: the entry buffer and the pair
 buffer report overflow through their counters.
 """
 
@@ -422,8 +422,6 @@ class BroadPhaseSAP:
         self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
         self.num_boxes = -1
-        self.entry_key = None
-        self.entry_box = None
         self.entry = GrowableBuffer(wp.int64, 1024, d, "sap grid entries", factor=2)
         self._init_lo = wp.array(np.full(3, 1e30, np.float32), device=d)
         self._init_hi = wp.array(np.full(3, -1e30, np.float32), device=d)

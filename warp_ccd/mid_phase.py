@@ -4,7 +4,8 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 :class:`~warp_ccd.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
 
 * :class:`MidPhaseBVH` (default): tree-vs-tree traversal of the two objects' trees
-  (:mod:`warp_ccd.bvh`), one thread per object pair with a bounded stack. When two nodes' boxes
+  (:mod:`warp_ccd.bvh`) with a bounded stack, one thread per object pair, or on CUDA one thread
+  per work item after a breadth-first split of each pair into about 8 node pairs. When two nodes' boxes
   overlap, the one with the smaller volume is kept and the bigger one is opened (the smaller one
   when the bigger is a leaf); two overlapping leaves give their triangle pairs. Work is about
   proportional to the number of overlapping node pairs.

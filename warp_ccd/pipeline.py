@@ -154,6 +154,13 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        for name, value, minimum in (("leaf_size", leaf_size, 1), ("traversal_split", traversal_split, 0),
+                                     ("pair_capacity", pair_capacity, 1), ("candidate_capacity", candidate_capacity, 1),
+                                     ("hit_capacity", hit_capacity, 1)):
+            if value is None and name != "leaf_size":
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+                raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
                 or not 0.0 <= float(tolerance) < 0.1:
             raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
@@ -286,8 +293,9 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test in
             double precision (for scenes far from the origin).
-        **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``narrow_phase``,
-            ``tolerance``, ``timings``, capacities).
+        **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
+            ``narrow_phase``, ``tolerance``, ``timings``, ``leaf_size``, ``traversal_split``,
+            ``segments``, ``containment``, capacities).
 
     Returns:
         :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``.

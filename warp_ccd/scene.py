@@ -223,7 +223,10 @@ class Scene:
         fdtype = np.float64 if precision == "float64" else np.float32
         self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}", dtype=fdtype) for k, (v, t) in enumerate(shapes)]
         num_shapes = len(self.shape_meshes)
-        inst = np.asarray(instance_shape, dtype=np.int64).reshape(-1)
+        inst = np.asarray(instance_shape)
+        if inst.ndim != 1 or (inst.size and not np.issubdtype(inst.dtype, np.integer)):
+            raise ValueError(f"instance_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
+        inst = inst.astype(np.int64)
         if inst.size and (inst.min() < 0 or inst.max() >= num_shapes):
             raise ValueError(f"instance_shape: ids must lie in [0, {num_shapes}), got {inst.min()}..{inst.max()}")
         n = inst.size
@@ -245,6 +248,9 @@ class Scene:
         poses = np.asarray(poses, fdtype)
         if poses.shape != (n, 7):
             raise ValueError(f"poses: expected shape ({n}, 7), got {poses.shape}")
+        bad = ~np.isfinite(poses).all(axis=1) | (np.abs(np.linalg.norm(poses[:, 3:], axis=1) - 1.0) > 1e-3)
+        if bad.any():
+            raise ValueError(f"poses: row {int(np.argmax(bad))} is not finite or its quaternion is not unit")
 
         # Host-side topology (static): offsets of shapes and instances.
         shape_nv = np.array([v.shape[0] for v, _ in self.shape_meshes], np.int64)
@@ -313,9 +319,14 @@ class Scene:
         """
         if isinstance(num_objects, bool) or not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
             raise ValueError(f"num_objects must be a non-negative integer, got {num_objects!r}")
-        if not 0.0 < density < 1.0:
+        if not isinstance(density, (int, float, np.number)) or not 0.0 < density < 1.0:
             raise ValueError(f"density must lie in (0, 1), got {density!r}")
-        lo, hi = size_range
+        if isinstance(seed, bool) or not (seed is None or isinstance(seed, (int, np.integer)) and seed >= 0):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        try:
+            lo, hi = (float(x) for x in size_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"size_range must be (min, max) numbers, got {size_range!r}") from None
         if not 0.0 < lo <= hi or not np.isfinite(hi):
             raise ValueError(f"size_range must be 0 < min <= max, got {size_range!r}")
         if len(shapes) == 0:
@@ -330,7 +341,6 @@ class Scene:
         centre = rng.uniform(-0.5 * side, 0.5 * side, size=(n, 3))
         motion = EllipseMotion.random(rng, centre, radius, device=device, precision=precision)
         scene = cls(meshes, inst, instance_scale=radius, motion=motion, device=device, precision=precision)
-        scene.box_side = side
         return scene
 
     @classmethod
@@ -395,8 +405,8 @@ class Scene:
         """Moves time forward by ``dt`` seconds: poses, then world vertices, all in kernels."""
         if self.motion is None:
             raise ValueError("advance: this scene has no motion (use set_transforms or set_world_vertices)")
-        if not np.isfinite(dt):
-            raise ValueError(f"advance: dt must be finite, got {dt!r}")
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
+            raise ValueError(f"advance: dt must be a finite number of seconds, got {dt!r}")
         self.time += float(dt)
         if self.num_objects:
             self.motion.launch(self.time, self.instance_pose)
@@ -470,10 +480,6 @@ class Scene:
             wp.launch(vertex_to_float32_kernel, dim=self.num_world_vertices, inputs=[self.world_vertex],
                       outputs=[self._world_vertex32], device=self.device)
         return self._world_vertex32
-
-    def object_triangle_counts(self) -> np.ndarray:
-        """``(N,)`` number of triangles of each object (host)."""
-        return np.diff(self.instance_triangle_start_np)
 
     def world_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per object ``(world vertices (n, 3) float32 or float64, triangles (m, 3) int32)``, on the host."""

@@ -167,11 +167,12 @@ class UsdAnimationWriter:
     def __init__(self, path, scene, *, fps: float = 60.0, aabb: bool = False, segments: bool = False,
                  up_axis: str = "Y", meters_per_unit: float = 1.0):
         self.path, self._ext = validate_stage_path(path)
-        if not np.isfinite(fps) or fps <= 0:
+        if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not np.isfinite(fps) or fps <= 0:
             raise ValueError(f"fps must be a positive number, got {fps!r}")
         if up_axis not in ("Y", "Z"):
             raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
-        if not np.isfinite(meters_per_unit) or meters_per_unit <= 0:
+        if not isinstance(meters_per_unit, (int, float, np.number)) or not np.isfinite(meters_per_unit) \
+                or meters_per_unit <= 0:
             raise ValueError(f"meters_per_unit must be a positive number, got {meters_per_unit!r}")
         for name in ("instance_pose", "instance_scale", "world_vertex", "shape_meshes"):
             if not hasattr(scene, name):
