@@ -231,11 +231,6 @@ def _make_narrow(types):
             hi = lo
         return hit, origin + u * lo, origin + u * hi
 
-    @wp.func
-    def _collinear_overlap(pa: V3, qa: V3, pb: V3, qb: V3, eps: S) -> bool:
-        """Overlap of two segments lying on one line, within ``eps``."""
-        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
-        return hit
 
 
     @wp.func
@@ -263,6 +258,65 @@ def _make_narrow(types):
         return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate
 
     @wp.func
+    def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
+        """Möller's test, and where the triangles meet: ``(kind, p, q)``.
+
+        Args:
+            v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units).
+            tol_rel: tolerance relative to the longest edge (see the module docstring).
+
+        Returns:
+            ``kind`` 0: apart (or a degenerate triangle); 1: they cross or touch along the segment
+            ``pq`` (a point when ``p == q``), in the input frame; 2: coplanar contact (an area, no
+            segment; ``p``, ``q`` are the pair's centroid).
+        """
+        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
+        if degenerate:
+            return 0, o, o
+        # 1. Triangle b against the plane of a, then a against the plane of b.
+        rb0 = wp.dot(na, b0 - a0)
+        rb1 = wp.dot(na, b1 - a0)
+        rb2 = wp.dot(na, b2 - a0)
+        db0 = _snap(rb0, eps)
+        db1 = _snap(rb1, eps)
+        db2 = _snap(rb2, eps)
+        if _one_side(db0, db1, db2):
+            return 0, o, o
+        ra0 = wp.dot(nb, a0 - b0)
+        ra1 = wp.dot(nb, a1 - b0)
+        ra2 = wp.dot(nb, a2 - b0)
+        da0 = _snap(ra0, eps)
+        da1 = _snap(ra1, eps)
+        da2 = _snap(ra2, eps)
+        if _one_side(da0, da1, da2):
+            return 0, o, o
+        coplanar = int(-1)
+        if db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0):
+            coplanar = wp.where(_coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps), 2, 0)
+        elif da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0):
+            coplanar = wp.where(_coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps), 2, 0)
+        if coplanar >= 0:
+            return coplanar, o, o
+        # 2. Where each triangle crosses the other's plane, and 3. overlap of the two intervals on
+        # the common line. First with the exact distances when both triangles truly straddle the
+        # other's plane: with nearly parallel planes, snapping a vertex within eps to the plane can
+        # move a section far along the line and lose a real crossing.
+        if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
+            pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
+            pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
+            hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+            if hit:
+                return 1, p + o, q + o
+        # Then with the snapped distances: contacts within the tolerance (touching).
+        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
+        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
+        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+        if hit:
+            return 1, p + o, q + o
+        return 0, o, o
+
+    @wp.func
     def tri_tri_moller(
         v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S
     ) -> bool:
@@ -275,85 +329,8 @@ def _make_narrow(types):
         Returns:
             True when they intersect or touch within the tolerance; False for degenerate triangles.
         """
-        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
-        if degenerate:
-            return False
-        # 1. Triangle b against the plane of a, then a against the plane of b.
-        rb0 = wp.dot(na, b0 - a0)
-        rb1 = wp.dot(na, b1 - a0)
-        rb2 = wp.dot(na, b2 - a0)
-        db0 = _snap(rb0, eps)
-        db1 = _snap(rb1, eps)
-        db2 = _snap(rb2, eps)
-        if _one_side(db0, db1, db2):
-            return False
-        ra0 = wp.dot(nb, a0 - b0)
-        ra1 = wp.dot(nb, a1 - b0)
-        ra2 = wp.dot(nb, a2 - b0)
-        da0 = _snap(ra0, eps)
-        da1 = _snap(ra1, eps)
-        da2 = _snap(ra2, eps)
-        if _one_side(da0, da1, da2):
-            return False
-        if db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0):
-            return _coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps)
-        if da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0):
-            return _coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps)
-        # 2. Where each triangle crosses the other's plane, and 3. overlap of the two intervals on
-        # the common line. First with the exact distances when both triangles truly straddle the
-        # other's plane: with nearly parallel planes, snapping a vertex within eps to the plane can
-        # move a section far along the line and lose a real crossing.
-        if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
-            pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
-            pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
-            if _collinear_overlap(pa, qa, pb, qb, eps):
-                return True
-        # Then with the snapped distances: contacts within the tolerance (touching).
-        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
-        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
-        return _collinear_overlap(pa, qa, pb, qb, eps)
-
-
-    @wp.func
-    def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
-        """Where two triangles that :func:`tri_tri_moller` calls intersecting meet: ``(kind, p, q)``.
-
-        ``kind`` 1: the segment ``pq`` where they cross or touch (a point when ``p == q``), in the
-        input frame; 2: coplanar contact (an area, no segment; ``p``, ``q`` are the centroid of the
-        pair); 0: no contact.
-        """
-        o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
-        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
-        if degenerate:
-            return 0, o, o
-        rb0 = wp.dot(na, b0 - a0)
-        rb1 = wp.dot(na, b1 - a0)
-        rb2 = wp.dot(na, b2 - a0)
-        ra0 = wp.dot(nb, a0 - b0)
-        ra1 = wp.dot(nb, a1 - b0)
-        ra2 = wp.dot(nb, a2 - b0)
-        db0 = _snap(rb0, eps)
-        db1 = _snap(rb1, eps)
-        db2 = _snap(rb2, eps)
-        da0 = _snap(ra0, eps)
-        da1 = _snap(ra1, eps)
-        da2 = _snap(ra2, eps)
-        if _one_side(db0, db1, db2) or _one_side(da0, da1, da2):
-            return 0, o, o
-        if (db0 == S(0.0) and db1 == S(0.0) and db2 == S(0.0)) or (da0 == S(0.0) and da1 == S(0.0) and da2 == S(0.0)):
-            return 2, o, o
-        if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
-            pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
-            pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
-            hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
-            if hit:
-                return 1, p + o, q + o
-        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
-        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
-        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
-        if hit:
-            return 1, p + o, q + o
-        return 0, o, o
+        kind, p, q = tri_tri_segment(v0, v1, v2, u0, u1, u2, tol_rel)
+        return kind != 0
 
     @wp.func
     def _point_in_triangle_3d(x: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
