@@ -56,7 +56,7 @@ def _tri_tri_f64_kernel(
     out[k] = wp.intersect_tri_tri(va[k, 0], va[k, 1], va[k, 2], vb[k, 0], vb[k, 1], vb[k, 2])
 
 
-def intersect_tri_tri_f64(ta: np.ndarray, tb: np.ndarray, device="cpu") -> np.ndarray:
+def intersect_tri_tri_f64(ta: np.ndarray, tb: np.ndarray, device=None) -> np.ndarray:
     """Warp's float64 Möller test on ``(P, 3, 3)`` triangle pairs; ``(P,)`` bool."""
     if len(ta) == 0:
         return np.zeros(0, bool)
@@ -72,7 +72,7 @@ def _sorted4(rows) -> np.ndarray:
     return p[np.lexsort((p[:, 3], p[:, 2], p[:, 1], p[:, 0]))]
 
 
-def triangle_pairs_warp64(meshes, scale: float = 1.0, device="cpu") -> np.ndarray:
+def triangle_pairs_warp64(meshes, scale: float = 1.0, device=None) -> np.ndarray:
     """Brute force over the triangle pairs of objects with overlapping boxes.
 
     Args:

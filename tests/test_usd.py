@@ -149,7 +149,7 @@ def test_rigid_stage_matches_every_frame(rigid_run):
 
 
 def test_colours_are_sampled_every_frame_even_when_unchanged(tmp_path):
-    scene = wc.Scene.random(5, seed=0, device="cpu")
+    scene = wc.Scene.random(5, seed=0)
     path = tmp_path / "const.usda"
     with UsdAnimationWriter(path, scene) as writer:
         for frame in range(4):
@@ -234,7 +234,7 @@ def test_deforming_scene_writes_meshes_with_points(tmp_path, device):
 )
 def test_bad_paths_fail_when_the_writer_is_created(tmp_path, name, message):
     (tmp_path / "a_folder.usd").mkdir()
-    scene = wc.Scene.random(3, seed=0, device="cpu")
+    scene = wc.Scene.random(3, seed=0)
     with pytest.raises(ValueError, match=message):
         UsdAnimationWriter(tmp_path / name, scene)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_folder.usd"]
@@ -254,7 +254,7 @@ def unwritable_folder(tmp_path):
 
 def test_unwritable_folder_fails_early(tmp_path):
     folder = unwritable_folder(tmp_path)
-    scene = wc.Scene.random(3, seed=0, device="cpu")
+    scene = wc.Scene.random(3, seed=0)
     with pytest.raises(ValueError, match="cannot"):
         validate_stage_path(os.path.join(folder, "x.usd"))
     with pytest.raises(ValueError, match="cannot"):
@@ -264,7 +264,7 @@ def test_unwritable_folder_fails_early(tmp_path):
 def test_interrupted_run_leaves_the_old_file_and_no_partial_file(tmp_path):
     path = tmp_path / "keep.usd"
     path.write_bytes(b"old content")
-    scene = wc.Scene.random(4, seed=0, device="cpu")
+    scene = wc.Scene.random(4, seed=0)
     with pytest.raises(KeyboardInterrupt):
         with UsdAnimationWriter(path, scene) as writer:
             writer.add_frame(0, None)
@@ -280,7 +280,7 @@ def test_interrupted_run_leaves_the_old_file_and_no_partial_file(tmp_path):
 
 
 def test_new_file_gets_umask_permissions(tmp_path):
-    scene = wc.Scene.random(2, seed=0, device="cpu")
+    scene = wc.Scene.random(2, seed=0)
     mask = os.umask(0o022)
     try:
         UsdAnimationWriter(tmp_path / "m.usda", scene).close()
@@ -290,7 +290,7 @@ def test_new_file_gets_umask_permissions(tmp_path):
 
 
 def test_writer_rejects_bad_frames_and_use_after_close(tmp_path):
-    scene = wc.Scene.random(4, seed=0, device="cpu")
+    scene = wc.Scene.random(4, seed=0)
     writer = UsdAnimationWriter(tmp_path / "w.usda", scene)
     with pytest.raises(ValueError, match="shape"):
         writer.add_frame(0, np.zeros(3, bool))
