@@ -829,7 +829,9 @@ def _triangles(text: str) -> str:
 
 def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
     """The options of :func:`main` (defaults sized for about a minute on one CPU thread)."""
-    parser = argparse.ArgumentParser(
+    from .cli import OneLineParser
+
+    parser = OneLineParser(
         prog=prog,
         description="Collision detection ms per frame against the number of objects, per stage, with Warp's "
         "built-in pipeline, python-fcl, the all-pairs broad phase and newton's sweep and prune in the same run.",
@@ -880,8 +882,14 @@ def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
     Returns:
         Exit status: 0 all agree, 1 a peer failed to run, 2 bad arguments, 3 a real mismatch.
     """
+    from .cli import CliError
+
     parser = build_parser(prog)
-    args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    try:
+        args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    except CliError as exc:
+        print(exc, file=sys.stderr)
+        return exc.status
     from .cli import quiet_warp
 
     quiet_warp()
@@ -893,7 +901,8 @@ def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
         if args.plot:
             check_output_path(args.plot, PLOT_EXTENSIONS, "plot")
     except ValueError as exc:
-        parser.error(str(exc))
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
     config = {k: v for k, v in vars(args).items() if k not in ("device",)}
     report = BenchReport(device, config)
     print(f"{prog}: {device} ({getattr(device, 'name', '')}), objects {args.objects}, triangles {args.triangles}, "

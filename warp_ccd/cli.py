@@ -36,7 +36,7 @@ class CliError(Exception):
         self.status = status
 
 
-class _Parser(argparse.ArgumentParser):
+class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line on stderr (no usage dump) and exit status 2."""
 
     def error(self, message: str):
@@ -57,9 +57,9 @@ def _count(minimum: int):
     return parse
 
 
-def _build_parser() -> _Parser:
-    parser = _Parser(prog=PROG, description="Collision detection among many moving triangle meshes (NVIDIA Warp).")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,bench}", parser_class=_Parser)
+def _build_parser() -> OneLineParser:
+    parser = OneLineParser(prog=PROG, description="Collision detection among many moving triangle meshes (NVIDIA Warp).")
+    sub = parser.add_subparsers(dest="command", metavar="{demo,bench}", parser_class=OneLineParser)
     sub.required = True
 
     demo = sub.add_parser(
