@@ -258,6 +258,15 @@ def _make_narrow(types):
         return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate
 
     @wp.func
+    def _plane_distances(n: V3, origin: V3, x0: V3, x1: V3, x2: V3, eps: S):
+        """Signed distances of ``x0, x1, x2`` to the plane through ``origin`` of unit normal ``n``:
+        exact, then snapped to zero within ``eps``."""
+        r0 = wp.dot(n, x0 - origin)
+        r1 = wp.dot(n, x1 - origin)
+        r2 = wp.dot(n, x2 - origin)
+        return r0, r1, r2, _snap(r0, eps), _snap(r1, eps), _snap(r2, eps)
+
+    @wp.func
     def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
         """Möller's test, and where the triangles meet: ``(kind, p, q)``.
 
@@ -275,20 +284,10 @@ def _make_narrow(types):
         if degenerate:
             return 0, o, o
         # 1. Triangle b against the plane of a, then a against the plane of b.
-        rb0 = wp.dot(na, b0 - a0)
-        rb1 = wp.dot(na, b1 - a0)
-        rb2 = wp.dot(na, b2 - a0)
-        db0 = _snap(rb0, eps)
-        db1 = _snap(rb1, eps)
-        db2 = _snap(rb2, eps)
+        rb0, rb1, rb2, db0, db1, db2 = _plane_distances(na, a0, b0, b1, b2, eps)
         if _one_side(db0, db1, db2):
             return 0, o, o
-        ra0 = wp.dot(nb, a0 - b0)
-        ra1 = wp.dot(nb, a1 - b0)
-        ra2 = wp.dot(nb, a2 - b0)
-        da0 = _snap(ra0, eps)
-        da1 = _snap(ra1, eps)
-        da2 = _snap(ra2, eps)
+        ra0, ra1, ra2, da0, da1, da2 = _plane_distances(nb, b0, a0, a1, a2, eps)
         if _one_side(da0, da1, da2):
             return 0, o, o
         coplanar = int(-1)
