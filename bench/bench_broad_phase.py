@@ -12,7 +12,7 @@ Methods, in the same run on the same boxes, each frame in turn:
 * ``sap``: this package's :class:`~warp_ccd.broad_phase.BroadPhaseSAP`, the reference;
 * ``nxn``: this package's :class:`~warp_ccd.broad_phase.BroadPhaseNxN`, for ``N <= --nxn-max``;
 * ``warp_bvh``: Warp's ``wp.Bvh`` over the boxes, rebuilt every frame, one ``wp.bvh_query_aabb``
-  per box (:class:`~warp_ccd.peers.WarpBvhBroadPhase`);
+  per box (:class:`~warp_ccd.bench.peers.WarpBvhBroadPhase`);
 * ``warp_bvh_refit``: the same tree only refit every frame (boxes do not move here, so this is
   refitting's best case);
 * ``newton_sap``: newton's ``BroadPhaseSAP`` when newton is installed, for ``N <= --newton-max``.
@@ -35,17 +35,12 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench import (
-    StageTimes,
-    environment,
-    resolve_device,
-    synced_ms,
-    write_json,
-)
+from warp_ccd.bench.compare import compare_exact
+from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
+from warp_ccd.bench.scaling import StageTimes, environment, synced_ms, write_json
 from warp_ccd.broad_phase import NXN_MAX_BOXES, BroadPhaseNxN, BroadPhaseSAP, find_pairs
 from warp_ccd.buffers import GrowableBuffer
-from warp_ccd.compare import compare_exact
-from warp_ccd.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
+from warp_ccd.cli_common import resolve_device
 
 METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
 REFERENCE = "sap"

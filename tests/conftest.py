@@ -14,6 +14,8 @@ wp.init()
 sys.path.insert(0, os.path.dirname(__file__))
 
 DEVICES = [str(d) for d in wp.get_devices()]
+DEFAULT_DEVICE = str(wp.get_device())
+"""Warp's default device (``cuda:0`` where there is one), for tests whose device does not matter."""
 
 
 @pytest.fixture(params=DEVICES)

@@ -9,11 +9,11 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd import bench
+from warp_ccd.bench import scaling as bench
 from warp_ccd.broad_phase import find_pairs
 from warp_ccd.buffers import GrowableBuffer
-from warp_ccd.compare import classify_triangle_pairs, compare_exact, compare_triangle_pairs, triangle_distance
-from warp_ccd.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
+from warp_ccd.bench.compare import classify_triangle_pairs, compare_exact, compare_triangle_pairs, triangle_distance
+from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",

@@ -8,6 +8,7 @@ import types
 import numpy as np
 import pytest
 
+from conftest import DEFAULT_DEVICE
 from warp_ccd import cli
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -44,7 +45,7 @@ def test_demo_gif_has_one_image_per_frame(tmp_path, capsys):
     from PIL import Image
 
     gif = tmp_path / "anim.gif"
-    rc = cli.main(["demo", "--num-objects", "10", "--num-frames", "3", "--device", "cpu",
+    rc = cli.main(["demo", "--num-objects", "10", "--num-frames", "3", "--device", DEFAULT_DEVICE,
                    "--out", str(tmp_path / "d.usd"), "--preview", str(gif)])
     assert rc == 0, capsys.readouterr().err
     with Image.open(gif) as im:
@@ -112,7 +113,7 @@ def test_interrupt_leaves_no_file(tmp_path, capsys, monkeypatch):
             raise KeyboardInterrupt
 
     monkeypatch.setattr(usd.UsdAnimationWriter, "add_frame", add_frame)
-    rc = cli.main(["demo", "--num-objects", "5", "--num-frames", "4", "--device", "cpu", "--out", str(out)])
+    rc = cli.main(["demo", "--num-objects", "5", "--num-frames", "4", "--device", DEFAULT_DEVICE, "--out", str(out)])
     captured = capsys.readouterr()
     assert rc == 130 and calls == [0, 1]
     assert "interrupted" in captured.err and "Traceback" not in captured.err
@@ -154,7 +155,7 @@ def run_module(*args, cwd):
 
 
 def test_python_dash_m_runs_the_demo(tmp_path):
-    proc = run_module("demo", "--num-objects", "8", "--num-frames", "2", "--device", "cpu", cwd=tmp_path)
+    proc = run_module("demo", "--num-objects", "8", "--num-frames", "2", "--device", DEFAULT_DEVICE, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "collisions.usd").is_file()  # the default output, in the working folder
     assert "8 objects, 2 frames" in proc.stdout
@@ -182,7 +183,7 @@ def test_summary_means(tmp_path, capsys, monkeypatch):
         return res
 
     monkeypatch.setattr(pipeline.CollisionPipeline, "detect", recording_detect)
-    rc = cli.main(["demo", "--num-objects", "60", "--num-frames", "4", "--device", "cpu",
+    rc = cli.main(["demo", "--num-objects", "60", "--num-frames", "4", "--device", DEFAULT_DEVICE,
                    "--out", str(tmp_path / "s.usd")])
     out = capsys.readouterr().out
     assert rc == 0

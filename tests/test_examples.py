@@ -7,6 +7,7 @@ import sys
 
 import pytest
 import warp as wp
+from conftest import DEFAULT_DEVICE
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = os.path.join(ROOT, "examples")
@@ -70,7 +71,7 @@ def test_example_user_meshes_collide_over_time():
     # Both scenes are built to collide part of the time: the rigid one at its first frames, the
     # pulsating sphere at the top of its first pulse (frame 30, t = 0.5 s).
     module = load_example("example_user_meshes")
-    with wp.ScopedDevice("cpu"):
+    with wp.ScopedDevice(DEFAULT_DEVICE):
         example = module.Example(stage_path=None)
         rigid, deforming = set(), set()
         for _ in range(30):
@@ -89,13 +90,13 @@ def test_example_user_meshes_collide_over_time():
     ],
 )
 def test_example_scripts_run_one_frame(tmp_path, name, args, files):
-    proc = run_script(name, "--device", "cpu", "--num-frames", "1", *args, cwd=tmp_path)
+    proc = run_script(name, "--device", DEFAULT_DEVICE, "--num-frames", "1", *args, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(files)  # default stage path(s)
 
 
 def test_example_script_stage_path_none(tmp_path):
-    proc = run_script("example_collision", "--device", "cpu", "--num-frames", "1", "--num-objects", "5",
+    proc = run_script("example_collision", "--device", DEFAULT_DEVICE, "--num-frames", "1", "--num-objects", "5",
                       "--stage-path", "None", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert list(tmp_path.iterdir()) == []

@@ -18,30 +18,20 @@ import os
 import sys
 import time
 
+from .cli_common import (
+    EXIT_ERROR,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    OneLineParser,
+    quiet_warp,
+    resolve_device,
+)
+
 __all__ = ["main"]
 
 PROG = "warp-ccd"
-
-EXIT_OK = 0
-EXIT_ERROR = 1
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
-
-
-class CliError(Exception):
-    """A problem to report in one line, with the exit status to end with."""
-
-    def __init__(self, message: str, status: int = EXIT_USAGE):
-        super().__init__(message)
-        self.status = status
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one line on stderr (no usage dump) and exit status 2."""
-
-    def error(self, message: str):
-        raise CliError(f"{self.prog}: error: {message} (see --help)", EXIT_USAGE)
-
 
 def _count(minimum: int):
     def parse(text: str) -> int:
@@ -84,28 +74,6 @@ def _build_parser() -> OneLineParser:
     return parser
 
 
-def _resolve_device(name: str | None):
-    import warp as wp
-
-    available = [str(d) for d in wp.get_devices()]
-    if name is None:
-        return wp.get_device("cuda:0" if wp.is_cuda_available() else "cpu")
-    if name == "cuda" and wp.is_cuda_available():
-        return wp.get_device("cuda:0")
-    if name not in available:
-        raise CliError(f"{PROG} demo: error: unknown device {name!r} (available: {', '.join(available)})")
-    return wp.get_device(name)
-
-
-def quiet_warp() -> None:
-    """Keeps Warp's start-up banner and module-load messages out of the command's output."""
-    import warp as wp
-
-    if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
-        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-    wp.config.quiet = True
-
-
 def _run_demo(args) -> int:
     from .preview import validate_preview_path
     from .usd import validate_stage_path
@@ -131,7 +99,10 @@ def _run_demo(args) -> int:
     from .scene import Scene
     from .usd import UsdAnimationWriter
 
-    device = _resolve_device(args.device)
+    try:
+        device = resolve_device(args.device)
+    except ValueError as exc:
+        raise CliError(f"{PROG} demo: error: {exc}") from None
     dt = 1.0 / 60.0
     start = time.perf_counter()
     scene = Scene.random(args.num_objects, seed=args.seed, device=device)

@@ -15,7 +15,7 @@ Scene peers expose ``stages()`` (``(name, callable)`` pairs run in order every f
   ``wp.intersect_tri_tri`` on candidates of different objects. Cost: O(T log T) queries plus the
   candidates. Warp's test snaps plane distances below an absolute 1e-6 (on the unnormalised
   normal), so on small triangles it reports some pairs that are apart by up to about
-  ``1e-6 / |n|``: compare with it through :mod:`warp_ccd.compare`, never for equality.
+  ``1e-6 / |n|``: compare with it through :mod:`warp_ccd.bench.compare`, never for equality.
 * :class:`FclPipeline`: python-fcl (CPU). One ``BVHModel`` per object, built once with the
   object's uniform scale baked into its vertices (FCL transforms are rigid, and every object of a
   random scene has its own scale), one ``fcl.Transform`` per object updated every frame from the
@@ -38,9 +38,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .broad_phase import boxes_overlap, emit_pair
-from .buffers import GrowableBuffer, read_counts, reserve_slot
-from .scene import Scene
+from ..broad_phase import boxes_overlap, emit_pair
+from ..buffers import GrowableBuffer, read_counts, reserve_slot
+from ..scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 

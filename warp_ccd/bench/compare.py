@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from ..scene import Scene
 from .peers import scene_triangle_vertex_index
-from .scene import Scene
 
 __all__ = [
     "ARBITER_EDGE",

@@ -16,8 +16,8 @@
      ``timings=True`` for the stages it reports (whatever their names; it synchronises after each,
      and the sum is ``detect_synced``), and with ``timings=False`` timed around ``detect()``
      (``detect``, the number to quote). ``total`` is ``motion + detect`` of the same frame.
-   * ``warp_builtin`` (peer ``builtin``): Warp's own tools, :class:`~warp_ccd.peers.WarpMeshPipeline`.
-   * ``fcl`` (peer ``fcl``): python-fcl, :class:`~warp_ccd.peers.FclPipeline`, on the host, for
+   * ``warp_builtin`` (peer ``builtin``): Warp's own tools, :class:`~warp_ccd.bench.peers.WarpMeshPipeline`.
+   * ``fcl`` (peer ``fcl``): python-fcl, :class:`~warp_ccd.bench.peers.FclPipeline`, on the host, for
      ``N <= --fcl-max-objects``.
    * ``warp_ccd_nxn`` (peer ``nxn``): this pipeline with the all-pairs broad phase, for
      ``N <= --nxn-max-objects``.
@@ -26,7 +26,7 @@
 
    Peers report ``detect`` (their stages, synchronised after each, plus the counter read) and
    ``total`` (``motion + detect``). A peer whose library is missing is skipped with a note.
-3. **Checks**, on the last frame (:mod:`warp_ccd.compare`): ``warp_builtin`` and ``fcl`` must
+3. **Checks**, on the last frame (:mod:`warp_ccd.bench.compare`): ``warp_builtin`` and ``fcl`` must
    find the same object pairs as ``warp_ccd`` up to near-touching pairs, their triangle-level
    differences are classified and counted; ``warp_ccd_nxn`` must find the very same triangle
    pairs and as many broad-phase pairs; ``newton_sap`` the very same box pairs as this package's
@@ -65,14 +65,15 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from . import __version__
-from .broad_phase import find_pairs, make_broad_phase
-from .buffers import GrowableBuffer
+from .. import __version__
+from ..broad_phase import find_pairs, make_broad_phase
+from ..buffers import GrowableBuffer
+from ..cli_common import CliError, OneLineParser, quiet_warp, resolve_device
+from ..output import PendingFile, check_output_path
+from ..pipeline import CollisionPipeline
+from ..scene import Scene
 from .compare import PairCheck, compare_exact, compare_triangle_pairs
-from .output import PendingFile, check_output_path
 from .peers import FclPipeline, NewtonBroadPhaseSAP, PeerUnavailable, WarpMeshPipeline
-from .pipeline import CollisionPipeline
-from .scene import Scene
 
 __all__ = [
     "PEERS",
@@ -214,7 +215,7 @@ class PipelineMethod:
 
 
 class PeerMethod:
-    """A scene peer of :mod:`warp_ccd.peers` (named by its ``name``) timed through :func:`run_stages`."""
+    """A scene peer of :mod:`warp_ccd.bench.peers` (named by its ``name``) timed through :func:`run_stages`."""
 
     def __init__(self, peer, device):
         self.name = peer.name
@@ -545,7 +546,7 @@ def _bytes(n: float | None) -> str:
 
 def _git_commit() -> tuple[str | None, bool | None]:
     """``(HEAD commit, tracked files modified)`` of the checkout this package runs from, or Nones."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
         if commit.returncode != 0:
@@ -829,8 +830,6 @@ def _triangles(text: str) -> str:
 
 def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
     """The options of :func:`main` (defaults sized for about a minute on one CPU thread)."""
-    from .cli import OneLineParser
-
     parser = OneLineParser(
         prog=prog,
         description="Collision detection ms per frame against the number of objects, per stage, with Warp's "
@@ -858,20 +857,6 @@ def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
     return parser
 
 
-def resolve_device(name: str | None):
-    """``None`` -> Warp's preferred device; else the named one (ValueError naming those available)."""
-    if name is None:
-        return wp.get_preferred_device()
-    available = [str(d) for d in wp.get_devices()]
-    try:
-        device = wp.get_device(name)
-    except Exception:
-        device = None
-    if device is None or str(device) not in available:
-        raise ValueError(f"unknown device {name!r} (available: {', '.join(available)})")
-    return device
-
-
 def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
     """Runs the benchmark (see module docs).
 
@@ -882,16 +867,12 @@ def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
     Returns:
         Exit status: 0 all agree, 1 a peer failed to run, 2 bad arguments, 3 a real mismatch.
     """
-    from .cli import CliError
-
     parser = build_parser(prog)
     try:
         args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
     except CliError as exc:
         print(exc, file=sys.stderr)
         return exc.status
-    from .cli import quiet_warp
-
     quiet_warp()
     try:
         device = resolve_device(args.device)
@@ -928,7 +909,3 @@ def main(argv: list[str] | None = None, *, prog: str = "warp-ccd bench") -> int:
         print(f"{prog}: a peer failed to run (see the ERROR notes above)", file=sys.stderr)
         return EXIT_PEER_FAILED
     return EXIT_OK
-
-
-if __name__ == "__main__":
-    sys.exit(main(prog="python -m warp_ccd.bench"))
