@@ -10,10 +10,17 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench import scaling as bench
-from warp_ccd.broad_phase import find_pairs
-from warp_ccd.buffers import GrowableBuffer
-from warp_ccd.bench.compare import classify_triangle_pairs, compare_exact, compare_triangle_pairs, triangle_distance
+from warp_ccd.bench.compare import (
+    box_overlap_truth,
+    classify_triangle_pairs,
+    compare_exact,
+    compare_triangle_pairs,
+    triangle_distance,
+)
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
+from warp_ccd.bench.timing import MODES, CountedFrame, StageTimes
+from warp_ccd.broad_phase import find_pairs
+from warp_ccd.buffers import GrowableBuffer, reserve_slot
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",
@@ -84,9 +91,27 @@ def test_bench_exit_status_on_mismatch_and_peer_failure(device, monkeypatch, cap
         raise RuntimeError("peer broke")
 
     monkeypatch.setattr(WarpMeshPipeline, "query", broken)
-    assert bench.main(argv) == bench.EXIT_PEER_FAILED
+    assert bench.main(argv) == bench.EXIT_OK  # a peer that breaks is reported, not failed
     captured = capsys.readouterr()
     assert "ERROR warp_builtin failed at frame 0: RuntimeError: peer broke" in captured.out
+
+
+def test_bench_reports_a_wrong_peer_and_exits_zero(device, monkeypatch, tmp_path, capsys):
+    """A peer's wrong answer is a finding: reported, its rows marked, exit status 0."""
+    out = tmp_path / "wrong.json"
+    argv = ["--device", device, "--objects", "60", "--triangles", "poly", "--frames", "1", "--warmup", "0",
+            "--peers", "builtin", "--no-memory", "--out", str(out)]
+    monkeypatch.setattr(WarpMeshPipeline, "triangle_pairs", lambda self, count=None: np.zeros((0, 4), np.int32))
+    assert bench.main(argv) == bench.EXIT_OK
+    text = capsys.readouterr().out
+    assert "PEER WRONG: warp_builtin misses" in text and "VERDICT 60 objects, triangles poly: OK" in text
+    assert "warp_builtin*" in text
+    doc = json.loads(out.read_text())
+    assert doc["ok"]
+    (check,) = doc["checks"]
+    assert check["ok"] and not check["peer_ok"] and check["peer_errors"] and not check["mismatches"]
+    assert {r["peer_wrong"] for r in doc["rows"] if r["method"] == "warp_builtin"} == {True}
+    assert {r["peer_wrong"] for r in doc["rows"] if r["method"] == "warp_ccd"} == {False}
 
 
 def test_parse_triangles():
@@ -98,18 +123,61 @@ def test_parse_triangles():
         bench.parse_triangles("100")
 
 
-def test_builtin_peer_agrees_with_pipeline(device):
+@pytest.mark.parametrize("mode", MODES)
+def test_builtin_peer_agrees_with_pipeline(device, mode):
+    if mode not in bench.device_modes(device):
+        pytest.skip(f"{mode} frames of the built-in peer need CUDA")
     scene = wc.Scene.random(300, seed=3, shapes=("icosphere1", "cube", "dodecahedron"), device=device)
-    scene.advance(0.4)
-    ours = wc.CollisionPipeline(scene).detect()
     peer = WarpMeshPipeline(scene, capacity=1)  # grows on the first frame
-    bench.run_stages(peer.stages(), peer.finish, device)
-    got = peer.triangle_pairs()
-    assert got.shape[1] == 4 and len(got) > 10 and peer.hits.capacity >= len(got)
-    check = compare_triangle_pairs(scene, "warp_ccd", ours.triangle_pairs, "warp_builtin", got)
-    assert check.ok, check.mismatches
-    ref_obj, peer_obj, common = check.object_pairs
-    assert common > 0 and ref_obj - common + peer_obj - common == check.explained
+    frame = CountedFrame(peer.launch, peer.buffers, device, mode)
+    for _ in range(3):  # eager, captured, replayed (in graph mode): each frame sees the new vertices
+        scene.advance(0.2)
+        ours = wc.CollisionPipeline(scene).detect()
+        (count,) = frame.run()
+        got = peer.triangle_pairs(count)
+        assert got.shape[1] == 4 and len(got) > 10 and peer.hits.capacity >= len(got)
+        check = compare_triangle_pairs(scene, "warp_ccd", ours.triangle_pairs, "warp_builtin", got)
+        assert check.ok and check.peer_ok, (check.mismatches, check.peer_errors)
+        ref_obj, peer_obj, common = check.object_pairs
+        assert common > 0 and ref_obj - common + peer_obj - common == check.explained
+
+
+@wp.kernel
+def _emit_kernel(capacity: int, item: wp.array[wp.int32], count: wp.array[wp.int64]):
+    i = wp.tid()
+    slot = reserve_slot(count, capacity)
+    if slot >= 0:
+        item[slot] = i
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_counted_frame_grows_and_captures_again(device, mode):
+    """A counter past its capacity grows the buffer and reruns the frame (captured again in graph mode),
+    also when another user of the buffer grew it."""
+    size = [50]
+    buf = GrowableBuffer(wp.int32, 4, device, "items")
+
+    def launch():
+        buf.reset()
+        wp.launch(_emit_kernel, dim=size[0], inputs=[buf.capacity], outputs=[buf.data, buf.count], device=device)
+
+    frame = CountedFrame(launch, [buf], device, mode)
+    for _ in range(3):
+        assert frame.run() == [50] and buf.capacity >= 50
+        assert sorted(buf.numpy(50).tolist()) == list(range(50))
+    buf.ensure(4 * buf.capacity)  # grown elsewhere: the graph must not write to the old storage
+    assert frame.run() == [50] and sorted(buf.numpy(50).tolist()) == list(range(50))
+    if mode == "graph":
+        assert frame.graph is not None
+
+
+def test_stage_times_best_of_modes():
+    st = StageTimes()
+    for eager, graph in ((1.0, 0.4), (1.2, 0.5), (0.9, 0.6)):
+        st.add({"detect_eager": eager, "detect_graph": graph, "motion": 0.1})
+    summary = st.summary()
+    assert summary["detect"] == summary["detect_graph"] == (0.4, 0.5) and st.best_mode == {"detect": "graph"}
+    assert st.has("detect") and st.has("motion") and not st.has("broad") and st.frames("detect") == 3
 
 
 def test_broad_phase_peers_agree(device):
@@ -186,17 +254,36 @@ def test_compare_triangle_pairs_verdicts(device):
     assert set(map(tuple, ours[:, [0, 2]].tolist())) == {(0, 1)}
     same = compare_triangle_pairs(scene, "a", ours, "b", ours)
     assert same.ok and same.num_common == len(ours)
+    # The peer (b) wrong: a finding charged to it, the reference stands.
     missed = compare_triangle_pairs(scene, "a", ours, "b", np.zeros((0, 4), np.int32))
-    assert not missed.ok and "b misses 1 object pairs" in missed.mismatches[0]
+    assert missed.ok and not missed.peer_ok and "b misses 1 object pairs" in missed.peer_errors[0]
     spurious = compare_triangle_pairs(scene, "a", ours, "b", np.concatenate([ours, [[1, 0, 2, 0]]]))
-    assert not spurious.ok and "clearly apart" in spurious.mismatches[0] and spurious.classes["b only: apart"] == 1
+    assert spurious.ok and "clearly apart" in spurious.peer_errors[0] and spurious.classes["b only: apart"] == 1
+    # The reference (a) wrong: a mismatch.
+    missed = compare_triangle_pairs(scene, "a", np.zeros((0, 4), np.int32), "b", ours)
+    assert not missed.ok and missed.peer_ok and "a misses 1 object pairs" in missed.mismatches[0]
+    spurious = compare_triangle_pairs(scene, "a", np.concatenate([ours, [[1, 0, 2, 0]]]), "b", ours)
+    assert not spurious.ok and "a reports 1 object pairs whose triangles are clearly apart" in spurious.mismatches[0]
 
 
 def test_compare_exact():
     ref = np.array([[0, 1], [2, 5], [3, 4]])
     assert compare_exact("a", ref, "b", ref[::-1][:, ::-1], "box pairs").ok  # any order, either way round
     check = compare_exact("a", ref, "b", np.array([[0, 1], [2, 6], [3, 4], [3, 4]]), "box pairs")
-    assert len(check.mismatches) == 3  # one missing, one extra, one duplicate
+    assert len(check.mismatches) == 3 and check.peer_ok  # one missing, one extra, one duplicate: no truth, all a's
+
+
+def test_compare_exact_charges_the_method_the_truth_finds_wrong():
+    lower = np.array([[0, 0, 0], [0.5, 0, 0], [5, 5, 5], [0.9, 0.9, 0.9]], np.float32)
+    upper = lower + 1.0
+    truth = box_overlap_truth(lower, upper)
+    assert truth(np.array([[0, 1], [0, 2], [0, 3], [1, 3], [2, 3], [1, 1], [0, 9]])).tolist() == [
+        True, False, True, True, False, False, False]
+    ref = np.array([[0, 1], [0, 3], [1, 3]])  # all true
+    peer_wrong = compare_exact("a", ref, "b", np.array([[0, 1], [0, 2], [1, 3], [1, 3]]), "box pairs", truth=truth)
+    assert peer_wrong.ok and len(peer_wrong.peer_errors) == 3  # misses (0, 3), adds (0, 2), a duplicate
+    ours_wrong = compare_exact("a", np.array([[0, 1], [0, 2]]), "b", ref, "box pairs", truth=truth)
+    assert not ours_wrong.ok and ours_wrong.peer_ok and len(ours_wrong.mismatches) == 2
 
 
 def test_tracker_peak_parse():

@@ -19,10 +19,16 @@ one method found to an arbiter independent of both, and sorts it into a class:
 * ``apart``: further apart than that.
 
 Triangle-level differences are counted, never fatal. Object pairs decide the verdict: an object
-pair found by one method only is a *real mismatch* when one of its triangle pairs is
+pair found by one method only is a *real* difference when one of its triangle pairs is
 ``intersecting`` (the other method missed a real contact) or ``apart`` (this method reported a
 clearly separated pair); when all of them are ``grazing`` or ``near`` it is counted as explained.
 The arbiter judges the scene's own float32 world vertices, promoted to float64.
+
+The benchmarks judge this package, not its peers. A real difference is charged to the method the
+arbiter finds wrong: to the reference (this package), a *mismatch* (the benchmark fails); to the
+peer, a *peer error*, a finding reported in the table and the JSON. Box pairs are judged the same
+way when :func:`compare_exact` is given the boxes' truth (:func:`box_overlap_truth`); without a
+truth every difference is a mismatch (two methods of this package must agree exactly).
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ __all__ = [
     "NEAR_REL",
     "PairCheck",
     "arbiter_kernel",
+    "box_overlap_truth",
     "classify_triangle_pairs",
     "compare_exact",
     "compare_triangle_pairs",
@@ -111,7 +118,9 @@ class PairCheck:
         object_pairs: ``(reference, peer, common)`` object-pair counts (triangle comparisons only).
         classes: triangle pairs found by one method only, per ``"<method> only: <class>"``.
         explained: object pairs found by one method only whose triangle pairs all touch.
-        mismatches: one line per real mismatch; empty when the methods agree.
+        mismatches: one line per real difference where the reference is wrong (or that no
+            arbiter can charge to the peer); empty when the reference stands.
+        peer_errors: one line per real difference where the peer is wrong (a finding).
     """
 
     reference: str
@@ -124,15 +133,27 @@ class PairCheck:
     classes: dict = field(default_factory=dict)
     explained: int = 0
     mismatches: list = field(default_factory=list)
+    peer_errors: list = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        """True when no real mismatch was found."""
+        """True when the reference stands: no real difference is charged to it."""
         return not self.mismatches
+
+    @property
+    def peer_ok(self) -> bool:
+        """True when no real difference is charged to the peer."""
+        return not self.peer_errors
+
+    def charge(self, wrong: str, line: str) -> None:
+        """Records a real difference against method ``wrong`` (the reference or the peer)."""
+        (self.mismatches if wrong == self.reference else self.peer_errors).append(line)
 
     def summary(self) -> str:
         """One line: counts, classes of differences, and the verdict."""
-        verdict = "agree" if self.ok else f"MISMATCH ({len(self.mismatches)})"
+        verdict = "agree" if self.ok and self.peer_ok else f"MISMATCH ({len(self.mismatches)})"
+        if self.ok and not self.peer_ok:
+            verdict = f"{self.peer} WRONG ({len(self.peer_errors)}), {self.reference} stands"
         if self.object_pairs is None:
             text = f"{self.peer} vs {self.reference}: {self.what} {self.num_peer} vs {self.num_reference}"
             if self.num_peer != self.num_common or self.num_reference != self.num_common:
@@ -160,11 +181,28 @@ class PairCheck:
             "explained": self.explained,
             "ok": self.ok,
             "mismatches": list(self.mismatches),
+            "peer_ok": self.peer_ok,
+            "peer_errors": list(self.peer_errors),
         }
 
 
+def box_overlap_truth(lower, upper):
+    """The truth about box pairs: a function of ``(K, 2)`` rows giving ``(K,)`` bool, whether the
+    closed boxes ``a`` and ``b`` of ``(N, 3)`` ``lower`` / ``upper`` overlap (numpy, exact)."""
+    lo = np.asarray(lower.numpy() if isinstance(lower, wp.array) else lower).reshape(-1, 3)
+    hi = np.asarray(upper.numpy() if isinstance(upper, wp.array) else upper).reshape(-1, 3)
+
+    def truth(rows: np.ndarray) -> np.ndarray:
+        a, b = rows[:, 0], rows[:, 1]
+        inside = (a >= 0) & (b >= 0) & (a < len(lo)) & (b < len(lo)) & (a != b)
+        a, b = np.where(inside, a, 0), np.where(inside, b, 0)
+        return inside & np.all((lo[a] <= hi[b]) & (lo[b] <= hi[a]), axis=1)
+
+    return truth
+
+
 def compare_exact(reference: str, reference_rows, peer: str, peer_rows, what: str, width: int = 2,
-                  max_listed: int = 5) -> PairCheck:
+                  max_listed: int = 5, truth=None) -> PairCheck:
     """Compares two sets of rows for equality (box pairs: rows are ordered ``a < b`` first).
 
     Args:
@@ -172,7 +210,10 @@ def compare_exact(reference: str, reference_rows, peer: str, peer_rows, what: st
         reference_rows, peer_rows: ``(K, width)`` int arrays, any order.
         what: what the rows are, for messages.
         width: columns per row.
-        max_listed: rows named in the mismatch lines.
+        max_listed: rows named in the messages.
+        truth: optional function of rows to bool (:func:`box_overlap_truth`): each row only one
+            method has is charged to the method that is wrong about it. Without it, every
+            difference is a mismatch.
     """
     ref = sorted_rows(reference_rows, width)
     got = sorted_rows(peer_rows, width)
@@ -184,12 +225,26 @@ def compare_exact(reference: str, reference_rows, peer: str, peer_rows, what: st
     missing = ref[~np.isin(kr, kg)]
     extra = got[~np.isin(kg, kr)]
     dup = len(got) - len(np.unique(kg))
-    if len(missing):
-        check.mismatches.append(f"{peer} misses {len(missing)} {what} of {reference}, e.g. {missing[:max_listed].tolist()}")
-    if len(extra):
-        check.mismatches.append(f"{peer} has {len(extra)} {what} that {reference} has not, e.g. {extra[:max_listed].tolist()}")
+    judged = truth is not None
+
+    def charge(wrong: str, text: str, rows: np.ndarray | None = None) -> None:
+        # Without a truth, every difference is the reference's: both methods are this package's.
+        example = "" if rows is None else f", e.g. {rows[:max_listed].tolist()}"
+        check.charge(wrong if judged else reference, text + example)
+
+    real_missing = truth(missing) if judged else np.ones(len(missing), bool)
+    real_extra = truth(extra) if judged else np.zeros(len(extra), bool)
+    if real_missing.any():
+        charge(peer, f"{peer} misses {real_missing.sum()} {what} of {reference}", missing[real_missing])
+    if (~real_missing).any():
+        charge(reference, f"{reference} reports {(~real_missing).sum()} {what} that are not true pairs",
+               missing[~real_missing])
+    if real_extra.any():
+        charge(reference, f"{reference} misses {real_extra.sum()} {what} that {peer} finds", extra[real_extra])
+    if (~real_extra).any():
+        charge(peer, f"{peer} has {(~real_extra).sum()} {what} that {reference} has not", extra[~real_extra])
     if dup:
-        check.mismatches.append(f"{peer} reports {dup} duplicate {what}")
+        charge(peer, f"{peer} reports {dup} duplicate {what}")
     return check
 
 
@@ -324,7 +379,8 @@ def compare_triangle_pairs(scene: Scene, reference: str, reference_rows, peer: s
 
     Returns:
         A :class:`PairCheck` with object-pair counts, classes of the triangle-level differences
-        and the real mismatches (see module docs).
+        and the real differences, each charged to the method the arbiter finds wrong (see module
+        docs).
     """
     ref = sorted_rows(reference_rows, 4)
     got = sorted_rows(peer_rows, 4)
@@ -362,9 +418,9 @@ def compare_triangle_pairs(scene: Scene, reference: str, reference_rows, peer: s
         spurious = np.setdiff1d(np.unique(okey[lone & (cls == "apart")]), missed)
         check.explained += len(lone_keys) - len(missed) - len(spurious)
         if len(missed):
-            check.mismatches.append(f"{other} misses {len(missed)} object pairs where {name} finds intersecting "
-                                    f"triangles, e.g. {_object_pair_names(missed, scene.num_objects, max_listed)}")
+            check.charge(other, f"{other} misses {len(missed)} object pairs where {name} finds intersecting "
+                                f"triangles, e.g. {_object_pair_names(missed, scene.num_objects, max_listed)}")
         if len(spurious):
-            check.mismatches.append(f"{name} reports {len(spurious)} object pairs whose triangles are clearly apart, "
-                                    f"e.g. {_object_pair_names(spurious, scene.num_objects, max_listed)}")
+            check.charge(name, f"{name} reports {len(spurious)} object pairs whose triangles are clearly apart, "
+                               f"e.g. {_object_pair_names(spurious, scene.num_objects, max_listed)}")
     return check

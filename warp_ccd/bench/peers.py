@@ -1,13 +1,17 @@
 """Peers: other ways to find the same pairs, for benchmarks and cross-checks in the same run.
 
 Each peer works on the same :class:`~warp_ccd.scene.Scene` (or the same boxes) as this package,
-so :mod:`warp_ccd.bench` can time them frame by frame and compare what they find. Optional
+so :mod:`warp_ccd.bench.scaling` can time them frame by frame and compare what they find. Optional
 libraries are imported inside the class that needs them; a missing one raises
 :class:`PeerUnavailable` naming the package, and the benchmark skips that peer with a note.
 
-Scene peers expose ``stages()`` (``(name, callable)`` pairs run in order every frame),
-``finish()`` (reads counters once; True when a buffer grew and the frame must run again) and
-``triangle_pairs()``:
+Scene peers are run at their best, as a careful user of each library runs it:
+
+* a device peer exposes ``launch()`` (a whole frame on the device, no host read, nothing
+  allocated, so it can be captured in a CUDA graph), ``buffers`` (whose counters are read once
+  after the frame, into pinned memory) and ``triangle_pairs(count)``;
+* a host peer exposes ``stages()`` (``(name, callable)`` pairs run in order every frame),
+  ``finish()`` (True when the frame must run again) and ``triangle_pairs()``.
 
 * :class:`WarpMeshPipeline`: Warp's built-in tools alone. One ``wp.Mesh`` over all world
   triangles (its points *are* ``scene.world_vertex``), refit every frame; one
@@ -39,7 +43,7 @@ import numpy as np
 import warp as wp
 
 from ..broad_phase import boxes_overlap, emit_pair
-from ..buffers import GrowableBuffer, read_counts, reserve_slot
+from ..buffers import GrowableBuffer, reserve_slot
 from ..scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -160,7 +164,6 @@ class WarpMeshPipeline:
         self.triangle_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), counts), dtype=wp.int32, device=d)
         self.mesh = wp.Mesh(points=scene.world_vertex, indices=self.index, bvh_constructor=constructor)
         self.hits = GrowableBuffer(wp.vec4i, capacity or max(256, 4 * n), d, "built-in triangle pairs")
-        self._count = 0
 
     def refit(self) -> None:
         """Refits the mesh's tree to the current world vertices."""
@@ -168,7 +171,6 @@ class WarpMeshPipeline:
 
     def query(self) -> None:
         """One query per triangle; hits into :attr:`hits` (host reads nothing)."""
-        self.hits.reset()
         if self.scene.num_triangles == 0:
             return
         wp.launch(
@@ -180,18 +182,26 @@ class WarpMeshPipeline:
             device=self.device,
         )
 
-    def stages(self) -> list:
-        """``[("refit", ...), ("query", ...)]``, run in this order every frame."""
-        return [("refit", self.refit), ("query", self.query)]
+    def launch(self) -> None:
+        """One frame on the device: reset the counter, refit, query. The host reads nothing and
+        nothing is allocated, so the frame can be captured in a graph
+        (:class:`~warp_ccd.bench.timing.CountedFrame` reads :attr:`buffers` after it)."""
+        self.hits.reset()
+        self.refit()
+        self.query()
 
-    def finish(self) -> bool:
-        """Reads the hit counter; grows the buffer and returns True when the frame must rerun."""
-        self._count = read_counts([self.hits.count], self.device)[0]
-        return self.hits.ensure(self._count)
+    @property
+    def buffers(self) -> list:
+        """The buffers whose counters a frame must read: ``[hits]``."""
+        return [self.hits]
 
-    def triangle_pairs(self) -> np.ndarray:
-        """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)`` of the last frame, sorted."""
-        t = self.hits.numpy(self._count).reshape(-1, 4).astype(np.int32)
+    def triangle_pairs(self, count: int | None = None) -> np.ndarray:
+        """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)`` of the last frame, sorted.
+
+        Args:
+            count: the frame's hit count (default: read the counter now).
+        """
+        t = self.hits.numpy(count).reshape(-1, 4).astype(np.int32)
         return t[np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))]
 
 

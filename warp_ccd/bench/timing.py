@@ -1,0 +1,171 @@
+"""Timing a frame the way a careful Warp user runs it, and summarising the times.
+
+* :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
+* :class:`CountedFrame`: one frame of device work followed by one asynchronous copy of its
+  counters to pinned host memory and one wait, launched eagerly from Python or replayed as a
+  captured graph (``wp.ScopedCapture`` / ``wp.capture_launch``). A counter past its buffer's
+  capacity grows the buffer, and the frame is captured again and rerun: nothing is dropped.
+* :func:`run_stages`: a host-side peer's stages in order, each timed.
+* :class:`StageTimes`: ms per stage over the timed frames; min and median, and for a method
+  timed both eagerly and as a graph, the better of the two under the plain stage name.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+__all__ = ["MODES", "CountedFrame", "StageTimes", "run_modes", "run_stages", "synced_ms"]
+
+MODES = ("eager", "graph")
+"""How a device frame is launched: from Python each time, or as a replayed graph."""
+
+
+def synced_ms(fn, device) -> float:
+    """Wall-clock ms of ``fn()``, with the device synchronised before and after."""
+    wp.synchronize_device(device)
+    start = time.perf_counter()
+    fn()
+    wp.synchronize_device(device)
+    return (time.perf_counter() - start) * 1e3
+
+
+class CountedFrame:
+    """A frame of device work and its single counter read.
+
+    Args:
+        launch: enqueues the frame's work on ``device`` (counter resets included) and reads
+            nothing on the host; it must not allocate (it is captured in graph mode).
+        buffers: the :class:`~warp_ccd.buffers.GrowableBuffer` s whose counters the frame reads.
+        device: Warp device.
+        mode: ``"eager"`` or ``"graph"``. In graph mode the first frame runs eagerly (kernels
+            load, lazy set-up allocates) and the next is captured; a graph is captured again
+            whenever one of the buffers has grown since (by this frame or another user of them).
+    """
+
+    def __init__(self, launch, buffers: list, device, mode: str = "eager"):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        self.launch = launch
+        self.buffers = list(buffers)
+        self.device = wp.get_device(device)
+        self.mode = mode
+        self.host = wp.zeros(len(self.buffers), dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        self.graph = None
+        self._captured = None  # (pointer, capacity) of each buffer when the graph was captured
+        self.counts = [0] * len(self.buffers)
+        self._ran = False  # the first frame runs eagerly (kernels load, lazy set-up allocates)
+
+    def _layout(self) -> list:
+        return [(b.data.ptr, b.capacity) for b in self.buffers]
+
+    def _enqueue(self) -> None:
+        self.launch()
+        for k, b in enumerate(self.buffers):
+            wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
+
+    def run(self) -> list[int]:
+        """Runs the frame until every buffer held its items; returns the counts."""
+        while True:
+            if self.mode == "graph" and self._ran:
+                if self.graph is None or self._captured != self._layout():  # new, or a buffer grew since
+                    with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                        self._enqueue()
+                    self.graph, self._captured = capture.graph, self._layout()
+                wp.capture_launch(self.graph)
+            else:
+                self._enqueue()
+            wp.synchronize_device(self.device)
+            self._ran = True
+            self.counts = [int(c) for c in self.host.numpy()]
+            grew = [b.ensure(c) for b, c in zip(self.buffers, self.counts)]
+            if not any(grew):
+                return self.counts
+
+
+def run_modes(stage: str, frames: dict, device) -> dict:
+    """Runs one :class:`CountedFrame` per mode in turn, each timed with :func:`synced_ms`.
+
+    Args:
+        stage: the stage's name (``detect``, ``broad``).
+        frames: ``{mode: CountedFrame}`` of the same work.
+        device: Warp device.
+
+    Returns:
+        ``{stage: ms}`` for a single mode, else ``{f"{stage}_{mode}": ms}`` per mode.
+    """
+    if len(frames) == 1:
+        (frame,) = frames.values()
+        return {stage: synced_ms(frame.run, device)}
+    return {f"{stage}_{mode}": synced_ms(frame.run, device) for mode, frame in frames.items()}
+
+
+def run_stages(stages: list, finish, device) -> dict:
+    """Runs a host-side peer's frame: its stages in order, each synchronised and timed, then ``finish()``.
+
+    Args:
+        stages: ``(name, callable)`` pairs.
+        finish: returns True when a buffer grew (the frame reruns).
+        device: Warp device to synchronise.
+
+    Returns:
+        ms per stage name, plus ``detect`` (stages and ``finish`` together), of the last run.
+    """
+    while True:
+        times = {}
+        wp.synchronize_device(device)
+        start = time.perf_counter()
+        t = start
+        for name, fn in stages:
+            fn()
+            wp.synchronize_device(device)
+            now = time.perf_counter()
+            times[name] = (now - t) * 1e3
+            t = now
+        rerun = finish()
+        times["detect"] = (time.perf_counter() - start) * 1e3
+        if not rerun:
+            return times
+
+
+@dataclass
+class StageTimes:
+    """ms per stage over the timed frames of one method.
+
+    A method timed in both :data:`MODES` records ``<stage>_eager`` and ``<stage>_graph``;
+    :meth:`summary` then also gives ``<stage>``, the mode with the lower median (its min and median
+    together), and :attr:`best_mode` says which (a stage timed eagerly only is ``<stage>`` too).
+    """
+
+    ms: dict = field(default_factory=dict)
+    best_mode: dict = field(default_factory=dict)
+
+    def add(self, times: dict) -> None:
+        """Appends one frame's ``{stage: ms}``."""
+        for stage, value in times.items():
+            self.ms.setdefault(stage, []).append(float(value))
+
+    def summary(self) -> dict:
+        """``{stage: (ms_min, ms_median)}``, best-of-modes stages included."""
+        out = {s: (float(np.min(v)), float(np.median(v))) for s, v in self.ms.items()}
+        for stage in list(out):
+            if not stage.endswith("_eager") or stage[: -len("_eager")] in self.ms:
+                continue
+            base = stage[: -len("_eager")]
+            graph = out.get(f"{base}_graph")
+            mode = "graph" if graph is not None and graph[1] < out[stage][1] else "eager"
+            out[base] = out[f"{base}_{mode}"]
+            if graph is not None:
+                self.best_mode[base] = mode
+        return out
+
+    def has(self, stage: str) -> bool:
+        """Whether ``stage`` was timed (in any mode)."""
+        return stage in self.ms or f"{stage}_eager" in self.ms
+
+    def frames(self, stage: str) -> int:
+        """Timed frames behind ``stage`` (a best-of-modes stage: its eager one's)."""
+        return len(self.ms.get(stage) or self.ms.get(f"{stage}_eager", []))
