@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
-# Everything to check and measure on a CUDA machine in one go: the test suite on every Warp
-# device, then the benchmarks the README quotes (scaling with 80-triangle objects up to 1e6,
-# 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes).
+# Everything to check and measure on a CUDA machine, in parts that each fit one run of a few
+# minutes: the test suite on every Warp device (and what one verdict on every device costs the
+# narrow phase), then the benchmarks the README quotes: scaling with polyhedra and 80-triangle
+# objects up to 1e6, 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes.
 #
-#   bash bench/run_cuda.sh            # results in bench/results/ (or in $OUT when it is set)
+#   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, scaling, spheres, broad
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
+# Where the tree is a copy without git, set WARP_CCD_GIT_COMMIT (and WARP_CCD_GIT_DIRTY=0|1) so
+# that the logs and result files name the commit they measured.
 # Needs warp-lang (CUDA build), numpy and pytest; python-fcl, newton and matplotlib are optional
 # (a missing peer is skipped with a note). Each step runs even if an earlier one failed; the exit
 # status is that of the first failure.
@@ -15,20 +19,40 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
+parts=${*:-tests scaling spheres broad}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
-    big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"
+    big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
+    narrow=100000
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
+commit=$(git rev-parse HEAD 2>/dev/null || echo "${WARP_CCD_GIT_COMMIT:-unknown}")
+gpu=$(python3 -c "import warp as wp; wp.config.quiet = True; print(wp.get_device('$device').name)" 2>/dev/null | tail -n 1)
 
-step python3 -m pytest -q $tests -p no:cacheprovider > "$out/tests_$tag.log" 2>&1
-tail -n 15 "$out/tests_$tag.log"
-step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles 80 --frames $frames --warmup 3 \
-    --out "$out/scaling80_$tag.json" --plot "$out/scaling80_$tag.png"
-step python3 -m warp_ccd.bench --device "$device" --objects $spheres --triangles 1280 --frames $frames --warmup 3 \
-    --peers builtin,fcl --out "$out/scaling1280_$tag.json" --plot "$out/scaling1280_$tag.png"
-step python3 bench/bench_broad_phase.py --device "$device" --n $boxes --out "$out/broad_phase_$tag.json"
+for part in $parts; do
+    case $part in
+    tests)
+        log="$out/tests_$tag.log"
+        { echo "warp_ccd test suite on $device ($gpu), commit $commit, $(date -u +%FT%TZ)"
+          python3 -c "import warp, numpy; print('warp', warp.__version__, 'numpy', numpy.__version__)"; } > "$log" 2>&1
+        step python3 -m pytest -q -ra $tests -p no:cacheprovider >> "$log" 2>&1
+        tail -n 15 "$log"
+        step python3 bench/bench_narrow_phase.py --device "$device" --objects $narrow \
+            --out "$out/narrow_phase_$tag.json" ;;
+    scaling)
+        step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles poly 80 --frames $frames \
+            --warmup 3 --out "$out/scaling_$tag.json" --plot "$out/scaling_$tag.png" ;;
+    spheres)
+        step python3 -m warp_ccd.bench --device "$device" --objects $spheres --triangles 1280 --frames $frames \
+            --warmup 3 --peers builtin,fcl --out "$out/scaling1280_$tag.json" --plot "$out/scaling1280_$tag.png" ;;
+    broad)
+        step python3 bench/bench_broad_phase.py --device "$device" --n $boxes --newton-max 1000000 \
+            --frames $((frames / 2)) --out "$out/broad_phase_$tag.json" ;;
+    *)
+        echo "run_cuda.sh: unknown part $part (tests, scaling, spheres, broad)" >&2; status=2 ;;
+    esac
+done
 exit $status

@@ -137,3 +137,97 @@ def triangle_pairs_fcl(meshes) -> np.ndarray:
             a, b, ta, tb = b, a, tb, ta
         rows.add((a, ta, b, tb))
     return _sorted4(sorted(rows)) if rows else np.zeros((0, 4), np.int32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Distances between closed triangles that may be degenerate (numpy, float64)
+
+ORACLE_DEGENERATE = 1e-9
+"""A triangle whose doubled area is at most this times its longest edge squared is taken as the
+union of its edges (in float64 its normal is then too poorly defined; its height is below 1e-9 of
+its size, far below any tolerance tested)."""
+
+
+def _dot(a, b):
+    return np.sum(a * b, axis=-1)
+
+
+def point_segment_distance(x, p, q):
+    """Distances of points ``x`` to closed segments ``pq`` (a point when ``p == q``); ``(P, 3)`` each."""
+    d = q - p
+    den = _dot(d, d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(den > 0, np.clip(_dot(x - p, d) / den, 0.0, 1.0), 0.0)
+    return np.linalg.norm(x - (p + d * t[:, None]), axis=1)
+
+
+def segment_segment_distance(p1, q1, p2, q2):
+    """Distances between closed segments (either may be a point): the least of the four
+    end-to-segment distances and, where the closest points of the two lines lie inside both
+    segments, their distance."""
+    best = np.minimum(np.minimum(point_segment_distance(p1, p2, q2), point_segment_distance(q1, p2, q2)),
+                      np.minimum(point_segment_distance(p2, p1, q1), point_segment_distance(q2, p1, q1)))
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, b = _dot(d1, d1), _dot(d2, d2), _dot(d1, d2)
+    c, f = _dot(d1, r), _dot(d2, r)
+    den = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (b * f - c * e) / den
+        t = (a * f - b * c) / den
+        inside = (den > 1e-12 * a * e) & (s >= 0) & (s <= 1) & (t >= 0) & (t <= 1)
+        gap = np.linalg.norm(p1 + d1 * s[:, None] - p2 - d2 * t[:, None], axis=1)
+    return np.where(inside, np.minimum(best, gap), best)
+
+
+def _inside_prism(x, a, b, c, n):
+    """``x`` projects into the closed triangle ``abc`` of normal ``n`` (not normalised)."""
+    return ((_dot(np.cross(b - a, x - a), n) >= 0) & (_dot(np.cross(c - b, x - b), n) >= 0)
+            & (_dot(np.cross(a - c, x - c), n) >= 0))
+
+
+def segment_triangle_distance(p, q, a, b, c):
+    """Distances between closed segments ``pq`` and non-degenerate closed triangles ``abc``: 0 where
+    the segment crosses the triangle, else the least of the end-to-face and segment-to-edge
+    distances."""
+    n = np.cross(b - a, c - a)
+    unit = n / np.linalg.norm(n, axis=1, keepdims=True)
+    rp, rq = _dot(p - a, unit), _dot(q - a, unit)
+    out = np.full(len(p), np.inf)
+    for x, r in ((p, rp), (q, rq)):  # an end over the face: its height
+        out = np.where(_inside_prism(x, a, b, c, n), np.minimum(out, np.abs(r)), out)
+    for u, v in ((a, b), (b, c), (c, a)):
+        out = np.minimum(out, segment_segment_distance(p, q, u, v))
+    t = np.divide(rp, rp - rq, out=np.zeros_like(rp), where=rp * rq < 0)
+    crossing = (rp * rq < 0) & _inside_prism(p + (q - p) * t[:, None], a, b, c, n)
+    return np.where(crossing, 0.0, out)
+
+
+def degenerate(tri, ratio=ORACLE_DEGENERATE):
+    """``(P,)`` bool: triangles ``(P, 3, 3)`` whose doubled area is at most ``ratio`` times their
+    longest edge squared."""
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    longest = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
+    return area2 <= ratio * longest**2
+
+
+def closed_triangle_distance(tri_a, tri_b):
+    """Distances between closed triangles ``(P, 3, 3)``, degenerate ones (:func:`degenerate`) taken as
+    the union of their edges: the least over the edges of each against the other (its face, or its
+    edges when it is degenerate). Two closed triangles intersect exactly when an edge of one meets
+    the other, so a crossing gives 0."""
+    a = np.asarray(tri_a, np.float64)
+    b = np.asarray(tri_b, np.float64)
+    flat_a, flat_b = degenerate(a), degenerate(b)
+    out = np.full(len(a), np.inf)
+    for one, other, other_flat in ((a, b, flat_b), (b, a, flat_a)):
+        for i in range(3):
+            p, q = one[:, i], one[:, (i + 1) % 3]
+            edges = np.full(len(a), np.inf)
+            for j in range(3):
+                edges = np.minimum(edges, segment_segment_distance(p, q, other[:, j], other[:, (j + 1) % 3]))
+            face = np.full(len(a), np.inf)
+            if (~other_flat).any():
+                k = ~other_flat
+                face[k] = segment_triangle_distance(p[k], q[k], other[k, 0], other[k, 1], other[k, 2])
+            out = np.minimum(out, np.where(other_flat, edges, face))
+    return out

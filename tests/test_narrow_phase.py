@@ -44,9 +44,13 @@ CASES = {
     "coplanar_near_miss": ([[2.0625, 0, 0], [3, 0, 0], [3, 1, 0]], False),
     "parallel_planes": ([[0, 0, 0.5], [2, 0, 0.5], [0, 2, 0.5]], False),
     "identical": (T1, True),
-    "degenerate_collinear_crossing": ([[0.5, 0.5, -1], [0.5, 0.5, 1], [0.5, 0.5, 0]], False),
-    "degenerate_point": ([[0.5, 0.5, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]], False),
-    "degenerate_repeated_vertex": ([[0.5, 0.5, -1], [0.5, 0.5, -1], [0.5, 0.5, 1]], False),
+    # A degenerate triangle is the segment or point it spans (tests/test_degenerate.py has more).
+    "degenerate_collinear_crossing": ([[0.5, 0.5, -1], [0.5, 0.5, 1], [0.5, 0.5, 0]], True),
+    "degenerate_collinear_beside": ([[2.5, 0.5, -1], [2.5, 0.5, 1], [2.5, 0.5, 0]], False),
+    "degenerate_point": ([[0.5, 0.5, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]], True),
+    "degenerate_point_above": ([[0.5, 0.5, 0.0625], [0.5, 0.5, 0.0625], [0.5, 0.5, 0.0625]], False),
+    "degenerate_repeated_vertex": ([[0.5, 0.5, -1], [0.5, 0.5, -1], [0.5, 0.5, 1]], True),
+    "degenerate_in_plane": ([[-1, 0.5, 0], [3, 0.5, 0], [1, 0.5, 0]], True),
 }
 NAMES = sorted(CASES)
 

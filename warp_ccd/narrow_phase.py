@@ -16,6 +16,12 @@ Two tests with the same semantics, one the cross-check of the other:
 * :func:`tri_tri_edge_face`, the seed's edge-vs-face test: an edge of either triangle meets the
   other triangle (closed triangles intersect exactly when one does).
 
+A degenerate triangle (see below) is decided as what it is: Möller's test takes the segment its
+longest edge spans (a point when all three vertices coincide) and clips it to the other triangle
+(or, for two degenerate triangles, takes the closest points of the two segments); the edge-face
+test takes its three edges, against the other's face or, for two degenerate triangles, against
+the other's edges.
+
 Semantics shared by both:
 
 * Triangles are closed sets: touching (at a vertex, along an edge) counts as intersecting.
@@ -24,9 +30,16 @@ Semantics shared by both:
   the pair's centroid, so it does not change when a scene is translated far from the origin
   (float32 rounding of the input aside). Signed plane distances within ``eps`` count as zero;
   points within ``eps`` of a triangle or segment count as on it.
-* A degenerate triangle (twice its area at most ``tol_rel`` times its longest edge squared: zero
-  area, collinear or repeated vertices) has no interior and never intersects anything. In a
-  closed mesh its edges are also edges of its neighbours, so contacts are still found there.
+* A degenerate triangle (twice its area at most ``tol_rel`` times its longest edge squared: a
+  sliver, collinear or repeated vertices) is still a closed set: the segment (or point) it spans,
+  within ``tol_rel`` times its longest edge of it. It meets what that segment meets, within
+  ``eps``. Fan-triangulated polygons of scanned and CAD meshes leave such slivers, and a sliver's
+  edge through another triangle is a real contact.
+* Every device gives the same verdict: the module is compiled without floating-point
+  contraction (``fuse_fp=False``), so CUDA does not fuse ``a * b + c`` into an FMA that the CPU
+  rounds in two steps. Only add, multiply, divide and square root (correctly rounded on every
+  device) decide a verdict; the winding number of the containment option uses ``atan2`` and may
+  differ in its last bits, far from its decision at 1/2.
 """
 
 
@@ -37,7 +50,8 @@ import warp as wp
 from .buffers import GrowableBuffer, reserve_slot, used_count
 from .scene import SCENE_TYPES
 
-wp.set_module_options({"enable_backward": False})  # forward kernels only
+# Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = [
     "NARROW_METHODS",
@@ -153,9 +167,12 @@ def _make_narrow(types):
         q0 = _to_plane(b0, e1, e2)
         q1 = _to_plane(b1, e1, e2)
         q2 = _to_plane(b2, e1, e2)
-        if _point_in_triangle_2d(p0, q0, q1, q2, eps) or _point_in_triangle_2d(q0, p0, p1, p2, eps):
+        # A vertex of one inside the other (closed, not widened: near the boundary the edge test
+        # below decides, so that a sharp corner does not reach further than eps) ...
+        zero = S(0.0)
+        if _point_in_triangle_2d(p0, q0, q1, q2, zero) or _point_in_triangle_2d(q0, p0, p1, p2, zero):
             return True
-        # Otherwise they overlap only if their boundaries meet.
+        # ... otherwise they are within eps only if their boundaries are.
         for i in range(3):
             pa = p0
             pb = p1
@@ -236,7 +253,8 @@ def _make_narrow(types):
     @wp.func
     def _centre_pair(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
         """Shared set-up of both tests: vertices relative to the pair's centroid, unit normals
-        ``na``, ``nb``, the tolerance ``eps``, and whether either triangle is degenerate."""
+        ``na``, ``nb``, the tolerance ``eps``, and whether each triangle is degenerate (then its
+        normal is left unnormalised and unused)."""
         o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
         a0 = v0 - o
         a1 = v1 - o
@@ -251,11 +269,73 @@ def _make_narrow(types):
         nb = wp.cross(b1 - b0, b2 - b0)
         lna = wp.length(na)
         lnb = wp.length(nb)
-        degenerate = lna <= tol_rel * la * la or lnb <= tol_rel * lb * lb
-        if not degenerate:
+        degenerate_a = lna <= tol_rel * la * la
+        degenerate_b = lnb <= tol_rel * lb * lb
+        if not degenerate_a:
             na = na / lna
+        if not degenerate_b:
             nb = nb / lnb
-        return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate
+        return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b
+
+    @wp.func
+    def _edge(a: V3, b: V3, c: V3, i: int):
+        """Edge ``i`` of triangle ``abc``: ``(a, b)``, ``(b, c)`` or ``(c, a)``."""
+        if i == 0:
+            return a, b
+        if i == 1:
+            return b, c
+        return c, a
+
+    @wp.func
+    def _span(a: V3, b: V3, c: V3):
+        """The longest edge ``(p, q)`` of triangle ``abc``. A degenerate triangle lies within
+        ``tol_rel`` times its longest edge of this segment (its third vertex's distance is twice
+        its area over the edge), so it is tested as this segment (a point when ``p == q``)."""
+        lab = wp.length_sq(b - a)
+        lbc = wp.length_sq(c - b)
+        lca = wp.length_sq(a - c)
+        if lab >= lbc and lab >= lca:
+            return a, b
+        if lbc >= lca:
+            return b, c
+        return c, a
+
+    @wp.func
+    def _closest_segment_points(p1: V3, q1: V3, p2: V3, q2: V3):
+        """Closest points ``(c1, c2)`` of the closed segments ``p1 q1`` and ``p2 q2`` (either may be a
+        point; Ericson, Real-Time Collision Detection, 5.1.9)."""
+        d1 = q1 - p1
+        d2 = q2 - p2
+        r = p1 - p2
+        a = wp.dot(d1, d1)
+        e = wp.dot(d2, d2)
+        f = wp.dot(d2, r)
+        s = S(0.0)
+        t = S(0.0)
+        if a > S(0.0) and e > S(0.0):
+            b = wp.dot(d1, d2)
+            c = wp.dot(d1, r)
+            denom = a * e - b * b
+            if denom > S(0.0):
+                s = wp.clamp((b * f - c * e) / denom, S(0.0), S(1.0))
+            t = (b * s + f) / e
+            if t < S(0.0):
+                t = S(0.0)
+                s = wp.clamp(-c / a, S(0.0), S(1.0))
+            elif t > S(1.0):
+                t = S(1.0)
+                s = wp.clamp((b - c) / a, S(0.0), S(1.0))
+        elif a > S(0.0):
+            s = wp.clamp(-wp.dot(d1, r) / a, S(0.0), S(1.0))
+        elif e > S(0.0):
+            t = wp.clamp(f / e, S(0.0), S(1.0))
+        return p1 + d1 * s, p2 + d2 * t
+
+    @wp.func
+    def _segments_within(p1: V3, q1: V3, p2: V3, q2: V3, eps: S) -> bool:
+        """Closed segments (or points) in space within ``eps`` of each other."""
+        c1, c2 = _closest_segment_points(p1, q1, p2, q2)
+        return wp.length(c1 - c2) <= eps
 
     @wp.func
     def _plane_distances(n: V3, origin: V3, x0: V3, x1: V3, x2: V3, eps: S):
@@ -267,6 +347,85 @@ def _make_narrow(types):
         return r0, r1, r2, _snap(r0, eps), _snap(r1, eps), _snap(r2, eps)
 
     @wp.func
+    def _clip(f0: S, f1: S, lo: S, hi: S):
+        """Narrows ``[lo, hi]`` to the ``t`` where ``f0 + t (f1 - f0) >= 0``; empty when ``lo > hi``."""
+        if f0 < S(0.0) and f1 < S(0.0):
+            return S(1.0), S(0.0)
+        if f0 < S(0.0):
+            return wp.max(lo, f0 / (f0 - f1)), hi
+        if f1 < S(0.0):
+            return lo, wp.min(hi, f0 / (f0 - f1))
+        return lo, hi
+
+    @wp.func
+    def _segment_triangle_section(p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S):
+        """Where the closed segment ``pq`` (a point when ``p == q``) meets the closed triangle
+        ``abc`` of unit normal ``n`` within ``eps``: ``(hit, s0, s1)``.
+
+        They meet when the segment comes within ``eps`` of the triangle: it passes through the
+        triangle's prism within ``eps`` of its plane, or within ``eps`` of one of its edges (the
+        triangle thickened by ``eps`` is exactly that union). ``s0 s1`` is the crossing point when
+        the segment crosses the plane, else the part of the segment within ``eps`` of the plane
+        and of the inner side of every edge line (an in-plane sliver's overlap with the triangle).
+        """
+        rp = wp.dot(n, p - a)
+        rq = wp.dot(n, q - a)
+        # Parameters t of p + t (q - p) within eps of the plane ...
+        lo, hi = _clip(eps - rp, eps - rq, S(0.0), S(1.0))
+        lo, hi = _clip(eps + rp, eps + rq, lo, hi)
+        wide_lo = lo
+        wide_hi = hi
+        # ... and over the triangle (lo, hi), or within eps of its edge lines (wide_lo, wide_hi).
+        for i in range(3):
+            u, v = _edge(a, b, c, i)
+            m = wp.normalize(wp.cross(n, v - u))  # into the triangle
+            fp = wp.dot(m, p - u)
+            fq = wp.dot(m, q - u)
+            lo, hi = _clip(fp, fq, lo, hi)
+            wide_lo, wide_hi = _clip(fp + eps, fq + eps, wide_lo, wide_hi)
+        if wide_lo > wide_hi:
+            return False, p, p
+        if lo > hi and not (
+            _segments_within(p, q, a, b, eps) or _segments_within(p, q, b, c, eps) or _segments_within(p, q, c, a, eps)
+        ):
+            return False, p, p  # near an edge line, beyond a sharp corner: more than eps away
+        d = q - p
+        if rp * rq < S(0.0):
+            x = p + d * wp.clamp(rp / (rp - rq), wide_lo, wide_hi)
+            return True, x, x
+        return True, p + d * wide_lo, p + d * wide_hi
+
+    @wp.func
+    def _segment_triangle(p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
+        """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
+        hit, s0, s1 = _segment_triangle_section(p, q, a, b, c, n, eps)
+        return hit
+
+    @wp.func
+    def _degenerate_section(
+        a0: V3, a1: V3, a2: V3, b0: V3, b1: V3, b2: V3, na: V3, nb: V3, eps: S, degenerate_a: bool,
+        degenerate_b: bool,
+    ):
+        """Möller's test when a triangle is degenerate: it is the segment (or point) it spans.
+        Returns ``(hit, p, q)``, ``pq`` where they meet (centred frame)."""
+        pa, qa = _span(a0, a1, a2)
+        pb, qb = _span(b0, b1, b2)
+        if degenerate_a and degenerate_b:
+            c1, c2 = _closest_segment_points(pa, qa, pb, qb)
+            if wp.length(c1 - c2) > eps:
+                return False, c1, c1
+            # Parallel segments (collinear, as they are close) share an interval, not a point.
+            da = qa - pa
+            db = qb - pb
+            if wp.length(wp.cross(da, db)) <= eps * wp.max(wp.length(da), wp.length(db)):
+                return _collinear_interval(pa, qa, pb, qb, eps)
+            mid = (c1 + c2) * S(0.5)
+            return True, mid, mid
+        if degenerate_a:
+            return _segment_triangle_section(pa, qa, b0, b1, b2, nb, eps)
+        return _segment_triangle_section(pb, qb, a0, a1, a2, na, eps)
+
+    @wp.func
     def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
         """Möller's test, and where the triangles meet: ``(kind, p, q)``.
 
@@ -275,14 +434,18 @@ def _make_narrow(types):
             tol_rel: tolerance relative to the longest edge (see the module docstring).
 
         Returns:
-            ``kind`` 0: apart (or a degenerate triangle); 1: they cross or touch along the segment
-            ``pq`` (a point when ``p == q``), in the input frame; 2: coplanar contact (an area, no
-            segment; ``p``, ``q`` are the pair's centroid).
+            ``kind`` 0: apart; 1: they cross or touch along the segment ``pq`` (a point when
+            ``p == q``), in the input frame; 2: coplanar contact (an area, no segment; ``p``, ``q``
+            are the pair's centroid). A degenerate triangle is tested as the segment or point it
+            is (see the module docstring): its contacts are kind 1.
         """
         o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
-        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
-        if degenerate:
-            return 0, o, o
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centre_pair(
+            v0, v1, v2, u0, u1, u2, tol_rel
+        )
+        if degenerate_a or degenerate_b:
+            hit, p, q = _degenerate_section(a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b)
+            return wp.where(hit, 1, 0), p + o, q + o
         # 1. Triangle b against the plane of a, then a against the plane of b.
         rb0, rb1, rb2, db0, db1, db2 = _plane_distances(na, a0, b0, b1, b2, eps)
         if _one_side(db0, db1, db2):
@@ -326,69 +489,11 @@ def _make_narrow(types):
             tol_rel: tolerance relative to the longest edge (see the module docstring).
 
         Returns:
-            True when they intersect or touch within the tolerance; False for degenerate triangles.
+            True when they intersect or touch within the tolerance (a degenerate triangle as the
+            segment or point it is).
         """
         kind, p, q = tri_tri_segment(v0, v1, v2, u0, u1, u2, tol_rel)
         return kind != 0
-
-    @wp.func
-    def _point_in_triangle_3d(x: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
-        """``x`` (on the plane of unit normal ``n``) inside the closed triangle ``abc`` within ``eps``."""
-        ok = True
-        for i in range(3):
-            p = a
-            q = b
-            if i == 1:
-                p = b
-                q = c
-            elif i == 2:
-                p = c
-                q = a
-            m = wp.cross(n, q - p)
-            if wp.dot(m, x - p) / wp.length(m) < -eps:
-                ok = False
-        return ok
-
-
-    @wp.func
-    def _segment_triangle(
-        p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S
-    ) -> bool:
-        """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
-        rp = wp.dot(n, p - a)
-        rq = wp.dot(n, q - a)
-        dp = _snap(rp, eps)
-        dq = _snap(rq, eps)
-        if dp * dq > S(0.0):
-            return False
-        if dp == S(0.0) and dq == S(0.0):
-            e1 = wp.normalize(b - a)
-            if wp.length(c - b) > wp.length(b - a):
-                e1 = wp.normalize(c - b)
-            e2 = wp.cross(n, e1)
-            p2 = _to_plane(p, e1, e2)
-            q2 = _to_plane(q, e1, e2)
-            ta = _to_plane(a, e1, e2)
-            tb = _to_plane(b, e1, e2)
-            tc = _to_plane(c, e1, e2)
-            return (
-                _point_in_triangle_2d(p2, ta, tb, tc, eps)
-                or _segments_within_2d(p2, q2, ta, tb, eps)
-                or _segments_within_2d(p2, q2, tb, tc, eps)
-                or _segments_within_2d(p2, q2, tc, ta, eps)
-            )
-        # The exact crossing first (a segment nearly parallel to the plane may cross it far from
-        # an endpoint that lies within eps of it), then the endpoint within the tolerance.
-        if rp * rq < S(0.0):
-            if _point_in_triangle_3d(p + (q - p) * (rp / (rp - rq)), a, b, c, n, eps):
-                return True
-        x = p
-        if dq == S(0.0):
-            x = q
-        elif dp != S(0.0):
-            x = p + (q - p) * (dp / (dp - dq))
-        return _point_in_triangle_3d(x, a, b, c, n, eps)
-
 
     @wp.func
     def tri_tri_edge_face(
@@ -398,17 +503,29 @@ def _make_narrow(types):
 
         Same arguments, tolerance and semantics as :func:`tri_tri_moller`.
         """
-        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
-        if degenerate:
-            return False
-        return (
-            _segment_triangle(a0, a1, b0, b1, b2, nb, eps)
-            or _segment_triangle(a1, a2, b0, b1, b2, nb, eps)
-            or _segment_triangle(a2, a0, b0, b1, b2, nb, eps)
-            or _segment_triangle(b0, b1, a0, a1, a2, na, eps)
-            or _segment_triangle(b1, b2, a0, a1, a2, na, eps)
-            or _segment_triangle(b2, b0, a0, a1, a2, na, eps)
+        a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centre_pair(
+            v0, v1, v2, u0, u1, u2, tol_rel
         )
+        if degenerate_a and degenerate_b:  # two segments (or points): some edge near some edge
+            for i in range(3):
+                pa, qa = _edge(a0, a1, a2, i)
+                for j in range(3):
+                    pb, qb = _edge(b0, b1, b2, j)
+                    if _segments_within(pa, qa, pb, qb, eps):
+                        return True
+            return False
+        # A degenerate triangle has no face: only its edges are tested, against the other's face.
+        if not degenerate_b:
+            for i in range(3):
+                p, q = _edge(a0, a1, a2, i)
+                if _segment_triangle(p, q, b0, b1, b2, nb, eps):
+                    return True
+        if not degenerate_a:
+            for i in range(3):
+                p, q = _edge(b0, b1, b2, i)
+                if _segment_triangle(p, q, a0, a1, a2, na, eps):
+                    return True
+        return False
 
 
     @wp.func
@@ -464,6 +581,23 @@ def _make_narrow(types):
         r = tri_tri_test(method, tri_a[k, 0], tri_a[k, 1], tri_a[k, 2], tri_b[k, 0], tri_b[k, 1], tri_b[k, 2], tol_rel)
         result[k] = wp.where(r, 1, 0)
 
+
+    @wp.kernel
+    def tri_tri_segment_batch_kernel(
+        tri_a: wp.array2d[V3],
+        tri_b: wp.array2d[V3],
+        tol_rel: S,
+        # Outputs
+        kind: wp.array[wp.int32],
+        segment: wp.array2d[V3],
+    ):
+        """One thread per pair of triangles given as ``(P, 3)`` vertex arrays: :func:`tri_tri_segment`'s
+        ``kind`` and segment ``(P, 2)`` (tests, tools)."""
+        k = wp.tid()
+        c, p, q = tri_tri_segment(tri_a[k, 0], tri_a[k, 1], tri_a[k, 2], tri_b[k, 0], tri_b[k, 1], tri_b[k, 2], tol_rel)
+        kind[k] = c
+        segment[k, 0] = p
+        segment[k, 1] = q
 
     @wp.kernel
     def segment_kernel(
@@ -562,6 +696,7 @@ def _make_narrow(types):
         winding_number=winding_number,
         narrow_phase_kernel=narrow_phase_kernel,
         tri_tri_batch_kernel=tri_tri_batch_kernel,
+        tri_tri_segment_batch_kernel=tri_tri_segment_batch_kernel,
         segment_kernel=segment_kernel,
         containment_kernel=containment_kernel,
     )

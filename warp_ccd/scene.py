@@ -29,7 +29,9 @@ from .motion import EllipseMotion
 from .shapes import shape as _named_shape
 from .shapes import validate_mesh
 
-wp.set_module_options({"enable_backward": False})  # forward kernels only
+# Forward kernels only; no FMA contraction, so that world vertices from the same poses are the same
+# bits on every device (the narrow phase's verdicts then agree too).
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["PRECISIONS", "SCENE_TYPES", "MeshView", "Scene", "mesh_triangle", "transforms_to_poses", "world_vertex_kernel"]
 
@@ -287,7 +289,7 @@ class Scene:
         self.world_vertex = wp.zeros(self.num_world_vertices, dtype=vec3, device=d)
         if motion is not None:
             motion.launch(self.time, self.instance_pose)
-        self.update_world_vertices()
+        self._pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -382,8 +384,14 @@ class Scene:
 
     # ------------------------------------------------------------------ motion
     def update_world_vertices(self) -> None:
-        """Recomputes ``world_vertex`` from the poses (not for deforming scenes)."""
-        if self.deforming or self.num_world_vertices == 0:
+        """Recomputes ``world_vertex`` from the poses (not for deforming scenes: their caller writes
+        the world vertices; they start as the meshes were given)."""
+        if self.deforming:
+            return
+        self._pose_world_vertices()
+
+    def _pose_world_vertices(self) -> None:
+        if self.num_world_vertices == 0:
             return
         wp.launch(
             self.types.world_vertex_kernel,

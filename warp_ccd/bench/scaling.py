@@ -66,6 +66,7 @@ import datetime
 import importlib.metadata
 import json
 import math
+import os
 import platform
 import subprocess
 import sys
@@ -539,17 +540,21 @@ def _bytes(n: float | None) -> str:
 
 
 def _git_commit() -> tuple[str | None, bool | None]:
-    """``(HEAD commit, tracked files modified)`` of the checkout this package runs from, or Nones."""
+    """``(HEAD commit, tracked files modified)`` of the checkout this package runs from; where there
+    is no git checkout (a copy of the tree on another machine), ``WARP_CCD_GIT_COMMIT`` and
+    ``WARP_CCD_GIT_DIRTY`` ("0" or "1") from the environment, else Nones."""
     root = Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
-        if commit.returncode != 0:
-            return None, None
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=10)
-        return commit.stdout.strip(), bool(dirty.stdout.strip())
+        if commit.returncode == 0:
+            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                                   capture_output=True, text=True, timeout=10)
+            return commit.stdout.strip(), bool(dirty.stdout.strip())
     except (OSError, subprocess.SubprocessError):
-        return None, None
+        pass
+    commit = os.environ.get("WARP_CCD_GIT_COMMIT") or None
+    dirty = os.environ.get("WARP_CCD_GIT_DIRTY")
+    return commit, (None if dirty is None else dirty == "1")
 
 
 def environment(device) -> dict:
@@ -758,10 +763,11 @@ class BenchReport:
                 for stage, style in (("total", "-"), ("broad", "--")):
                     if stage not in summary or (stage == "broad" and m != self.reference and "total" in summary):
                         continue
-                    series.setdefault((m, stage, c.label, style), []).append((c.num_objects, summary[stage][1]))
-        for (m, stage, label, style), pts in series.items():
+                    key = (m, stage, c.label, style, stage in st.best_mode)
+                    series.setdefault(key, []).append((c.num_objects, summary[stage][1]))
+        for (m, stage, label, style, best_of), pts in series.items():
             pts.sort()
-            what = "frame" if stage == "total" else "broad phase"
+            what = ("frame" if stage == "total" else "broad phase") + (", best of eager/graph" if best_of else "")
             ax.plot([p[0] for p in pts], [p[1] for p in pts], style, color=colours[m], marker=markers[label],
                     markersize=4, label=f"{m} ({what}), triangles {label}")
         ax.set_xscale("log")

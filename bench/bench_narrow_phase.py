@@ -1,0 +1,137 @@
+"""Benchmark: what one verdict on every device costs the narrow phase (``fuse_fp`` off against on).
+
+The narrow-phase module is compiled without floating-point contraction (``fuse_fp=False``) so that
+CUDA rounds every step as the CPU does. This script measures, on one device and in one process,
+both builds of the module (the option is switched and the module rebuilt in between):
+
+* **time**: the narrow-phase kernel (``NarrowPhase.launch``: exact test of every candidate triangle
+  pair, hits appended) on the candidates of a real frame of the scaling scene (``--objects`` objects
+  of ``--triangles`` triangles), and the batch kernel on the 10^5 near-degenerate pairs of
+  ``tests/awkward_pairs.py``; GPU time per launch from CUDA events (wall time on the CPU), min and
+  median over ``--repeats`` launches after a warm-up;
+* **verdicts**: how many of the near-degenerate pairs' verdicts (both tests, float32 and float64)
+  differ from those recorded on the CPU (``tests/data/narrow_phase_verdicts.npz``), and how many
+  hits the scene frame has.
+
+    PYTHONPATH=. python bench/bench_narrow_phase.py --device cuda:0 --out bench/results/narrow_phase_cuda0.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+
+import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
+
+import warp_ccd as wc  # noqa: E402
+from warp_ccd import narrow_phase  # noqa: E402
+from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
+from warp_ccd.cli_common import resolve_device  # noqa: E402
+
+
+def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
+    """``(min, median)`` ms of ``fn()`` per launch: CUDA events on a GPU, wall time on the CPU."""
+    fn()
+    wp.synchronize_device(device)
+    times = []
+    for _ in range(repeats):
+        if device.is_cuda:
+            start, end = wp.Event(device, enable_timing=True), wp.Event(device, enable_timing=True)
+            wp.record_event(start)
+            fn()
+            wp.record_event(end)
+            wp.synchronize_device(device)
+            times.append(wp.get_event_elapsed_time(start, end))
+        else:
+            t = time.perf_counter()
+            fn()
+            wp.synchronize_device(device)
+            times.append((time.perf_counter() - t) * 1e3)
+    return float(np.min(times)), float(np.median(times))
+
+
+def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
+    wp.set_module_options({"fuse_fp": fuse}, module=narrow_phase)
+    rows = []
+    narrow = pipe.narrow
+    candidates = pipe.mid.candidates
+
+    def frame_narrow():
+        narrow.launch(scene, candidates)
+
+    lo, med = gpu_ms(frame_narrow, device, args.repeats)
+    hits = int(narrow.hits.count.numpy()[0])
+    rows.append({"fuse_fp": fuse, "workload": f"scene {args.objects} x {args.triangles}", "precision": "float32",
+                 "method": narrow.method, "pairs": int(candidates.count.numpy()[0]), "hits": hits,
+                 "ms_min": lo, "ms_median": med})
+    reference = awkward_pairs.read_reference()
+    for precision in awkward_pairs.PRECISIONS:
+        same_inputs = awkward_pairs.inputs_digest(precision) == reference[f"{precision}_inputs_sha256"]
+        got = awkward_pairs.verdicts(precision, device)
+        ta, tb = awkward_pairs.awkward_pairs(precision)
+        vec3 = wp.vec3 if precision == "float32" else wp.vec3d
+        scalar = wp.float32 if precision == "float32" else wp.float64
+        a, b = wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device)
+        hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
+        kernels = narrow_phase.NARROW_TYPES[precision]
+        for method in awkward_pairs.METHODS:
+
+            def batch(method=method):
+                wp.launch(kernels.tri_tri_batch_kernel, dim=len(ta),
+                          inputs=[a, b, narrow_phase.NARROW_METHODS[method], scalar(narrow_phase.TOLERANCE)],
+                          outputs=[hit], device=device)
+
+            lo, med = gpu_ms(batch, device, args.repeats)
+            differ = int((got[method] != reference[f"{precision}_{method}"]).sum()) if same_inputs else None
+            rows.append({"fuse_fp": fuse, "workload": "near-degenerate pairs", "precision": precision,
+                         "method": method, "pairs": len(ta), "hits": int(got[method].sum()),
+                         "verdicts_differing_from_cpu": differ,
+                         "segments_match_cpu": got["segment_sha256"] == reference[f"{precision}_segment_sha256"]
+                         if method == "moller" and same_inputs else None,
+                         "ms_min": lo, "ms_median": med})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--objects", type=lambda s: int(float(s)), default=100_000)
+    parser.add_argument("--triangles", default="80", help="'poly' or an icosphere's triangle count (default: 80)")
+    parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--out", default=None, help="JSON file (default: none)")
+    args = parser.parse_args(argv)
+    wp.config.quiet = True
+    device = resolve_device(args.device)
+    label, shapes = parse_triangles(args.triangles)
+    scene = wc.Scene.random(args.objects, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
+    scene.advance(0.5)
+    pipe = wc.CollisionPipeline(scene)
+    pipe.detect()  # candidates of a real frame stay in pipe.mid.candidates
+    rows = []
+    for fuse in (False, True):  # the shipped build first, then with contraction
+        rows += measure(fuse, args, device, scene, pipe)
+    wp.set_module_options({"fuse_fp": False}, module=narrow_phase)
+    print(f"narrow phase on {device} ({getattr(device, 'name', '')}): fuse_fp off (shipped) vs on")
+    print(f"{'workload':<28}{'precision':<10}{'method':<11}{'pairs':>10}{'hits':>10}"
+          f"{'ms off':>10}{'ms on':>10}{'on/off':>8}{'differ from CPU off / on':>28}")
+    off = [r for r in rows if not r["fuse_fp"]]
+    on = [r for r in rows if r["fuse_fp"]]
+    for a, b in zip(off, on):
+        differ = f"{a.get('verdicts_differing_from_cpu', '-')} / {b.get('verdicts_differing_from_cpu', '-')}"
+        print(f"{a['workload']:<28}{a['precision']:<10}{a['method']:<11}{a['pairs']:>10,}{a['hits']:>10,}"
+              f"{a['ms_median']:>10.4f}{b['ms_median']:>10.4f}{b['ms_median'] / a['ms_median']:>8.2f}{differ:>28}")
+    if args.out:
+        write_json(args.out, {**environment(device), "config": vars(args), "rows": rows})
+        print(f"results written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

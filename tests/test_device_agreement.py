@@ -1,0 +1,64 @@
+"""One verdict on every device: the triangle tests give bit-identical answers on CPU and CUDA.
+
+On 10^5 near-degenerate pairs (:mod:`awkward_pairs`) in float32 and float64, each device's
+verdicts (both tests) and Möller's segments must equal those recorded on the CPU
+(``tests/data/narrow_phase_verdicts.npz``), so the check runs on a GPU machine whose Warp has no
+CPU device too; where CPU and CUDA both exist they are also compared live, and a whole scene's
+triangle pairs with them.
+"""
+
+import numpy as np
+import pytest
+
+import awkward_pairs
+import warp_ccd as wc
+from conftest import DEVICES
+
+CUDA = [d for d in DEVICES if d.startswith("cuda")]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return awkward_pairs.read_reference()
+
+
+@pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
+def test_verdicts_match_the_recorded_ones(device, precision, reference):
+    if awkward_pairs.inputs_digest(precision) != reference[f"{precision}_inputs_sha256"]:
+        pytest.skip("this numpy builds other awkward pairs than those the verdicts were recorded for")
+    got = awkward_pairs.verdicts(precision, device)
+    for method in awkward_pairs.METHODS:
+        want = reference[f"{precision}_{method}"]
+        differ = np.nonzero(got[method] != want)[0]
+        assert not len(differ), (f"{method} {precision} on {device}: {len(differ)} of {len(want)} verdicts differ "
+                                 f"from the CPU's, e.g. pairs {differ[:8].tolist()}")
+        assert 0.1 < want.mean() < 0.9  # both answers are well represented
+    assert got["segment_sha256"] == reference[f"{precision}_segment_sha256"], f"segments differ on {device}"
+
+
+@pytest.mark.skipif(not (CUDA and "cpu" in DEVICES), reason="needs the CPU and a CUDA device")
+@pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
+def test_cpu_and_cuda_agree_live(precision):
+    cpu = awkward_pairs.verdicts(precision, "cpu")
+    for device in CUDA:
+        gpu = awkward_pairs.verdicts(precision, device)
+        for method in awkward_pairs.METHODS:
+            assert np.array_equal(cpu[method], gpu[method]), f"{method} {precision}: cpu and {device} differ"
+        assert cpu["segment_sha256"] == gpu["segment_sha256"]
+
+
+@pytest.mark.skipif(not (CUDA and "cpu" in DEVICES), reason="needs the CPU and a CUDA device")
+def test_scene_from_poses_agrees_across_devices():
+    """World vertices from the same poses are the same bits, so a crowded scene's pairs are too."""
+    from test_robustness import crowded_cubes
+
+    meshes, transforms = crowded_cubes(n=200, seed=4)
+    transforms[:, :3, 3] *= 20.0
+    results = []
+    for device in ["cpu", *CUDA]:
+        scene = wc.Scene.from_meshes(meshes, transforms, device=device)
+        results.append((scene.world_vertex.numpy(), wc.CollisionPipeline(scene).detect().triangle_pairs))
+    for vertices, pairs in results[1:]:
+        assert np.array_equal(vertices, results[0][0])
+        assert np.array_equal(pairs, results[0][1])
+    assert len(results[0][1]) > 0
