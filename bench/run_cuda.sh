@@ -8,8 +8,8 @@
 #   bash bench/run_cuda.sh tests scaling   # some parts: tests, scaling, spheres, broad
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
-# Where the tree is a copy without git, set WARP_CCD_GIT_COMMIT (and WARP_CCD_GIT_DIRTY=0|1) so
-# that the logs and result files name the commit they measured.
+# Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
+# WARP_CCD_GIT_DIRTY=0|1) so that the logs and result files name the commit they measured.
 # Needs warp-lang (CUDA build), numpy and pytest; python-fcl, newton and matplotlib are optional
 # (a missing peer is skipped with a note). Each step runs even if an earlier one failed; the exit
 # status is that of the first failure.
@@ -29,7 +29,7 @@ else
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
-commit=$(git rev-parse HEAD 2>/dev/null || echo "${WARP_CCD_GIT_COMMIT:-unknown}")
+commit=${WARP_CCD_GIT_COMMIT:-$(git rev-parse HEAD 2>/dev/null || echo unknown)}
 gpu=$(python3 -c "import warp as wp; wp.config.quiet = True; print(wp.get_device('$device').name)" 2>/dev/null | tail -n 1)
 
 for part in $parts; do

@@ -540,21 +540,22 @@ def _bytes(n: float | None) -> str:
 
 
 def _git_commit() -> tuple[str | None, bool | None]:
-    """``(HEAD commit, tracked files modified)`` of the checkout this package runs from; where there
-    is no git checkout (a copy of the tree on another machine), ``WARP_CCD_GIT_COMMIT`` and
-    ``WARP_CCD_GIT_DIRTY`` ("0" or "1") from the environment, else Nones."""
+    """``(commit, tracked files modified)`` of the code that runs: ``WARP_CCD_GIT_COMMIT`` and
+    ``WARP_CCD_GIT_DIRTY`` ("0" or "1") from the environment when set (a copy of the tree on
+    another machine, whose git, if any, need not describe it), else the checkout's HEAD, else Nones."""
+    if os.environ.get("WARP_CCD_GIT_COMMIT"):
+        dirty = os.environ.get("WARP_CCD_GIT_DIRTY")
+        return os.environ["WARP_CCD_GIT_COMMIT"], (None if dirty is None else dirty == "1")
     root = Path(__file__).resolve().parents[2]
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
-        if commit.returncode == 0:
-            dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                                   capture_output=True, text=True, timeout=10)
-            return commit.stdout.strip(), bool(dirty.stdout.strip())
+        if commit.returncode != 0:
+            return None, None
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=10)
+        return commit.stdout.strip(), bool(dirty.stdout.strip())
     except (OSError, subprocess.SubprocessError):
-        pass
-    commit = os.environ.get("WARP_CCD_GIT_COMMIT") or None
-    dirty = os.environ.get("WARP_CCD_GIT_DIRTY")
-    return commit, (None if dirty is None else dirty == "1")
+        return None, None
 
 
 def environment(device) -> dict:
