@@ -45,7 +45,7 @@ import warp as wp
 from warp_ccd.bench.compare import box_overlap_truth, compare_exact
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
 from warp_ccd.bench.scaling import device_modes, environment, write_json
-from warp_ccd.bench.timing import CountedFrame, StageTimes, run_modes
+from warp_ccd.bench.timing import ModeFrames, StageTimes
 from warp_ccd.broad_phase import NXN_MAX_BOXES, BroadPhaseNxN, BroadPhaseSAP
 from warp_ccd.buffers import GrowableBuffer
 from warp_ccd.cli_common import resolve_device
@@ -104,21 +104,14 @@ def run_size(num_boxes: int, methods: list[str], args, device) -> dict:
             notes.append(f"{name} skipped: {exc}")
             continue
         pairs = GrowableBuffer(wp.vec2i, max(64, 2 * num_boxes), device, f"{name} pairs")
-        buffers = [pairs, *getattr(broad, "counters", [])]
-
-        def launch(broad=broad, pairs=pairs, buffers=buffers):
-            for b in buffers:
-                b.reset()
-            broad.launch(lower, upper, pairs)
-
         modes = ("eager",) if name in OURS else device_modes(device)
-        runners[name] = (pairs, {m: CountedFrame(launch, buffers, device, m) for m in modes})
+        runners[name] = (pairs, ModeFrames.broad_phase(broad, lambda: (lower, upper), pairs, device, modes))
     times = {name: StageTimes() for name in runners}
     counts = {}
     for frame in range(args.warmup + args.frames):
         for name, (pairs, frames) in runners.items():
-            t = run_modes("broad", frames, device)
-            counts[name] = next(iter(frames.values())).counts[0]
+            t = frames.run("broad")
+            counts[name] = frames.counts[0]
             if frame >= args.warmup:
                 times[name].add(t)
     results = {name: pairs.numpy(counts[name]).reshape(-1, 2) for name, (pairs, _) in runners.items()}

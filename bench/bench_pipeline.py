@@ -18,7 +18,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from warp_ccd.bench.scaling import build_parser, main as bench_main
+from warp_ccd.bench.scaling import build_parser
+from warp_ccd.bench.scaling import main as bench_main
 from warp_ccd.cli_common import resolve_device
 
 PROG = "bench_pipeline.py"

@@ -85,7 +85,7 @@ from ..pipeline import CollisionPipeline
 from ..scene import Scene
 from .compare import PairCheck, box_overlap_truth, compare_exact, compare_triangle_pairs
 from .peers import FclPipeline, NewtonBroadPhaseSAP, PeerUnavailable, WarpMeshPipeline
-from .timing import MODES, CountedFrame, StageTimes, run_modes, run_stages, synced_ms
+from .timing import MODES, ModeFrames, StageTimes, run_stages, synced_ms
 
 __all__ = [
     "PEERS",
@@ -200,13 +200,13 @@ class DevicePeerMethod(HostPeerMethod):
 
     def __init__(self, peer, device):
         super().__init__(peer, device)
-        self.frames = {m: CountedFrame(peer.launch, peer.buffers, device, m) for m in device_modes(device)}
+        self.frames = ModeFrames(peer.launch, peer.buffers, device, device_modes(device))
         self.count = 0
 
     def run(self) -> dict:
         """One frame per mode; ms of ``detect_<mode>`` (``detect`` with one mode)."""
-        times = run_modes("detect", self.frames, self.device)
-        self.count = next(iter(self.frames.values())).counts[0]
+        times = self.frames.run("detect")
+        self.count = self.frames.counts[0]
         return times
 
     def triangle_pairs(self) -> np.ndarray:
@@ -226,20 +226,13 @@ class BroadPhaseMethod:
         self.device = device
         n = source.plain.scene.num_objects
         self.pairs = GrowableBuffer(wp.vec2i, max(64, 4 * n), device, f"{name} pairs")
-        buffers = [self.pairs, *getattr(broad, "counters", [])]
-
-        def launch():
-            for b in buffers:
-                b.reset()
-            broad.launch(*source.object_boxes(), self.pairs)
-
-        self.frames = {m: CountedFrame(launch, buffers, device, m) for m in device_modes(device)}
+        self.frames = ModeFrames.broad_phase(broad, source.object_boxes, self.pairs, device, device_modes(device))
         self.num_pairs = 0
 
     def run(self) -> dict:
         """One frame per mode; ms of ``broad_<mode>`` (``broad`` with one mode)."""
-        times = run_modes("broad", self.frames, self.device)
-        self.num_pairs = next(iter(self.frames.values())).counts[0]
+        times = self.frames.run("broad")
+        self.num_pairs = self.frames.counts[0]
         return times
 
     def box_pairs(self) -> np.ndarray:

@@ -5,6 +5,7 @@
   counters to pinned host memory and one wait, launched eagerly from Python or replayed as a
   captured graph (``wp.ScopedCapture`` / ``wp.capture_launch``). A counter past its buffer's
   capacity grows the buffer, and the frame is captured again and rerun: nothing is dropped.
+* :class:`ModeFrames`: the same frame in several modes, run in turn.
 * :func:`run_stages`: a host-side peer's stages in order, each timed.
 * :class:`StageTimes`: ms per stage over the timed frames; min and median, and for a method
   timed both eagerly and as a graph, the better of the two under the plain stage name.
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-__all__ = ["MODES", "CountedFrame", "StageTimes", "run_modes", "run_stages", "synced_ms"]
+__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "run_stages", "synced_ms"]
 
 MODES = ("eager", "graph")
 """How a device frame is launched: from Python each time, or as a replayed graph."""
@@ -86,21 +87,46 @@ class CountedFrame:
                 return self.counts
 
 
-def run_modes(stage: str, frames: dict, device) -> dict:
-    """Runs one :class:`CountedFrame` per mode in turn, each timed with :func:`synced_ms`.
+class ModeFrames:
+    """The same frame in each of several modes (a :class:`CountedFrame` each), run in turn.
 
     Args:
-        stage: the stage's name (``detect``, ``broad``).
-        frames: ``{mode: CountedFrame}`` of the same work.
-        device: Warp device.
-
-    Returns:
-        ``{stage: ms}`` for a single mode, else ``{f"{stage}_{mode}": ms}`` per mode.
+        launch, buffers, device: as for :class:`CountedFrame`.
+        modes: the modes (:data:`MODES`, or a subset).
     """
-    if len(frames) == 1:
-        (frame,) = frames.values()
-        return {stage: synced_ms(frame.run, device)}
-    return {f"{stage}_{mode}": synced_ms(frame.run, device) for mode, frame in frames.items()}
+
+    def __init__(self, launch, buffers: list, device, modes):
+        self.device = wp.get_device(device)
+        self.frames = {m: CountedFrame(launch, buffers, device, m) for m in modes}
+
+    @classmethod
+    def broad_phase(cls, broad, boxes, pairs, device, modes) -> "ModeFrames":
+        """A broad phase's frame: reset ``pairs`` and the broad phase's own ``counters`` (if any),
+        then ``broad.launch(*boxes(), pairs)``; ``boxes()`` gives the ``(lower, upper)`` arrays."""
+        buffers = [pairs, *getattr(broad, "counters", [])]
+
+        def launch():
+            for b in buffers:
+                b.reset()
+            broad.launch(*boxes(), pairs)
+
+        return cls(launch, buffers, device, modes)
+
+    def run(self, stage: str) -> dict:
+        """One frame per mode, each timed with :func:`synced_ms`.
+
+        Returns:
+            ``{stage: ms}`` for a single mode, else ``{f"{stage}_{mode}": ms}`` per mode.
+        """
+        if len(self.frames) == 1:
+            (frame,) = self.frames.values()
+            return {stage: synced_ms(frame.run, self.device)}
+        return {f"{stage}_{mode}": synced_ms(frame.run, self.device) for mode, frame in self.frames.items()}
+
+    @property
+    def counts(self) -> list[int]:
+        """The counts of the last frame (every mode finds the same)."""
+        return next(iter(self.frames.values())).counts
 
 
 def run_stages(stages: list, finish, device) -> dict:
