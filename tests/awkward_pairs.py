@@ -92,7 +92,8 @@ def _families(rng, n):
     ta[:, :, 2] = 0.0  # a in the plane z = 0
     tb = _uniform(rng, -1.0, 1.0, (n, 3, 3))
     centre = (ta[:, 0] + ta[:, 1] + ta[:, 2]) / 3.0
-    # 0: b nearly parallel to a, tilted by a small angle about a line through a's centroid, lifted.
+    # 0: b nearly parallel to a, about a's centroid, tilted by a small angle about the line x = 0
+    # of a's plane, and lifted.
     m = family == 0
     tilt = _pick(rng, SMALL, n)
     lift = _signed(rng, SMALL, n)
@@ -173,13 +174,16 @@ def inputs_digest(precision: str) -> str:
                           + tb.astype(tb.dtype.newbyteorder("<")).tobytes()).hexdigest()
 
 
-def verdicts(precision: str, device) -> dict:
-    """Both tests' verdicts ``(n,)`` bool and Möller's segments' SHA-256 on ``device``."""
+def verdicts(precision: str, device, swap: bool = False) -> dict:
+    """Both tests' verdicts ``(n,)`` bool and Möller's segments' SHA-256 on ``device`` (``swap``:
+    each pair's triangles in the other order)."""
     import warp as wp
 
     from warp_ccd.narrow_phase import NARROW_METHODS, NARROW_TYPES, TOLERANCE
 
     ta, tb = awkward_pairs(precision)
+    if swap:
+        ta, tb = tb, ta
     kernels = NARROW_TYPES[precision]
     vec3 = wp.vec3 if precision == "float32" else wp.vec3d
     scalar = wp.float32 if precision == "float32" else wp.float64

@@ -4,7 +4,9 @@ On 10^5 near-degenerate pairs (:mod:`awkward_pairs`) in float32 and float64, eac
 verdicts (both tests) and Möller's segments must equal those recorded on the CPU
 (``tests/data/narrow_phase_verdicts.npz``), so the check runs on a GPU machine whose Warp has no
 CPU device too; where CPU and CUDA both exist they are also compared live, and a whole scene's
-triangle pairs with them.
+triangle pairs with them. The recorded verdicts are themselves judged by the float64 reference
+(:func:`oracles.closed_triangle_distance`) away from the tolerance band, so that agreeing devices
+agree on right answers.
 """
 
 import numpy as np
@@ -13,6 +15,9 @@ import pytest
 import awkward_pairs
 import warp_ccd as wc
 from conftest import DEVICES
+from oracles import closed_triangle_distance, degenerate_height
+from test_degenerate import tolerance_length
+from warp_ccd.narrow_phase import TOLERANCE
 
 CUDA = [d for d in DEVICES if d.startswith("cuda")]
 
@@ -22,10 +27,34 @@ def reference():
     return awkward_pairs.read_reference()
 
 
+def same_inputs(precision, reference):
+    if awkward_pairs.inputs_digest(precision) != reference[f"{precision}_inputs_sha256"]:
+        pytest.fail("this machine builds other awkward pairs than those the verdicts were recorded for "
+                    "(numpy's random stream changed?): record them anew with python tests/awkward_pairs.py --write")
+
+
+@pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
+def test_recorded_verdicts_are_right(precision, reference):
+    """Away from the band, both tests' recorded verdicts agree with the float64 reference: pairs
+    within eps / 4 (less the height of a triangle taken as degenerate) touch, pairs 4 eps apart do not."""
+    same_inputs(precision, reference)
+    ta, tb = (t.astype(np.float64) for t in awkward_pairs.awkward_pairs(precision))
+    dist = closed_triangle_distance(ta, tb)
+    eps = tolerance_length(ta, tb)
+    slack = degenerate_height(ta, TOLERANCE) + degenerate_height(tb, TOLERANCE)
+    must_hit = dist + slack <= 0.25 * eps
+    must_miss = dist >= 4.0 * eps
+    assert must_hit.mean() > 0.3 and must_miss.mean() > 0.2
+    for method in awkward_pairs.METHODS:
+        got = reference[f"{precision}_{method}"]
+        missed, false = np.nonzero(must_hit & ~got)[0], np.nonzero(must_miss & got)[0]
+        assert not len(missed), f"{method} {precision}: {len(missed)} touching pairs missed, e.g. {missed[:8]}"
+        assert not len(false), f"{method} {precision}: {len(false)} pairs apart reported, e.g. {false[:8]}"
+
+
 @pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
 def test_verdicts_match_the_recorded_ones(device, precision, reference):
-    if awkward_pairs.inputs_digest(precision) != reference[f"{precision}_inputs_sha256"]:
-        pytest.skip("this numpy builds other awkward pairs than those the verdicts were recorded for")
+    same_inputs(precision, reference)
     got = awkward_pairs.verdicts(precision, device)
     for method in awkward_pairs.METHODS:
         want = reference[f"{precision}_{method}"]
@@ -34,6 +63,9 @@ def test_verdicts_match_the_recorded_ones(device, precision, reference):
                                  f"from the CPU's, e.g. pairs {differ[:8].tolist()}")
         assert 0.1 < want.mean() < 0.9  # both answers are well represented
     assert got["segment_sha256"] == reference[f"{precision}_segment_sha256"], f"segments differ on {device}"
+    swapped = awkward_pairs.verdicts(precision, device, swap=True)  # the pair's order changes nothing
+    for method in awkward_pairs.METHODS:
+        assert np.array_equal(swapped[method], got[method]), f"{method} {precision}: not symmetric on {device}"
 
 
 @pytest.mark.skipif(not (CUDA and "cpu" in DEVICES), reason="needs the CPU and a CUDA device")

@@ -127,6 +127,18 @@ def test_random_pairs_far_and_scaled(device):
         assert mismatch.mean() < 1e-3, f"offset {off} scale {s}: {mismatch.sum()} changed"
 
 
+@pytest.mark.parametrize("method", sorted(NARROW_METHODS))
+def test_nearly_parallel_but_apart(device, method):
+    """Two nearly parallel triangles side by side, about 16,000 tolerances apart: their parts within
+    eps of each other's plane do not lie on one line, so they must not be projected onto one."""
+    a = [[0, 0, 0], [3, 0, 0], [0, 1, 0]]
+    b = [[-0.5, 0, -1e-5], [-0.5, 1, -1e-5], [-3, 0.5, -6e-5]]
+    touching = [[-0.5 + 1e-6, 0.5, 0], [-0.5, 1, -1e-5], [-3, 0.5, -6e-5]]  # b moved to a's edge line
+    touching[0][0] = 0.0
+    got = run_test([a, b, a, touching], [b, a, touching, a], device, method)
+    assert got.tolist() == [False, False, True, True]
+
+
 def near_parallel_pairs(rng, n, lift=0.0):
     """Triangle b tilted by 1e-6..1e-3 rad from triangle a's plane, through a's centroid, which lies
     deep inside both: every pair intersects (``lift`` = 0), or lies wholly above a's plane."""

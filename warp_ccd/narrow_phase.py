@@ -3,18 +3,28 @@
 Two tests with the same semantics, one the cross-check of the other:
 
 * :func:`tri_tri_moller`, Möller (1997), "A Fast Triangle-Triangle Intersection Test":
-  1. reject when the three vertices of one triangle lie strictly on one side of the other's plane
-     (tested both ways);
-  2. otherwise each triangle crosses the other's plane in a segment (a vertex, an edge, or two
-     edge crossings);
-  3. both segments lie on the line of direction ``n1 x n2``; the triangles intersect when their
-     intervals along it overlap. The line's direction is taken from the longer of the two segments
-     (the same line, better conditioned than ``n1 x n2`` for nearly parallel planes).
-  Coplanar triangles (all of one triangle's vertices on the other's plane) go to a 2D test in
-  that plane: an edge of one within the tolerance of an edge of the other, or a vertex of one
-  inside the other.
-* :func:`tri_tri_edge_face`, the seed's edge-vs-face test: an edge of either triangle meets the
-  other triangle (closed triangles intersect exactly when one does).
+  1. reject when the three vertices of one triangle lie beyond ``eps`` on one side of the other's
+     plane (tested both ways);
+  2. when both triangles truly straddle the other's plane, each crosses it in a segment (a vertex,
+     an edge, or two edge crossings), from the exact distances;
+  3. both segments lie on the common line of the two planes: the triangles cross when they meet;
+  4. otherwise they touch when they come within ``eps`` of each other: an edge of one within
+     ``eps`` of the other (distance, not snapped sections: with nearly parallel planes the part
+     of a triangle within ``eps`` of the other's plane is a wide strip, and two "sections" made
+     from snapped distances need not lie on one line; projecting them on one direction reported
+     pairs thousands of tolerances apart).
+  Coplanar triangles (all of one triangle's vertices within ``eps`` of the other's plane) go to a
+  2D test in that plane: an edge of one within ``eps`` of an edge of the other, or a vertex of one
+  inside the other (as the vertices are flattened onto the plane first, such pairs count as
+  touching up to ``sqrt(2) eps`` apart).
+* :func:`tri_tri_edge_face`, the seed's edge-vs-face test: an edge of either triangle within
+  ``eps`` of the other triangle (closed triangles intersect exactly when an edge of one meets the
+  other, and are within ``eps`` exactly when an edge of one is).
+
+A segment is within ``eps`` of a triangle when it passes through the triangle's prism within
+``eps`` of its plane, or within ``eps`` of one of its edges: the triangle thickened by ``eps``,
+without the corners that widening its edge lines would add (a thin triangle's sharp corner
+would otherwise reach ``eps / sin(angle / 2)`` beyond its tip).
 
 A degenerate triangle (see below) is decided as what it is: Möller's test takes the segment its
 longest edge spans (a point when all three vertices coincide) and clips it to the other triangle
@@ -28,13 +38,14 @@ Semantics shared by both:
 * Tolerance: ``eps = tol_rel * L`` with ``L`` the longest edge of the two triangles, so the
   result does not change when a scene is scaled, and vertices are first expressed relative to
   the pair's centroid, so it does not change when a scene is translated far from the origin
-  (float32 rounding of the input aside). Signed plane distances within ``eps`` count as zero;
-  points within ``eps`` of a triangle or segment count as on it.
+  (float32 rounding of the input aside). Triangles within ``eps`` of each other touch.
+* A triangle's plane comes from a normal computed in float64 from its vertices
+  (:func:`_unit_normal`), so that thin triangles keep their plane in float32 scenes too.
 * A degenerate triangle (twice its area at most ``tol_rel`` times its longest edge squared: a
-  sliver, collinear or repeated vertices) is still a closed set: the segment (or point) it spans,
-  within ``tol_rel`` times its longest edge of it. It meets what that segment meets, within
-  ``eps``. Fan-triangulated polygons of scanned and CAD meshes leave such slivers, and a sliver's
-  edge through another triangle is a real contact.
+  sliver, collinear or repeated vertices) is still a closed set, within ``tol_rel`` times its
+  longest edge of the segment (or point) it spans, and of its edges; it meets what they meet,
+  within ``eps``. Fan-triangulated polygons of scanned and CAD meshes leave such slivers, and a
+  sliver's edge through another triangle is a real contact.
 * Every device gives the same verdict: the module is compiled without floating-point
   contraction (``fuse_fp=False``), so CUDA does not fuse ``a * b + c`` into an FMA that the CPU
   rounds in two steps. Only add, multiply, divide and square root (correctly rounded on every
@@ -221,9 +232,10 @@ def _make_narrow(types):
 
 
     @wp.func
-    def _collinear_interval(pa: V3, qa: V3, pb: V3, qb: V3, eps: S):
-        """Overlap of two segments lying on one line, within ``eps``: ``(hit, p, q)``, ``pq`` the
-        common part (a point when they only touch)."""
+    def _common_part(pa: V3, qa: V3, pb: V3, qb: V3):
+        """Where two segments that come within the tolerance meet, for reporting: ``(p, q)``, the
+        overlap of their projections on the longer one's line (a point when they only touch).
+        Two sections of crossing triangles lie on one line, so this is the segment they share."""
         da = qa - pa
         db = qb - pb
         origin = pa
@@ -232,9 +244,9 @@ def _make_narrow(types):
             origin = pb
             d = db
         ld = wp.length(d)
-        if ld <= eps:
-            mid = (pa + qa + pb + qb) * S(0.25)
-            return wp.length((pa + qa) * S(0.5) - (pb + qb) * S(0.5)) <= S(2.0) * eps, mid, mid
+        if ld == S(0.0):  # two points
+            mid = (pa + pb) * S(0.5)
+            return mid, mid
         u = d / ld
         ta0 = wp.dot(pa - origin, u)
         ta1 = wp.dot(qa - origin, u)
@@ -242,19 +254,39 @@ def _make_narrow(types):
         tb1 = wp.dot(qb - origin, u)
         lo = wp.max(wp.min(ta0, ta1), wp.min(tb0, tb1))
         hi = wp.min(wp.max(ta0, ta1), wp.max(tb0, tb1))
-        hit = lo <= hi + eps
-        if lo > hi:  # touching within eps: one point between the two ends
+        if lo > hi:  # touching within the tolerance: one point between the two ends
             lo = (lo + hi) * S(0.5)
             hi = lo
-        return hit, origin + u * lo, origin + u * hi
+        return origin + u * lo, origin + u * hi
 
 
 
     @wp.func
+    def _unit_normal(x0: V3, x1: V3, x2: V3, tol_rel: S):
+        """Unit normal of triangle ``x0 x1 x2`` and whether it is degenerate (twice its area at most
+        ``tol_rel`` times its longest edge squared; its normal is then zero).
+
+        Computed in float64 from the vertices as given: the edges of float32 vertices and their
+        products are exact there, so a thin triangle keeps its plane. In float32 the cross product
+        of two nearly parallel edges would turn the normal by about 6e-8 over the triangle's
+        doubled area in units of its longest edge squared: 6e-3 rad for a triangle just above the
+        degeneracy threshold, which moves its own vertices hundreds of tolerances off its plane.
+        """
+        e1 = wp.vec3d(x1) - wp.vec3d(x0)
+        e2 = wp.vec3d(x2) - wp.vec3d(x0)
+        e3 = wp.vec3d(x2) - wp.vec3d(x1)
+        n = wp.cross(e1, e2)
+        ln = wp.length(n)
+        longest_sq = wp.max(wp.max(wp.length_sq(e1), wp.length_sq(e2)), wp.length_sq(e3))
+        if ln <= wp.float64(tol_rel) * longest_sq:
+            return V3(S(0.0), S(0.0), S(0.0)), True
+        return V3(n / ln), False
+
+    @wp.func
     def _centre_pair(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
         """Shared set-up of both tests: vertices relative to the pair's centroid, unit normals
-        ``na``, ``nb``, the tolerance ``eps``, and whether each triangle is degenerate (then its
-        normal is left unnormalised and unused)."""
+        ``na``, ``nb`` (:func:`_unit_normal`), the tolerance ``eps``, and whether each triangle is
+        degenerate (then its normal is zero and unused)."""
         o = (v0 + v1 + v2 + u0 + u1 + u2) / S(6.0)
         a0 = v0 - o
         a1 = v1 - o
@@ -262,19 +294,9 @@ def _make_narrow(types):
         b0 = u0 - o
         b1 = u1 - o
         b2 = u2 - o
-        la = _max_edge(a0, a1, a2)
-        lb = _max_edge(b0, b1, b2)
-        eps = tol_rel * wp.max(la, lb)
-        na = wp.cross(a1 - a0, a2 - a0)
-        nb = wp.cross(b1 - b0, b2 - b0)
-        lna = wp.length(na)
-        lnb = wp.length(nb)
-        degenerate_a = lna <= tol_rel * la * la
-        degenerate_b = lnb <= tol_rel * lb * lb
-        if not degenerate_a:
-            na = na / lna
-        if not degenerate_b:
-            nb = nb / lnb
+        eps = tol_rel * wp.max(_max_edge(a0, a1, a2), _max_edge(b0, b1, b2))
+        na, degenerate_a = _unit_normal(v0, v1, v2, tol_rel)
+        nb, degenerate_b = _unit_normal(u0, u1, u2, tol_rel)
         return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b
 
     @wp.func
@@ -364,9 +386,10 @@ def _make_narrow(types):
 
         They meet when the segment comes within ``eps`` of the triangle: it passes through the
         triangle's prism within ``eps`` of its plane, or within ``eps`` of one of its edges (the
-        triangle thickened by ``eps`` is exactly that union). ``s0 s1`` is the crossing point when
-        the segment crosses the plane, else the part of the segment within ``eps`` of the plane
-        and of the inner side of every edge line (an in-plane sliver's overlap with the triangle).
+        triangle thickened by ``eps`` is exactly that union). ``s0 s1`` is the point where the
+        segment crosses the plane (moved into the part within ``eps`` of the triangle when it
+        crosses just outside), else the part of the segment within ``eps`` of the plane and of the
+        inner side of every edge line (an in-plane sliver's overlap with the triangle).
         """
         rp = wp.dot(n, p - a)
         rq = wp.dot(n, q - a)
@@ -396,10 +419,26 @@ def _make_narrow(types):
         return True, p + d * wide_lo, p + d * wide_hi
 
     @wp.func
-    def _segment_triangle(p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S) -> bool:
-        """Closed segment ``pq`` meets closed triangle ``abc`` (unit normal ``n``) within ``eps``."""
-        hit, s0, s1 = _segment_triangle_section(p, q, a, b, c, n, eps)
-        return hit
+    def _edges_meet(
+        a0: V3, a1: V3, a2: V3, b0: V3, b1: V3, b2: V3, na: V3, nb: V3, eps: S, face_a: bool, face_b: bool
+    ):
+        """Some edge of one triangle within ``eps`` of the other: ``(hit, p, q)``, ``pq`` where the
+        first such edge meets it. The edges of ``a`` are tested against ``b``'s face when
+        ``face_b``, the edges of ``b`` against ``a``'s when ``face_a``. Two closed triangles are
+        within ``eps`` of each other exactly when one of these six tests says so."""
+        if face_b:
+            for i in range(3):
+                p, q = _edge(a0, a1, a2, i)
+                hit, s0, s1 = _segment_triangle_section(p, q, b0, b1, b2, nb, eps)
+                if hit:
+                    return True, s0, s1
+        if face_a:
+            for i in range(3):
+                p, q = _edge(b0, b1, b2, i)
+                hit, s0, s1 = _segment_triangle_section(p, q, a0, a1, a2, na, eps)
+                if hit:
+                    return True, s0, s1
+        return False, a0, a0
 
     @wp.func
     def _degenerate_section(
@@ -418,7 +457,8 @@ def _make_narrow(types):
             da = qa - pa
             db = qb - pb
             if wp.length(wp.cross(da, db)) <= eps * wp.max(wp.length(da), wp.length(db)):
-                return _collinear_interval(pa, qa, pb, qb, eps)
+                p, q = _common_part(pa, qa, pb, qb)
+                return True, p, q
             mid = (c1 + c2) * S(0.5)
             return True, mid, mid
         if degenerate_a:
@@ -460,20 +500,20 @@ def _make_narrow(types):
             coplanar = wp.where(_coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps), 2, 0)
         if coplanar >= 0:
             return coplanar, o, o
-        # 2. Where each triangle crosses the other's plane, and 3. overlap of the two intervals on
-        # the common line. First with the exact distances when both triangles truly straddle the
-        # other's plane: with nearly parallel planes, snapping a vertex within eps to the plane can
-        # move a section far along the line and lose a real crossing.
+        # 2. Where each triangle crosses the other's plane (a section of each, from the exact
+        # distances, when both truly straddle the other's plane), and 3. whether the two sections,
+        # on the common line, meet: the triangles cross.
         if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
             pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
             pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
-            hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
-            if hit:
+            if _segments_within(pa, qa, pb, qb, eps):
+                p, q = _common_part(pa, qa, pb, qb)
                 return 1, p + o, q + o
-        # Then with the snapped distances: contacts within the tolerance (touching).
-        pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
-        pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
-        hit, p, q = _collinear_interval(pa, qa, pb, qb, eps)
+        # 4. No crossing: touching within the tolerance, decided by distance (an edge of one within
+        # eps of the other). Sections from snapped distances cannot decide it: with nearly
+        # parallel planes the part of a triangle within eps of the other's plane is a wide strip,
+        # not a segment, and two such "sections" need not lie on one line.
+        hit, p, q = _edges_meet(a0, a1, a2, b0, b1, b2, na, nb, eps, True, True)
         if hit:
             return 1, p + o, q + o
         return 0, o, o
@@ -515,17 +555,8 @@ def _make_narrow(types):
                         return True
             return False
         # A degenerate triangle has no face: only its edges are tested, against the other's face.
-        if not degenerate_b:
-            for i in range(3):
-                p, q = _edge(a0, a1, a2, i)
-                if _segment_triangle(p, q, b0, b1, b2, nb, eps):
-                    return True
-        if not degenerate_a:
-            for i in range(3):
-                p, q = _edge(b0, b1, b2, i)
-                if _segment_triangle(p, q, a0, a1, a2, na, eps):
-                    return True
-        return False
+        hit, p, q = _edges_meet(a0, a1, a2, b0, b1, b2, na, nb, eps, not degenerate_a, not degenerate_b)
+        return hit
 
 
     @wp.func
