@@ -300,13 +300,18 @@ def _make_narrow(types):
         return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b
 
     @wp.func
+    def _pick(x0: V3, x1: V3, x2: V3, i: int) -> V3:
+        """``x0``, ``x1`` or ``x2`` for ``i`` 0, 1 or 2."""
+        if i == 0:
+            return x0
+        if i == 1:
+            return x1
+        return x2
+
+    @wp.func
     def _edge(a: V3, b: V3, c: V3, i: int):
         """Edge ``i`` of triangle ``abc``: ``(a, b)``, ``(b, c)`` or ``(c, a)``."""
-        if i == 0:
-            return a, b
-        if i == 1:
-            return b, c
-        return c, a
+        return _pick(a, b, c, i), _pick(b, c, a, i)
 
     @wp.func
     def _span(a: V3, b: V3, c: V3):
@@ -380,9 +385,22 @@ def _make_narrow(types):
         return lo, hi
 
     @wp.func
-    def _segment_triangle_section(p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, eps: S):
+    def _edge_normals(a: V3, b: V3, c: V3, n: V3):
+        """Unit normals of the edges ``ab``, ``bc``, ``ca`` in the plane of triangle ``abc`` (unit
+        normal ``n``), pointing into the triangle."""
+        return (
+            wp.normalize(wp.cross(n, b - a)),
+            wp.normalize(wp.cross(n, c - b)),
+            wp.normalize(wp.cross(n, a - c)),
+        )
+
+    @wp.func
+    def _segment_triangle_section(
+        p: V3, q: V3, a: V3, b: V3, c: V3, n: V3, m0: V3, m1: V3, m2: V3, eps: S
+    ):
         """Where the closed segment ``pq`` (a point when ``p == q``) meets the closed triangle
-        ``abc`` of unit normal ``n`` within ``eps``: ``(hit, s0, s1)``.
+        ``abc`` of unit normal ``n`` and inward edge normals ``m0, m1, m2`` (:func:`_edge_normals`)
+        within ``eps``: ``(hit, s0, s1)``.
 
         They meet when the segment comes within ``eps`` of the triangle: it passes through the
         triangle's prism within ``eps`` of its plane, or within ``eps`` of one of its edges (the
@@ -396,18 +414,20 @@ def _make_narrow(types):
         # Parameters t of p + t (q - p) within eps of the plane ...
         lo, hi = _clip(eps - rp, eps - rq, S(0.0), S(1.0))
         lo, hi = _clip(eps + rp, eps + rq, lo, hi)
+        if lo > hi:
+            return False, p, p
         wide_lo = lo
         wide_hi = hi
         # ... and over the triangle (lo, hi), or within eps of its edge lines (wide_lo, wide_hi).
         for i in range(3):
             u, v = _edge(a, b, c, i)
-            m = wp.normalize(wp.cross(n, v - u))  # into the triangle
+            m = _pick(m0, m1, m2, i)
             fp = wp.dot(m, p - u)
             fq = wp.dot(m, q - u)
             lo, hi = _clip(fp, fq, lo, hi)
             wide_lo, wide_hi = _clip(fp + eps, fq + eps, wide_lo, wide_hi)
-        if wide_lo > wide_hi:
-            return False, p, p
+            if wide_lo > wide_hi:
+                return False, p, p
         if lo > hi and not (
             _segments_within(p, q, a, b, eps) or _segments_within(p, q, b, c, eps) or _segments_within(p, q, c, a, eps)
         ):
@@ -427,15 +447,17 @@ def _make_narrow(types):
         ``face_b``, the edges of ``b`` against ``a``'s when ``face_a``. Two closed triangles are
         within ``eps`` of each other exactly when one of these six tests says so."""
         if face_b:
+            m0, m1, m2 = _edge_normals(b0, b1, b2, nb)
             for i in range(3):
                 p, q = _edge(a0, a1, a2, i)
-                hit, s0, s1 = _segment_triangle_section(p, q, b0, b1, b2, nb, eps)
+                hit, s0, s1 = _segment_triangle_section(p, q, b0, b1, b2, nb, m0, m1, m2, eps)
                 if hit:
                     return True, s0, s1
         if face_a:
+            m0, m1, m2 = _edge_normals(a0, a1, a2, na)
             for i in range(3):
                 p, q = _edge(b0, b1, b2, i)
-                hit, s0, s1 = _segment_triangle_section(p, q, a0, a1, a2, na, eps)
+                hit, s0, s1 = _segment_triangle_section(p, q, a0, a1, a2, na, m0, m1, m2, eps)
                 if hit:
                     return True, s0, s1
         return False, a0, a0
@@ -462,8 +484,10 @@ def _make_narrow(types):
             mid = (c1 + c2) * S(0.5)
             return True, mid, mid
         if degenerate_a:
-            return _segment_triangle_section(pa, qa, b0, b1, b2, nb, eps)
-        return _segment_triangle_section(pb, qb, a0, a1, a2, na, eps)
+            m0, m1, m2 = _edge_normals(b0, b1, b2, nb)
+            return _segment_triangle_section(pa, qa, b0, b1, b2, nb, m0, m1, m2, eps)
+        m0, m1, m2 = _edge_normals(a0, a1, a2, na)
+        return _segment_triangle_section(pb, qb, a0, a1, a2, na, m0, m1, m2, eps)
 
     @wp.func
     def tri_tri_segment(v0: V3, v1: V3, v2: V3, u0: V3, u1: V3, u2: V3, tol_rel: S):
