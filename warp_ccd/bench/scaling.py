@@ -533,7 +533,7 @@ def _bytes(n: float | None) -> str:
 
 
 def _git_commit() -> tuple[str | None, bool | None]:
-    """``(commit, tracked files modified)`` of the code that runs: ``WARP_CCD_GIT_COMMIT`` and
+    """``(commit, tracked files other than bench/results/ modified)`` of the code that runs: ``WARP_CCD_GIT_COMMIT`` and
     ``WARP_CCD_GIT_DIRTY`` ("0" or "1") from the environment when set (a copy of the tree on
     another machine, whose git, if any, need not describe it), else the checkout's HEAD, else Nones."""
     if os.environ.get("WARP_CCD_GIT_COMMIT"):
@@ -544,8 +544,9 @@ def _git_commit() -> tuple[str | None, bool | None]:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
         if commit.returncode != 0:
             return None, None
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=10)
+        # Result files written by earlier benchmarks of the same run are not a change of the code.
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                ":(exclude)bench/results"], cwd=root, capture_output=True, text=True, timeout=10)
         return commit.stdout.strip(), bool(dirty.stdout.strip())
     except (OSError, subprocess.SubprocessError):
         return None, None
