@@ -139,22 +139,20 @@ def _make_narrow(types):
 
 
     @wp.func
-    def _inside_edge_2d(p: V2, a: V2, b: V2, orient: S, eps: S) -> bool:
-        e = b - a
-        le = wp.length(e)
-        if le == S(0.0):
-            return True
-        return orient * _cross2(e, p - a) / le >= -eps
+    def _inside_edge_2d(p: V2, a: V2, b: V2, orient: S) -> bool:
+        """``p`` on the inner side of edge ``ab`` (or on its line) of a triangle of orientation ``orient``."""
+        return orient * _cross2(b - a, p - a) >= S(0.0)
 
 
     @wp.func
-    def _point_in_triangle_2d(p: V2, a: V2, b: V2, c: V2, eps: S) -> bool:
-        """``p`` inside the closed triangle ``abc`` or within ``eps`` of its edge lines."""
+    def _point_in_triangle_2d(p: V2, a: V2, b: V2, c: V2) -> bool:
+        """``p`` inside the closed (non-degenerate) triangle ``abc``; near its boundary rounding
+        decides, so callers test the boundary within their tolerance apart."""
         orient = wp.sign(_cross2(b - a, c - a))
         return (
-            _inside_edge_2d(p, a, b, orient, eps)
-            and _inside_edge_2d(p, b, c, orient, eps)
-            and _inside_edge_2d(p, c, a, orient, eps)
+            _inside_edge_2d(p, a, b, orient)
+            and _inside_edge_2d(p, b, c, orient)
+            and _inside_edge_2d(p, c, a, orient)
         )
 
 
@@ -180,8 +178,7 @@ def _make_narrow(types):
         q2 = _to_plane(b2, e1, e2)
         # A vertex of one inside the other (closed, not widened: near the boundary the edge test
         # below decides, so that a sharp corner does not reach further than eps) ...
-        zero = S(0.0)
-        if _point_in_triangle_2d(p0, q0, q1, q2, zero) or _point_in_triangle_2d(q0, p0, p1, p2, zero):
+        if _point_in_triangle_2d(p0, q0, q1, q2) or _point_in_triangle_2d(q0, p0, p1, p2):
             return True
         # ... otherwise they are within eps only if their boundaries are.
         for i in range(3):
@@ -439,6 +436,18 @@ def _make_narrow(types):
         return True, p + d * wide_lo, p + d * wide_hi
 
     @wp.func
+    def _edges_near_face(x0: V3, x1: V3, x2: V3, f0: V3, f1: V3, f2: V3, nf: V3, eps: S):
+        """Some edge of triangle ``x`` within ``eps`` of triangle ``f`` (unit normal ``nf``):
+        ``(hit, p, q)``, ``pq`` where the first such edge meets it."""
+        m0, m1, m2 = _edge_normals(f0, f1, f2, nf)
+        for i in range(3):
+            p, q = _edge(x0, x1, x2, i)
+            hit, s0, s1 = _segment_triangle_section(p, q, f0, f1, f2, nf, m0, m1, m2, eps)
+            if hit:
+                return True, s0, s1
+        return False, x0, x0
+
+    @wp.func
     def _edges_meet(
         a0: V3, a1: V3, a2: V3, b0: V3, b1: V3, b2: V3, na: V3, nb: V3, eps: S, face_a: bool, face_b: bool
     ):
@@ -447,19 +456,11 @@ def _make_narrow(types):
         ``face_b``, the edges of ``b`` against ``a``'s when ``face_a``. Two closed triangles are
         within ``eps`` of each other exactly when one of these six tests says so."""
         if face_b:
-            m0, m1, m2 = _edge_normals(b0, b1, b2, nb)
-            for i in range(3):
-                p, q = _edge(a0, a1, a2, i)
-                hit, s0, s1 = _segment_triangle_section(p, q, b0, b1, b2, nb, m0, m1, m2, eps)
-                if hit:
-                    return True, s0, s1
+            hit, p, q = _edges_near_face(a0, a1, a2, b0, b1, b2, nb, eps)
+            if hit:
+                return True, p, q
         if face_a:
-            m0, m1, m2 = _edge_normals(a0, a1, a2, na)
-            for i in range(3):
-                p, q = _edge(b0, b1, b2, i)
-                hit, s0, s1 = _segment_triangle_section(p, q, a0, a1, a2, na, m0, m1, m2, eps)
-                if hit:
-                    return True, s0, s1
+            return _edges_near_face(b0, b1, b2, a0, a1, a2, na, eps)
         return False, a0, a0
 
     @wp.func
