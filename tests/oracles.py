@@ -244,3 +244,22 @@ def degenerate_height(tri, tol):
     with np.errstate(divide="ignore", invalid="ignore"):
         height = np.where(longest > 0, area2 / longest, 0.0)
     return np.where(area2 <= tol * longest**2, height, 0.0)
+
+
+def tolerance_length(tri_a, tri_b, tol):
+    """``eps`` of each pair ``(P, 3, 3)``: ``tol`` times the longest edge of the two triangles."""
+    edges = np.concatenate([np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2) for t in (tri_a, tri_b)], axis=1)
+    return tol * edges.max(axis=1)
+
+
+def touching_band(tri_a, tri_b, tol, degenerate_slack=False):
+    """Where the reference decides what a triangle test with relative tolerance ``tol`` must say:
+    ``(must_touch, must_miss)``, ``(P,)`` bool. A pair within ``eps / 4`` must touch, one at least
+    ``4 eps`` apart must not (``eps``: :func:`tolerance_length`); in between either answer is right.
+    With ``degenerate_slack`` a pair must touch only when it does so by more than the heights of its
+    triangles that the test takes as degenerate (:func:`degenerate_height`), since it decides such a
+    triangle as a segment that far from it."""
+    dist = closed_triangle_distance(tri_a, tri_b)
+    eps = tolerance_length(tri_a, tri_b, tol)
+    slack = degenerate_height(tri_a, tol) + degenerate_height(tri_b, tol) if degenerate_slack else 0.0
+    return dist + slack <= 0.25 * eps, dist >= 4.0 * eps

@@ -13,7 +13,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from oracles import closed_triangle_distance
+from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test
 from test_robustness import random_rotations
 from warp_ccd.narrow_phase import NARROW_METHODS, NARROW_TYPES, TOLERANCE
@@ -92,16 +92,10 @@ def crafted(offset=(0.0, 0.0, 0.0), scale=1.0, rotation=None):
     return ta * scale + offset, tb * scale + offset, np.array([CASES[n][2] for n in NAMES])
 
 
-def tolerance_length(ta, tb, tol=TOLERANCE):
-    """``eps`` of each pair: ``tol`` times the longest edge of the two triangles."""
-    edges = np.concatenate([np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2) for t in (ta, tb)], axis=1)
-    return tol * edges.max(axis=1)
-
-
 def test_crafted_cases_against_float64_reference():
     ta, tb, expect = crafted()
     dist = closed_triangle_distance(ta, tb)
-    eps = tolerance_length(ta, tb)
+    eps = tolerance_length(ta, tb, TOLERANCE)
     wrong = [n for n, d, e, x in zip(NAMES, dist, eps, expect) if (d > 1e-9 if x else d < 100 * e)]
     assert not wrong, f"the reference disagrees with the crafted truth for {wrong}"
 
@@ -243,10 +237,7 @@ def test_random_degenerate_pairs_match_float64_reference(device, precision):
     ta, tb = random_degenerate_pairs(rng, 20_000)
     if precision == "float32":  # the reference judges the very coordinates the kernel sees
         ta, tb = ta.astype(np.float32).astype(np.float64), tb.astype(np.float32).astype(np.float64)
-    dist = closed_triangle_distance(ta, tb)
-    eps = tolerance_length(ta, tb)
-    must_hit = dist <= 0.25 * eps
-    must_miss = dist >= 4.0 * eps
+    must_hit, must_miss = touching_band(ta, tb, TOLERANCE)
     assert must_hit.mean() > 0.2 and must_miss.mean() > 0.2  # the sample holds both answers
     run = run_test if precision == "float32" else run_kernel64
     for method in NARROW_METHODS:
@@ -306,12 +297,11 @@ def test_fan_triangulated_meshes_against_reference(device):
     res = wc.collide([(v, t), (other, t)], device=device)
     ta = np.repeat(v[t].astype(np.float64), len(t), axis=0)
     tb = np.tile(other[t].astype(np.float64), (len(t), 1, 1))
-    dist = closed_triangle_distance(ta, tb)
-    eps = tolerance_length(ta, tb)
+    must_touch, must_miss = touching_band(ta, tb, TOLERANCE)
     index = np.stack([np.repeat(np.arange(len(t)), len(t)), np.tile(np.arange(len(t)), len(t))], axis=1)
     found = {tuple(r) for r in res.triangle_pairs[:, [1, 3]].tolist()}
-    must = {tuple(r) for r in index[dist <= 0.25 * eps].tolist()}
-    never = {tuple(r) for r in index[dist >= 4 * eps].tolist()}
+    must = {tuple(r) for r in index[must_touch].tolist()}
+    never = {tuple(r) for r in index[must_miss].tolist()}
     assert must and must <= found, f"missed {sorted(must - found)[:5]}"
     assert not (found & never), f"reported apart pairs {sorted(found & never)[:5]}"
     sliver_pairs = [(a, b) for a, b in must if flat[a] or flat[b]]

@@ -15,8 +15,7 @@ import pytest
 import awkward_pairs
 import warp_ccd as wc
 from conftest import DEVICES
-from oracles import closed_triangle_distance, degenerate_height
-from test_degenerate import tolerance_length
+from oracles import touching_band
 from warp_ccd.narrow_phase import TOLERANCE
 
 CUDA = [d for d in DEVICES if d.startswith("cuda")]
@@ -39,11 +38,7 @@ def test_recorded_verdicts_are_right(precision, reference):
     within eps / 4 (less the height of a triangle taken as degenerate) touch, pairs 4 eps apart do not."""
     same_inputs(precision, reference)
     ta, tb = (t.astype(np.float64) for t in awkward_pairs.awkward_pairs(precision))
-    dist = closed_triangle_distance(ta, tb)
-    eps = tolerance_length(ta, tb)
-    slack = degenerate_height(ta, TOLERANCE) + degenerate_height(tb, TOLERANCE)
-    must_hit = dist + slack <= 0.25 * eps
-    must_miss = dist >= 4.0 * eps
+    must_hit, must_miss = touching_band(ta, tb, TOLERANCE, degenerate_slack=True)
     assert must_hit.mean() > 0.3 and must_miss.mean() > 0.2
     for method in awkward_pairs.METHODS:
         got = reference[f"{precision}_{method}"]
