@@ -7,16 +7,21 @@ CPU device too; where CPU and CUDA both exist they are also compared live, and a
 triangle pairs with them. The recorded verdicts are themselves judged by the float64 reference
 (:func:`oracles.closed_triangle_distance`) away from the tolerance band, so that agreeing devices
 agree on right answers.
+
+Whole scenes (:mod:`scene_results`) are held to their recorded results the same way: triangle
+pairs, segments, flags and containment pairs, bit for bit, with four option sets of the pipeline.
 """
 
 import numpy as np
 import pytest
 
-import awkward_pairs
 import warp_ccd as wc
+from warp_ccd.narrow_phase import TOLERANCE
+
+import awkward_pairs
+import scene_results
 from conftest import DEVICES
 from oracles import touching_band
-from warp_ccd.narrow_phase import TOLERANCE
 
 CUDA = [d for d in DEVICES if d.startswith("cuda")]
 
@@ -89,3 +94,28 @@ def test_scene_from_poses_agrees_across_devices():
         assert np.array_equal(vertices, results[0][0])
         assert np.array_equal(pairs, results[0][1])
     assert len(results[0][1]) > 0
+
+
+@pytest.fixture(scope="module")
+def recorded_scenes():
+    return scene_results.read_reference()
+
+
+def _canonical(a: np.ndarray) -> bytes:
+    """The array's bytes, every NaN written alike."""
+    a = np.ascontiguousarray(a)
+    if np.issubdtype(a.dtype, np.floating):
+        a = np.where(np.isnan(a), np.nan, a).astype(a.dtype)
+    return a.tobytes()
+
+
+@pytest.mark.parametrize("precision", scene_results.PRECISIONS)
+def test_scene_results_match_the_recorded_ones(device, precision, recorded_scenes):
+    got = scene_results.results(precision, device)
+    want = {k: v for k, v in recorded_scenes.items() if k.startswith(f"{precision}/")}
+    assert sorted(got) == sorted(want)
+    differ = [k for k in want if got[k].shape != want[k].shape or got[k].dtype != want[k].dtype
+              or _canonical(got[k]) != _canonical(want[k])]
+    assert not differ, f"on {device}, results differ from the recorded ones: {differ}"
+    assert sum(len(v) for k, v in want.items() if k.endswith("/triangle_pairs")) > 0
+    assert sum(len(v) for k, v in want.items() if k.endswith("/containment_pairs")) > 0
