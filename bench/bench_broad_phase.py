@@ -147,13 +147,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-n", type=_count, default=None,
                         help="largest number of boxes, decades from --min-n (default: 1e5 on CPU, 1e6 on CUDA)")
     parser.add_argument("--n", type=_count, nargs="+", default=None, help="explicit box counts (instead of decades)")
-    parser.add_argument("--overlaps", type=float, default=2.0, help="mean number of boxes each box overlaps (default: %(default)s)")
-    parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of %(default)s (default: all)")
+    parser.add_argument("--overlaps", type=float, default=2.0,
+                        help="mean number of boxes each box overlaps (default: %(default)s)")
+    parser.add_argument("--methods", default=",".join(METHODS),
+                        help="comma-separated subset of %(default)s (default: all)")
     parser.add_argument("--nxn-max", type=_count, default=None,
                         help=f"largest N for nxn (default: 10000 on CPU, {NXN_MAX_BOXES} on CUDA)")
     parser.add_argument("--newton-max", type=_count, default=None, help="largest N for newton_sap (default: all)")
     parser.add_argument("--frames", type=int, default=5, help="timed frames (default: %(default)s)")
-    parser.add_argument("--warmup", type=int, default=2, help="untimed frames before them, at least 1 (default: %(default)s)")
+    parser.add_argument("--warmup", type=int, default=2,
+                        help="untimed frames before them, at least 1 (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the boxes (default: %(default)s)")
     parser.add_argument("--out", default=None,
                         help="JSON file (default: bench/results/broad_phase_<device>.json)")

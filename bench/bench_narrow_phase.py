@@ -28,12 +28,12 @@ import warp as wp
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
-import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
-
 import warp_ccd as wc  # noqa: E402
 from warp_ccd import narrow_phase  # noqa: E402
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
 from warp_ccd.cli_common import resolve_device  # noqa: E402
+
+import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
 
 
 def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
@@ -64,6 +64,7 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
     candidates = pipe.mid.candidates
 
     def frame_narrow():
+        narrow.hits.reset()
         narrow.launch(scene, candidates)
 
     lo, med = gpu_ms(frame_narrow, device, args.repeats)
@@ -80,11 +81,10 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
         scalar = wp.float32 if precision == "float32" else wp.float64
         a, b = wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device)
         hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
-        kernels = narrow_phase.NARROW_TYPES[precision]
         for method in awkward_pairs.METHODS:
 
             def batch(method=method):
-                wp.launch(kernels.tri_tri_batch_kernel, dim=len(ta),
+                wp.launch(narrow_phase.tri_tri_batch_kernel, dim=len(ta),
                           inputs=[a, b, narrow_phase.NARROW_METHODS[method], scalar(narrow_phase.TOLERANCE)],
                           outputs=[hit], device=device)
 

@@ -189,7 +189,8 @@ def test_broad_phase_peers_agree(device):
     n_ref = find_pairs(wc.BroadPhaseSAP(device=device), lower, upper, ref_pairs)
     ref = ref_pairs.numpy(n_ref)
     assert 2 * n_ref / 3000 > 1.0  # about the requested 2 overlaps per box
-    peers = {"warp_bvh": WarpBvhBroadPhase(device=device), "warp_bvh_refit": WarpBvhBroadPhase(device=device, refit=True)}
+    peers = {"warp_bvh": WarpBvhBroadPhase(device=device),
+             "warp_bvh_refit": WarpBvhBroadPhase(device=device, refit=True)}
     try:
         peers["newton_sap"] = NewtonBroadPhaseSAP(device=device)
     except PeerUnavailable:

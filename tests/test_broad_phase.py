@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
+
 from oracles import box_pairs_numpy
 
 
@@ -108,7 +109,7 @@ def test_capacity_one_is_complete(device):
     """Starting from buffers of capacity 1, every pair is still returned (buffers grow)."""
     import warp as wp
 
-    from warp_ccd.buffers import GrowableBuffer, read_counts
+    from warp_ccd.buffers import CounterRead, GrowableBuffer
 
     rng = np.random.default_rng(3)
     lo, hi = boxes_clustered(rng, 800)
@@ -117,19 +118,18 @@ def test_capacity_one_is_complete(device):
     whi = wp.array(hi, dtype=wp.vec3, device=device)
     for bp in (wc.BroadPhaseSAP(device=device), wc.BroadPhaseNxN(device=device)):
         pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
-        buffers = [pairs, *getattr(bp, "counters", [])]
-        for b in buffers[1:]:
+        for b in bp.counters:
             b._allocate(1)
+        counters = CounterRead([pairs, *bp.counters], device)
         rounds = 0
         while True:
             rounds += 1
-            for b in buffers:
-                b.reset()
+            counters.reset()
             bp.launch(wlo, whi, pairs)
-            counts = read_counts([b.count for b in buffers], device)
-            if not any([b.ensure(c) for b, c in zip(buffers, counts)]):
+            counters.enqueue()
+            if not counters.finish():
                 break
-        got = pairs.numpy(counts[0])
+        got = pairs.numpy(pairs.last_count)
         got = got[np.lexsort((got[:, 1], got[:, 0]))]
         assert rounds >= 2
         assert np.array_equal(got, want)

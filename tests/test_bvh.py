@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 from warp_ccd.bvh import build_tree
+
+from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 
 
 def tree_invariants(tree, vertices, triangles, leaf_size):
@@ -92,7 +93,7 @@ def test_refit_bounds_contain(device):
     for _ in range(2):
         scene.advance(0.3)
         pipe.detect()
-        refit_contains(scene, pipe.bounds)
+        refit_contains(scene, pipe.boxes)
 
 
 def test_candidates_contain_exact_pairs(device):
@@ -170,7 +171,7 @@ def test_refit_paths_agree(device):
     assert per_level.small_instance.shape[0] == 0 and per_instance.small_instance.shape[0] == 25
     assert 0 < mixed.small_instance.shape[0] < 25
     for bvh in (per_level, per_instance, mixed):
-        bvh.launch(scene)
+        bvh.refit(scene)
     ref = per_level.tree.node_lower.numpy(), per_level.tree.node_upper.numpy(), per_level.lower.numpy()
     for bvh in (per_instance, mixed):
         assert np.array_equal(bvh.tree.node_lower.numpy(), ref[0])

@@ -8,8 +8,9 @@ import types
 import numpy as np
 import pytest
 
-from conftest import DEFAULT_DEVICE
 from warp_ccd import cli
+
+from conftest import DEFAULT_DEVICE
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

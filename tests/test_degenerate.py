@@ -13,10 +13,11 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_segment_batch_kernel
+
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test
 from test_robustness import random_rotations
-from warp_ccd.narrow_phase import NARROW_METHODS, NARROW_TYPES, TOLERANCE
 
 T1 = [[0, 0, 0], [2, 0, 0], [0, 2, 0]]
 THIN = [[0, 0, 0], [10, 0, 0], [0, 0.0625, 0]]  # a sharp corner of about 0.36 degrees at (10, 0, 0)
@@ -109,35 +110,27 @@ TRANSFORMS = {
 }
 
 
+@pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("method", sorted(NARROW_METHODS))
 @pytest.mark.parametrize("where", sorted(TRANSFORMS))
-def test_crafted_degenerate_cases(device, method, where):
+def test_crafted_degenerate_cases(device, method, where, precision):
     offset, scale, rotation = TRANSFORMS[where]
     if rotation == "random":
         rotation = random_rotations(np.random.default_rng(5), 1)[0]
     ta, tb, expect = crafted(offset, scale, rotation)
     for a, b in ((ta, tb), (tb, ta), (ta[:, [1, 2, 0]], tb[:, [2, 0, 1]])):
-        got = run_test(a, b, device, method)
+        got = run_test(a, b, device, method, precision=precision)
         wrong = [n for n, g, e in zip(NAMES, got, expect) if g != e]
-        assert not wrong, f"{method}, {where}: wrong answers for {wrong}"
+        assert not wrong, f"{method} {precision}, {where}: wrong answers for {wrong}"
 
 
 @pytest.mark.parametrize("method", sorted(NARROW_METHODS))
 def test_crafted_degenerate_cases_float64_far(device, method):
     ta, tb, expect = crafted(offset=(1e8, -3e8, 2e8))
     for a, b in ((ta, tb), (tb, ta)):
-        got = run_kernel64(a, b, device, method)
+        got = run_test(a, b, device, method, precision="float64")
         wrong = [n for n, g, e in zip(NAMES, got, expect) if g != e]
         assert not wrong, f"{method}, float64 at 1e8: wrong answers for {wrong}"
-
-
-def run_kernel64(ta, tb, device, method="moller", tol=TOLERANCE):
-    out = wp.zeros(len(ta), dtype=wp.int32, device=device)
-    wp.launch(NARROW_TYPES["float64"].tri_tri_batch_kernel, dim=len(ta),
-              inputs=[wp.array(np.asarray(ta, np.float64), dtype=wp.vec3d, device=device),
-                      wp.array(np.asarray(tb, np.float64), dtype=wp.vec3d, device=device),
-                      NARROW_METHODS[method], wp.float64(tol)], outputs=[out], device=device)
-    return out.numpy().astype(bool)
 
 
 def segments(ta, tb, device, tol=TOLERANCE):
@@ -145,9 +138,9 @@ def segments(ta, tb, device, tol=TOLERANCE):
     n = len(ta)
     kind = wp.zeros(n, dtype=wp.int32, device=device)
     seg = wp.zeros((n, 2), dtype=wp.vec3, device=device)
-    wp.launch(NARROW_TYPES["float32"].tri_tri_segment_batch_kernel, dim=n,
+    wp.launch(tri_tri_segment_batch_kernel, dim=n,
               inputs=[wp.array(np.asarray(ta, np.float32), dtype=wp.vec3, device=device),
-                      wp.array(np.asarray(tb, np.float32), dtype=wp.vec3, device=device), tol],
+                      wp.array(np.asarray(tb, np.float32), dtype=wp.vec3, device=device), wp.float32(tol)],
               outputs=[kind, seg], device=device)
     return kind.numpy(), seg.numpy().reshape(n, 2, 3)
 
@@ -239,10 +232,9 @@ def test_random_degenerate_pairs_match_float64_reference(device, precision):
         ta, tb = ta.astype(np.float32).astype(np.float64), tb.astype(np.float32).astype(np.float64)
     must_hit, must_miss = touching_band(ta, tb, TOLERANCE)
     assert must_hit.mean() > 0.2 and must_miss.mean() > 0.2  # the sample holds both answers
-    run = run_test if precision == "float32" else run_kernel64
     for method in NARROW_METHODS:
         for a, b in ((ta, tb), (tb, ta)):
-            got = run(a, b, device, method)
+            got = run_test(a, b, device, method, precision=precision)
             missed = np.nonzero(must_hit & ~got)[0]
             false = np.nonzero(must_miss & got)[0]
             assert not len(missed), f"{method} {precision}: {len(missed)} touching pairs missed, e.g. {missed[:5]}"

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 import warp as wp
+
 from conftest import DEFAULT_DEVICE
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -4,19 +4,24 @@ import numpy as np
 import pytest
 import warp as wp
 
-from oracles import intersect_tri_tri_f64
+import warp_ccd as wc
 from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
 
+from oracles import intersect_tri_tri_f64
 
-def run_test(ta, tb, device, method="moller", tol=TOLERANCE):
-    ta = np.asarray(ta, np.float32).reshape(-1, 3, 3)
-    tb = np.asarray(tb, np.float32).reshape(-1, 3, 3)
+
+def run_test(ta, tb, device, method="moller", tol=TOLERANCE, precision="float32"):
+    """Verdicts of ``tri_tri_batch_kernel`` on pairs ``(P, 3, 3)``, computed in ``precision``."""
+    dtype, vec3, scalar = (np.float64, wp.vec3d, wp.float64) if precision == "float64" else (
+        np.float32, wp.vec3, wp.float32)
+    ta = np.asarray(ta, dtype).reshape(-1, 3, 3)
+    tb = np.asarray(tb, dtype).reshape(-1, 3, 3)
     out = wp.zeros(len(ta), dtype=wp.int32, device=device)
     wp.launch(
         tri_tri_batch_kernel,
         dim=len(ta),
-        inputs=[wp.array(ta, dtype=wp.vec3, device=device), wp.array(tb, dtype=wp.vec3, device=device),
-                NARROW_METHODS[method], tol],
+        inputs=[wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device),
+                NARROW_METHODS[method], scalar(tol)],
         outputs=[out],
         device=device,
     )
@@ -62,20 +67,21 @@ def crafted(offset=(0.0, 0.0, 0.0), scale=1.0):
     return ta, tb, expect
 
 
+@pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("method", sorted(NARROW_METHODS))
 @pytest.mark.parametrize(
     "offset, scale",
     [((0, 0, 0), 1.0), ((1e4, -1e4, 1e4), 1.0), ((0, 0, 0), 1e-4), ((3e-4, 1e-4, -2e-4), 1e-4), ((0, 0, 0), 1e3)],
     ids=["unit", "far", "tiny", "tiny_offset", "huge"],
 )
-def test_crafted_cases(device, method, offset, scale):
+def test_crafted_cases(device, method, offset, scale, precision):
     ta, tb, expect = crafted(offset, scale)
-    got = run_test(ta, tb, device, method)
+    got = run_test(ta, tb, device, method, precision=precision)
     wrong = [n for n, g, e in zip(NAMES, got, expect) if g != e]
-    assert not wrong, f"{method}: wrong answers for {wrong}"
+    assert not wrong, f"{method} {precision}: wrong answers for {wrong}"
     # symmetric: swapping the triangles, and cycling a triangle's vertices, change nothing
-    assert (run_test(tb, ta, device, method) == expect).all()
-    assert (run_test(ta[:, [1, 2, 0]], tb[:, [2, 0, 1]], device, method) == expect).all()
+    assert (run_test(tb, ta, device, method, precision=precision) == expect).all()
+    assert (run_test(ta[:, [1, 2, 0]], tb[:, [2, 0, 1]], device, method, precision=precision) == expect).all()
 
 
 def test_crafted_cases_match_warp_float64(device):
@@ -127,15 +133,16 @@ def test_random_pairs_far_and_scaled(device):
         assert mismatch.mean() < 1e-3, f"offset {off} scale {s}: {mismatch.sum()} changed"
 
 
+@pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("method", sorted(NARROW_METHODS))
-def test_nearly_parallel_but_apart(device, method):
+def test_nearly_parallel_but_apart(device, method, precision):
     """Two nearly parallel triangles side by side, about 16,000 tolerances apart: their parts within
     eps of each other's plane do not lie on one line, so they must not be projected onto one."""
     a = [[0, 0, 0], [3, 0, 0], [0, 1, 0]]
     b = [[-0.5, 0, -1e-5], [-0.5, 1, -1e-5], [-3, 0.5, -6e-5]]
     touching = [[-0.5 + 1e-6, 0.5, 0], [-0.5, 1, -1e-5], [-3, 0.5, -6e-5]]  # b moved to a's edge line
     touching[0][0] = 0.0
-    got = run_test([a, b, a, touching], [b, a, touching, a], device, method)
+    got = run_test([a, b, a, touching], [b, a, touching, a], device, method, precision=precision)
     assert got.tolist() == [False, False, True, True]
 
 
@@ -164,12 +171,33 @@ def near_parallel_pairs(rng, n, lift=0.0):
     return np.einsum("nij,nkj->nki", r, ta), np.einsum("nij,nkj->nki", r, tb)
 
 
+@pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("method", sorted(NARROW_METHODS))
-def test_near_parallel_crossings(device, method):
+def test_near_parallel_crossings(device, method, precision):
     """Snapping vertices within the tolerance to a nearly parallel plane must not lose a crossing."""
     rng = np.random.default_rng(17)
     ta, tb = near_parallel_pairs(rng, 20_000)
-    got = run_test(ta, tb, device, method)
+    got = run_test(ta, tb, device, method, precision=precision)
     assert got.all(), f"{(~got).sum()} of {len(got)} intersecting pairs missed"
     ta, tb = near_parallel_pairs(rng, 20_000, lift=2e-3)
-    assert not run_test(ta, tb, device, method).any()
+    assert not run_test(ta, tb, device, method, precision=precision).any()
+
+
+@wp.kernel
+def _user_float64_kernel(tri_a: wp.array2d[wp.vec3d], tri_b: wp.array2d[wp.vec3d], out: wp.array2d[wp.int32]):
+    """A user's own kernel: float64 vertices, the tolerance a float32 literal or constant."""
+    k = wp.tid()
+    a0, a1, a2 = tri_a[k, 0], tri_a[k, 1], tri_a[k, 2]
+    b0, b1, b2 = tri_b[k, 0], tri_b[k, 1], tri_b[k, 2]
+    out[k, 0] = wp.where(wc.tri_tri_moller(a0, a1, a2, b0, b1, b2, 1.0e-5), 1, 0)
+    out[k, 1] = wp.where(wc.tri_tri_edge_face(a0, a1, a2, b0, b1, b2, wc.TOLERANCE), 1, 0)
+
+
+def test_tests_called_from_a_user_kernel(device):
+    """The public tests take either precision, and a tolerance of the other one."""
+    ta, tb, expect = crafted(offset=(1e8, -3e8, 2e8))
+    out = wp.zeros((len(ta), 2), dtype=wp.int32, device=device)
+    wp.launch(_user_float64_kernel, dim=len(ta), inputs=[wp.array(ta, dtype=wp.vec3d, device=device),
+              wp.array(tb, dtype=wp.vec3d, device=device)], outputs=[out], device=device)
+    got = out.numpy().astype(bool)
+    assert np.array_equal(got[:, 0], expect) and np.array_equal(got[:, 1], expect)

@@ -5,6 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 
 

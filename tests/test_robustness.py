@@ -7,6 +7,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import warp_ccd as wc
+
 from oracles import intersect_tri_tri_f64
 from test_narrow_phase import run_test
 
@@ -214,16 +215,10 @@ def test_float64_moving_scene_matches_fcl(device):
 
 @pytest.mark.parametrize("method", ["moller", "edge_face"])
 def test_float64_crafted_cases_far(device, method):
-    from test_narrow_phase import crafted
-
-    from warp_ccd.narrow_phase import NARROW_METHODS, NARROW_TYPES
+    from test_narrow_phase import crafted, run_test
 
     ta, tb, expect = crafted(offset=(1e8, -3e8, 2e8), scale=1.0)
-    out = wp.zeros(len(ta), dtype=wp.int32, device=device)
-    wp.launch(NARROW_TYPES["float64"].tri_tri_batch_kernel, dim=len(ta),
-              inputs=[wp.array(ta, dtype=wp.vec3d, device=device), wp.array(tb, dtype=wp.vec3d, device=device),
-                      NARROW_METHODS[method], wp.float64(1e-5)], outputs=[out], device=device)
-    assert np.array_equal(out.numpy().astype(bool), expect)
+    assert np.array_equal(run_test(ta, tb, device, method, tol=1e-5, precision="float64"), expect)
 
 
 def test_precision_validation():

@@ -317,8 +317,9 @@ def test_orientation_layout_matches_gf_quath():
 
 
 def test_segment_markers(tmp_path, device):
-    import warp_ccd as wc
     from pxr import Usd, UsdGeom
+
+    import warp_ccd as wc
 
     scene = wc.Scene.random(150, seed=3, device=device)
     pipe = wc.CollisionPipeline(scene, segments=True)

@@ -16,8 +16,8 @@ from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .motion import EllipseMotion
 from .narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
 from .pipeline import CollisionPipeline, CollisionResult, collide
-from .scene import Scene
 from .preview import render_frame, save_preview
+from .scene import Scene
 from .shapes import SHAPES, icosphere, shape, validate_mesh
 from .usd import UsdAnimationWriter
 

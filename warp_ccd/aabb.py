@@ -1,9 +1,12 @@
-"""Axis-aligned bounding boxes of objects (the first stage of the seed design).
+"""Axis-aligned bounding boxes: object boxes, and the box helpers every stage shares.
 
-One thread per object takes the min/max of its world vertices, then pads the box by
-``margin_rel`` times its diagonal, so that pairs the narrow phase calls touching (its tolerance is
-relative to the triangles' size, at most the box diagonal) are never culled by the broad phase.
-Cost O(V) work, O(max vertices per object) depth.
+:class:`InstanceBounds`: one thread per object takes the min/max of its world vertices, then pads
+the box by ``margin_rel`` times its diagonal, so that pairs the narrow phase calls touching (its
+tolerance is relative to the triangles' size, at most the box diagonal) are never culled by the
+broad phase. Cost O(V) work, O(max vertices per object) depth.
+
+Boxes are float32 ``wp.vec3`` corners at every scene precision: :func:`box_lower32` /
+:func:`box_upper32` round a corner outward, :func:`boxes_overlap` tests two closed boxes.
 """
 
 
@@ -13,11 +16,24 @@ import warp as wp
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["BOUNDS_KERNELS", "InstanceBounds", "instance_bounds_kernel", "make_box_rounding", "vertex_bounds"]
+__all__ = ["InstanceBounds", "box_lower32", "box_upper32", "boxes_overlap", "vertex_bounds"]
 
 
 @wp.func
-def vertex_bounds(world_vertex: wp.array(dtype=Any), start: int, end: int):
+def boxes_overlap(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
+    """Closed boxes: True when they overlap or touch on every axis."""
+    return (
+        lo_a[0] <= hi_b[0]
+        and lo_b[0] <= hi_a[0]
+        and lo_a[1] <= hi_b[1]
+        and lo_b[1] <= hi_a[1]
+        and lo_a[2] <= hi_b[2]
+        and lo_b[2] <= hi_a[2]
+    )
+
+
+@wp.func
+def vertex_bounds(world_vertex: wp.array[Any], start: int, end: int):
     """Exact ``(lower, upper)`` of ``world_vertex[start:end]`` (``end > start``), in its own type."""
     lo = world_vertex[start]
     hi = lo
@@ -28,66 +44,67 @@ def vertex_bounds(world_vertex: wp.array(dtype=Any), start: int, end: int):
     return lo, hi
 
 
-ULP_PAD = 2.4e-7
+ULP_PAD = wp.constant(2.4e-7)
 """Relative outward padding (two float32 units in the last place) when float64 bounds become float32."""
 
-
-def make_box_rounding(S, V3):
-    """``(lower32, upper32)`` functions converting ``V3`` corners to float32 boxes, rounded outward."""
-    if S == wp.float32:
-
-        @wp.func
-        def lower32(x: V3) -> wp.vec3:
-            return x
-
-        @wp.func
-        def upper32(x: V3) -> wp.vec3:
-            return x
-
-    else:
-
-        @wp.func
-        def lower32(x: V3) -> wp.vec3:
-            f = wp.vec3(x)
-            pad = wp.vec3(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])) * ULP_PAD + wp.vec3(1.0e-30)
-            return f - pad
-
-        @wp.func
-        def upper32(x: V3) -> wp.vec3:
-            f = wp.vec3(x)
-            pad = wp.vec3(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])) * ULP_PAD + wp.vec3(1.0e-30)
-            return f + pad
-
-    return lower32, upper32
+BOX_PAD_MIN = wp.constant(1.0e-30)
+"""Absolute outward padding of a float64 corner rounded to float32 (for corners at zero)."""
 
 
-def _make_bounds_kernel(S, V3):
-    lower32, upper32 = make_box_rounding(S, V3)
-
-    @wp.kernel
-    def instance_bounds_kernel(
-        world_vertex: wp.array[V3],
-        instance_vertex_start: wp.array[wp.int32],
-        margin_rel: S,
-        # Outputs
-        instance_lower: wp.array[wp.vec3],
-        instance_upper: wp.array[wp.vec3],
-    ):
-        """One thread per object: padded AABB of its world vertices (float32, rounded outward)."""
-        i = wp.tid()
-        lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
-        pad = margin_rel * wp.length(hi - lo)
-        m = V3(pad, pad, pad)
-        instance_lower[i] = lower32(lo - m)
-        instance_upper[i] = upper32(hi + m)
-
-    return instance_bounds_kernel
+@wp.func
+def _rounding_pad(f: wp.vec3) -> wp.vec3:
+    """Outward padding of a float32 corner ``f`` rounded from float64: two units in the last place."""
+    return wp.vec3(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])) * ULP_PAD + wp.vec3(BOX_PAD_MIN)
 
 
-BOUNDS_KERNELS = {"float32": _make_bounds_kernel(wp.float32, wp.vec3), "float64": _make_bounds_kernel(wp.float64, wp.vec3d)}
-"""Object-box kernels by scene precision."""
+# A box corner as float32 (boxes are float32 at every precision), rounded outward: a float32
+# corner as it is, a float64 one padded by two units in the last place (one overload each).
+@wp.func
+def box_lower32(x: wp.vec3) -> wp.vec3:
+    """Lower corner ``x`` as a float32 corner at or below it."""
+    return x
 
-instance_bounds_kernel = BOUNDS_KERNELS["float32"]
+
+@wp.func
+def box_lower32(x: wp.vec3d) -> wp.vec3:  # noqa: F811 (the float64 overload)
+    """Lower corner ``x`` as a float32 corner at or below it."""
+    f = wp.vec3(x)
+    return f - _rounding_pad(f)
+
+
+@wp.func
+def box_upper32(x: wp.vec3) -> wp.vec3:
+    """Upper corner ``x`` as a float32 corner at or above it."""
+    return x
+
+
+@wp.func
+def box_upper32(x: wp.vec3d) -> wp.vec3:  # noqa: F811 (the float64 overload)
+    """Upper corner ``x`` as a float32 corner at or above it."""
+    f = wp.vec3(x)
+    return f + _rounding_pad(f)
+
+
+@wp.kernel
+def _instance_bounds_kernel(
+    world_vertex: wp.array[Any],
+    instance_vertex_start: wp.array[wp.int32],
+    margin_rel: Any,
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per object: padded AABB of its world vertices (float32, rounded outward)."""
+    i = wp.tid()
+    lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
+    pad = margin_rel * wp.length(hi - lo)
+    m = type(lo)(pad, pad, pad)
+    instance_lower[i] = box_lower32(lo - m)
+    instance_upper[i] = box_upper32(hi + m)
+
+
+for _scalar, _vec3 in ((wp.float32, wp.vec3), (wp.float64, wp.vec3d)):
+    wp.overload(_instance_bounds_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
 
 
 class InstanceBounds:
@@ -105,14 +122,19 @@ class InstanceBounds:
         self.lower = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
         self.upper = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
 
-    def launch(self, scene) -> None:
+    @property
+    def counters(self) -> list:
+        """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
+        return []
+
+    def refit(self, scene) -> None:
         """Computes the boxes from ``scene.world_vertex`` and ``scene.instance_vertex_start``."""
         if self.lower.shape[0] == 0:
             return
         wp.launch(
-            BOUNDS_KERNELS[scene.precision],
+            _instance_bounds_kernel,
             dim=self.lower.shape[0],
-            inputs=[scene.world_vertex, scene.instance_vertex_start, scene.types.scalar(self.margin_rel)],
+            inputs=[scene.world_vertex, scene.instance_vertex_start, scene.scalar_type(self.margin_rel)],
             outputs=[self.lower, self.upper],
             device=self.device,
         )

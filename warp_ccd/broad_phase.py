@@ -1,11 +1,12 @@
 """Broad phase: which pairs of axis-aligned boxes overlap.
 
 Two implementations behind one interface (``launch(lower, upper, pairs)`` writes pairs ``(a, b)``,
-``a < b``, into a :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i``; boxes are closed, so
-touching boxes overlap):
+``a < b``, into a :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i``, and ``counters`` lists
+the buffers of its own whose counters the caller checks after it; boxes are closed, so touching
+boxes overlap):
 
-* :class:`BroadPhaseNxN`, the reference: one thread per pair index ``k < N (N - 1) / 2`` (the
-  seed's step 1.4). O(N^2) work, exact, limited to 65,536 boxes.
+* :class:`BroadPhaseNxN`, the reference: one thread per pair index ``k < N (N - 1) / 2``. O(N^2)
+  work, exact, limited to 65,536 boxes.
 * :class:`BroadPhaseSAP`, the default: sort-based sweep and prune on a grid (Liu et al. 2010).
 
 Sweep and prune, as run on the device each frame:
@@ -36,7 +37,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .buffers import GrowableBuffer, read_counts, reserve_slot, used_count
+from .aabb import boxes_overlap
+from .buffers import CounterRead, GrowableBuffer, emit_pair, launch_until_fit, used_count
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -46,33 +48,12 @@ NXN_MAX_BOXES = 65536
 """The reference enumerates pair indices in int32: at most ``65536 * 65535 / 2 < 2**31`` pairs."""
 
 
-@wp.func
-def boxes_overlap(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
-    """Closed boxes: True when they overlap or touch on every axis."""
-    return (
-        lo_a[0] <= hi_b[0]
-        and lo_b[0] <= hi_a[0]
-        and lo_a[1] <= hi_b[1]
-        and lo_b[1] <= hi_a[1]
-        and lo_a[2] <= hi_b[2]
-        and lo_b[2] <= hi_a[2]
-    )
-
-
-@wp.func
-def emit_pair(a: int, b: int, pair: wp.array[wp.vec2i], pair_count: wp.array[wp.int64], pair_capacity: int):
-    """Appends ``(min, max)`` through the capacity + counter protocol."""
-    slot = reserve_slot(pair_count, pair_capacity)
-    if slot >= 0:
-        pair[slot] = wp.vec2i(wp.min(a, b), wp.max(a, b))
-
-
 # ---------------------------------------------------------------------------------------------
 # Reference: all pairs
 
 
 @wp.kernel
-def nxn_kernel(
+def _nxn_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     pair_capacity: int,
@@ -105,6 +86,11 @@ class BroadPhaseNxN:
     def __init__(self, *, device=None):
         self.device = wp.get_device(device)
 
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        return []
+
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes ``lower``/``upper`` into ``pairs``.
 
@@ -117,7 +103,7 @@ class BroadPhaseNxN:
         if num_pairs == 0:
             return
         wp.launch(
-            nxn_kernel,
+            _nxn_kernel,
             dim=num_pairs,
             inputs=[lower, upper, pairs.capacity],
             outputs=[pairs.data, pairs.count],
@@ -146,12 +132,27 @@ class SapGrid:
     qscale: wp.float64
 
 
-QKEY_MAX = 4294967295.0
+QKEY_MAX = wp.constant(wp.float64(4294967295.0))
 """Largest quantised lower bound (low 32 bits of a sort key)."""
+
+KEY_CELL_UNIT = wp.constant(wp.int64(4294967296))
+"""A sort key is ``cell * KEY_CELL_UNIT + quantised lower bound``: the cell id in the high 32 bits."""
+
+KEY_CELL_SHIFT = wp.constant(wp.int64(32))
+"""``key >> KEY_CELL_SHIFT`` is the cell id."""
+
+KEY_LOW_MASK = wp.constant(wp.int64(4294967295))
+"""``key & KEY_LOW_MASK`` is the quantised lower bound."""
+
+KEY_PAD = 9223372036854775807
+"""Sort key of unused entries (the largest int64): they sort after every real entry."""
+
+GRID_CELLS_MAX = wp.constant(32768)
+"""Most grid cells along each axis of the grid perpendicular to the sweep axis."""
 
 
 @wp.kernel
-def sap_stats_kernel(
+def _sap_stats_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     num_boxes: int,
@@ -200,7 +201,7 @@ def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: fl
 
 
 @wp.kernel
-def sap_setup_kernel(
+def _sap_setup_kernel(
     num_boxes: int,
     stat_lo: wp.array[wp.float32],
     stat_hi: wp.array[wp.float32],
@@ -223,7 +224,7 @@ def sap_setup_kernel(
     g.axis = best
     g.ay = (best + 1) % 3
     g.az = (best + 2) % 3
-    max_cells = 32767.0
+    max_cells = float(GRID_CELLS_MAX - 1)
     span_y = stat_hi[g.ay] - stat_lo[g.ay]
     span_z = stat_hi[g.az] - stat_lo[g.az]
     cell_y = _cell_size(float(stat_sum[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
@@ -232,13 +233,13 @@ def sap_setup_kernel(
     g.origin_z = stat_lo[g.az]
     g.inv_cell_y = 1.0 / cell_y
     g.inv_cell_z = 1.0 / cell_z
-    g.ny = wp.min(int(span_y / cell_y) + 1, 32768)
-    g.nz = wp.min(int(span_z / cell_z) + 1, 32768)
+    g.ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
+    g.nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
     g.axis_min = wp.float64(stat_lo[best])
     span = wp.float64(stat_hi[best]) - g.axis_min
     g.qscale = wp.float64(0.0)
     if span > wp.float64(0.0):
-        g.qscale = wp.float64(QKEY_MAX) / span
+        g.qscale = QKEY_MAX / span
     grid[0] = g
 
 
@@ -254,12 +255,12 @@ def _cell(x: float, origin: float, inv_cell: float, count: int) -> int:
 def _quantise(x: float, g: SapGrid) -> wp.int64:
     """Monotonic 32-bit quantisation of ``x`` along the sweep axis."""
     q = wp.floor((wp.float64(x) - g.axis_min) * g.qscale)
-    q = wp.clamp(q, wp.float64(0.0), wp.float64(QKEY_MAX))
+    q = wp.clamp(q, wp.float64(0.0), QKEY_MAX)
     return wp.int64(q)
 
 
 @wp.kernel
-def sap_count_kernel(
+def _sap_count_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
@@ -284,13 +285,7 @@ def sap_count_kernel(
 
 
 @wp.kernel
-def sap_fill_kernel(entry_key: wp.array[wp.int64]):
-    """Pads the whole key buffer with the largest key (padding sorts last)."""
-    entry_key[wp.tid()] = wp.int64(9223372036854775807)
-
-
-@wp.kernel
-def sap_emit_kernel(
+def _sap_emit_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
@@ -321,13 +316,13 @@ def sap_emit_kernel(
         for z in range(z0, z1 + 1):
             if slot < wp.int64(entry_capacity):
                 cell = wp.int64(y * g.nz + z)
-                entry_key[int(slot)] = cell * wp.int64(4294967296) + q
+                entry_key[int(slot)] = cell * KEY_CELL_UNIT + q
                 entry_box[int(slot)] = i
             slot += wp.int64(1)
 
 
 @wp.kernel
-def sap_sweep_kernel(
+def _sap_sweep_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
@@ -347,7 +342,7 @@ def sap_sweep_kernel(
         return
     g = grid[0]
     key = entry_key[e]
-    cell = key >> wp.int64(32)
+    cell = key >> KEY_CELL_SHIFT
     i = entry_box[e]
     lo_i = lower[i]
     hi_i = upper[i]
@@ -356,9 +351,9 @@ def sap_sweep_kernel(
     cz = int(cell) - cy * g.nz
     for f in range(e + 1, total):
         key_f = entry_key[f]
-        if (key_f >> wp.int64(32)) != cell:
+        if (key_f >> KEY_CELL_SHIFT) != cell:
             break
-        if (key_f & wp.int64(4294967295)) > q_hi:
+        if (key_f & KEY_LOW_MASK) > q_hi:
             break
         j = entry_box[f]
         lo_j = lower[j]
@@ -372,7 +367,7 @@ def sap_sweep_kernel(
 
 
 @wp.kernel
-def sap_big_kernel(
+def _sap_big_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     entry_count: wp.array[wp.int64],
@@ -423,8 +418,6 @@ class BroadPhaseSAP:
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
         self.num_boxes = -1
         self.entry = GrowableBuffer(wp.int64, 1024, d, "sap grid entries", factor=2)
-        self._init_lo = wp.array(np.full(3, 1e30, np.float32), device=d)
-        self._init_hi = wp.array(np.full(3, -1e30, np.float32), device=d)
 
     def _resize(self, n: int) -> None:
         if n == self.num_boxes:
@@ -445,7 +438,8 @@ class BroadPhaseSAP:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers whose counters the caller checks after :meth:`launch` (the grid entries)."""
+        """Buffers of its own that :meth:`launch` writes, whose counters the caller checks after
+        it (besides ``pairs``): the grid entries."""
         return [self.entry]
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
@@ -459,28 +453,28 @@ class BroadPhaseSAP:
         if n < 2:
             return
         d = self.device
-        wp.copy(self.stat_lo, self._init_lo)
-        wp.copy(self.stat_hi, self._init_hi)
+        self.stat_lo.fill_(1.0e30)
+        self.stat_hi.fill_(-1.0e30)
         self.stat_sum.zero_()
         self.big_count.zero_()
-        wp.launch(sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
+        wp.launch(_sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
                   outputs=[self.stat_lo, self.stat_hi, self.stat_sum], device=d)
-        wp.launch(sap_setup_kernel, dim=1, inputs=[n, self.stat_lo, self.stat_hi, self.stat_sum, self.cell_scale],
+        wp.launch(_sap_setup_kernel, dim=1, inputs=[n, self.stat_lo, self.stat_hi, self.stat_sum, self.cell_scale],
                   outputs=[self.grid], device=d)
-        wp.launch(sap_count_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box],
+        wp.launch(_sap_count_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box],
                   outputs=[self.entry_count, self.big_box, self.big_count], device=d)
         wp.utils.array_scan(self.entry_count, self.entry_start, inclusive=False)
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        wp.launch(sap_fill_kernel, dim=cap, inputs=[key], device=d)
-        wp.launch(sap_emit_kernel, dim=n,
+        key[:cap].fill_(KEY_PAD)  # padding sorts last
+        wp.launch(_sap_emit_kernel, dim=n,
                   inputs=[lower, upper, self.grid, self.entry_count, self.entry_start, cap],
                   outputs=[key, box, self.entry.count], device=d)
         wp.utils.radix_sort_pairs(key, box, cap)
-        wp.launch(sap_sweep_kernel, dim=cap,
+        wp.launch(_sap_sweep_kernel, dim=cap,
                   inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, pairs.capacity],
                   outputs=[pairs.data, pairs.count], device=d)
-        wp.launch(sap_big_kernel, dim=n,
+        wp.launch(_sap_big_kernel, dim=n,
                   inputs=[lower, upper, self.entry_count, self.big_box, self.big_count, pairs.capacity],
                   outputs=[pairs.data, pairs.count], device=d)
 
@@ -497,23 +491,17 @@ def make_broad_phase(method: str, *, device=None):
 def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> int:
     """Runs a broad phase until its buffers hold everything; returns the number of pairs.
 
-    Resets ``pairs`` and the broad phase's own ``counters`` (if any), launches, reads all
-    counters with one synchronisation, grows what overflowed and launches again if needed.
+    Resets ``pairs`` and the broad phase's own ``counters``, launches, reads all counters with one
+    synchronisation, grows what overflowed and launches again if needed
+    (:func:`~warp_ccd.buffers.launch_until_fit`).
 
     Args:
-        broad: an object with ``launch(lower, upper, pairs)`` (and optionally ``counters``).
+        broad: an object with ``launch(lower, upper, pairs)`` and ``counters``.
         lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
         pairs: ``wp.vec2i`` output buffer.
     """
-    buffers = [pairs, *getattr(broad, "counters", [])]
-    while True:
-        for b in buffers:
-            b.reset()
-        broad.launch(lower, upper, pairs)
-        counts = read_counts([b.count for b in buffers], pairs.device)
-        grew = [b.ensure(c) for b, c in zip(buffers, counts)]
-        if not any(grew):
-            return counts[0]
+    counters = CounterRead([pairs, *broad.counters], pairs.device)
+    return launch_until_fit(lambda: broad.launch(lower, upper, pairs), counters)[0]
 
 
 def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:

@@ -1,20 +1,36 @@
-"""Output buffers with a capacity and a counter.
+"""Output buffers with a capacity and a counter, and the loop that makes every item fit.
 
 A kernel that emits items reserves a slot with :func:`reserve_slot` (an atomic add on the int64
 counter) and writes only while the slot is below the capacity; the counter keeps counting past it,
-in 64 bits, so it cannot wrap. After the frame the
-host reads the counter once: if it passed the capacity, the buffer grows and the stage runs
-again, so no item is ever dropped silently.
+in 64 bits, so it cannot wrap. After the frame the host reads all counters once
+(:class:`CounterRead`): if one passed its capacity, that buffer grows and the frame runs again
+(:func:`launch_until_fit`), so no item is ever dropped silently.
+
+Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
+protocol) and :func:`upper_bound` (which block of a scanned count a flat work item falls in).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import warp as wp
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["COUNT_LIMIT", "GrowableBuffer", "read_counts", "reserve_slot", "used_count"]
+__all__ = [
+    "COUNT_LIMIT",
+    "CounterRead",
+    "GrowableBuffer",
+    "emit_pair",
+    "launch_until_fit",
+    "read_counts",
+    "reserve_slot",
+    "upper_bound",
+    "used_count",
+]
 
 COUNT_LIMIT = 2**31 - 1
 """Items are indexed in int32: a stage that would need more items than this raises OverflowError."""
@@ -35,6 +51,29 @@ def used_count(count: wp.array[wp.int64], capacity: int) -> int:
     return int(wp.min(count[0], wp.int64(capacity)))
 
 
+@wp.func
+def emit_pair(a: int, b: int, pair: wp.array[wp.vec2i], pair_count: wp.array[wp.int64], pair_capacity: int):
+    """Appends the object pair ``(min(a, b), max(a, b))`` through the capacity + counter protocol."""
+    slot = reserve_slot(pair_count, pair_capacity)
+    if slot >= 0:
+        pair[slot] = wp.vec2i(wp.min(a, b), wp.max(a, b))
+
+
+@wp.func
+def upper_bound(values: wp.array[Any], first: int, end: int, x: Any) -> int:
+    """First index ``k`` in ``[first, end)`` with ``values[k] > x`` (``end`` when there is none), for
+    ``values`` sorted ascending. Over the ends of scanned counts, the block flat item ``x`` lies in."""
+    lo = first
+    hi = end
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] > x:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 class GrowableBuffer:
     """``data`` (capacity items of ``dtype``) plus ``count`` (int64, one element) on one device.
 
@@ -44,6 +83,10 @@ class GrowableBuffer:
         device: Warp device.
         name: what the buffer holds, for error messages.
         factor: storage is ``factor * capacity`` items (2 for radix-sort scratch).
+
+    Attributes:
+        last_count: the counter as the host last read it (:class:`CounterRead`), 0 before; once
+            the frame fits, the number of items held.
     """
 
     def __init__(self, dtype, capacity: int, device, name: str, factor: int = 1):
@@ -52,6 +95,7 @@ class GrowableBuffer:
         self.name = name
         self.factor = factor
         self.capacity = 0
+        self.last_count = 0
         self.count = wp.zeros(1, dtype=wp.int64, device=self.device)
         self._allocate(max(1, int(capacity)))
 
@@ -84,7 +128,71 @@ class GrowableBuffer:
         if count:
             return self.data[:count].numpy()
         length = getattr(self.dtype, "_length_", None)
-        return np.zeros((0,) if length is None else (0, length), dtype=wp.dtype_to_numpy(getattr(self.dtype, "_wp_scalar_type_", self.dtype)))
+        scalar = wp.dtype_to_numpy(getattr(self.dtype, "_wp_scalar_type_", self.dtype))
+        return np.zeros((0,) if length is None else (0, length), dtype=scalar)
+
+    def held(self) -> wp.array:
+        """The items held after the last read (``data[:last_count]``), a view on the device."""
+        return self.data[: min(self.last_count, self.capacity)]
+
+
+class CounterRead:
+    """The counters of several buffers, copied to the host together and read with one wait.
+
+    :meth:`enqueue` only enqueues copies into pinned host memory, so a frame that ends with it
+    can be captured in a CUDA graph; :meth:`finish` waits, records each buffer's
+    :attr:`~GrowableBuffer.last_count` and grows the buffers that overflowed.
+
+    Args:
+        buffers: the buffers, fixed for the reader's life (their storage may grow).
+        device: Warp device of the buffers.
+    """
+
+    def __init__(self, buffers: Sequence[GrowableBuffer], device):
+        self.buffers = list(buffers)
+        self.device = wp.get_device(device)
+        self.host = wp.zeros(max(1, len(self.buffers)), dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        self.counts = [0] * len(self.buffers)
+
+    def reset(self) -> None:
+        """Zeroes every counter (device work, no wait)."""
+        for b in self.buffers:
+            b.reset()
+
+    def enqueue(self) -> None:
+        """Copies every counter to the host (asynchronous; capturable)."""
+        for k, b in enumerate(self.buffers):
+            wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
+
+    def finish(self) -> bool:
+        """Waits for the device, records the counts; returns True when a buffer grew (run again).
+
+        Raises:
+            OverflowError: a counter reached :data:`COUNT_LIMIT`.
+        """
+        wp.synchronize_device(self.device)
+        self.counts = [int(c) for c in self.host.numpy()[: len(self.buffers)]]
+        grew = False
+        for b, c in zip(self.buffers, self.counts):
+            b.last_count = c
+            grew |= b.ensure(c)
+        return grew
+
+
+def launch_until_fit(launch: Callable[[], None], counters: CounterRead) -> list[int]:
+    """Resets the counters, runs ``launch()``, reads the counters once; while a buffer overflowed
+    (it has grown since), runs again. Returns the counts of the run where everything fitted.
+
+    Args:
+        launch: enqueues the work on the counters' device; reads nothing on the host.
+        counters: the :class:`CounterRead` of every buffer ``launch`` writes.
+    """
+    while True:
+        counters.reset()
+        launch()
+        counters.enqueue()
+        if not counters.finish():
+            return counters.counts
 
 
 def read_counts(counts: list[wp.array], device) -> list[int]:

@@ -2,10 +2,10 @@
 
 Build (host, numpy, once per shape, vectorised level by level): the root holds all triangles;
 each node with more than ``leaf_size`` triangles is split at the median of its triangles'
-centroids along the longest axis of its bounds (the seed's balanced strategy), so the tree is
-balanced with ``ceil(log2(m / leaf_size)) + 1`` levels. Triangles are presorted by centroid along each
-axis once; splitting a level is then a stable partition of the three sorted lists (O(m) per
-level, O(m log m) in all; 1.5 s for a 1.3M-triangle shape on one CPU core).
+centroids along the longest axis of its bounds, so the tree is balanced with
+``ceil(log2(m / leaf_size)) + 1`` levels. Triangles are presorted by centroid along each axis
+once; splitting a level is then a stable partition of the three sorted lists (O(m) per level,
+O(m log m) in all; 1.5 s for a 1.3M-triangle shape on one CPU core).
 
 Stored flat, topology shared by every instance of a shape:
 
@@ -27,17 +27,18 @@ the caller writes world vertices, refit does the rest.
 """
 
 
-from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import warp as wp
 
-from .aabb import make_box_rounding
-from .scene import SCENE_TYPES
+from .aabb import box_lower32, box_upper32
+from .buffers import upper_bound
+from .scene import PRECISIONS, MeshTopology, mesh_triangle, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["SceneBVH", "ShapeTree", "build_tree", "refit_level_kernel"]
+__all__ = ["SceneBVH", "ShapeTree", "TreeView", "build_tree"]
 
 
 class ShapeTree:
@@ -144,7 +145,8 @@ def build_tree(vertices: np.ndarray, triangles: np.ndarray, leaf_size: int = 1) 
     node_child = np.concatenate(child).astype(np.int32)
     node_parent = np.concatenate(parent).astype(np.int32)
     node_triangle = np.concatenate(tri_range).astype(np.int32)
-    return ShapeTree(node_child, node_parent, node_triangle, lists[0].astype(np.int32), np.asarray(level_start, np.int32))
+    tri_order = lists[0].astype(np.int32)
+    return ShapeTree(node_child, node_parent, node_triangle, tri_order, np.asarray(level_start, np.int32))
 
 
 @wp.struct
@@ -161,112 +163,100 @@ class TreeView:
     node_upper: wp.array[wp.vec3]
 
 
-def _make_refit_kernel(types):
-    S = types.scalar
-    V3 = types.vec3
-    View = types.MeshView
-    mesh_triangle = types.mesh_triangle
-    lower32, upper32 = make_box_rounding(S, V3)
-
-    @wp.func
-    def _refit_node(
-        mesh: View,
-        tree: TreeView,
-        s: int,
-        inst: int,
-        node: int,
-        margin_rel: S,
-        instance_lower: wp.array[wp.vec3],
-        instance_upper: wp.array[wp.vec3],
-    ):
-        """Box of ``node`` (local id in shape ``s``) of instance ``inst``: from its triangles (leaf,
-        padded by the tolerance) or its children's boxes; the root's box is the object's box."""
-        shape_node = tree.shape_node_start[s] + node
-        slot = tree.instance_node_start[inst] + node
-        child = tree.node_child[shape_node]
-        lo = wp.vec3(0.0)
-        hi = wp.vec3(0.0)
-        if child[0] < 0:
-            rng = tree.node_triangle[shape_node]
-            base = tree.shape_tri_order_start[s]
-            lo = wp.vec3(1.0e30)
-            hi = wp.vec3(-1.0e30)
-            for k in range(rng[0], rng[0] + rng[1]):
-                a, b, c = mesh_triangle(mesh, inst, tree.tri_order[base + k])
-                edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
-                pad = V3(margin_rel * edge, margin_rel * edge, margin_rel * edge)
-                lo = wp.min(lo, lower32(wp.min(wp.min(a, b), c) - pad))
-                hi = wp.max(hi, upper32(wp.max(wp.max(a, b), c) + pad))
-        else:
-            base_slot = tree.instance_node_start[inst]
-            lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
-            hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
-        tree.node_lower[slot] = lo
-        tree.node_upper[slot] = hi
-        if node == 0:
-            instance_lower[inst] = lo
-            instance_upper[inst] = hi
-
-    @wp.kernel
-    def refit_level_kernel(
-        mesh: View,
-        tree: TreeView,
-        block_start: wp.array[wp.int32],
-        level_first: wp.array[wp.int32],
-        level_count: wp.array[wp.int32],
-        shape_instance: wp.array[wp.int32],
-        shape_instance_start: wp.array[wp.int32],
-        margin_rel: S,
-        # Outputs
-        instance_lower: wp.array[wp.vec3],
-        instance_upper: wp.array[wp.vec3],
-    ):
-        """One thread per (instance, node of this level): leaf box from triangles, else children union.
-
-        Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
-        (its instances times its nodes on this level).
-        """
-        t = wp.tid()
-        lo_s = int(0)
-        hi_s = block_start.shape[0] - 1
-        while lo_s + 1 < hi_s:  # last s with block_start[s] <= t
-            mid = (lo_s + hi_s) / 2
-            if block_start[mid] <= t:
-                lo_s = mid
-            else:
-                hi_s = mid
-        s = lo_s
-        local = t - block_start[s]
-        cnt = level_count[s]
-        inst = shape_instance[shape_instance_start[s] + local / cnt]
-        node = level_first[s] + local % cnt
-        _refit_node(mesh, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
-
-    @wp.kernel
-    def refit_instance_kernel(
-        mesh: View,
-        tree: TreeView,
-        small_instance: wp.array[wp.int32],
-        margin_rel: S,
-        # Outputs
-        instance_lower: wp.array[wp.vec3],
-        instance_upper: wp.array[wp.vec3],
-    ):
-        """One thread per instance of a small shape: all its nodes, children before parents
-        (reverse breadth-first order). One launch instead of one per level."""
-        inst = small_instance[wp.tid()]
-        s = mesh.instance_shape[inst]
-        num_nodes = tree.shape_node_start[s + 1] - tree.shape_node_start[s]
-        for k in range(num_nodes):
-            _refit_node(mesh, tree, s, inst, num_nodes - 1 - k, margin_rel, instance_lower, instance_upper)
-
-    return SimpleNamespace(level=refit_level_kernel, instance=refit_instance_kernel)
+@wp.func
+def _refit_node(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    tree: TreeView,
+    s: int,
+    inst: int,
+    node: int,
+    margin_rel: Any,
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """Box of ``node`` (local id in shape ``s``) of instance ``inst``: from its triangles (leaf,
+    padded by the tolerance) or its children's boxes; the root's box is the object's box."""
+    shape_node = tree.shape_node_start[s] + node
+    slot = tree.instance_node_start[inst] + node
+    child = tree.node_child[shape_node]
+    lo = wp.vec3(0.0)
+    hi = wp.vec3(0.0)
+    if child[0] < 0:
+        rng = tree.node_triangle[shape_node]
+        base = tree.shape_tri_order_start[s]
+        lo = wp.vec3(1.0e30)
+        hi = wp.vec3(-1.0e30)
+        for k in range(rng[0], rng[0] + rng[1]):
+            a, b, c = mesh_triangle(mesh, world_vertex, inst, tree.tri_order[base + k])
+            edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+            pad = type(a)(margin_rel * edge, margin_rel * edge, margin_rel * edge)
+            lo = wp.min(lo, box_lower32(wp.min(wp.min(a, b), c) - pad))
+            hi = wp.max(hi, box_upper32(wp.max(wp.max(a, b), c) + pad))
+    else:
+        base_slot = tree.instance_node_start[inst]
+        lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
+        hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
+    tree.node_lower[slot] = lo
+    tree.node_upper[slot] = hi
+    if node == 0:
+        instance_lower[inst] = lo
+        instance_upper[inst] = hi
 
 
-REFIT_KERNELS = {p: _make_refit_kernel(SCENE_TYPES[p]) for p in SCENE_TYPES}
-"""Refit kernels by scene precision (``level``, ``instance``); node boxes are float32, rounded outward."""
+@wp.kernel
+def _refit_level_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    tree: TreeView,
+    block_start: wp.array[wp.int32],
+    level_first: wp.array[wp.int32],
+    level_count: wp.array[wp.int32],
+    shape_instance: wp.array[wp.int32],
+    shape_instance_start: wp.array[wp.int32],
+    margin_rel: Any,
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per (instance, node of this level): leaf box from triangles, else children union.
 
-refit_level_kernel = REFIT_KERNELS["float32"].level
+    Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
+    (its instances times its nodes on this level).
+    """
+    t = wp.tid()
+    s = upper_bound(block_start, 0, block_start.shape[0], t) - 1  # last s with block_start[s] <= t
+    local = t - block_start[s]
+    cnt = level_count[s]
+    inst = shape_instance[shape_instance_start[s] + local / cnt]
+    node = level_first[s] + local % cnt
+    _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
+
+
+@wp.kernel
+def _refit_instance_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    tree: TreeView,
+    small_instance: wp.array[wp.int32],
+    margin_rel: Any,
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per instance of a small shape: all its nodes, children before parents
+    (reverse breadth-first order). One launch instead of one per level."""
+    inst = small_instance[wp.tid()]
+    s = mesh.instance_shape[inst]
+    num_nodes = tree.shape_node_start[s + 1] - tree.shape_node_start[s]
+    for k in range(num_nodes):
+        _refit_node(mesh, world_vertex, tree, s, inst, num_nodes - 1 - k, margin_rel, instance_lower, instance_upper)
+
+
+for _precision in PRECISIONS:
+    _scalar, _vec3, _ = precision_types(_precision)
+    for _kernel in (_refit_level_kernel, _refit_instance_kernel):
+        wp.overload(_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
 
 
 class SceneBVH:
@@ -282,7 +272,7 @@ class SceneBVH:
             are refit level by level, one thread per node.
 
     Attributes:
-        lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`launch`.
+        lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`refit`.
         tree: the :class:`TreeView` struct for kernels.
         trees: per-shape :class:`ShapeTree` (host).
     """
@@ -339,7 +329,10 @@ class SceneBVH:
         tv.shape_node_start = wp.array(self.shape_node_start_np, dtype=wp.int32, device=d)
         tri_len = np.array([len(tr.tri_order) for tr in self.trees], np.int64)
         tv.shape_tri_order_start = wp.array(np.concatenate([[0], np.cumsum(tri_len)]).astype(np.int32), device=d)
-        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape, np.int32))
+
+        def cat(xs, shape):
+            return np.concatenate(xs) if xs else np.zeros(shape, np.int32)
+
         tv.node_child = wp.array(cat([tr.node_child for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
         tv.node_triangle = wp.array(cat([tr.node_triangle for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
         tv.tri_order = wp.array(cat([tr.tri_order for tr in self.trees], (0,)), dtype=wp.int32, device=d)
@@ -350,23 +343,27 @@ class SceneBVH:
         self.lower = wp.zeros(n, dtype=wp.vec3, device=d)
         self.upper = wp.zeros(n, dtype=wp.vec3, device=d)
 
-    def launch(self, scene) -> None:
-        """Refits all node bounds from ``scene.world_vertex``: small trees in one launch, the
-        others deepest level first."""
-        view = scene.mesh_view()
-        kernels = REFIT_KERNELS[scene.precision]
-        margin = scene.types.scalar(self.margin_rel)
+    @property
+    def counters(self) -> list:
+        """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
+        return []
+
+    def refit(self, scene) -> None:
+        """Refits all node bounds (and the object boxes) from ``scene.world_vertex``: small trees
+        in one launch, the others deepest level first."""
+        margin = scene.scalar_type(self.margin_rel)
         if self.small_instance.shape[0]:
-            wp.launch(kernels.instance, dim=self.small_instance.shape[0],
-                      inputs=[view, self.tree, self.small_instance, margin],
+            wp.launch(_refit_instance_kernel, dim=self.small_instance.shape[0],
+                      inputs=[scene.topology, scene.world_vertex, self.tree, self.small_instance, margin],
                       outputs=[self.lower, self.upper], device=self.device)
         for items, block, first, count in reversed(self.levels):
             if items == 0:
                 continue
             wp.launch(
-                kernels.level,
+                _refit_level_kernel,
                 dim=items,
-                inputs=[view, self.tree, block, first, count, self.shape_instance, self.shape_instance_start, margin],
+                inputs=[scene.topology, scene.world_vertex, self.tree, block, first, count, self.shape_instance,
+                        self.shape_instance_start, margin],
                 outputs=[self.lower, self.upper],
                 device=self.device,
             )

@@ -48,7 +48,8 @@ def _count(minimum: int):
 
 
 def _build_parser() -> OneLineParser:
-    parser = OneLineParser(prog=PROG, description="Collision detection among many moving triangle meshes (NVIDIA Warp).")
+    parser = OneLineParser(prog=PROG,
+                           description="Collision detection among many moving triangle meshes (NVIDIA Warp).")
     sub = parser.add_subparsers(dest="command", metavar="{demo,bench}", parser_class=OneLineParser)
     sub.required = True
 

@@ -18,25 +18,25 @@ from __future__ import annotations
 
 import warp as wp
 
-from .broad_phase import boxes_overlap
-from .buffers import GrowableBuffer, reserve_slot, used_count
+from .aabb import boxes_overlap
+from .buffers import GrowableBuffer, reserve_slot, upper_bound, used_count
 from .bvh import SceneBVH, TreeView
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = [
-    "MidPhaseAllPairs",
-    "MidPhaseBVH",
-    "all_pairs_count_kernel",
-    "all_pairs_write_kernel",
-    "traverse_kernel",
-    "traverse_work_kernel",
-]
+__all__ = ["MidPhaseAllPairs", "MidPhaseBVH"]
 
 STACK_SIZE = 64
 """Traversal stack entries per thread: enough for two trees of depth 31 (2**31 triangles each)."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
+
+VISIT_APART = wp.constant(0)
+"""A node pair whose boxes are apart: nothing below it."""
+VISIT_LEAVES = wp.constant(1)
+"""Two overlapping leaves: their triangle pairs are candidates."""
+VISIT_OPEN = wp.constant(2)
+"""Overlapping boxes, one of them inner: its two child pairs are visited next."""
 
 
 @wp.func
@@ -80,22 +80,23 @@ def _step(
     na: int,
     nb: int,
 ):
-    """Visits node pair ``(na, nb)``: returns ``(kind, n1a, n1b, n2a, n2b)`` with kind 0 (boxes
-    apart), 1 (two leaves: emit) or 2 (push the two child pairs ``(n1a, n1b)``, ``(n2a, n2b)``).
-    The bigger box (by volume) is opened, the smaller one when the bigger is a leaf."""
+    """Visits node pair ``(na, nb)``: returns ``(kind, n1a, n1b, n2a, n2b)`` with kind
+    :data:`VISIT_APART`, :data:`VISIT_LEAVES` (emit) or :data:`VISIT_OPEN` (push the two child pairs
+    ``(n1a, n1b)``, ``(n2a, n2b)``). The bigger box (by volume) is opened, the smaller one when the
+    bigger is a leaf."""
     lo_a = tree.node_lower[slot_a + na]
     hi_a = tree.node_upper[slot_a + na]
     lo_b = tree.node_lower[slot_b + nb]
     hi_b = tree.node_upper[slot_b + nb]
     if not boxes_overlap(lo_a, hi_a, lo_b, hi_b):
-        return 0, na, nb, na, nb
+        return VISIT_APART, na, nb, na, nb
     ca = tree.node_child[shape_a + na]
     cb = tree.node_child[shape_b + nb]
     if ca[0] < 0 and cb[0] < 0:
-        return 1, na, nb, na, nb
+        return VISIT_LEAVES, na, nb, na, nb
     if cb[0] < 0 or (ca[0] >= 0 and _volume(lo_a, hi_a) >= _volume(lo_b, hi_b)):
-        return 2, ca[0], nb, ca[1], nb
-    return 2, na, cb[0], na, cb[1]
+        return VISIT_OPEN, ca[0], nb, ca[1], nb
+    return VISIT_OPEN, na, cb[0], na, cb[1]
 
 
 @wp.func
@@ -130,10 +131,10 @@ def _descend(
     while top > 0:
         top -= 1
         kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, stack_a[top], stack_b[top])
-        if kind == 1:
+        if kind == VISIT_LEAVES:
             _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
                          candidate_capacity)
-        elif kind == 2:
+        elif kind == VISIT_OPEN:
             stack_a[top] = n1a
             stack_b[top] = n1b
             stack_a[top + 1] = n2a
@@ -142,7 +143,7 @@ def _descend(
 
 
 @wp.kernel
-def traverse_kernel(
+def _traverse_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
     pair: wp.array[wp.vec2i],
@@ -159,7 +160,7 @@ def traverse_kernel(
 ):
     """One thread per object pair. With ``split <= 1`` the whole traversal. Otherwise a
     breadth-first expansion from the roots until ``split`` overlapping node pairs wait (or none),
-    which are written as work items ``(a, b, node_a, node_b)`` for :func:`traverse_work_kernel`:
+    which are written as work items ``(a, b, node_a, node_b)`` for :func:`_traverse_work_kernel`:
     big trees then spread over many threads, in pieces of about equal depth."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
@@ -178,10 +179,10 @@ def traverse_kernel(
     while head < tail and tail - head < split and tail + 2 <= STACK_SIZE:
         kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, queue_a[head], queue_b[head])
         head += 1
-        if kind == 1:
+        if kind == VISIT_LEAVES:
             _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
                          candidate_capacity)
-        elif kind == 2:
+        elif kind == VISIT_OPEN:
             queue_a[tail] = n1a
             queue_b[tail] = n1b
             queue_a[tail + 1] = n2a
@@ -194,7 +195,7 @@ def traverse_kernel(
 
 
 @wp.kernel
-def traverse_work_kernel(
+def _traverse_work_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
     work: wp.array[wp.vec4i],
@@ -238,13 +239,14 @@ class MidPhaseBVH:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers whose counters the caller checks after :meth:`launch` (the work items)."""
-        return [self.work] if self.split > 1 else []
+        """Buffers :meth:`launch` writes, whose counters the caller checks after it: the candidates,
+        and the traversal's work items when it splits."""
+        return [self.candidates, self.work] if self.split > 1 else [self.candidates]
 
     def launch(self, scene, pairs: GrowableBuffer) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`."""
         wp.launch(
-            traverse_kernel,
+            _traverse_kernel,
             dim=pairs.capacity,
             inputs=[self.bvh.tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self.split,
                     self.candidates.capacity, self.work.capacity],
@@ -253,7 +255,7 @@ class MidPhaseBVH:
         )
         if self.split > 1:
             wp.launch(
-                traverse_work_kernel,
+                _traverse_work_kernel,
                 dim=self.work.capacity,
                 inputs=[self.bvh.tree, scene.instance_shape, self.work.data, self.work.count, self.work.capacity,
                         self.candidates.capacity],
@@ -263,7 +265,7 @@ class MidPhaseBVH:
 
 
 @wp.kernel
-def all_pairs_count_kernel(
+def _all_pairs_count_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
@@ -283,7 +285,7 @@ def all_pairs_count_kernel(
 
 
 @wp.kernel
-def all_pairs_write_kernel(
+def _all_pairs_write_kernel(
     pair: wp.array[wp.vec2i],
     pair_work: wp.array[wp.int64],
     pair_work_end: wp.array[wp.int64],
@@ -301,14 +303,7 @@ def all_pairs_write_kernel(
         candidate_count[0] = total
     if wp.int64(c) >= total:
         return
-    lo = int(0)
-    hi = num_slots - 1
-    while lo < hi:
-        mid = (lo + hi) / 2
-        if pair_work_end[mid] > wp.int64(c):
-            hi = mid
-        else:
-            lo = mid + 1
+    lo = upper_bound(pair_work_end, 0, num_slots, wp.int64(c))  # the pair whose block holds c
     p = pair[lo]
     local = wp.int64(c) - (pair_work_end[lo] - pair_work[lo])
     mb = wp.int64(instance_triangle_start[p[1] + 1] - instance_triangle_start[p[1]])
@@ -328,17 +323,22 @@ class MidPhaseAllPairs:
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self._work = None
 
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers :meth:`launch` writes, whose counters the caller checks after it: the candidates."""
+        return [self.candidates]
+
     def launch(self, scene, pairs: GrowableBuffer) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`."""
         d = self.device
         if self._work is None or self._work.shape[0] != pairs.capacity:
             self._work = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._work_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
-        wp.launch(all_pairs_count_kernel, dim=pairs.capacity,
+        wp.launch(_all_pairs_count_kernel, dim=pairs.capacity,
                   inputs=[pairs.data, pairs.count, pairs.capacity, scene.instance_triangle_start],
                   outputs=[self._work], device=d)
         wp.utils.array_scan(self._work, self._work_end, inclusive=True)
-        wp.launch(all_pairs_write_kernel, dim=self.candidates.capacity,
+        wp.launch(_all_pairs_write_kernel, dim=self.candidates.capacity,
                   inputs=[pairs.data, self._work, self._work_end, scene.instance_triangle_start,
                           self.candidates.capacity],
                   outputs=[self.candidates.data, self.candidates.count], device=d)

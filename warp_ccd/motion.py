@@ -1,4 +1,4 @@
-"""The composed motion of the seed scenes: an inclined ellipse with spin.
+"""The composed motion of random scenes: an inclined ellipse with spin.
 
 Each object's pose at time ``t`` (seconds) is a composition of translations and rotations, each
 with its own angular velocity:
@@ -12,52 +12,48 @@ One kernel computes the poses of all objects; cost O(N), no host work.
 """
 
 
+from typing import Any
+
 import numpy as np
 import warp as wp
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["MOTION_KERNELS", "EllipseMotion", "motion_pose_kernel"]
+__all__ = ["EllipseMotion"]
 
 
-def _make_motion_kernel(S, V3, Q, T):
-    """The pose kernel computing in scalar type ``S`` (``wp.float32`` or ``wp.float64``)."""
-
-    @wp.kernel
-    def motion_pose_kernel(
-        time: S,
-        motion_centre: wp.array[V3],
-        motion_axes: wp.array[wp.vec2],
-        motion_orbit: wp.array[wp.vec2],
-        motion_tilt: wp.array[wp.quat],
-        motion_spin_axis: wp.array[wp.vec3],
-        motion_spin: wp.array[wp.vec2],
-        motion_base: wp.array[wp.quat],
-        # Outputs
-        instance_pose: wp.array[T],
-    ):
-        """One thread per object: pose at ``time`` (see the module docstring)."""
-        i = wp.tid()
-        axes = motion_axes[i]
-        orbit = motion_orbit[i]
-        theta = S(orbit[0]) * time + S(orbit[1])
-        local = V3(S(axes[0]) * wp.cos(theta), S(axes[1]) * wp.sin(theta), S(0.0))
-        pos = motion_centre[i] + wp.quat_rotate(Q(motion_tilt[i]), local)
-        spin = motion_spin[i]
-        angle = S(spin[0]) * time + S(spin[1])
-        rot = wp.quat_from_axis_angle(V3(motion_spin_axis[i]), angle) * Q(motion_base[i])
-        instance_pose[i] = T(pos, wp.normalize(rot))
-
-    return motion_pose_kernel
+@wp.kernel
+def _motion_pose_kernel(
+    time: Any,
+    motion_centre: wp.array[Any],
+    motion_axes: wp.array[wp.vec2],
+    motion_orbit: wp.array[wp.vec2],
+    motion_tilt: wp.array[wp.quat],
+    motion_spin_axis: wp.array[wp.vec3],
+    motion_spin: wp.array[wp.vec2],
+    motion_base: wp.array[wp.quat],
+    # Outputs
+    instance_pose: wp.array[Any],
+):
+    """One thread per object: pose at ``time`` (see the module docstring), computed in the type of
+    ``time`` (float32 or float64) like the centres and the poses written."""
+    i = wp.tid()
+    axes = motion_axes[i]
+    orbit = motion_orbit[i]
+    theta = type(time)(orbit[0]) * time + type(time)(orbit[1])
+    local = type(motion_centre[i])(type(time)(axes[0]) * wp.cos(theta), type(time)(axes[1]) * wp.sin(theta),
+                                   type(time)(0.0))
+    pos = motion_centre[i] + wp.quat_rotate(wp.quaternion(motion_tilt[i], dtype=type(time)), local)
+    spin = motion_spin[i]
+    angle = type(time)(spin[0]) * time + type(time)(spin[1])
+    spin_axis = type(local)(motion_spin_axis[i])
+    rot = wp.quat_from_axis_angle(spin_axis, angle) * wp.quaternion(motion_base[i], dtype=type(time))
+    instance_pose[i] = wp.transformation(pos, wp.normalize(rot), dtype=type(time))
 
 
-MOTION_KERNELS = {
-    "float32": _make_motion_kernel(wp.float32, wp.vec3, wp.quat, wp.transform),
-    "float64": _make_motion_kernel(wp.float64, wp.vec3d, wp.quatd, wp.transformd),
-}
-"""Pose kernels by precision (positions and poses in float32 or float64)."""
-
-motion_pose_kernel = MOTION_KERNELS["float32"]
+for _scalar, _vec3, _transform in ((wp.float32, wp.vec3, wp.transform), (wp.float64, wp.vec3d, wp.transformd)):
+    wp.overload(_motion_pose_kernel, {"time": _scalar, "motion_centre": wp.array[_vec3],
+                                      "instance_pose": wp.array[_transform]})
 
 
 def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -133,12 +129,11 @@ class EllipseMotion:
 
     def launch(self, time: float, instance_pose: wp.array) -> None:
         """Writes the poses of all objects at ``time`` (seconds) into ``instance_pose`` ``(N,)``."""
-        kernel = MOTION_KERNELS[self.precision]
         wp.launch(
-            kernel,
+            _motion_pose_kernel,
             dim=self.num_objects,
             inputs=[
-                wp.float64(time) if self.precision == "float64" else float(time),
+                wp.float64(time) if self.precision == "float64" else wp.float32(time),
                 self.motion_centre,
                 self.motion_axes,
                 self.motion_orbit,

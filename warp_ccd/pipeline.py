@@ -1,9 +1,11 @@
 """The frame: refit (object bounds) -> broad phase -> mid phase -> narrow phase -> result.
 
-:class:`CollisionPipeline` owns one object of each stage and chains their launches on the scene's
-device. Between stages the host reads nothing; at the end of the frame it reads the stages'
-counters once (a single synchronisation). A counter that passed its buffer's capacity makes that
-buffer grow and the frame run again, so no pair is ever dropped.
+:class:`CollisionPipeline` owns one object of each stage and calls their methods in order on the
+scene's device; each stage launches its own kernels and exposes the buffers it writes
+(``counters``). Between stages the host reads nothing; at the end of the frame it reads every
+counter once (:class:`~warp_ccd.buffers.CounterRead`, a single synchronisation). A counter that
+passed its buffer's capacity makes that buffer grow and the frame run again
+(:func:`~warp_ccd.buffers.launch_until_fit`), so no pair is ever dropped.
 """
 
 from __future__ import annotations
@@ -16,10 +18,10 @@ import warp as wp
 
 from .aabb import InstanceBounds
 from .broad_phase import make_broad_phase
-from .buffers import GrowableBuffer, read_counts
+from .buffers import CounterRead, GrowableBuffer, launch_until_fit
 from .bvh import SceneBVH
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .narrow_phase import NARROW_TYPES, TOLERANCE, NarrowPhase
+from .narrow_phase import TOLERANCE, NarrowPhase
 from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
@@ -133,6 +135,13 @@ class CollisionPipeline:
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
+
+    Attributes:
+        boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
+            scene's :class:`~warp_ccd.bvh.SceneBVH` (node boxes too) with the ``bvh`` mid phase,
+            else an :class:`~warp_ccd.aabb.InstanceBounds`.
+        broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
+        counters: the :class:`~warp_ccd.buffers.CounterRead` of every buffer the frame writes.
     """
 
     def __init__(
@@ -174,28 +183,23 @@ class CollisionPipeline:
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
-            self.bounds = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
-            self.mid = MidPhaseBVH(self.bounds, capacity=candidate_capacity or max(1024, 16 * n),
+            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
+            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
                                    split=traversal_split, device=d)
         else:
-            self.bounds = InstanceBounds(n, device=d, margin_rel=tolerance)
+            self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
         self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
-                                  capacity=hit_capacity or max(256, 4 * n), device=d)
-        self.segments = bool(segments)
-        self._segment = None
-        self.contained = GrowableBuffer(wp.vec2i, max(16, n // 8), d, "contained pairs") if containment else None
+                                  capacity=hit_capacity or max(256, 4 * n), segments=segments,
+                                  containment=containment, device=d)
+        stages = (self.boxes, self.broad, self.mid, self.narrow)
+        self.counters = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
+        self._times = None
 
-    def _buffers(self) -> list[GrowableBuffer]:
-        """Every buffer of the frame; the pipeline checks all their counters after it."""
-        extra = [self.contained] if self.contained is not None else []
-        stages = [*getattr(self.broad, "counters", []), *getattr(self.mid, "counters", []), *extra]
-        return [self.pairs, self.mid.candidates, self.narrow.hits, *stages]
-
-    def _run_frame(self) -> dict | None:
+    def _run_frame(self) -> None:
+        """Enqueues one frame (the counters were reset); with ``timings``, times each stage."""
         scene = self.scene
         times = {} if self.timings else None
-        t0 = time.perf_counter()
 
         def mark(stage: str, start: float) -> float:
             if times is None:
@@ -205,43 +209,20 @@ class CollisionPipeline:
             times[stage] = (now - start) * 1e3
             return now
 
-        for b in self._buffers():
-            b.reset()
         if times is not None:
             wp.synchronize_device(self.device)
-            t0 = time.perf_counter()
-        t = t0
-        self.bounds.launch(scene)
+        t = time.perf_counter()
+        self.boxes.refit(scene)
         t = mark("refit", t)
-        self.broad.launch(self.bounds.lower, self.bounds.upper, self.pairs)
+        self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
         t = mark("broad", t)
         self.mid.launch(scene, self.pairs)
         t = mark("mid", t)
-        self.narrow.launch(scene, self.mid.candidates)
-        if self.segments:
-            hits = self.narrow.hits
-            if self._segment is None or self._segment.shape[0] != hits.capacity:
-                self._segment = wp.zeros((hits.capacity, 2), dtype=scene.types.vec3, device=self.device)
-            wp.launch(
-                NARROW_TYPES[scene.precision].segment_kernel,
-                dim=hits.capacity,
-                inputs=[scene.mesh_view(), hits.data, hits.count, hits.capacity, scene.types.scalar(self.narrow.tolerance)],
-                outputs=[self._segment],
-                device=self.device,
-            )
-        if self.contained is not None:
-            wp.launch(
-                NARROW_TYPES[scene.precision].containment_kernel,
-                dim=self.pairs.capacity,
-                inputs=[scene.mesh_view(), scene.instance_triangle_start, self.bounds.lower, self.bounds.upper,
-                        self.pairs.data, self.pairs.count, self.pairs.capacity, self.contained.capacity],
-                outputs=[self.contained.data, self.contained.count],
-                device=self.device,
-            )
+        self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper)
         mark("narrow", t)
         if times is not None:
             times["total"] = sum(times[s] for s in STAGES)
-        return times
+        self._times = times
 
     def detect(self) -> CollisionResult:
         """Runs one frame on the scene's current world vertices.
@@ -251,34 +232,25 @@ class CollisionPipeline:
         """
         n = self.scene.num_objects
         d = self.device
+        vec3 = self.scene.vec3_type
         if n < 2:
-            empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.contained is not None else None
-            no_segments = wp.zeros((0, 2), dtype=self.scene.types.vec3, device=d) if self.segments else None
+            empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.narrow.contained is not None else None
+            no_segments = wp.zeros((0, 2), dtype=vec3, device=d) if self.narrow.segments else None
             return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                    {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
                                    device_contained=empty, device_segments=no_segments)
-        buffers = self._buffers()
-        while True:
-            times = self._run_frame()
-            counts = read_counts([b.count for b in buffers], d)
-            grew = [b.ensure(c) for b, c in zip(buffers, counts)]
-            if not any(grew):
-                break
-        num_hits = counts[2]
-        contained = None
-        if self.contained is not None:
-            nc = counts[-1]
-            contained = wp.clone(self.contained.data[:nc]) if nc else wp.zeros(0, dtype=wp.vec2i, device=d)
-        segments = None
-        if self.segments:
-            segments = wp.clone(self._segment[:num_hits]) if num_hits else wp.zeros((0, 2), dtype=self.scene.types.vec3, device=d)
+        launch_until_fit(self._run_frame, self.counters)
+        narrow = self.narrow
+        num_hits = narrow.hits.last_count
+        contained = wp.clone(narrow.contained.held()) if narrow.contained is not None else None
+        segments = wp.clone(narrow.segment[:num_hits]) if narrow.segments else None
         return CollisionResult(
             n,
-            wp.clone(self.narrow.hits.data[:num_hits]) if num_hits else wp.zeros(0, dtype=wp.vec4i, device=d),
-            wp.clone(self.narrow.object_colliding),
-            times,
-            num_candidates=counts[1],
-            num_broad_pairs=counts[0],
+            wp.clone(narrow.hits.held()),
+            wp.clone(narrow.object_colliding),
+            self._times,
+            num_candidates=self.mid.candidates.last_count,
+            num_broad_pairs=self.pairs.last_count,
             device_contained=contained,
             device_segments=segments,
         )

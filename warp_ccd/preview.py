@@ -27,7 +27,6 @@ __all__ = [
     "PREVIEW_EXTENSIONS",
     "PreviewRenderer",
     "mesh_triangle_indices",
-    "preview_render_kernel",
     "render_frame",
     "save_preview",
     "validate_preview_path",
@@ -38,7 +37,7 @@ PREVIEW_EXTENSIONS = (".png", ".gif")
 
 
 @wp.kernel
-def preview_render_kernel(
+def _preview_render_kernel(
     mesh: wp.uint64,
     triangle_object: wp.array[wp.int32],
     object_colliding: wp.array[wp.int32],
@@ -236,7 +235,7 @@ class PreviewRenderer:
             mesh_id = self._mesh.id
         if self.num_triangles:
             wp.launch(
-                preview_render_kernel,
+                _preview_render_kernel,
                 dim=(self.height, self.width),
                 inputs=[
                     mesh_id,

@@ -13,6 +13,10 @@ Data layout (struct of arrays, all on ``scene.device``):
 * World vertices of all instances concatenated (``world_vertex``, ``V`` entries), with
   ``vertex_instance`` giving the owner of each.
 
+Kernels find a triangle's world vertices with :func:`mesh_triangle` from the index arrays (the
+:class:`MeshTopology` struct, the same at both precisions) and ``world_vertex`` (``wp.vec3`` or
+``wp.vec3d``), a separate generic argument.
+
 Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd.motion.EllipseMotion`,
 ``set_transforms`` / ``set_poses`` for rigid objects placed by the caller, and writing
 ``world_vertex`` directly (``set_world_vertices`` or a kernel of one's own) for deforming meshes.
@@ -20,7 +24,7 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 
 
 from collections.abc import Sequence
-from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -33,79 +37,78 @@ from .shapes import validate_mesh
 # bits on every device (the narrow phase's verdicts then agree too).
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["PRECISIONS", "SCENE_TYPES", "MeshView", "Scene", "mesh_triangle", "transforms_to_poses", "world_vertex_kernel"]
+__all__ = ["PRECISIONS", "MeshTopology", "Scene", "mesh_triangle", "precision_types", "transforms_to_poses"]
 
 
 PRECISIONS = ("float32", "float64")
 """Scene precisions: the type of shape vertices, poses and world vertices (boxes stay float32)."""
 
 
-def _make_scene_types(S, V3, T):
-    """Struct, fetch function and world-vertex kernel for vertices of type ``V3``."""
+def precision_types(precision: str) -> tuple:
+    """``(scalar, vec3, transform)`` Warp types of a scene precision (``"float32"`` or ``"float64"``)."""
+    if precision == "float64":
+        return wp.float64, wp.vec3d, wp.transformd
+    if precision == "float32":
+        return wp.float32, wp.vec3, wp.transform
+    raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
 
-    @wp.struct
-    class MeshView:
-        """What a kernel needs to fetch the world vertices of triangle ``(instance, local id)``."""
 
-        shape_triangle: wp.array[wp.vec3i]
-        shape_triangle_start: wp.array[wp.int32]
-        instance_shape: wp.array[wp.int32]
-        instance_vertex_start: wp.array[wp.int32]
-        world_vertex: wp.array[V3]
+@wp.struct
+class MeshTopology:
+    """Which world vertices make triangle ``(instance, local id)``: everything but the vertices
+    themselves, which kernels take as a separate ``world_vertex`` array of either precision."""
 
-    @wp.func
-    def mesh_triangle(view: MeshView, instance: int, tri: int):
-        """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
-        s = view.instance_shape[instance]
-        idx = view.shape_triangle[view.shape_triangle_start[s] + tri]
-        base = view.instance_vertex_start[instance]
-        return (
-            view.world_vertex[base + idx[0]],
-            view.world_vertex[base + idx[1]],
-            view.world_vertex[base + idx[2]],
-        )
+    shape_triangle: wp.array[wp.vec3i]
+    shape_triangle_start: wp.array[wp.int32]
+    instance_shape: wp.array[wp.int32]
+    instance_vertex_start: wp.array[wp.int32]
+    instance_triangle_start: wp.array[wp.int32]
 
-    @wp.kernel
-    def world_vertex_kernel(
-        shape_vertex: wp.array[V3],
-        shape_vertex_start: wp.array[wp.int32],
-        instance_shape: wp.array[wp.int32],
-        instance_scale: wp.array[wp.float32],
-        instance_pose: wp.array[T],
-        instance_vertex_start: wp.array[wp.int32],
-        vertex_instance: wp.array[wp.int32],
-        # Outputs
-        world_vertex: wp.array[V3],
-    ):
-        """One thread per world vertex: ``pose * (scale * local vertex)``."""
-        v = wp.tid()
-        i = vertex_instance[v]
-        local = v - instance_vertex_start[i]
-        p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
-        world_vertex[v] = wp.transform_point(instance_pose[i], p * S(instance_scale[i]))
 
-    return SimpleNamespace(
-        scalar=S, vec3=V3, transform=T, MeshView=MeshView, mesh_triangle=mesh_triangle,
-        world_vertex_kernel=world_vertex_kernel,
+@wp.func
+def mesh_triangle(topology: MeshTopology, world_vertex: wp.array[Any], instance: int, tri: int):
+    """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
+    s = topology.instance_shape[instance]
+    idx = topology.shape_triangle[topology.shape_triangle_start[s] + tri]
+    base = topology.instance_vertex_start[instance]
+    return (
+        world_vertex[base + idx[0]],
+        world_vertex[base + idx[1]],
+        world_vertex[base + idx[2]],
     )
 
 
-SCENE_TYPES = {
-    "float32": _make_scene_types(wp.float32, wp.vec3, wp.transform),
-    "float64": _make_scene_types(wp.float64, wp.vec3d, wp.transformd),
-}
-"""Per precision: ``MeshView`` struct, ``mesh_triangle`` function, ``world_vertex_kernel``."""
+@wp.kernel
+def _world_vertex_kernel(
+    shape_vertex: wp.array[Any],
+    shape_vertex_start: wp.array[wp.int32],
+    instance_shape: wp.array[wp.int32],
+    instance_scale: wp.array[wp.float32],
+    instance_pose: wp.array[Any],
+    instance_vertex_start: wp.array[wp.int32],
+    vertex_instance: wp.array[wp.int32],
+    # Outputs
+    world_vertex: wp.array[Any],
+):
+    """One thread per world vertex: ``pose * (scale * local vertex)``."""
+    v = wp.tid()
+    i = vertex_instance[v]
+    local = v - instance_vertex_start[i]
+    p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
+    world_vertex[v] = wp.transform_point(instance_pose[i], p * type(p[0])(instance_scale[i]))
+
+
+for _precision in PRECISIONS:
+    _, _vec3, _transform = precision_types(_precision)
+    wp.overload(_world_vertex_kernel, {"shape_vertex": wp.array[_vec3], "instance_pose": wp.array[_transform],
+                                       "world_vertex": wp.array[_vec3]})
+
 
 @wp.kernel
-def vertex_to_float32_kernel(src: wp.array[wp.vec3d], dst: wp.array[wp.vec3]):
+def _vertex_to_float32_kernel(src: wp.array[wp.vec3d], dst: wp.array[wp.vec3]):
     """One thread per vertex: float64 to float32 (nearest)."""
     v = wp.tid()
     dst[v] = wp.vec3(src[v])
-
-
-MeshView = SCENE_TYPES["float32"].MeshView
-mesh_triangle = SCENE_TYPES["float32"].mesh_triangle
-world_vertex_kernel = SCENE_TYPES["float32"].world_vertex_kernel
 
 
 def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
@@ -124,7 +127,8 @@ def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
         if c == 3:
             s = np.sqrt(1.0 + tr[m]) * 2.0
             q[m] = np.stack(
-                [(rm[:, 2, 1] - rm[:, 1, 2]) / s, (rm[:, 0, 2] - rm[:, 2, 0]) / s, (rm[:, 1, 0] - rm[:, 0, 1]) / s, s / 4],
+                [(rm[:, 2, 1] - rm[:, 1, 2]) / s, (rm[:, 0, 2] - rm[:, 2, 0]) / s, (rm[:, 1, 0] - rm[:, 0, 1]) / s,
+                 s / 4],
                 axis=1,
             )
         else:
@@ -203,6 +207,11 @@ class Scene:
         precision: ``"float32"`` (default) or ``"float64"``: type of shape vertices, poses and
             world vertices, and of the exact triangle test. Object and node boxes stay float32,
             rounded outward.
+
+    Attributes:
+        scalar_type, vec3_type, transform_type: the Warp types of its precision
+            (:func:`precision_types`).
+        topology: the :class:`MeshTopology` struct kernels take beside ``world_vertex``.
     """
 
     def __init__(
@@ -217,17 +226,16 @@ class Scene:
         device=None,
         precision: str = "float32",
     ):
-        if precision not in PRECISIONS:
-            raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
+        self.scalar_type, self.vec3_type, self.transform_type = precision_types(precision)
         self.device = wp.get_device(device)
         self.precision = precision
-        self.types = SCENE_TYPES[precision]
         fdtype = np.float64 if precision == "float64" else np.float32
         self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}", dtype=fdtype) for k, (v, t) in enumerate(shapes)]
         num_shapes = len(self.shape_meshes)
         inst = np.asarray(instance_shape)
         if inst.ndim != 1 or (inst.size and not np.issubdtype(inst.dtype, np.integer)):
-            raise ValueError(f"instance_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
+            raise ValueError(
+                f"instance_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
         inst = inst.astype(np.int64)
         if inst.size and (inst.min() < 0 or inst.max() >= num_shapes):
             raise ValueError(f"instance_shape: ids must lie in [0, {num_shapes}), got {inst.min()}..{inst.max()}")
@@ -275,18 +283,24 @@ class Scene:
         d = self.device
         cat_v = np.concatenate([v for v, _ in self.shape_meshes]) if num_shapes else np.zeros((0, 3), fdtype)
         cat_t = np.concatenate([t for _, t in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.int32)
-        vec3 = self.types.vec3
+        vec3 = self.vec3_type
         self.shape_vertex = wp.array(cat_v, dtype=vec3, device=d)
         self.shape_triangle = wp.array(cat_t, dtype=wp.vec3i, device=d)
         self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
         self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
         self.instance_shape = wp.array(self.instance_shape_np, dtype=wp.int32, device=d)
         self.instance_scale = wp.array(scale, dtype=wp.float32, device=d)
-        self.instance_pose = wp.array(poses, dtype=self.types.transform, device=d)
+        self.instance_pose = wp.array(poses, dtype=self.transform_type, device=d)
         self.instance_vertex_start = wp.array(self.instance_vertex_start_np, dtype=wp.int32, device=d)
         self.instance_triangle_start = wp.array(self.instance_triangle_start_np, dtype=wp.int32, device=d)
         self.vertex_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
         self.world_vertex = wp.zeros(self.num_world_vertices, dtype=vec3, device=d)
+        self.topology = MeshTopology()
+        self.topology.shape_triangle = self.shape_triangle
+        self.topology.shape_triangle_start = self.shape_triangle_start
+        self.topology.instance_shape = self.instance_shape
+        self.topology.instance_vertex_start = self.instance_vertex_start
+        self.topology.instance_triangle_start = self.instance_triangle_start
         if motion is not None:
             motion.launch(self.time, self.instance_pose)
         self._pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
@@ -394,7 +408,7 @@ class Scene:
         if self.num_world_vertices == 0:
             return
         wp.launch(
-            self.types.world_vertex_kernel,
+            _world_vertex_kernel,
             dim=self.num_world_vertices,
             inputs=[
                 self.shape_vertex,
@@ -431,7 +445,7 @@ class Scene:
     def set_poses(self, poses: wp.array) -> None:
         """Copies ``(N,)`` poses already on this device (``wp.transform``, or ``wp.transformd`` for a
         float64 scene), then updates world vertices."""
-        t = self.types.transform
+        t = self.transform_type
         if not isinstance(poses, wp.array) or poses.dtype != t or poses.shape != (self.num_objects,):
             raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} {t.__name__}")
         if poses.device != self.device:
@@ -446,7 +460,7 @@ class Scene:
         vector type (``wp.vec3``, or ``wp.vec3d`` at float64) on this device (copied as is).
         """
         if isinstance(vertices, wp.array):
-            vec3 = self.types.vec3
+            vec3 = self.vec3_type
             if vertices.dtype != vec3 or vertices.shape != (self.num_world_vertices,):
                 raise ValueError(f"set_world_vertices: expected {self.num_world_vertices} {vec3.__name__}")
             if vertices.device != self.device:
@@ -467,16 +481,6 @@ class Scene:
         self.world_vertex.assign(v)
 
     # ------------------------------------------------------------------ views
-    def mesh_view(self):
-        """The ``MeshView`` struct of this scene for kernels (of its precision)."""
-        view = self.types.MeshView()
-        view.shape_triangle = self.shape_triangle
-        view.shape_triangle_start = self.shape_triangle_start
-        view.instance_shape = self.instance_shape
-        view.instance_vertex_start = self.instance_vertex_start
-        view.world_vertex = self.world_vertex
-        return view
-
     def world_vertex32(self) -> wp.array:
         """World vertices as float32 ``wp.vec3`` (for rendering and export): ``world_vertex`` itself
         in a float32 scene, a copy rounded to nearest (refreshed on each call) in a float64 one."""
@@ -485,7 +489,7 @@ class Scene:
         if getattr(self, "_world_vertex32", None) is None:
             self._world_vertex32 = wp.zeros(self.num_world_vertices, dtype=wp.vec3, device=self.device)
         if self.num_world_vertices:
-            wp.launch(vertex_to_float32_kernel, dim=self.num_world_vertices, inputs=[self.world_vertex],
+            wp.launch(_vertex_to_float32_kernel, dim=self.num_world_vertices, inputs=[self.world_vertex],
                       outputs=[self._world_vertex32], device=self.device)
         return self._world_vertex32
 

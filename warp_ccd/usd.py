@@ -31,8 +31,8 @@ created, before any simulation runs.
 
 Cost per frame of a rigid scene: a few O(N) numpy operations and five array copies into USD, no
 Python loop over objects; the optional wireframes add one kernel (one thread per object) and a
-copy of ``16 N`` points. A deforming scene costs a Python loop over its objects (one prim each). ``pxr`` is imported inside functions only, so the rest of the library
-works without usd-core.
+copy of ``16 N`` points. A deforming scene costs a Python loop over its objects (one prim each).
+``pxr`` is imported inside functions only, so the rest of the library works without usd-core.
 """
 
 from __future__ import annotations
@@ -50,7 +50,6 @@ __all__ = [
     "COLOR_FREE",
     "STAGE_EXTENSIONS",
     "UsdAnimationWriter",
-    "usd_box_polyline_kernel",
     "validate_stage_path",
 ]
 
@@ -105,7 +104,7 @@ def _extent(lower: np.ndarray, upper: np.ndarray):
 
 
 @wp.kernel
-def usd_box_polyline_kernel(
+def _usd_box_polyline_kernel(
     world_vertex: wp.array[wp.vec3],
     instance_vertex_start: wp.array[wp.int32],
     box_path_corner: wp.array[wp.int32],
@@ -285,7 +284,8 @@ class UsdAnimationWriter:
             self._segment_counts = marks.CreateCurveVertexCountsAttr()
             self._segment_points = marks.CreatePointsAttr()
             self._segment_extent = marks.CreateExtentAttr()
-            widths = self._shape_radius[self._instance_shape] * self.scene.instance_scale_np if self.num_objects else [1.0]
+            radius = self._shape_radius[self._instance_shape]
+            widths = radius * self.scene.instance_scale_np if self.num_objects else [1.0]
             marks.CreateWidthsAttr(Vt.FloatArray([max(float(np.median(widths)) * 0.03, 1e-6)]))
             marks.SetWidthsInterpolation(UsdGeom.Tokens.constant)
 
@@ -374,7 +374,7 @@ class UsdAnimationWriter:
             self._box_upper = wp.zeros(n, dtype=wp.vec3, device=d)
             self._box_point = wp.zeros(16 * n, dtype=wp.vec3, device=d)
         wp.launch(
-            usd_box_polyline_kernel,
+            _usd_box_polyline_kernel,
             dim=n,
             inputs=[scene.world_vertex32(), scene.instance_vertex_start, self._box_corner],
             outputs=[self._box_lower, self._box_upper, self._box_point],

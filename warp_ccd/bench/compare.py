@@ -46,7 +46,6 @@ __all__ = [
     "GRAZE_REL",
     "NEAR_REL",
     "PairCheck",
-    "arbiter_kernel",
     "box_overlap_truth",
     "classify_triangle_pairs",
     "compare_exact",
@@ -74,7 +73,7 @@ CLASSES = ("intersecting", "grazing", "near", "apart")
 
 
 @wp.kernel
-def arbiter_kernel(
+def _arbiter_kernel(
     tri_a: wp.array2d[wp.vec3d],
     tri_b: wp.array2d[wp.vec3d],
     # Outputs
@@ -330,7 +329,7 @@ def _arbiter(tri_a: np.ndarray, tri_b: np.ndarray, device) -> np.ndarray:
     ta = wp.array(np.ascontiguousarray(tri_a), dtype=wp.vec3d, device=device)
     tb = wp.array(np.ascontiguousarray(tri_b), dtype=wp.vec3d, device=device)
     hit = wp.zeros(len(tri_a), dtype=wp.int32, device=device)
-    wp.launch(arbiter_kernel, dim=len(tri_a), inputs=[ta, tb], outputs=[hit], device=device)
+    wp.launch(_arbiter_kernel, dim=len(tri_a), inputs=[ta, tb], outputs=[hit], device=device)
     return hit.numpy().astype(bool)
 
 
@@ -403,7 +402,8 @@ def compare_triangle_pairs(scene: Scene, reference: str, reference_rows, peer: s
                       object_pairs=(len(obj_ref), len(obj_got), int(np.isin(okg, okr).sum())))
 
     world = scene.world_vertex.numpy()
-    for name, rows, only, ga, gb, other_obj in ((reference, ref, only_ref, ra, rb, okg), (peer, got, only_peer, pa, pb, okr)):
+    sides = ((reference, ref, only_ref, ra, rb, okg), (peer, got, only_peer, pa, pb, okr))
+    for name, rows, only, ga, gb, other_obj in sides:
         other = peer if name == reference else reference
         tri_a = world[scene_triangle_vertex_index(scene, ga[only])]
         tri_b = world[scene_triangle_vertex_index(scene, gb[only])]

@@ -42,8 +42,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..broad_phase import boxes_overlap, emit_pair
-from ..buffers import GrowableBuffer, reserve_slot
+from ..aabb import boxes_overlap
+from ..buffers import GrowableBuffer, emit_pair, reserve_slot
 from ..scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -54,8 +54,6 @@ __all__ = [
     "PeerUnavailable",
     "WarpBvhBroadPhase",
     "WarpMeshPipeline",
-    "bvh_box_pairs_kernel",
-    "mesh_triangle_pairs_kernel",
     "scene_triangle_vertex_index",
 ]
 
@@ -91,7 +89,7 @@ def scene_triangle_vertex_index(scene: Scene, triangles=None) -> np.ndarray:
 
 
 @wp.kernel
-def count_to_int64_kernel(count32: wp.array[wp.int32], count: wp.array[wp.int64]):
+def _count_to_int64_kernel(count32: wp.array[wp.int32], count: wp.array[wp.int64]):
     """Copies newton's int32 pair counter into our int64 one."""
     count[0] = wp.int64(count32[0])
 
@@ -101,7 +99,7 @@ def count_to_int64_kernel(count32: wp.array[wp.int32], count: wp.array[wp.int64]
 
 
 @wp.kernel
-def mesh_triangle_pairs_kernel(
+def _mesh_triangle_pairs_kernel(
     mesh: wp.uint64,
     point: wp.array[wp.vec3],
     index: wp.array[wp.int32],
@@ -174,7 +172,7 @@ class WarpMeshPipeline:
         if self.scene.num_triangles == 0:
             return
         wp.launch(
-            mesh_triangle_pairs_kernel,
+            _mesh_triangle_pairs_kernel,
             dim=self.scene.num_triangles,
             inputs=[self.mesh.id, self.scene.world_vertex, self.index, self.triangle_instance,
                     self.scene.instance_triangle_start, self.hits.capacity],
@@ -303,7 +301,7 @@ class FclPipeline:
 
 
 @wp.kernel
-def bvh_box_pairs_kernel(
+def _bvh_box_pairs_kernel(
     bvh: wp.uint64,
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
@@ -345,6 +343,11 @@ class WarpBvhBroadPhase:
         self.bvh = None
         self._boxes = None
 
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        return []
+
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing."""
         n = lower.shape[0]
@@ -357,7 +360,7 @@ class WarpBvhBroadPhase:
             self.bvh.refit()
         else:
             self.bvh.rebuild()
-        wp.launch(bvh_box_pairs_kernel, dim=n, inputs=[self.bvh.id, lower, upper, pairs.capacity],
+        wp.launch(_bvh_box_pairs_kernel, dim=n, inputs=[self.bvh.id, lower, upper, pairs.capacity],
                   outputs=[pairs.data, pairs.count], device=self.device)
 
 
@@ -389,6 +392,11 @@ class NewtonBroadPhaseSAP:
         self.num_boxes = -1
         self.sap = None
 
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        return []
+
     def _resize(self, n: int) -> None:
         if n == self.num_boxes:
             return
@@ -407,4 +415,4 @@ class NewtonBroadPhaseSAP:
         self._resize(n)
         self.sap.launch(lower, upper, None, self.shape_group, self.shape_world, n,
                         pairs.data, self.count32, device=self.device)
-        wp.launch(count_to_int64_kernel, dim=1, inputs=[self.count32], outputs=[pairs.count], device=self.device)
+        wp.launch(_count_to_int64_kernel, dim=1, inputs=[self.count32], outputs=[pairs.count], device=self.device)

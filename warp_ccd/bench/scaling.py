@@ -158,7 +158,7 @@ class PipelineMethod:
 
     def object_boxes(self) -> tuple:
         """``(lower, upper)`` ``(N,)`` object boxes the broad phase saw in the last frame."""
-        return self.plain.bounds.lower, self.plain.bounds.upper
+        return self.plain.boxes.lower, self.plain.boxes.upper
 
     def counts(self) -> tuple:
         """``(object pairs, triangle pairs)`` of the last frame."""
@@ -381,7 +381,8 @@ def measure_pipeline_memory(scene: Scene, frames: int = 2) -> dict:
 
 
 def parse_triangles(spec: str) -> tuple[str, tuple | None]:
-    """``"poly"`` -> the seed polyhedra; ``"80"`` (``20 * 4**L``) or ``"icosphereL"`` -> icosphere level L.
+    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
+    or ``"icosphereL"`` -> icosphere level L.
 
     Returns:
         ``(label, shapes)``: ``shapes`` for :meth:`Scene.random` (None: its default polyhedra).
@@ -674,8 +675,10 @@ class BenchReport:
                 if stage in st.best_mode:
                     stage = f"{stage} ({st.best_mode[stage]})"
                 last = k == len(summary) - 1
+                obj_text = obj if last and obj is not None else ""
+                tri_text = tri if last and tri is not None else ""
                 lines.append(f"{name if k == 0 else '':<14}{stage:<15}{lo:>10.3f}{med:>11.3f}{ratio:>14}"
-                             f"{(obj if last and obj is not None else ''):>14}{(tri if last and tri is not None else ''):>11}")
+                             f"{obj_text:>14}{tri_text:>11}")
         if c.memory:
             m = c.memory
             pool = f", CUDA pool high-water {_bytes(m['mempool_peak_bytes'])}" if m.get("mempool_peak_bytes") else ""
@@ -769,7 +772,8 @@ class BenchReport:
         ax.set_yscale("log")
         ax.set_xlabel("objects N")
         ax.set_ylabel("ms per frame (median)")
-        ax.set_title(f"warp_ccd scaling on {getattr(self.device, 'name', self.device)} ({self.environment['date'][:10]})")
+        device_name = getattr(self.device, "name", self.device)
+        ax.set_title(f"warp_ccd scaling on {device_name} ({self.environment['date'][:10]})")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
         fig.tight_layout()
@@ -841,7 +845,7 @@ def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
     parser.add_argument("--objects", type=_count, nargs="+", default=[100, 1000, 3000, 10000],
                         help="object counts N; 1e5 is accepted (default: %(default)s)")
     parser.add_argument("--triangles", type=_triangles, nargs="+", default=["poly", "80"],
-                        help="triangles per object: 'poly' (the seed polyhedra, 4 to 36) or an icosphere's "
+                        help="triangles per object: 'poly' (the five polyhedra, 4 to 36 triangles) or an icosphere's "
                         "count 20*4**L (80: icosphere1, 1280: icosphere3) (default: %(default)s)")
     parser.add_argument("--frames", type=_positive, default=10, help="timed frames per case (default: %(default)s)")
     parser.add_argument("--warmup", type=_non_negative, default=2,

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from ..buffers import CounterRead
+
 __all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "run_stages", "synced_ms"]
 
 MODES = ("eager", "graph")
@@ -51,22 +53,20 @@ class CountedFrame:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         self.launch = launch
-        self.buffers = list(buffers)
         self.device = wp.get_device(device)
+        self.counters = CounterRead(buffers, self.device)
         self.mode = mode
-        self.host = wp.zeros(len(self.buffers), dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         self.graph = None
         self._captured = None  # (pointer, capacity) of each buffer when the graph was captured
-        self.counts = [0] * len(self.buffers)
+        self.counts = [0] * len(self.counters.buffers)
         self._ran = False  # the first frame runs eagerly (kernels load, lazy set-up allocates)
 
     def _layout(self) -> list:
-        return [(b.data.ptr, b.capacity) for b in self.buffers]
+        return [(b.data.ptr, b.capacity) for b in self.counters.buffers]
 
     def _enqueue(self) -> None:
         self.launch()
-        for k, b in enumerate(self.buffers):
-            wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
+        self.counters.enqueue()
 
     def run(self) -> list[int]:
         """Runs the frame until every buffer held its items; returns the counts."""
@@ -79,11 +79,10 @@ class CountedFrame:
                 wp.capture_launch(self.graph)
             else:
                 self._enqueue()
-            wp.synchronize_device(self.device)
             self._ran = True
-            self.counts = [int(c) for c in self.host.numpy()]
-            grew = [b.ensure(c) for b, c in zip(self.buffers, self.counts)]
-            if not any(grew):
+            grew = self.counters.finish()
+            self.counts = self.counters.counts
+            if not grew:
                 return self.counts
 
 
@@ -103,11 +102,11 @@ class ModeFrames:
     def broad_phase(cls, broad, boxes, pairs, device, modes) -> "ModeFrames":
         """A broad phase's frame: reset ``pairs`` and the broad phase's own ``counters`` (if any),
         then ``broad.launch(*boxes(), pairs)``; ``boxes()`` gives the ``(lower, upper)`` arrays."""
-        buffers = [pairs, *getattr(broad, "counters", [])]
+        buffers = [pairs, *broad.counters]
+        resets = CounterRead(buffers, device)
 
         def launch():
-            for b in buffers:
-                b.reset()
+            resets.reset()
             broad.launch(*boxes(), pairs)
 
         return cls(launch, buffers, device, modes)

@@ -1,0 +1,58 @@
+"""Buffers with a capacity and a counter, the loop that makes every item fit, and the shared
+binary search, against plain numpy."""
+
+from typing import Any
+
+import numpy as np
+import pytest
+import warp as wp
+
+from warp_ccd.buffers import CounterRead, GrowableBuffer, launch_until_fit, reserve_slot, upper_bound
+
+
+@wp.kernel
+def _upper_bound_kernel(values: wp.array[Any], first: int, end: int, query: wp.array[Any], out: wp.array[int]):
+    k = wp.tid()
+    out[k] = upper_bound(values, first, end, query[k])
+
+
+@wp.kernel
+def _emit_kernel(capacity: int, data: wp.array[int], count: wp.array[wp.int64]):
+    k = wp.tid()
+    slot = reserve_slot(count, capacity)
+    if slot >= 0:
+        data[slot] = k
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_upper_bound_matches_searchsorted(device, dtype):
+    rng = np.random.default_rng(4)
+    values = np.sort(rng.integers(0, 40, 200)).astype(dtype)  # many repeats (empty blocks of a scan)
+    query = np.arange(-2, 43, dtype=dtype)
+    wp_dtype = wp.int32 if dtype == np.int32 else wp.int64
+    v = wp.array(values, dtype=wp_dtype, device=device)
+    q = wp.array(query, dtype=wp_dtype, device=device)
+    for first, end in ((0, len(values)), (17, 150), (60, 60), (0, 1)):
+        out = wp.zeros(len(query), dtype=int, device=device)
+        wp.launch(_upper_bound_kernel, dim=len(query), inputs=[v, first, end, q, out], device=device)
+        want = first + np.searchsorted(values[first:end], query, side="right")
+        assert np.array_equal(out.numpy(), want), (first, end)
+
+
+def test_launch_until_fit_grows_and_records_counts(device):
+    """From capacity 1, the loop grows the buffer until all 1,000 items fit, and each buffer records
+    its count; the items held are exactly the ones emitted."""
+    items = GrowableBuffer(wp.int32, 1, device, "items")
+    other = GrowableBuffer(wp.int32, 1, device, "untouched")
+    counters = CounterRead([items, other], device)
+    runs = []
+
+    def launch():
+        runs.append(1)
+        wp.launch(_emit_kernel, dim=1000, inputs=[items.capacity], outputs=[items.data, items.count], device=device)
+
+    counts = launch_until_fit(launch, counters)
+    assert counts == [1000, 0] and len(runs) == 2
+    assert items.last_count == 1000 and other.last_count == 0 and items.capacity >= 1000
+    assert np.array_equal(np.sort(items.held().numpy()), np.arange(1000))
+    assert launch_until_fit(launch, counters) == [1000, 0] and len(runs) == 3  # fits at once now
