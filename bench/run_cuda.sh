@@ -9,7 +9,9 @@
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
-# WARP_CCD_GIT_DIRTY=0|1) so that the logs and result files name the commit they measured.
+# WARP_CCD_GIT_DIRTY=0|1) so that the logs and result files name the commit they measured. The
+# suite runs each test on $DEVICE only (the CPU is what CI covers; set TEST_DEVICES=cpu,cuda for
+# both); the tests that compare the CPU with CUDA live still run wherever Warp has both.
 # Needs warp-lang (CUDA build), numpy and pytest; python-fcl, newton and matplotlib are optional
 # (a missing peer is skipped with a note). Each step runs even if an earlier one failed; the exit
 # status is that of the first failure.
@@ -38,7 +40,8 @@ for part in $parts; do
         log="$out/tests_$tag.log"
         { echo "warp_ccd test suite on $device ($gpu), commit $commit, $(date -u +%FT%TZ)"
           python3 -c "import warp, numpy; print('warp', warp.__version__, 'numpy', numpy.__version__)"; } > "$log" 2>&1
-        step python3 -m pytest -q -ra $tests -p no:cacheprovider >> "$log" 2>&1
+        WARP_CCD_TEST_DEVICES=${TEST_DEVICES:-$device} step python3 -m pytest -q -ra $tests -p no:cacheprovider \
+            >> "$log" 2>&1
         tail -n 15 "$log"
         step python3 bench/bench_narrow_phase.py --device "$device" --objects $narrow \
             --out "$out/narrow_phase_$tag.json" ;;

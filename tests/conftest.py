@@ -13,7 +13,13 @@ wp.init()
 
 sys.path.insert(0, os.path.dirname(__file__))
 
-DEVICES = [str(d) for d in wp.get_devices()]
+ALL_DEVICES = [str(d) for d in wp.get_devices()]
+"""Every Warp device present (tests that compare devices use these)."""
+
+_WANTED = [w for w in os.environ.get("WARP_CCD_TEST_DEVICES", "").split(",") if w]
+DEVICES = [d for d in ALL_DEVICES if not _WANTED or d in _WANTED or d.split(":")[0] in _WANTED]
+"""The devices the ``device`` fixture runs each test on: all of them, or those named (``cuda:0``) or
+kinds (``cuda``, ``cpu``) listed in the ``WARP_CCD_TEST_DEVICES`` environment variable."""
 DEFAULT_DEVICE = str(wp.get_device())
 """Warp's default device (``cuda:0`` where there is one), for tests whose device does not matter."""
 

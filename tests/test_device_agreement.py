@@ -20,10 +20,10 @@ from warp_ccd.narrow_phase import TOLERANCE
 
 import awkward_pairs
 import scene_results
-from conftest import DEVICES
+from conftest import ALL_DEVICES
 from oracles import touching_band
 
-CUDA = [d for d in DEVICES if d.startswith("cuda")]
+CUDA = [d for d in ALL_DEVICES if d.startswith("cuda")]
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_verdicts_match_the_recorded_ones(device, precision, reference):
         assert np.array_equal(swapped[method], got[method]), f"{method} {precision}: not symmetric on {device}"
 
 
-@pytest.mark.skipif(not (CUDA and "cpu" in DEVICES), reason="needs the CPU and a CUDA device")
+@pytest.mark.skipif(not (CUDA and "cpu" in ALL_DEVICES), reason="needs the CPU and a CUDA device")
 @pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
 def test_cpu_and_cuda_agree_live(precision):
     cpu = awkward_pairs.verdicts(precision, "cpu")
@@ -79,7 +79,7 @@ def test_cpu_and_cuda_agree_live(precision):
         assert cpu["segment_sha256"] == gpu["segment_sha256"]
 
 
-@pytest.mark.skipif(not (CUDA and "cpu" in DEVICES), reason="needs the CPU and a CUDA device")
+@pytest.mark.skipif(not (CUDA and "cpu" in ALL_DEVICES), reason="needs the CPU and a CUDA device")
 def test_scene_from_poses_agrees_across_devices():
     """World vertices from the same poses are the same bits, so a crowded scene's pairs are too."""
     from test_robustness import crowded_cubes
