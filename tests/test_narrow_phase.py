@@ -9,6 +9,11 @@ from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kerne
 
 from oracles import intersect_tri_tri_f64
 
+# As a user's module that calls the exact tests should be compiled: forward only (the tests have
+# no gradient, and their adjoint takes minutes to compile for CUDA), no FMA contraction (the same
+# verdict on every device).
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
+
 
 def run_test(ta, tb, device, method="moller", tol=TOLERANCE, precision="float32"):
     """Verdicts of ``tri_tri_batch_kernel`` on pairs ``(P, 3, 3)``, computed in ``precision``."""
