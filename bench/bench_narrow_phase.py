@@ -78,14 +78,13 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
         got = awkward_pairs.verdicts(precision, device)
         ta, tb = awkward_pairs.awkward_pairs(precision)
         vec3 = wp.vec3 if precision == "float32" else wp.vec3d
-        scalar = wp.float32 if precision == "float32" else wp.float64
         a, b = wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device)
         hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
         for method in awkward_pairs.METHODS:
 
             def batch(method=method):
                 wp.launch(narrow_phase.tri_tri_batch_kernel, dim=len(ta),
-                          inputs=[a, b, narrow_phase.NARROW_METHODS[method], scalar(narrow_phase.TOLERANCE)],
+                          inputs=[a, b, narrow_phase.NARROW_METHODS[method], wp.float64(narrow_phase.TOLERANCE)],
                           outputs=[hit], device=device)
 
             lo, med = gpu_ms(batch, device, args.repeats)

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Everything to check and measure on a CUDA machine, in parts that each fit one run of a few
-# minutes: the test suite on every Warp device (and what one verdict on every device costs the
-# narrow phase), then the benchmarks the README quotes: scaling with polyhedra and 80-triangle
-# objects up to 1e6, 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes.
+# minutes: the test suite, what one verdict on every device costs the narrow phase, then the
+# benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
+# 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, scaling, spheres, broad
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, narrow, scaling, spheres, broad
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -21,7 +21,7 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests scaling spheres broad}
+parts=${*:-tests narrow scaling spheres broad}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
@@ -42,7 +42,8 @@ for part in $parts; do
           python3 -c "import warp, numpy; print('warp', warp.__version__, 'numpy', numpy.__version__)"; } > "$log" 2>&1
         WARP_CCD_TEST_DEVICES=${TEST_DEVICES:-$device} step python3 -m pytest -q -ra $tests -p no:cacheprovider \
             >> "$log" 2>&1
-        tail -n 15 "$log"
+        tail -n 15 "$log" ;;
+    narrow)
         step python3 bench/bench_narrow_phase.py --device "$device" --objects $narrow \
             --out "$out/narrow_phase_$tag.json" ;;
     scaling)
@@ -55,7 +56,7 @@ for part in $parts; do
         step python3 bench/bench_broad_phase.py --device "$device" --n $boxes --newton-max 1000000 \
             --frames $((frames / 2)) --out "$out/broad_phase_$tag.json" ;;
     *)
-        echo "run_cuda.sh: unknown part $part (tests, scaling, spheres, broad)" >&2; status=2 ;;
+        echo "run_cuda.sh: unknown part $part (tests, narrow, scaling, spheres, broad)" >&2; status=2 ;;
     esac
 done
 exit $status

@@ -179,28 +179,33 @@ def verdicts(precision: str, device, swap: bool = False) -> dict:
     each pair's triangles in the other order)."""
     import warp as wp
 
-    from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel, tri_tri_segment_batch_kernel
+    from warp_ccd.narrow_phase import (
+        CONTACT_SEGMENT,
+        NARROW_METHODS,
+        TOLERANCE,
+        tri_tri_batch_kernel,
+        tri_tri_segment_batch_kernel,
+    )
 
     ta, tb = awkward_pairs(precision)
     if swap:
         ta, tb = tb, ta
     vec3 = wp.vec3 if precision == "float32" else wp.vec3d
-    scalar = wp.float32 if precision == "float32" else wp.float64
     a = wp.array(ta, dtype=vec3, device=device)
     b = wp.array(tb, dtype=vec3, device=device)
     out = {}
     for method in METHODS:
         hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
-        wp.launch(tri_tri_batch_kernel, dim=len(ta), inputs=[a, b, NARROW_METHODS[method], scalar(TOLERANCE)],
+        wp.launch(tri_tri_batch_kernel, dim=len(ta), inputs=[a, b, NARROW_METHODS[method], wp.float64(TOLERANCE)],
                   outputs=[hit], device=device)
         out[method] = hit.numpy().astype(bool)
     kind = wp.zeros(len(ta), dtype=wp.int32, device=device)
     seg = wp.zeros((len(ta), 2), dtype=vec3, device=device)
-    wp.launch(tri_tri_segment_batch_kernel, dim=len(ta), inputs=[a, b, scalar(TOLERANCE)],
+    wp.launch(tri_tri_segment_batch_kernel, dim=len(ta), inputs=[a, b, wp.float64(TOLERANCE)],
               outputs=[kind, seg], device=device)
     k = kind.numpy()
     s = seg.numpy().reshape(len(ta), 6)
-    s[k != 1] = 0.0  # only crossings have a segment
+    s[k != CONTACT_SEGMENT] = 0.0  # only crossings have a segment
     out["segment_kind"] = k
     digest = hashlib.sha256(k.astype("<i4").tobytes() + s.astype(s.dtype.newbyteorder("<")).tobytes())
     out["segment_sha256"] = digest.hexdigest()

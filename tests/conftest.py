@@ -18,6 +18,9 @@ ALL_DEVICES = [str(d) for d in wp.get_devices()]
 
 _WANTED = [w for w in os.environ.get("WARP_CCD_TEST_DEVICES", "").split(",") if w]
 DEVICES = [d for d in ALL_DEVICES if not _WANTED or d in _WANTED or d.split(":")[0] in _WANTED]
+if not DEVICES:
+    raise pytest.UsageError(f"WARP_CCD_TEST_DEVICES={os.environ['WARP_CCD_TEST_DEVICES']!r} names none of the "
+                            f"devices present: {ALL_DEVICES}")
 """The devices the ``device`` fixture runs each test on: all of them, or those named (``cuda:0``) or
 kinds (``cuda``, ``cpu``) listed in the ``WARP_CCD_TEST_DEVICES`` environment variable."""
 DEFAULT_DEVICE = str(wp.get_device())

@@ -129,7 +129,7 @@ def test_builtin_peer_agrees_with_pipeline(device, mode):
         pytest.skip(f"{mode} frames of the built-in peer need CUDA")
     scene = wc.Scene.random(300, seed=3, shapes=("icosphere1", "cube", "dodecahedron"), device=device)
     peer = WarpMeshPipeline(scene, capacity=1)  # grows on the first frame
-    frame = CountedFrame(peer.launch, peer.buffers, device, mode)
+    frame = CountedFrame(peer.launch, peer.counters, device, mode)
     for _ in range(3):  # eager, captured, replayed (in graph mode): each frame sees the new vertices
         scene.advance(0.2)
         ours = wc.CollisionPipeline(scene).detect()

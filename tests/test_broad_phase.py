@@ -124,7 +124,7 @@ def test_capacity_one_is_complete(device):
         rounds = 0
         while True:
             rounds += 1
-            counters.reset()
+            pairs.reset()
             bp.launch(wlo, whi, pairs)
             counters.enqueue()
             if not counters.finish():

@@ -49,6 +49,7 @@ def test_launch_until_fit_grows_and_records_counts(device):
 
     def launch():
         runs.append(1)
+        items.reset()
         wp.launch(_emit_kernel, dim=1000, inputs=[items.capacity], outputs=[items.data, items.count], device=device)
 
     counts = launch_until_fit(launch, counters)
@@ -56,3 +57,13 @@ def test_launch_until_fit_grows_and_records_counts(device):
     assert items.last_count == 1000 and other.last_count == 0 and items.capacity >= 1000
     assert np.array_equal(np.sort(items.held().numpy()), np.arange(1000))
     assert launch_until_fit(launch, counters) == [1000, 0] and len(runs) == 3  # fits at once now
+
+
+def test_held_refuses_a_buffer_that_grew_at_its_read(device):
+    items = GrowableBuffer(wp.int32, 1, device, "items")
+    counters = CounterRead([items], device)
+    wp.launch(_emit_kernel, dim=10, inputs=[items.capacity], outputs=[items.data, items.count], device=device)
+    counters.enqueue()
+    assert counters.finish() and not items.fitted and items.last_count == 10
+    with pytest.raises(RuntimeError, match="items: the buffer grew"):
+        items.held()

@@ -13,7 +13,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_segment_batch_kernel
+from warp_ccd.narrow_phase import CONTACT_NONE, CONTACT_SEGMENT, NARROW_METHODS, TOLERANCE, tri_tri_segment_batch_kernel
 
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test
@@ -133,26 +133,28 @@ def test_crafted_degenerate_cases_float64_far(device, method):
         assert not wrong, f"{method}, float64 at 1e8: wrong answers for {wrong}"
 
 
-def segments(ta, tb, device, tol=TOLERANCE):
-    """``(kind, (P, 2, 3) segment)`` of Möller's test (float32)."""
+def segments(ta, tb, device, tol=TOLERANCE, precision="float32"):
+    """``(kind, (P, 2, 3) segment)`` of Möller's test, computed in ``precision``."""
     n = len(ta)
+    dtype, vec3 = (np.float64, wp.vec3d) if precision == "float64" else (np.float32, wp.vec3)
     kind = wp.zeros(n, dtype=wp.int32, device=device)
-    seg = wp.zeros((n, 2), dtype=wp.vec3, device=device)
+    seg = wp.zeros((n, 2), dtype=vec3, device=device)
     wp.launch(tri_tri_segment_batch_kernel, dim=n,
-              inputs=[wp.array(np.asarray(ta, np.float32), dtype=wp.vec3, device=device),
-                      wp.array(np.asarray(tb, np.float32), dtype=wp.vec3, device=device), wp.float32(tol)],
+              inputs=[wp.array(np.asarray(ta, dtype), dtype=vec3, device=device),
+                      wp.array(np.asarray(tb, dtype), dtype=vec3, device=device), wp.float64(tol)],
               outputs=[kind, seg], device=device)
     return kind.numpy(), seg.numpy().reshape(n, 2, 3)
 
 
-def test_degenerate_segments(device):
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_degenerate_segments(device, precision):
     """Where a degenerate triangle meets: the crossing point, or the part of a sliver over the face."""
     names = ["sliver_crossing", "sliver_in_plane", "sliver_along_edge", "point_on_face", "slivers_crossing",
              "slivers_collinear_overlap", "sliver_crossing_beside"]
     ta = np.array([CASES[n][0] for n in names])
     tb = np.array([CASES[n][1] for n in names])
-    kind, seg = segments(ta, tb, device)
-    assert kind.tolist() == [1, 1, 1, 1, 1, 1, 0]
+    kind, seg = segments(ta, tb, device, precision=precision)
+    assert kind.tolist() == [CONTACT_SEGMENT] * 6 + [CONTACT_NONE]
     ends = {n: np.sort(s, axis=0) for n, s in zip(names, seg)}  # end points in either order
     expected = {
         "sliver_crossing": [[0.5, 0.5, 0], [0.5, 0.5, 0]],

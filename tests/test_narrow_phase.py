@@ -17,8 +17,7 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 def run_test(ta, tb, device, method="moller", tol=TOLERANCE, precision="float32"):
     """Verdicts of ``tri_tri_batch_kernel`` on pairs ``(P, 3, 3)``, computed in ``precision``."""
-    dtype, vec3, scalar = (np.float64, wp.vec3d, wp.float64) if precision == "float64" else (
-        np.float32, wp.vec3, wp.float32)
+    dtype, vec3 = (np.float64, wp.vec3d) if precision == "float64" else (np.float32, wp.vec3)
     ta = np.asarray(ta, dtype).reshape(-1, 3, 3)
     tb = np.asarray(tb, dtype).reshape(-1, 3, 3)
     out = wp.zeros(len(ta), dtype=wp.int32, device=device)
@@ -26,7 +25,7 @@ def run_test(ta, tb, device, method="moller", tol=TOLERANCE, precision="float32"
         tri_tri_batch_kernel,
         dim=len(ta),
         inputs=[wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device),
-                NARROW_METHODS[method], scalar(tol)],
+                NARROW_METHODS[method], wp.float64(tol)],
         outputs=[out],
         device=device,
     )
@@ -190,12 +189,12 @@ def test_near_parallel_crossings(device, method, precision):
 
 @wp.kernel
 def _user_float64_kernel(tri_a: wp.array2d[wp.vec3d], tri_b: wp.array2d[wp.vec3d], out: wp.array2d[wp.int32]):
-    """A user's own kernel: float64 vertices, the tolerance a float32 literal or constant."""
+    """A user's own kernel: float64 vertices, the tolerance in float64 or a float32 literal."""
     k = wp.tid()
     a0, a1, a2 = tri_a[k, 0], tri_a[k, 1], tri_a[k, 2]
     b0, b1, b2 = tri_b[k, 0], tri_b[k, 1], tri_b[k, 2]
-    out[k, 0] = wp.where(wc.tri_tri_moller(a0, a1, a2, b0, b1, b2, 1.0e-5), 1, 0)
-    out[k, 1] = wp.where(wc.tri_tri_edge_face(a0, a1, a2, b0, b1, b2, wc.TOLERANCE), 1, 0)
+    out[k, 0] = wp.where(wc.tri_tri_moller(a0, a1, a2, b0, b1, b2, wp.float64(wc.TOLERANCE)), 1, 0)
+    out[k, 1] = wp.where(wc.tri_tri_edge_face(a0, a1, a2, b0, b1, b2, 1.0e-5), 1, 0)
 
 
 def test_tests_called_from_a_user_kernel(device):

@@ -261,11 +261,13 @@ def test_segments_lie_on_both_triangles(device, precision):
     assert wc.CollisionPipeline(scene).detect().segments is None
 
 
-def test_segment_of_crossing_triangles(device):
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_segment_of_crossing_triangles(device, precision):
     t = np.array([[0, 1, 2]])
     flat = (np.array([[0, 0, 0], [2, 0, 0], [0, 2, 0]], np.float32), t)
     upright = (np.array([[0.5, -1, -1], [0.5, 3, -1], [0.5, 0.5, 1]], np.float32), t)
-    res = wc.CollisionPipeline(wc.Scene.from_meshes([flat, upright], device=device), segments=True).detect()
+    scene = wc.Scene.from_meshes([flat, upright], device=device, precision=precision)
+    res = wc.CollisionPipeline(scene, segments=True).detect()
     ends = sorted(map(tuple, res.segments[0].round(5)))
     assert ends == [(0.5, 0.0, 0.0), (0.5, 1.5, 0.0)]
 

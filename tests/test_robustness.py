@@ -232,7 +232,7 @@ def test_precision_validation():
 def test_counters_do_not_wrap(device):
     """Counters are int64: past 2**31 items a stage raises OverflowError instead of wrapping."""
     from warp_ccd.broad_phase import BroadPhaseNxN
-    from warp_ccd.buffers import GrowableBuffer, read_counts
+    from warp_ccd.buffers import CounterRead, GrowableBuffer
 
     lo = np.zeros((4, 3), np.float32)
     hi = np.ones((4, 3), np.float32)
@@ -240,8 +240,9 @@ def test_counters_do_not_wrap(device):
     pairs.count.assign(np.array([2**31 - 3], np.int64))  # as if 2**31 - 3 pairs came before
     BroadPhaseNxN(device=device).launch(wp.array(lo, dtype=wp.vec3, device=device),
                                         wp.array(hi, dtype=wp.vec3, device=device), pairs)
-    (count,) = read_counts([pairs.count], device)
-    assert count == 2**31 - 3 + 6
-    assert (pairs.numpy(0).shape == (0, 2))
+    counters = CounterRead([pairs], device)
+    counters.enqueue()
     with pytest.raises(OverflowError, match="pairs"):
-        pairs.ensure(count)
+        counters.finish()  # reading the count grows the buffer: past the limit, it refuses
+    assert counters.counts == [2**31 - 3 + 6]
+    assert pairs.numpy(0).shape == (0, 2)

@@ -14,9 +14,11 @@ from typing import Any
 
 import warp as wp
 
+from .precision import PRECISIONS, precision_types
+
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["InstanceBounds", "box_lower32", "box_upper32", "boxes_overlap", "vertex_bounds"]
+__all__ = ["BOX_EMPTY", "InstanceBounds", "box_lower32", "box_upper32", "boxes_overlap", "vertex_bounds"]
 
 
 @wp.func
@@ -43,6 +45,9 @@ def vertex_bounds(world_vertex: wp.array[Any], start: int, end: int):
         hi = wp.max(hi, p)
     return lo, hi
 
+
+BOX_EMPTY = wp.constant(1.0e30)
+"""An empty box's corners, ``(BOX_EMPTY, ...)`` below and ``(-BOX_EMPTY, ...)`` above: any point grows it."""
 
 ULP_PAD = wp.constant(2.4e-7)
 """Relative outward padding (two float32 units in the last place) when float64 bounds become float32."""
@@ -103,7 +108,8 @@ def _instance_bounds_kernel(
     instance_upper[i] = box_upper32(hi + m)
 
 
-for _scalar, _vec3 in ((wp.float32, wp.vec3), (wp.float64, wp.vec3d)):
+for _precision in PRECISIONS:
+    _scalar, _vec3, _, _ = precision_types(_precision)
     wp.overload(_instance_bounds_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
 
 

@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .aabb import boxes_overlap
+from .aabb import BOX_EMPTY, boxes_overlap
 from .buffers import CounterRead, GrowableBuffer, emit_pair, launch_until_fit, used_count
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -88,7 +88,7 @@ class BroadPhaseNxN:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
         return []
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
@@ -165,8 +165,8 @@ def _sap_stats_kernel(
     """Strided pass: scene bounds (``stat_lo``/``stat_hi``, 3 each) and sums (``stat_sum``, 9:
     centres, squared centres, extents per axis), with one atomic per value per thread."""
     t = wp.tid()
-    lo = wp.vec3(1.0e30, 1.0e30, 1.0e30)
-    hi = wp.vec3(-1.0e30, -1.0e30, -1.0e30)
+    lo = wp.vec3(BOX_EMPTY)
+    hi = wp.vec3(-BOX_EMPTY)
     c1 = wp.vec3d(0.0, 0.0, 0.0)
     c2 = wp.vec3d(0.0, 0.0, 0.0)
     ext = wp.vec3d(0.0, 0.0, 0.0)
@@ -438,23 +438,25 @@ class BroadPhaseSAP:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers of its own that :meth:`launch` writes, whose counters the caller checks after
-        it (besides ``pairs``): the grid entries."""
+        """The buffers of its own with counters that :meth:`launch` writes, whose counters the caller
+        reads after it (besides ``pairs``): the grid entries (their counter set by a kernel)."""
         return [self.entry]
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
-        After the frame, check ``pairs`` and :attr:`counters`; if a counter passed its capacity,
-        ``ensure`` it and launch again.
+        The caller resets ``pairs`` (or not, to append). After the frame, check ``pairs`` and
+        :attr:`counters`; if a counter passed its capacity, ``ensure`` it and launch again
+        (:func:`find_pairs` does).
         """
         n = lower.shape[0]
         self._resize(n)
         if n < 2:
+            self.entry.reset()  # no entries (the emit kernel sets the counter otherwise)
             return
         d = self.device
-        self.stat_lo.fill_(1.0e30)
-        self.stat_hi.fill_(-1.0e30)
+        self.stat_lo.fill_(BOX_EMPTY)
+        self.stat_hi.fill_(-BOX_EMPTY)
         self.stat_sum.zero_()
         self.big_count.zero_()
         wp.launch(_sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
@@ -491,17 +493,21 @@ def make_broad_phase(method: str, *, device=None):
 def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> int:
     """Runs a broad phase until its buffers hold everything; returns the number of pairs.
 
-    Resets ``pairs`` and the broad phase's own ``counters``, launches, reads all counters with one
-    synchronisation, grows what overflowed and launches again if needed
+    Resets ``pairs``, launches, reads the counters of ``pairs`` and of the broad phase's own
+    ``counters`` with one synchronisation, grows what overflowed and launches again if needed
     (:func:`~warp_ccd.buffers.launch_until_fit`).
 
     Args:
-        broad: an object with ``launch(lower, upper, pairs)`` and ``counters``.
+        broad: an object with ``launch(lower, upper, pairs)`` (and ``counters``, when it writes
+            buffers of its own).
         lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
         pairs: ``wp.vec2i`` output buffer.
     """
-    counters = CounterRead([pairs, *broad.counters], pairs.device)
-    return launch_until_fit(lambda: broad.launch(lower, upper, pairs), counters)[0]
+    def launch():
+        pairs.reset()
+        broad.launch(lower, upper, pairs)
+
+    return launch_until_fit(launch, CounterRead([pairs, *getattr(broad, "counters", [])], pairs.device))[0]
 
 
 def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:

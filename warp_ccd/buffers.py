@@ -26,7 +26,6 @@ __all__ = [
     "GrowableBuffer",
     "emit_pair",
     "launch_until_fit",
-    "read_counts",
     "reserve_slot",
     "upper_bound",
     "used_count",
@@ -87,6 +86,8 @@ class GrowableBuffer:
     Attributes:
         last_count: the counter as the host last read it (:class:`CounterRead`), 0 before; once
             the frame fits, the number of items held.
+        fitted: whether the items counted at that read were all stored (False when the buffer
+            then grew: its new storage holds nothing yet).
     """
 
     def __init__(self, dtype, capacity: int, device, name: str, factor: int = 1):
@@ -96,6 +97,7 @@ class GrowableBuffer:
         self.factor = factor
         self.capacity = 0
         self.last_count = 0
+        self.fitted = True
         self.count = wp.zeros(1, dtype=wp.int64, device=self.device)
         self._allocate(max(1, int(capacity)))
 
@@ -132,8 +134,15 @@ class GrowableBuffer:
         return np.zeros((0,) if length is None else (0, length), dtype=scalar)
 
     def held(self) -> wp.array:
-        """The items held after the last read (``data[:last_count]``), a view on the device."""
-        return self.data[: min(self.last_count, self.capacity)]
+        """The items held after the last read (``data[:last_count]``), a view on the device.
+
+        Raises:
+            RuntimeError: the buffer grew at that read (its items were not all stored): run the
+                work that fills it again first.
+        """
+        if not self.fitted:
+            raise RuntimeError(f"{self.name}: the buffer grew after its last read; run the frame again first")
+        return self.data[: self.last_count]
 
 
 class CounterRead:
@@ -141,7 +150,9 @@ class CounterRead:
 
     :meth:`enqueue` only enqueues copies into pinned host memory, so a frame that ends with it
     can be captured in a CUDA graph; :meth:`finish` waits, records each buffer's
-    :attr:`~GrowableBuffer.last_count` and grows the buffers that overflowed.
+    :attr:`~GrowableBuffer.last_count` and grows the buffers that overflowed. Who launches the
+    work resets the counters: each stage those of the buffers it owns, the caller the ones it
+    passes in.
 
     Args:
         buffers: the buffers, fixed for the reader's life (their storage may grow).
@@ -153,11 +164,6 @@ class CounterRead:
         self.device = wp.get_device(device)
         self.host = wp.zeros(max(1, len(self.buffers)), dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         self.counts = [0] * len(self.buffers)
-
-    def reset(self) -> None:
-        """Zeroes every counter (device work, no wait)."""
-        for b in self.buffers:
-            b.reset()
 
     def enqueue(self) -> None:
         """Copies every counter to the host (asynchronous; capturable)."""
@@ -175,31 +181,25 @@ class CounterRead:
         grew = False
         for b, c in zip(self.buffers, self.counts):
             b.last_count = c
-            grew |= b.ensure(c)
+            b.fitted = not b.ensure(c)
+            grew |= not b.fitted
         return grew
 
 
-def launch_until_fit(launch: Callable[[], None], counters: CounterRead) -> list[int]:
-    """Resets the counters, runs ``launch()``, reads the counters once; while a buffer overflowed
-    (it has grown since), runs again. Returns the counts of the run where everything fitted.
+def launch_until_fit(launch: Callable[[], None], counters: CounterRead, *, reads: bool = False) -> list[int]:
+    """Runs ``launch()`` and reads the counters once; while a buffer overflowed (it has grown
+    since), runs it again. Returns the counts of the run where everything fitted.
 
     Args:
-        launch: enqueues the work on the counters' device; reads nothing on the host.
+        launch: enqueues the work on the counters' device, resetting the counters it fills first;
+            reads nothing on the host.
         counters: the :class:`CounterRead` of every buffer ``launch`` writes.
+        reads: ``launch`` ends with ``counters.enqueue()`` itself (as a frame captured in a CUDA
+            graph with its read does); otherwise the read is enqueued after it here.
     """
     while True:
-        counters.reset()
         launch()
-        counters.enqueue()
+        if not reads:
+            counters.enqueue()
         if not counters.finish():
             return counters.counts
-
-
-def read_counts(counts: list[wp.array], device) -> list[int]:
-    """Reads several one-element int64 counters with a single host synchronisation."""
-    device = wp.get_device(device)
-    host = wp.empty(len(counts), dtype=wp.int64, device="cpu", pinned=device.is_cuda)
-    for k, c in enumerate(counts):
-        wp.copy(host, c, dest_offset=k, src_offset=0, count=1)
-    wp.synchronize_device(device)
-    return [int(x) for x in host.numpy()]

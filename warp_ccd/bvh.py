@@ -32,9 +32,10 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .aabb import box_lower32, box_upper32
+from .aabb import BOX_EMPTY, box_lower32, box_upper32
 from .buffers import upper_bound
-from .scene import PRECISIONS, MeshTopology, mesh_triangle, precision_types
+from .precision import PRECISIONS, precision_types
+from .scene import MeshTopology, mesh_triangle
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -185,8 +186,8 @@ def _refit_node(
     if child[0] < 0:
         rng = tree.node_triangle[shape_node]
         base = tree.shape_tri_order_start[s]
-        lo = wp.vec3(1.0e30)
-        hi = wp.vec3(-1.0e30)
+        lo = wp.vec3(BOX_EMPTY)
+        hi = wp.vec3(-BOX_EMPTY)
         for k in range(rng[0], rng[0] + rng[1]):
             a, b, c = mesh_triangle(mesh, world_vertex, inst, tree.tri_order[base + k])
             edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
@@ -254,7 +255,7 @@ def _refit_instance_kernel(
 
 
 for _precision in PRECISIONS:
-    _scalar, _vec3, _ = precision_types(_precision)
+    _scalar, _vec3, _, _ = precision_types(_precision)
     for _kernel in (_refit_level_kernel, _refit_instance_kernel):
         wp.overload(_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
 

@@ -239,12 +239,14 @@ class MidPhaseBVH:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers :meth:`launch` writes, whose counters the caller checks after it: the candidates,
-        and the traversal's work items when it splits."""
+        """The buffers with counters that :meth:`launch` resets and writes, whose counters the caller
+        reads after it: the candidates, and the traversal's work items when it splits."""
         return [self.candidates, self.work] if self.split > 1 else [self.candidates]
 
     def launch(self, scene, pairs: GrowableBuffer) -> None:
-        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`."""
+        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (reset first)."""
+        for buffer in self.counters:
+            buffer.reset()
         wp.launch(
             _traverse_kernel,
             dim=pairs.capacity,
@@ -325,7 +327,8 @@ class MidPhaseAllPairs:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers :meth:`launch` writes, whose counters the caller checks after it: the candidates."""
+        """The buffers with counters that :meth:`launch` writes (the candidates, their counter set
+        by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
 
     def launch(self, scene, pairs: GrowableBuffer) -> None:

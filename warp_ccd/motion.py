@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .precision import PRECISIONS, precision_types
+
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["EllipseMotion"]
@@ -51,7 +53,8 @@ def _motion_pose_kernel(
     instance_pose[i] = wp.transformation(pos, wp.normalize(rot), dtype=type(time))
 
 
-for _scalar, _vec3, _transform in ((wp.float32, wp.vec3, wp.transform), (wp.float64, wp.vec3d, wp.transformd)):
+for _precision in PRECISIONS:
+    _scalar, _vec3, _, _transform = precision_types(_precision)
     wp.overload(_motion_pose_kernel, {"time": _scalar, "motion_centre": wp.array[_vec3],
                                       "instance_pose": wp.array[_transform]})
 
@@ -83,11 +86,11 @@ class EllipseMotion:
     """
 
     def __init__(self, centre, axes, orbit, tilt, spin_axis, spin, base, device=None, precision: str = "float32"):
+        self.scalar_type, vec, _, _ = precision_types(precision)
         self.device = wp.get_device(device)
         self.num_objects = len(centre)
         self.precision = precision
         d = self.device
-        vec = wp.vec3d if precision == "float64" else wp.vec3
         self.motion_centre = wp.array(np.asarray(centre, np.float64), dtype=vec, device=d)
         self.motion_axes = wp.array(np.asarray(axes, np.float32), dtype=wp.vec2, device=d)
         self.motion_orbit = wp.array(np.asarray(orbit, np.float32), dtype=wp.vec2, device=d)
@@ -133,7 +136,7 @@ class EllipseMotion:
             _motion_pose_kernel,
             dim=self.num_objects,
             inputs=[
-                wp.float64(time) if self.precision == "float64" else wp.float32(time),
+                self.scalar_type(time),
                 self.motion_centre,
                 self.motion_axes,
                 self.motion_orbit,

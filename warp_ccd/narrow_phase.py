@@ -11,8 +11,8 @@ Two tests with the same semantics, one the cross-check of the other:
   4. otherwise they touch when they come within ``eps`` of each other: an edge of one within
      ``eps`` of the other (distance, not snapped sections: with nearly parallel planes the part
      of a triangle within ``eps`` of the other's plane is a wide strip, and two "sections" made
-     from snapped distances need not lie on one line; projecting them on one direction reported
-     pairs thousands of tolerances apart).
+     from snapped distances need not lie on one line; projected on one direction they would
+     report pairs thousands of tolerances apart).
   Coplanar triangles (all of one triangle's vertices within ``eps`` of the other's plane) go to a
   2D test in that plane: an edge of one within ``eps`` of an edge of the other, or a vertex of one
   inside the other (as the vertices are flattened onto the plane first, such pairs count as
@@ -55,7 +55,8 @@ Semantics shared by both:
 Precision: every function takes ``wp.vec3`` or ``wp.vec3d`` vertices and computes in their
 precision (Warp generics: ``Any``-typed arguments, literals as ``type(eps)(0.5)``); the kernels'
 float32 and float64 variants are declared with ``wp.overload`` after them, so the module compiles
-once for both. The tests take the tolerance in either precision.
+once for both. The functions take the tolerance in either precision and round it to the
+vertices' (the kernels take it in float64).
 """
 
 
@@ -64,7 +65,8 @@ from typing import Any
 import warp as wp
 
 from .buffers import GrowableBuffer, reserve_slot, used_count
-from .scene import PRECISIONS, MeshTopology, mesh_triangle, precision_types
+from .precision import PRECISIONS, precision_types
+from .scene import MeshTopology, mesh_triangle
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -73,6 +75,8 @@ __all__ = [
     "CONTACT_AREA",
     "CONTACT_NONE",
     "CONTACT_SEGMENT",
+    "METHOD_EDGE_FACE",
+    "METHOD_MOLLER",
     "NARROW_METHODS",
     "NarrowPhase",
     "TOLERANCE",
@@ -102,6 +106,9 @@ CONTACT_SEGMENT = wp.constant(1)
 """``kind`` of :func:`tri_tri_segment`: they cross or touch along a segment (or at a point)."""
 CONTACT_AREA = wp.constant(2)
 """``kind`` of :func:`tri_tri_segment`: coplanar contact, an area (no segment)."""
+
+FOUR_PI = wp.constant(wp.float64(12.566370614359172))
+"""The solid angle of the whole sphere (the winding number's unit)."""
 
 
 @wp.func
@@ -532,7 +539,8 @@ def tri_tri_segment(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_re
         v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units), all ``wp.vec3`` (the
             test computes in float32) or all ``wp.vec3d`` (in float64).
         tol_rel: tolerance relative to the longest edge (see the module docstring), a float of
-            either precision (taken in the vertices' precision).
+            either precision, rounded to the vertices' precision. With float64 vertices give it
+            in float64 (``wp.float64(wc.TOLERANCE)``): a float32 value is already rounded.
 
     Returns:
         ``kind`` :data:`CONTACT_NONE`: apart; :data:`CONTACT_SEGMENT`: they cross or touch along
@@ -586,7 +594,8 @@ def tri_tri_moller(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel
         v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units), all ``wp.vec3`` (the
             test computes in float32) or all ``wp.vec3d`` (in float64).
         tol_rel: tolerance relative to the longest edge (see the module docstring), a float of
-            either precision (taken in the vertices' precision).
+            either precision, rounded to the vertices' precision. With float64 vertices give it
+            in float64 (``wp.float64(wc.TOLERANCE)``): a float32 value is already rounded.
 
     Returns:
         True when they intersect or touch within the tolerance (a degenerate triangle as the
@@ -646,7 +655,7 @@ def winding_number(mesh: MeshTopology, world_vertex: wp.array[Any], instance: in
         num = wp.dot(a, wp.cross(b, c))
         den = la * lb * lc + wp.dot(a, b) * lc + wp.dot(a, c) * lb + wp.dot(b, c) * la
         total += type(p[0])(2.0) * wp.atan2(num, den)
-    return total / type(p[0])(12.566370614359172)
+    return total / type(p[0])(FOUR_PI)
 
 
 @wp.func
@@ -675,7 +684,7 @@ def _narrow_phase_kernel(
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
     method: int,
-    tol_rel: Any,
+    tol_rel: wp.float64,
     hit_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
@@ -703,7 +712,7 @@ def _segment_kernel(
     hit: wp.array[wp.vec4i],
     hit_count: wp.array[wp.int64],
     hit_capacity: int,
-    tol_rel: Any,
+    tol_rel: wp.float64,
     # Outputs
     segment: wp.array2d[Any],
 ):
@@ -715,7 +724,7 @@ def _segment_kernel(
     a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex, c)
     kind, p, q = tri_tri_segment(a0, a1, a2, b0, b1, b2, tol_rel)
     if kind != CONTACT_SEGMENT:
-        nan = type(tol_rel)(wp.nan)
+        nan = type(p[0])(wp.nan)
         p = type(p)(nan, nan, nan)
         q = p
     segment[k, 0] = p
@@ -759,12 +768,13 @@ def tri_tri_batch_kernel(
     tri_a: wp.array2d[Any],
     tri_b: wp.array2d[Any],
     method: int,
-    tol_rel: Any,
+    tol_rel: wp.float64,
     # Outputs
     result: wp.array[wp.int32],
 ):
     """One thread per pair of triangles given directly as ``(P, 3)`` vertex arrays (``wp.vec3``
-    or ``wp.vec3d``, ``tol_rel`` of the same precision): :func:`tri_tri_test`'s verdict, 1 or 0."""
+    or ``wp.vec3d``; ``tol_rel`` in float64, rounded to their precision): :func:`tri_tri_test`'s
+    verdict, 1 or 0."""
     k = wp.tid()
     r = tri_tri_test(method, tri_a[k, 0], tri_a[k, 1], tri_a[k, 2], tri_b[k, 0], tri_b[k, 1], tri_b[k, 2], tol_rel)
     result[k] = wp.where(r, 1, 0)
@@ -774,7 +784,7 @@ def tri_tri_batch_kernel(
 def tri_tri_segment_batch_kernel(
     tri_a: wp.array2d[Any],
     tri_b: wp.array2d[Any],
-    tol_rel: Any,
+    tol_rel: wp.float64,
     # Outputs
     kind: wp.array[wp.int32],
     segment: wp.array2d[Any],
@@ -789,15 +799,15 @@ def tri_tri_segment_batch_kernel(
 
 
 # Both precisions, declared up front: the module compiles once, for float32 and float64 together.
+# The kernels take the tolerance in float64 and round it to the vertices' precision.
 for _precision in PRECISIONS:
-    _scalar, _vec3, _ = precision_types(_precision)
+    _, _vec3, _, _ = precision_types(_precision)
     _vertices, _triangles = wp.array[_vec3], wp.array2d[_vec3]
-    wp.overload(_narrow_phase_kernel, {"world_vertex": _vertices, "tol_rel": _scalar})
-    wp.overload(_segment_kernel, {"world_vertex": _vertices, "tol_rel": _scalar, "segment": _triangles})
+    wp.overload(_narrow_phase_kernel, {"world_vertex": _vertices})
+    wp.overload(_segment_kernel, {"world_vertex": _vertices, "segment": _triangles})
     wp.overload(_containment_kernel, {"world_vertex": _vertices})
-    wp.overload(tri_tri_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles, "tol_rel": _scalar})
-    wp.overload(tri_tri_segment_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles, "tol_rel": _scalar,
-                                               "segment": _triangles})
+    wp.overload(tri_tri_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles})
+    wp.overload(tri_tri_segment_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles, "segment": _triangles})
 
 
 class NarrowPhase:
@@ -842,14 +852,14 @@ class NarrowPhase:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers :meth:`launch` writes, whose counters the caller checks after it."""
+        """The buffers with counters that :meth:`launch` resets and writes; the caller reads
+        their counters after it."""
         return [self.hits] if self.contained is None else [self.hits, self.contained]
 
     def launch(self, scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
                object_lower: wp.array | None = None, object_upper: wp.array | None = None) -> None:
-        """Tests the candidates of ``scene``: appends hits, sets flags, and writes the segments
-        and the containment pairs when asked for. The caller resets the :attr:`counters` first
-        (:func:`~warp_ccd.buffers.launch_until_fit` does), or the hits are appended.
+        """Tests the candidates of ``scene``: resets and writes the hits and the flags, and the
+        segments and the containment pairs when asked for (host reads nothing).
 
         Args:
             scene: the :class:`~warp_ccd.scene.Scene` (its world vertices now).
@@ -857,9 +867,13 @@ class NarrowPhase:
             object_pairs, object_lower, object_upper: the broad phase's object pairs and the
                 ``(N,)`` object boxes it saw (needed with ``containment``).
         """
+        if self.contained is not None and (object_pairs is None or object_lower is None or object_upper is None):
+            raise ValueError("containment: launch needs the object pairs and the object boxes")
         d = self.device
+        for buffer in self.counters:
+            buffer.reset()
         self.object_colliding.zero_()
-        tol = scene.scalar_type(self.tolerance)
+        tol = wp.float64(self.tolerance)
         wp.launch(
             _narrow_phase_kernel,
             dim=candidates.capacity,
@@ -876,8 +890,6 @@ class NarrowPhase:
                       inputs=[scene.topology, scene.world_vertex, hits.data, hits.count, hits.capacity, tol],
                       outputs=[self.segment], device=d)
         if self.contained is not None:
-            if object_pairs is None or object_lower is None or object_upper is None:
-                raise ValueError("containment: launch needs the object pairs and the object boxes")
             wp.launch(
                 _containment_kernel,
                 dim=object_pairs.capacity,

@@ -1,8 +1,8 @@
 """The frame: refit (object bounds) -> broad phase -> mid phase -> narrow phase -> result.
 
 :class:`CollisionPipeline` owns one object of each stage and calls their methods in order on the
-scene's device; each stage launches its own kernels and exposes the buffers it writes
-(``counters``). Between stages the host reads nothing; at the end of the frame it reads every
+scene's device; each stage resets and launches its own work and exposes the buffers with counters
+it writes (``counters``). Between stages the host reads nothing; at the end of the frame it reads every
 counter once (:class:`~warp_ccd.buffers.CounterRead`, a single synchronisation). A counter that
 passed its buffer's capacity makes that buffer grow and the frame run again
 (:func:`~warp_ccd.buffers.launch_until_fit`), so no pair is ever dropped.
@@ -141,7 +141,8 @@ class CollisionPipeline:
             scene's :class:`~warp_ccd.bvh.SceneBVH` (node boxes too) with the ``bvh`` mid phase,
             else an :class:`~warp_ccd.aabb.InstanceBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
-        counters: the :class:`~warp_ccd.buffers.CounterRead` of every buffer the frame writes.
+        counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
+            frame writes (``pairs`` and each stage's ``counters``).
     """
 
     def __init__(
@@ -193,11 +194,12 @@ class CollisionPipeline:
                                   capacity=hit_capacity or max(256, 4 * n), segments=segments,
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
-        self.counters = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
+        self.counter_read = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
         self._times = None
 
     def _run_frame(self) -> None:
-        """Enqueues one frame (the counters were reset); with ``timings``, times each stage."""
+        """Enqueues one frame (each stage resets what it owns; the pipeline resets ``pairs``); with
+        ``timings``, times each stage."""
         scene = self.scene
         times = {} if self.timings else None
 
@@ -212,6 +214,7 @@ class CollisionPipeline:
         if times is not None:
             wp.synchronize_device(self.device)
         t = time.perf_counter()
+        self.pairs.reset()
         self.boxes.refit(scene)
         t = mark("refit", t)
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
@@ -239,7 +242,7 @@ class CollisionPipeline:
             return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                    {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
                                    device_contained=empty, device_segments=no_segments)
-        launch_until_fit(self._run_frame, self.counters)
+        launch_until_fit(self._run_frame, self.counter_read)
         narrow = self.narrow
         num_hits = narrow.hits.last_count
         contained = wp.clone(narrow.contained.held()) if narrow.contained is not None else None

@@ -30,6 +30,7 @@ import numpy as np
 import warp as wp
 
 from .motion import EllipseMotion
+from .precision import PRECISIONS, precision_types
 from .shapes import shape as _named_shape
 from .shapes import validate_mesh
 
@@ -38,19 +39,6 @@ from .shapes import validate_mesh
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["PRECISIONS", "MeshTopology", "Scene", "mesh_triangle", "precision_types", "transforms_to_poses"]
-
-
-PRECISIONS = ("float32", "float64")
-"""Scene precisions: the type of shape vertices, poses and world vertices (boxes stay float32)."""
-
-
-def precision_types(precision: str) -> tuple:
-    """``(scalar, vec3, transform)`` Warp types of a scene precision (``"float32"`` or ``"float64"``)."""
-    if precision == "float64":
-        return wp.float64, wp.vec3d, wp.transformd
-    if precision == "float32":
-        return wp.float32, wp.vec3, wp.transform
-    raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
 
 
 @wp.struct
@@ -99,7 +87,7 @@ def _world_vertex_kernel(
 
 
 for _precision in PRECISIONS:
-    _, _vec3, _transform = precision_types(_precision)
+    _, _vec3, _, _transform = precision_types(_precision)
     wp.overload(_world_vertex_kernel, {"shape_vertex": wp.array[_vec3], "instance_pose": wp.array[_transform],
                                        "world_vertex": wp.array[_vec3]})
 
@@ -210,7 +198,7 @@ class Scene:
 
     Attributes:
         scalar_type, vec3_type, transform_type: the Warp types of its precision
-            (:func:`precision_types`).
+            (:func:`~warp_ccd.precision.precision_types`).
         topology: the :class:`MeshTopology` struct kernels take beside ``world_vertex``.
     """
 
@@ -226,7 +214,7 @@ class Scene:
         device=None,
         precision: str = "float32",
     ):
-        self.scalar_type, self.vec3_type, self.transform_type = precision_types(precision)
+        self.scalar_type, self.vec3_type, _, self.transform_type = precision_types(precision)
         self.device = wp.get_device(device)
         self.precision = precision
         fdtype = np.float64 if precision == "float64" else np.float32

@@ -8,7 +8,7 @@ libraries are imported inside the class that needs them; a missing one raises
 Scene peers are run at their best, as a careful user of each library runs it:
 
 * a device peer exposes ``launch()`` (a whole frame on the device, no host read, nothing
-  allocated, so it can be captured in a CUDA graph), ``buffers`` (whose counters are read once
+  allocated, so it can be captured in a CUDA graph), ``counters`` (buffers whose counters are read once
   after the frame, into pinned memory) and ``triangle_pairs(count)``;
 * a host peer exposes ``stages()`` (``(name, callable)`` pairs run in order every frame),
   ``finish()`` (True when the frame must run again) and ``triangle_pairs()``.
@@ -28,7 +28,8 @@ Scene peers are run at their best, as a careful user of each library runs it:
 
 Broad-phase peers follow :class:`~warp_ccd.broad_phase.BroadPhaseSAP`'s interface,
 ``launch(lower, upper, pairs)`` into a :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i``
-(the caller resets it and checks its counter after):
+(the caller resets it and checks its counter after) and ``counters`` (buffers of their own with
+counters: none here):
 
 * :class:`WarpBvhBroadPhase`: a ``wp.Bvh`` over the boxes, rebuilt (or refit) every frame, and one
   ``wp.bvh_query_aabb`` per box. Pairs ``(a, b)`` with ``a < b``.
@@ -183,14 +184,14 @@ class WarpMeshPipeline:
     def launch(self) -> None:
         """One frame on the device: reset the counter, refit, query. The host reads nothing and
         nothing is allocated, so the frame can be captured in a graph
-        (:class:`~warp_ccd.bench.timing.CountedFrame` reads :attr:`buffers` after it)."""
+        (:class:`~warp_ccd.bench.timing.CountedFrame` reads :attr:`counters` after it)."""
         self.hits.reset()
         self.refit()
         self.query()
 
     @property
-    def buffers(self) -> list:
-        """The buffers whose counters a frame must read: ``[hits]``."""
+    def counters(self) -> list:
+        """The buffers with counters that :meth:`launch` resets and writes: ``[hits]``."""
         return [self.hits]
 
     def triangle_pairs(self, count: int | None = None) -> np.ndarray:
@@ -345,7 +346,7 @@ class WarpBvhBroadPhase:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
         return []
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
@@ -394,7 +395,7 @@ class NewtonBroadPhaseSAP:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """Buffers of its own that :meth:`launch` writes: none (it writes only ``pairs``)."""
+        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
         return []
 
     def _resize(self, n: int) -> None:

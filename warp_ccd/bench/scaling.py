@@ -200,7 +200,7 @@ class DevicePeerMethod(HostPeerMethod):
 
     def __init__(self, peer, device):
         super().__init__(peer, device)
-        self.frames = ModeFrames(peer.launch, peer.buffers, device, device_modes(device))
+        self.frames = ModeFrames(peer.launch, peer.counters, device, device_modes(device))
         self.count = 0
 
     def run(self) -> dict:

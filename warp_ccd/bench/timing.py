@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from ..buffers import CounterRead
+from ..buffers import CounterRead, launch_until_fit
 
 __all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "run_stages", "synced_ms"]
 
@@ -54,36 +54,37 @@ class CountedFrame:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         self.launch = launch
         self.device = wp.get_device(device)
-        self.counters = CounterRead(buffers, self.device)
+        self.counter_read = CounterRead(buffers, self.device)
         self.mode = mode
         self.graph = None
         self._captured = None  # (pointer, capacity) of each buffer when the graph was captured
-        self.counts = [0] * len(self.counters.buffers)
+        self.counts = [0] * len(self.counter_read.buffers)
         self._ran = False  # the first frame runs eagerly (kernels load, lazy set-up allocates)
 
     def _layout(self) -> list:
-        return [(b.data.ptr, b.capacity) for b in self.counters.buffers]
+        return [(b.data.ptr, b.capacity) for b in self.counter_read.buffers]
 
     def _enqueue(self) -> None:
         self.launch()
-        self.counters.enqueue()
+        self.counter_read.enqueue()
+
+    def _frame(self) -> None:
+        """The frame and its counter read, enqueued eagerly or as a (re)captured graph."""
+        if self.mode == "graph" and self._ran:
+            if self.graph is None or self._captured != self._layout():  # new, or a buffer grew since
+                with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                    self._enqueue()
+                self.graph, self._captured = capture.graph, self._layout()
+            wp.capture_launch(self.graph)
+        else:
+            self._enqueue()
+        self._ran = True
 
     def run(self) -> list[int]:
-        """Runs the frame until every buffer held its items; returns the counts."""
-        while True:
-            if self.mode == "graph" and self._ran:
-                if self.graph is None or self._captured != self._layout():  # new, or a buffer grew since
-                    with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
-                        self._enqueue()
-                    self.graph, self._captured = capture.graph, self._layout()
-                wp.capture_launch(self.graph)
-            else:
-                self._enqueue()
-            self._ran = True
-            grew = self.counters.finish()
-            self.counts = self.counters.counts
-            if not grew:
-                return self.counts
+        """Runs the frame until every buffer held its items (:func:`~warp_ccd.buffers.launch_until_fit`);
+        returns the counts."""
+        self.counts = launch_until_fit(self._frame, self.counter_read, reads=True)
+        return self.counts
 
 
 class ModeFrames:
@@ -100,16 +101,14 @@ class ModeFrames:
 
     @classmethod
     def broad_phase(cls, broad, boxes, pairs, device, modes) -> "ModeFrames":
-        """A broad phase's frame: reset ``pairs`` and the broad phase's own ``counters`` (if any),
-        then ``broad.launch(*boxes(), pairs)``; ``boxes()`` gives the ``(lower, upper)`` arrays."""
-        buffers = [pairs, *broad.counters]
-        resets = CounterRead(buffers, device)
+        """A broad phase's frame: reset ``pairs``, then ``broad.launch(*boxes(), pairs)``; ``boxes()``
+        gives the ``(lower, upper)`` arrays. Read: ``pairs`` and the broad phase's ``counters``."""
 
         def launch():
-            resets.reset()
+            pairs.reset()
             broad.launch(*boxes(), pairs)
 
-        return cls(launch, buffers, device, modes)
+        return cls(launch, [pairs, *broad.counters], device, modes)
 
     def run(self, stage: str) -> dict:
         """One frame per mode, each timed with :func:`synced_ms`.
