@@ -590,12 +590,7 @@ def tri_tri_segment(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_re
 def tri_tri_moller(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: Any) -> bool:
     """Möller's test: do the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)`` intersect?
 
-    Args:
-        v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units), all ``wp.vec3`` (the
-            test computes in float32) or all ``wp.vec3d`` (in float64).
-        tol_rel: tolerance relative to the longest edge (see the module docstring), a float of
-            either precision, rounded to the vertices' precision. With float64 vertices give it
-            in float64 (``wp.float64(wc.TOLERANCE)``): a float32 value is already rounded.
+    Same arguments and precisions as :func:`tri_tri_segment`.
 
     Returns:
         True when they intersect or touch within the tolerance (a degenerate triangle as the
