@@ -38,7 +38,7 @@ from .shapes import validate_mesh
 # bits on every device (the narrow phase's verdicts then agree too).
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["PRECISIONS", "MeshTopology", "Scene", "mesh_triangle", "precision_types", "transforms_to_poses"]
+__all__ = ["MeshTopology", "Scene", "mesh_triangle", "transforms_to_poses"]
 
 
 @wp.struct
