@@ -32,6 +32,7 @@ import warp_ccd as wc  # noqa: E402
 from warp_ccd import narrow_phase  # noqa: E402
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
 from warp_ccd.cli_common import resolve_device  # noqa: E402
+from warp_ccd.precision import precision_types  # noqa: E402
 
 import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
 
@@ -77,7 +78,7 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
         same_inputs = awkward_pairs.inputs_digest(precision) == reference[f"{precision}_inputs_sha256"]
         got = awkward_pairs.verdicts(precision, device)
         ta, tb = awkward_pairs.awkward_pairs(precision)
-        vec3 = wp.vec3 if precision == "float32" else wp.vec3d
+        _, vec3, _, _ = precision_types(precision)
         a, b = wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device)
         hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
         for method in awkward_pairs.METHODS:

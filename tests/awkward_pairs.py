@@ -186,11 +186,12 @@ def verdicts(precision: str, device, swap: bool = False) -> dict:
         tri_tri_batch_kernel,
         tri_tri_segment_batch_kernel,
     )
+    from warp_ccd.precision import precision_types
 
     ta, tb = awkward_pairs(precision)
     if swap:
         ta, tb = tb, ta
-    vec3 = wp.vec3 if precision == "float32" else wp.vec3d
+    _, vec3, _, _ = precision_types(precision)
     a = wp.array(ta, dtype=vec3, device=device)
     b = wp.array(tb, dtype=vec3, device=device)
     out = {}

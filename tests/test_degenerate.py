@@ -14,6 +14,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.narrow_phase import CONTACT_NONE, CONTACT_SEGMENT, NARROW_METHODS, TOLERANCE, tri_tri_segment_batch_kernel
+from warp_ccd.precision import precision_types
 
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test
@@ -136,7 +137,8 @@ def test_crafted_degenerate_cases_float64_far(device, method):
 def segments(ta, tb, device, tol=TOLERANCE, precision="float32"):
     """``(kind, (P, 2, 3) segment)`` of Möller's test, computed in ``precision``."""
     n = len(ta)
-    dtype, vec3 = (np.float64, wp.vec3d) if precision == "float64" else (np.float32, wp.vec3)
+    _, vec3, _, _ = precision_types(precision)
+    dtype = np.dtype(precision)
     kind = wp.zeros(n, dtype=wp.int32, device=device)
     seg = wp.zeros((n, 2), dtype=vec3, device=device)
     wp.launch(tri_tri_segment_batch_kernel, dim=n,

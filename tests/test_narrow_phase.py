@@ -6,6 +6,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
+from warp_ccd.precision import precision_types
 
 from oracles import intersect_tri_tri_f64
 
@@ -17,7 +18,8 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 def run_test(ta, tb, device, method="moller", tol=TOLERANCE, precision="float32"):
     """Verdicts of ``tri_tri_batch_kernel`` on pairs ``(P, 3, 3)``, computed in ``precision``."""
-    dtype, vec3 = (np.float64, wp.vec3d) if precision == "float64" else (np.float32, wp.vec3)
+    _, vec3, _, _ = precision_types(precision)
+    dtype = np.dtype(precision)
     ta = np.asarray(ta, dtype).reshape(-1, 3, 3)
     tb = np.asarray(tb, dtype).reshape(-1, 3, 3)
     out = wp.zeros(len(ta), dtype=wp.int32, device=device)

@@ -58,7 +58,6 @@ class CountedFrame:
         self.mode = mode
         self.graph = None
         self._captured = None  # (pointer, capacity) of each buffer when the graph was captured
-        self.counts = [0] * len(self.counter_read.buffers)
         self._ran = False  # the first frame runs eagerly (kernels load, lazy set-up allocates)
 
     def _layout(self) -> list:
@@ -83,8 +82,12 @@ class CountedFrame:
     def run(self) -> list[int]:
         """Runs the frame until every buffer held its items (:func:`~warp_ccd.buffers.launch_until_fit`);
         returns the counts."""
-        self.counts = launch_until_fit(self._frame, self.counter_read, reads=True)
-        return self.counts
+        return launch_until_fit(self._frame, self.counter_read, reads=True)
+
+    @property
+    def counts(self) -> list[int]:
+        """The counts of the last frame (zeros before the first)."""
+        return self.counter_read.counts
 
 
 class ModeFrames:
