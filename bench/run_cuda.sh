@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # Everything to check and measure on a CUDA machine, in parts that each fit one run of a few
-# minutes: the test suite, what one verdict on every device costs the narrow phase, then the
-# benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
+# minutes: the test suite, one frame profiled activity by activity (and as a graph), what one
+# verdict on every device costs the narrow phase, then the benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
 # 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, narrow, scaling, spheres, broad
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, broad
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -21,13 +21,14 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests narrow scaling spheres broad}
+parts=${*:-tests profile narrow scaling spheres broad}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
+    profiled="100"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
-    narrow=100000
+    narrow=100000; profiled="1e3 1e4 1e5"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -43,6 +44,9 @@ for part in $parts; do
         WARP_CCD_TEST_DEVICES=${TEST_DEVICES:-$device} step python3 -m pytest -q -ra $tests -p no:cacheprovider \
             >> "$log" 2>&1
         tail -n 15 "$log" ;;
+    profile)
+        step python3 bench/profile_frame.py --device "$device" --objects $profiled --frames $((frames * 5)) \
+            --out "$out/profile_$tag.json" ;;
     narrow)
         step python3 bench/bench_narrow_phase.py --device "$device" --objects $narrow \
             --out "$out/narrow_phase_$tag.json" ;;
@@ -56,7 +60,7 @@ for part in $parts; do
         step python3 bench/bench_broad_phase.py --device "$device" --n $boxes --newton-max 1000000 \
             --frames $((frames / 2)) --out "$out/broad_phase_$tag.json" ;;
     *)
-        echo "run_cuda.sh: unknown part $part (tests, narrow, scaling, spheres, broad)" >&2; status=2 ;;
+        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, broad)" >&2; status=2 ;;
     esac
 done
 exit $status

@@ -2,8 +2,10 @@
 
 import numpy as np
 import pytest
+import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.broad_phase import make_broad_phase
 
 from oracles import box_pairs_numpy
 
@@ -161,3 +163,24 @@ def test_bad_input(lower, upper, match):
 def test_unknown_method():
     with pytest.raises(ValueError, match="'sap' or 'nxn'"):
         wc.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")
+
+
+@pytest.mark.parametrize("method", ["sap", "nxn"])
+def test_find_pairs_frame_after_frame(device, method):
+    """A broad phase run alone, frame after frame (a CUDA graph on CUDA), finds the numpy truth as
+    the boxes move and the pair buffer grows."""
+    rng = np.random.default_rng(7)
+    bp = make_broad_phase(method, device=device)
+    lo = rng.uniform(0, 20, (800, 3)).astype(np.float32)
+    lower = wp.array(lo, dtype=wp.vec3, device=device)
+    upper = wp.array(lo + 1.0, dtype=wp.vec3, device=device)
+    for k in range(5):
+        lo = lo + np.float32(0.3 * k)
+        size = np.float32(1.0 + k)  # more pairs each frame: the buffer grows
+        lower.assign(lo)
+        upper.assign(lo + size)
+        got = bp.find_pairs(lower, upper).numpy().reshape(-1, 2)
+        got = got[np.lexsort((got[:, 1], got[:, 0]))]
+        assert np.array_equal(got, wc.broad_phase_pairs(lo, lo + size, method="nxn", device="cpu"))
+    with pytest.raises(ValueError, match="lower"):
+        bp.find_pairs(lo, upper)

@@ -124,16 +124,30 @@ def test_mixed_scene_matches_oracles(device, seed):
 
 
 @pytest.mark.parametrize(
-    "options", [dict(leaf_size=2), dict(leaf_size=4), dict(traversal_split=0), dict(traversal_split=2),
-                dict(traversal_split=8), dict(traversal_split=32), dict(traversal_split=8, candidate_capacity=1)],
-    ids=["leaf2", "leaf4", "split0", "split2", "split8", "split32", "split8_capacity1"])
+    "options", [dict(), dict(leaf_size=2), dict(leaf_size=4), dict(candidate_capacity=1), dict(pair_capacity=1)],
+    ids=["leaf1", "leaf2", "leaf4", "capacity1", "pairs1"])
 def test_options_same_result(device, options):
+    """The traversal finds exactly the candidates that survive the reference's all triangle pairs."""
     scene = mixed_scene(device, n=30, seed=4)
     scene.advance(0.4)
-    ref = wc.CollisionPipeline(scene, traversal_split=0).detect()
+    ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     got = wc.CollisionPipeline(scene, **options).detect()
     assert ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+
+
+@pytest.mark.parametrize("num_threads", [1, 2, 7, 64, 100000])
+def test_traversal_runs_split_anywhere(device, num_threads):
+    """However many threads share the work items, runs that start or end inside a pair's block
+    give the same candidates (the CPU's default is one thread, CUDA's many)."""
+    scene = mixed_scene(device, n=30, seed=4)
+    scene.advance(0.4)
+    ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
+    pipe = wc.CollisionPipeline(scene)
+    pipe.mid.num_threads = num_threads
+    got = pipe.detect()
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+    assert got.num_candidates == wc.CollisionPipeline(scene).detect().num_candidates
 
 
 def test_deforming_twisting_sphere(device):
@@ -160,7 +174,7 @@ def test_deforming_twisting_sphere(device):
 
 
 def test_refit_paths_agree(device):
-    """One thread per instance (small trees) and level by level give the same boxes."""
+    """Leaves then inner nodes (small trees) and level by level give the same boxes."""
     from warp_ccd.bvh import SceneBVH
 
     scene = mixed_scene(device, n=25, seed=6)
@@ -178,15 +192,3 @@ def test_refit_paths_agree(device):
         assert np.array_equal(bvh.tree.node_upper.numpy(), ref[1])
         assert np.array_equal(bvh.lower.numpy(), ref[2])
     refit_contains(scene, mixed)
-
-
-def test_work_items_grow(device):
-    """The traversal's work-item buffer grows like every other buffer."""
-    scene = mixed_scene(device, n=30, seed=4)
-    scene.advance(0.4)
-    ref = wc.CollisionPipeline(scene, traversal_split=0).detect()
-    pipe = wc.CollisionPipeline(scene, traversal_split=8)
-    pipe.mid.work._allocate(1)
-    got = pipe.detect()
-    assert pipe.mid.work.capacity > 1
-    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)

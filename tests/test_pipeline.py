@@ -219,8 +219,11 @@ def test_bad_options():
         wc.Scene.random(True)
     with pytest.raises(ValueError, match="tolerance"):
         wc.CollisionPipeline(scene, tolerance="a")
-    with pytest.raises(ValueError, match="traversal_split"):
-        wc.CollisionPipeline(scene, traversal_split=-1)
+    with pytest.raises(ValueError, match="graph"):
+        wc.CollisionPipeline(scene, graph="yes")
+    if not scene.device.is_cuda:
+        with pytest.raises(ValueError, match="graph"):
+            wc.CollisionPipeline(scene, graph=True)
     with pytest.raises(ValueError, match="density"):
         wc.Scene.random(10, density=2.0)
 
@@ -277,7 +280,7 @@ def test_segment_of_crossing_triangles(device, precision):
     [
         (lambda s: wc.CollisionPipeline(s, leaf_size=1.5), "leaf_size"),
         (lambda s: wc.CollisionPipeline(s, leaf_size=True), "leaf_size"),
-        (lambda s: wc.CollisionPipeline(s, traversal_split=1.5), "traversal_split"),
+        (lambda s: wc.CollisionPipeline(s, graph=1), "graph"),
         (lambda s: wc.CollisionPipeline(s, pair_capacity=0), "pair_capacity"),
         (lambda s: wc.CollisionPipeline(s, candidate_capacity="big"), "candidate_capacity"),
         (lambda s: wc.Scene.random(5, density="x"), "density"),
@@ -294,3 +297,58 @@ def test_bad_arguments_name_the_argument(call, match):
     scene = wc.Scene.random(5, seed=0)
     with pytest.raises(ValueError, match=match):
         call(scene)
+
+
+def _same_frame(got, want):
+    assert np.array_equal(got.triangle_pairs, want.triangle_pairs)
+    assert np.array_equal(got.colliding, want.colliding)
+    assert np.array_equal(got.containment_pairs, want.containment_pairs)
+    assert np.array_equal(got.segments, want.segments, equal_nan=True)
+    assert (got.num_broad_pairs, got.num_candidates) == (want.num_broad_pairs, want.num_candidates)
+
+
+def test_detect_with_advance_is_advance_then_detect(device):
+    """``detect(advance=dt)`` (one frame: motion and detection) equals ``advance(dt)`` then ``detect()``,
+    frame after frame, including frames whose buffers overflow (every capacity starts at 1)."""
+    one = wc.Scene.random(120, seed=21, device=device)
+    two = wc.Scene.random(120, seed=21, device=device)
+    small = dict(pair_capacity=1, candidate_capacity=1, hit_capacity=1, segments=True, containment=True)
+    fused = wc.CollisionPipeline(one, **small)
+    split = wc.CollisionPipeline(two, graph=False, **small)
+    for _ in range(6):
+        got = fused.detect(advance=0.05)
+        two.advance(0.05)
+        _same_frame(got, split.detect())
+        assert one.time == two.time and one.time_device.numpy()[0] == one.time
+    assert np.array_equal(one.instance_pose.numpy(), two.instance_pose.numpy())
+
+
+def test_graph_and_eager_frames_agree_over_100_frames(device):
+    """The frame replayed as a CUDA graph gives the eager frame's results, frame after frame, as
+    buffers overflow, grow and the graph is captured again (every capacity starts at 1)."""
+    if not wp.get_device(device).is_cuda:
+        pytest.skip("CUDA graphs need a CUDA device")
+    scenes = [wc.Scene.random(400, seed=22, device=device) for _ in range(2)]
+    small = dict(pair_capacity=1, candidate_capacity=1, hit_capacity=1, segments=True, containment=True)
+    graph = wc.CollisionPipeline(scenes[0], graph=True, **small)
+    eager = wc.CollisionPipeline(scenes[1], graph=False, **small)
+    for _ in range(100):
+        _same_frame(graph.detect(advance=1 / 30), eager.detect(advance=1 / 30))
+    frames = list(graph._frames.values())
+    assert any(f.captures for f in frames) and all(f.mode == "graph" for f in frames)
+    assert graph.pairs.capacity > 1 and graph.mid.candidates.capacity > 1 and graph.narrow.hits.capacity > 1
+
+
+def test_result_views_and_copies(device):
+    """A result holds views of the pipeline's buffers until the next detect(); copy() keeps its own."""
+    scene = wc.Scene.random(200, seed=23, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    first = pipe.detect()
+    kept = first.copy()
+    want = kept.triangle_pairs.copy()
+    assert first.device_triangle_pairs.ptr == pipe.narrow.hits.data.ptr  # a view, no copy
+    assert kept.device_triangle_pairs.ptr != pipe.narrow.hits.data.ptr
+    for _ in range(3):
+        pipe.detect(advance=0.3)
+    assert np.array_equal(kept.triangle_pairs, want)
+    assert kept.host_ms >= 0.0 and len(want) > 0

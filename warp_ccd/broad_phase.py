@@ -39,10 +39,12 @@ import warp as wp
 
 from .aabb import BOX_EMPTY, boxes_overlap
 from .buffers import CounterRead, GrowableBuffer, emit_pair, launch_until_fit, used_count
+from .frame import CountedFrame
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase"]
+__all__ = ["BroadPhase", "BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase",
+           "sap_key_bits"]
 
 NXN_MAX_BOXES = 65536
 """The reference enumerates pair indices in int32: at most ``65536 * 65535 / 2 < 2**31`` pairs."""
@@ -76,20 +78,75 @@ def _nxn_kernel(
         emit_pair(a, b, pair, pair_count, pair_capacity)
 
 
-class BroadPhaseNxN:
+class BroadPhase:
+    """What both broad phases share: running alone, frame after frame (:meth:`find_pairs`).
+
+    A subclass implements ``launch(lower, upper, pairs)`` and ``counters``. :meth:`find_pairs`
+    owns the pair buffer and one :class:`~warp_ccd.frame.CountedFrame` per box arrays: each call
+    is one frame with one counter read, replayed as a CUDA graph on CUDA (``graph``), so a user of
+    the broad phase alone gets the pipeline's frame.
+
+    Args:
+        device: Warp device.
+        graph: replay frames of :meth:`find_pairs` as CUDA graphs (default: on CUDA).
+    """
+
+    def __init__(self, *, device=None, graph: bool | None = None):
+        self.device = wp.get_device(device)
+        if graph and not self.device.is_cuda:
+            raise ValueError(f"graph: CUDA graphs need a CUDA device, got {self.device}")
+        self.graph = self.device.is_cuda if graph is None else bool(graph)
+        self.pairs = None
+        self._reader = None
+        self._frames = {}
+
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """The buffers of its own with counters that ``launch`` writes, besides ``pairs``."""
+        return []
+
+    def find_pairs(self, lower: wp.array, upper: wp.array) -> wp.array:
+        """Overlapping pairs of the ``(N,)`` closed boxes ``lower``/``upper`` (``wp.vec3`` on this
+        device), as one frame: launch, one counter read, grow and rerun if a buffer overflowed.
+
+        Returns:
+            ``(K,)`` ``wp.vec2i`` pairs ``(a, b)``, ``a < b``, unsorted: a view of :attr:`pairs`,
+            valid until the next call.
+
+        Raises:
+            ValueError: arrays of another type, shape or device.
+        """
+        for name, a in (("lower", lower), ("upper", upper)):
+            if not isinstance(a, wp.array) or a.dtype != wp.vec3 or a.ndim != 1:
+                raise ValueError(f"find_pairs: {name} must be a 1-D wp.array of wp.vec3")
+            if a.device != self.device:
+                raise ValueError(f"find_pairs: {name} is on {a.device}, the broad phase on {self.device}")
+        if lower.shape != upper.shape:
+            raise ValueError(f"find_pairs: lower and upper differ in shape, {lower.shape} and {upper.shape}")
+        n = lower.shape[0]
+        if self.pairs is None:
+            self.pairs = GrowableBuffer(wp.vec2i, max(64, 4 * n), self.device, "broad-phase pairs")
+        key = (lower.ptr, upper.ptr, n)
+        frame = self._frames.get(key)
+        if frame is None:
+            if self._reader is None:
+                self._reader = CounterRead([self.pairs, *self.counters], self.device)
+            if len(self._frames) > 8:  # ever new arrays: keep a few graphs
+                self._frames.clear()
+            frame = CountedFrame(lambda: self.launch(lower, upper, self.pairs), self._reader,
+                                 "graph" if self.graph else "eager")
+            self._frames[key] = frame
+        frame.run()
+        return self.pairs.held()
+
+
+class BroadPhaseNxN(BroadPhase):
     """Reference broad phase: tests all ``N (N - 1) / 2`` pairs, one thread each.
 
     Args:
         device: Warp device.
+        graph: as for :class:`BroadPhase`.
     """
-
-    def __init__(self, *, device=None):
-        self.device = wp.get_device(device)
-
-    @property
-    def counters(self) -> list[GrowableBuffer]:
-        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
-        return []
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes ``lower``/``upper`` into ``pairs``.
@@ -130,25 +187,32 @@ class SapGrid:
     nz: int
     axis_min: wp.float64
     qscale: wp.float64
+    q_max: wp.float64
+    q_bits: wp.int64
 
 
-QKEY_MAX = wp.constant(wp.float64(4294967295.0))
-"""Largest quantised lower bound (low 32 bits of a sort key)."""
-
-KEY_CELL_UNIT = wp.constant(wp.int64(4294967296))
-"""A sort key is ``cell * KEY_CELL_UNIT + quantised lower bound``: the cell id in the high 32 bits."""
-
-KEY_CELL_SHIFT = wp.constant(wp.int64(32))
-"""``key >> KEY_CELL_SHIFT`` is the cell id."""
-
-KEY_LOW_MASK = wp.constant(wp.int64(4294967295))
-"""``key & KEY_LOW_MASK`` is the quantised lower bound."""
-
-KEY_PAD = 9223372036854775807
-"""Sort key of unused entries (the largest int64): they sort after every real entry."""
+KEY_PAD = wp.constant(wp.int64(9223372036854775807))
+"""Sort key of unused entries (the largest int64): its low bits are all ones, so it sorts after
+every real entry whatever the number of key bits sorted."""
 
 GRID_CELLS_MAX = wp.constant(32768)
 """Most grid cells along each axis of the grid perpendicular to the sweep axis."""
+
+CELL_BITS_MAX = 30
+"""Most bits of a grid cell id (``GRID_CELLS_MAX`` squared)."""
+
+
+def sap_key_bits(num_boxes: int) -> tuple[int, int]:
+    """``(cell_bits, q_bits)`` of the sort keys for ``num_boxes`` boxes: key =
+    ``cell << q_bits | q``, sorted on its low ``cell_bits + q_bits`` bits only (a radix pass
+    per 8 bits). The grid has fewer than ``2**cell_bits`` cells (about two per box at most: more
+    would be empty); the lower bounds along the sweep axis are quantised to ``q_bits`` bits,
+    enough to order the few boxes of one grid column (order within a quantum only costs box
+    tests, never a pair)."""
+    log_n = max(1, int(num_boxes - 1).bit_length())
+    cell_bits = min(CELL_BITS_MAX, max(4, log_n + 1))
+    q_bits = min(32, max(12, -(-log_n // 3) + 8))
+    return cell_bits, q_bits
 
 
 @wp.kernel
@@ -163,7 +227,8 @@ def _sap_stats_kernel(
     stat_sum: wp.array[wp.float64],
 ):
     """Strided pass: scene bounds (``stat_lo``/``stat_hi``, 3 each) and sums (``stat_sum``, 9:
-    centres, squared centres, extents per axis), with one atomic per value per thread."""
+    centres, squared centres, extents per axis), with one atomic per value per thread, into
+    accumulators that the setup kernel of the previous frame (or the constructor) left empty."""
     t = wp.tid()
     lo = wp.vec3(BOX_EMPTY)
     hi = wp.vec3(-BOX_EMPTY)
@@ -203,14 +268,19 @@ def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: fl
 @wp.kernel
 def _sap_setup_kernel(
     num_boxes: int,
+    cell_scale: float,
+    cell_limit: int,
+    q_bits: int,
+    # Outputs (the statistics are read, then emptied for the next frame)
     stat_lo: wp.array[wp.float32],
     stat_hi: wp.array[wp.float32],
     stat_sum: wp.array[wp.float64],
-    cell_scale: float,
-    # Outputs
+    big_count: wp.array[wp.int32],
     grid: wp.array[SapGrid],
 ):
-    """One thread: sweep axis of greatest centre variance, grid of the other two axes."""
+    """One thread: sweep axis of greatest centre variance, grid of the other two axes with fewer
+    than ``cell_limit`` cells, key quantisation to ``q_bits`` bits. Then empties the statistics
+    and the big-box list for the next frame (saving a memset each)."""
     inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
     best = int(0)
     best_var = wp.float64(-1.0)
@@ -229,18 +299,33 @@ def _sap_setup_kernel(
     span_z = stat_hi[g.az] - stat_lo[g.az]
     cell_y = _cell_size(float(stat_sum[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
     cell_z = _cell_size(float(stat_sum[6 + g.az] * inv_n), span_z, cell_scale, max_cells)
+    ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
+    nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
+    while ny * nz >= cell_limit:  # coarser cells until the ids fit their bits
+        cell_y = cell_y * 1.5
+        cell_z = cell_z * 1.5
+        ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
+        nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
     g.origin_y = stat_lo[g.ay]
     g.origin_z = stat_lo[g.az]
     g.inv_cell_y = 1.0 / cell_y
     g.inv_cell_z = 1.0 / cell_z
-    g.ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
-    g.nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
+    g.ny = ny
+    g.nz = nz
     g.axis_min = wp.float64(stat_lo[best])
+    g.q_bits = wp.int64(q_bits)
+    g.q_max = wp.float64((wp.int64(1) << g.q_bits) - wp.int64(1))
     span = wp.float64(stat_hi[best]) - g.axis_min
     g.qscale = wp.float64(0.0)
     if span > wp.float64(0.0):
-        g.qscale = QKEY_MAX / span
+        g.qscale = g.q_max / span
     grid[0] = g
+    for k in range(3):
+        stat_lo[k] = BOX_EMPTY
+        stat_hi[k] = -BOX_EMPTY
+    for k in range(9):
+        stat_sum[k] = wp.float64(0.0)
+    big_count[0] = 0
 
 
 @wp.func
@@ -253,9 +338,9 @@ def _cell(x: float, origin: float, inv_cell: float, count: int) -> int:
 
 @wp.func
 def _quantise(x: float, g: SapGrid) -> wp.int64:
-    """Monotonic 32-bit quantisation of ``x`` along the sweep axis."""
+    """Monotonic quantisation of ``x`` along the sweep axis to ``g.q_bits`` bits."""
     q = wp.floor((wp.float64(x) - g.axis_min) * g.qscale)
-    q = wp.clamp(q, wp.float64(0.0), QKEY_MAX)
+    q = wp.clamp(q, wp.float64(0.0), g.q_max)
     return wp.int64(q)
 
 
@@ -297,11 +382,16 @@ def _sap_emit_kernel(
     entry_box: wp.array[wp.int32],
     entry_total: wp.array[wp.int64],
 ):
-    """One thread per box: one (key, box) entry per covered cell."""
+    """One thread per box (and per unused entry slot): one (key, box) entry per covered cell;
+    slots past the total get the padding key, which sorts last."""
     i = wp.tid()
-    if i == entry_count.shape[0] - 1:
-        entry_total[0] = entry_start[i] + entry_count[i]
-    if entry_count[i] == wp.int64(0):
+    n = entry_count.shape[0]
+    total = entry_start[n - 1] + entry_count[n - 1]
+    if i == 0:
+        entry_total[0] = total
+    if wp.int64(i) >= total and i < entry_capacity:
+        entry_key[i] = KEY_PAD
+    if i >= n or entry_count[i] == wp.int64(0):
         return
     g = grid[0]
     lo = lower[i]
@@ -316,33 +406,28 @@ def _sap_emit_kernel(
         for z in range(z0, z1 + 1):
             if slot < wp.int64(entry_capacity):
                 cell = wp.int64(y * g.nz + z)
-                entry_key[int(slot)] = cell * KEY_CELL_UNIT + q
+                entry_key[int(slot)] = (cell << g.q_bits) | q
                 entry_box[int(slot)] = i
             slot += wp.int64(1)
 
 
-@wp.kernel
-def _sap_sweep_kernel(
+@wp.func
+def _sweep_entry(
+    e: int,
+    total: int,
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
-    grid: wp.array[SapGrid],
+    g: SapGrid,
     entry_key: wp.array[wp.int64],
     entry_box: wp.array[wp.int32],
-    entry_total: wp.array[wp.int64],
-    entry_capacity: int,
     pair_capacity: int,
-    # Outputs
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """One thread per sorted entry: sweep forward within the cell, report owned pairs."""
-    e = wp.tid()
-    total = used_count(entry_total, entry_capacity)
-    if e >= total:
-        return
-    g = grid[0]
+    """Sorted entry ``e`` sweeps forward within its cell and reports the pairs it owns."""
     key = entry_key[e]
-    cell = key >> KEY_CELL_SHIFT
+    cell = key >> g.q_bits
+    low_mask = (wp.int64(1) << g.q_bits) - wp.int64(1)
     i = entry_box[e]
     lo_i = lower[i]
     hi_i = upper[i]
@@ -351,9 +436,9 @@ def _sap_sweep_kernel(
     cz = int(cell) - cy * g.nz
     for f in range(e + 1, total):
         key_f = entry_key[f]
-        if (key_f >> KEY_CELL_SHIFT) != cell:
+        if (key_f >> g.q_bits) != cell:
             break
-        if (key_f & KEY_LOW_MASK) > q_hi:
+        if (key_f & low_mask) > q_hi:
             break
         j = entry_box[f]
         lo_j = lower[j]
@@ -366,23 +451,19 @@ def _sap_sweep_kernel(
                 emit_pair(i, j, pair, pair_count, pair_capacity)
 
 
-@wp.kernel
-def _sap_big_kernel(
+@wp.func
+def _big_box_pairs(
+    j: int,
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     entry_count: wp.array[wp.int64],
     big_box: wp.array[wp.int32],
-    big_count: wp.array[wp.int32],
+    nb: int,
     pair_capacity: int,
-    # Outputs
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """One thread per box ``j``: test it against every big box ``i`` (pairs of two big boxes once)."""
-    j = wp.tid()
-    nb = big_count[0]
-    if nb == 0:
-        return
+    """Box ``j`` against every big box ``i`` (a pair of two big boxes once)."""
     lo_j = lower[j]
     hi_j = upper[j]
     j_big = entry_count[j] == wp.int64(0)
@@ -394,26 +475,56 @@ def _sap_big_kernel(
             emit_pair(i, j, pair, pair_count, pair_capacity)
 
 
-class BroadPhaseSAP:
+@wp.kernel
+def _sap_sweep_kernel(
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    grid: wp.array[SapGrid],
+    entry_key: wp.array[wp.int64],
+    entry_box: wp.array[wp.int32],
+    entry_total: wp.array[wp.int64],
+    entry_capacity: int,
+    entry_count: wp.array[wp.int64],
+    big_box: wp.array[wp.int32],
+    big_count: wp.array[wp.int32],
+    pair_capacity: int,
+    # Outputs
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int64],
+):
+    """Thread ``t``: sorted entry ``t`` sweeps its cell; box ``t`` is tested against the big boxes."""
+    t = wp.tid()
+    total = used_count(entry_total, entry_capacity)
+    if t < total:
+        _sweep_entry(t, total, lower, upper, grid[0], entry_key, entry_box, pair_capacity, pair, pair_count)
+    nb = big_count[0]
+    if nb > 0 and t < lower.shape[0]:
+        _big_box_pairs(t, lower, upper, entry_count, big_box, nb, pair_capacity, pair, pair_count)
+
+
+class BroadPhaseSAP(BroadPhase):
     """Sort-based sweep and prune on a grid perpendicular to the sweep axis (see module docs).
 
     Owns its scratch arrays, sized for ``N`` boxes and grown on demand.
 
     Args:
         device: Warp device.
+        graph: as for :class:`BroadPhase`.
         cell_scale: grid cell width relative to the mean box extent.
         max_cells_per_box: boxes covering more cells go to the big-box list.
         stats_threads: threads of the statistics pass (each handles ``N / stats_threads`` boxes).
     """
 
-    def __init__(self, *, device=None, cell_scale: float = 2.0, max_cells_per_box: int = 64, stats_threads: int = 4096):
-        self.device = wp.get_device(device)
+    def __init__(self, *, device=None, graph: bool | None = None, cell_scale: float = 2.0, max_cells_per_box: int = 64,
+                 stats_threads: int = 4096):
+        super().__init__(device=device, graph=graph)
         self.cell_scale = float(cell_scale)
         self.max_cells_per_box = int(max_cells_per_box)
         self.stats_threads = int(stats_threads) if self.device.is_cuda else 1
         d = self.device
-        self.stat_lo = wp.zeros(3, dtype=wp.float32, device=d)
-        self.stat_hi = wp.zeros(3, dtype=wp.float32, device=d)
+        # Empty accumulators; each frame's setup kernel empties them again after reading them.
+        self.stat_lo = wp.full(3, BOX_EMPTY, dtype=wp.float32, device=d)
+        self.stat_hi = wp.full(3, -BOX_EMPTY, dtype=wp.float32, device=d)
         self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
         self.num_boxes = -1
@@ -430,6 +541,7 @@ class BroadPhaseSAP:
         self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
         self.entry.ensure(2 * n + 1024)
         self._entry_box = None
+        self.cell_bits, self.q_bits = sap_key_bits(n)
 
     def _entry_arrays(self):
         if self._entry_box is None or self._entry_box.shape[0] != 2 * self.entry.capacity:
@@ -445,7 +557,8 @@ class BroadPhaseSAP:
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
-        The caller resets ``pairs`` (or not, to append). After the frame, check ``pairs`` and
+        Seven launches: statistics, setup, count, scan, emit, sort (of the key bits in use),
+        sweep. The caller resets ``pairs`` (or not, to append). After the frame, check ``pairs`` and
         :attr:`counters`; if a counter passed its capacity, ``ensure`` it and launch again
         (:func:`find_pairs` does).
         """
@@ -455,38 +568,32 @@ class BroadPhaseSAP:
             self.entry.reset()  # no entries (the emit kernel sets the counter otherwise)
             return
         d = self.device
-        self.stat_lo.fill_(BOX_EMPTY)
-        self.stat_hi.fill_(-BOX_EMPTY)
-        self.stat_sum.zero_()
-        self.big_count.zero_()
         wp.launch(_sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
                   outputs=[self.stat_lo, self.stat_hi, self.stat_sum], device=d)
-        wp.launch(_sap_setup_kernel, dim=1, inputs=[n, self.stat_lo, self.stat_hi, self.stat_sum, self.cell_scale],
-                  outputs=[self.grid], device=d)
+        wp.launch(_sap_setup_kernel, dim=1,
+                  inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
+                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.grid], device=d)
         wp.launch(_sap_count_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box],
                   outputs=[self.entry_count, self.big_box, self.big_count], device=d)
         wp.utils.array_scan(self.entry_count, self.entry_start, inclusive=False)
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        key[:cap].fill_(KEY_PAD)  # padding sorts last
-        wp.launch(_sap_emit_kernel, dim=n,
+        wp.launch(_sap_emit_kernel, dim=max(n, cap),
                   inputs=[lower, upper, self.grid, self.entry_count, self.entry_start, cap],
                   outputs=[key, box, self.entry.count], device=d)
-        wp.utils.radix_sort_pairs(key, box, cap)
-        wp.launch(_sap_sweep_kernel, dim=cap,
-                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, pairs.capacity],
-                  outputs=[pairs.data, pairs.count], device=d)
-        wp.launch(_sap_big_kernel, dim=n,
-                  inputs=[lower, upper, self.entry_count, self.big_box, self.big_count, pairs.capacity],
+        wp.utils.radix_sort_pairs(key, box, cap, end_bit=self.cell_bits + self.q_bits)
+        wp.launch(_sap_sweep_kernel, dim=max(n, cap),
+                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.entry_count, self.big_box,
+                          self.big_count, pairs.capacity],
                   outputs=[pairs.data, pairs.count], device=d)
 
 
-def make_broad_phase(method: str, *, device=None):
+def make_broad_phase(method: str, *, device=None, graph: bool | None = None):
     """``"sap"`` -> :class:`BroadPhaseSAP`, ``"nxn"`` -> :class:`BroadPhaseNxN`."""
     if method == "sap":
-        return BroadPhaseSAP(device=device)
+        return BroadPhaseSAP(device=device, graph=graph)
     if method == "nxn":
-        return BroadPhaseNxN(device=device)
+        return BroadPhaseNxN(device=device, graph=graph)
     raise ValueError(f"broad phase method must be 'sap' or 'nxn', got {method!r}")
 
 
@@ -559,13 +666,11 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
         i = int(np.argmax(bad))
         raise ValueError(f"box {i}: lower {lo[i].tolist()} exceeds upper {hi[i].tolist()}")
     device = wp.get_device(device)
-    bp = make_broad_phase(method, device=device)
+    bp = make_broad_phase(method, device=device, graph=False)  # one frame: nothing to replay
     n = lo.shape[0]
     if n < 2:
         return np.zeros((0, 2), np.int32)
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    pairs = GrowableBuffer(wp.vec2i, 4 * n, device, "broad-phase pairs")
-    count = find_pairs(bp, wlo, whi, pairs)
-    out = pairs.numpy(count).reshape(-1, 2).astype(np.int32)
+    out = bp.find_pairs(wlo, whi).numpy().reshape(-1, 2).astype(np.int32)
     return out[np.lexsort((out[:, 1], out[:, 0]))]

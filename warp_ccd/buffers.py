@@ -146,28 +146,57 @@ class GrowableBuffer:
 
 
 class CounterRead:
-    """The counters of several buffers, copied to the host together and read with one wait.
+    """The counters of several buffers in one device block, reset with one memset and copied to
+    the host with one asynchronous copy, then read with one wait.
 
-    :meth:`enqueue` only enqueues copies into pinned host memory, so a frame that ends with it
-    can be captured in a CUDA graph; :meth:`finish` waits, records each buffer's
-    :attr:`~GrowableBuffer.last_count` and grows the buffers that overflowed. Who launches the
-    work resets the counters: each stage those of the buffers it owns, the caller the ones it
-    passes in.
+    On construction the reader adopts the buffers' counters: each buffer's ``count`` becomes a view
+    of one slot of :attr:`block` (its value kept). :meth:`reset` zeroes them all at once and
+    :meth:`enqueue` copies the block into pinned host memory; both only enqueue work, so a frame
+    that starts with one and ends with the other can be captured in a CUDA graph. :meth:`finish`
+    waits, records each buffer's :attr:`~GrowableBuffer.last_count` and grows the buffers that
+    overflowed. A buffer adopted by a later reader leaves this one's block; this reader then resets
+    and copies that buffer's counter on its own (slower, still right).
 
     Args:
         buffers: the buffers, fixed for the reader's life (their storage may grow).
         device: Warp device of the buffers.
+
+    Attributes:
+        block: ``(len(buffers),)`` int64 counters on the device.
+        counts: the counts of the last :meth:`finish`.
     """
 
     def __init__(self, buffers: Sequence[GrowableBuffer], device):
         self.buffers = list(buffers)
         self.device = wp.get_device(device)
-        self.host = wp.zeros(max(1, len(self.buffers)), dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        k = max(1, len(self.buffers))
+        self.block = wp.zeros(k, dtype=wp.int64, device=self.device)
+        for slot, b in enumerate(self.buffers):
+            wp.copy(self.block, b.count, dest_offset=slot, src_offset=0, count=1)
+            b.count = self.block[slot : slot + 1]
+        self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         self.counts = [0] * len(self.buffers)
 
+    def _strays(self) -> list[tuple[int, GrowableBuffer]]:
+        """Buffers whose counter is no longer this block's slot (adopted by another reader)."""
+        base = self.block.ptr
+        return [(k, b) for k, b in enumerate(self.buffers) if b.count.ptr != base + 8 * k]
+
+    def counter_pointers(self) -> list[int]:
+        """Device addresses of the counters (a captured frame is stale when one changes)."""
+        return [b.count.ptr for b in self.buffers]
+
+    def reset(self) -> None:
+        """Zeroes every counter (one memset; capturable)."""
+        self.block.zero_()
+        for _, b in self._strays():
+            b.reset()
+
     def enqueue(self) -> None:
-        """Copies every counter to the host (asynchronous; capturable)."""
-        for k, b in enumerate(self.buffers):
+        """Copies every counter to the host (one asynchronous copy; capturable)."""
+        if self.buffers:
+            wp.copy(self.host, self.block, count=len(self.buffers))
+        for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 
     def finish(self) -> bool:

@@ -19,7 +19,10 @@ Refit (device, every frame): per instance, node bounds ``node_lower`` / ``node_u
 ``instance_node_start[i] + node``. Leaf boxes come from the world vertices of their triangles,
 padded by the narrow phase's tolerance times their longest edge; inner boxes are the union of
 their children. Instances of small trees (up to 255 nodes: polyhedra, 80-triangle spheres) are
-refit by one thread each, all nodes children first, in a single launch; bigger trees one launch
+refit in two launches: one thread per leaf of every such instance, then one thread per inner node
+(the union of the leaf boxes of its subtree, which the leaf order makes a contiguous run of
+:attr:`ShapeTree.leaf_node`): no thread walks a whole tree, so a few hundred objects still fill
+the GPU in a few microseconds. Bigger trees one launch
 per level, deepest first, one thread per (instance, node), so a few big meshes still spread over
 the whole device.
 The root's box is the object's AABB: no separate bounds pass. Deforming meshes need nothing else:
@@ -52,6 +55,10 @@ class ShapeTree:
         tri_order: ``(m,)`` int32 triangle ids, each subtree contiguous.
         level_start: ``(D + 1,)`` int32 first node of each level (breadth-first order).
         depth: ``D``, the number of levels.
+        leaf_node: ``(L,)`` int32 the leaves, in the order of their triangles in ``tri_order``.
+        node_leaf: ``(K, 2)`` int32 ``(first, count)``: the node's subtree holds the leaves
+            ``leaf_node[first:first + count]``.
+        inner_node: ``(K - L,)`` int32 the inner nodes.
     """
 
     def __init__(self, node_child, node_parent, node_triangle, tri_order, level_start):
@@ -61,6 +68,16 @@ class ShapeTree:
         self.tri_order = tri_order
         self.level_start = level_start
         self.depth = len(level_start) - 1
+        is_leaf = node_child[:, 0] < 0
+        leaves = np.nonzero(is_leaf)[0]
+        leaf_start = node_triangle[leaves, 0]
+        order = np.argsort(leaf_start, kind="stable")
+        self.leaf_node = leaves[order].astype(np.int32)
+        leaf_start = leaf_start[order]
+        first = np.searchsorted(leaf_start, node_triangle[:, 0], side="left")
+        end = np.searchsorted(leaf_start, node_triangle[:, 0] + node_triangle[:, 1], side="left")
+        self.node_leaf = np.stack([first, end - first], axis=1).astype(np.int32)
+        self.inner_node = np.nonzero(~is_leaf)[0].astype(np.int32)
 
     @property
     def num_nodes(self) -> int:
@@ -156,8 +173,11 @@ class TreeView:
 
     shape_node_start: wp.array[wp.int32]
     shape_tri_order_start: wp.array[wp.int32]
+    shape_leaf_start: wp.array[wp.int32]
     node_child: wp.array[wp.vec2i]
     node_triangle: wp.array[wp.vec2i]
+    node_leaf: wp.array[wp.vec2i]
+    leaf_node: wp.array[wp.int32]
     tri_order: wp.array[wp.int32]
     instance_node_start: wp.array[wp.int32]
     node_lower: wp.array[wp.vec3]
@@ -235,28 +255,68 @@ def _refit_level_kernel(
 
 
 @wp.kernel
-def _refit_instance_kernel(
+def _refit_small_leaf_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
     tree: TreeView,
     small_instance: wp.array[wp.int32],
+    small_leaf_end: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
     instance_lower: wp.array[wp.vec3],
     instance_upper: wp.array[wp.vec3],
 ):
-    """One thread per instance of a small shape: all its nodes, children before parents
-    (reverse breadth-first order). One launch instead of one per level."""
-    inst = small_instance[wp.tid()]
+    """One thread per leaf of each instance of a small shape: the leaf's box from its triangles.
+    ``small_leaf_end`` is the inclusive scan of the leaf counts of ``small_instance``."""
+    t = wp.tid()
+    k = upper_bound(small_leaf_end, 0, small_leaf_end.shape[0], t)
+    inst = small_instance[k]
     s = mesh.instance_shape[inst]
-    num_nodes = tree.shape_node_start[s + 1] - tree.shape_node_start[s]
-    for k in range(num_nodes):
-        _refit_node(mesh, world_vertex, tree, s, inst, num_nodes - 1 - k, margin_rel, instance_lower, instance_upper)
+    first = tree.shape_leaf_start[s]
+    local = t - (small_leaf_end[k] - (tree.shape_leaf_start[s + 1] - first))
+    node = tree.leaf_node[first + local]
+    _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
+
+
+@wp.kernel
+def _refit_small_inner_kernel(
+    tree: TreeView,
+    instance_shape: wp.array[wp.int32],
+    small_instance: wp.array[wp.int32],
+    small_inner_end: wp.array[wp.int32],
+    shape_inner_start: wp.array[wp.int32],
+    inner_node: wp.array[wp.int32],
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per inner node of each instance of a small shape, after the leaves: the union
+    of the boxes of the leaves of its subtree (the same bits as the union of its children's)."""
+    t = wp.tid()
+    k = upper_bound(small_inner_end, 0, small_inner_end.shape[0], t)
+    inst = small_instance[k]
+    s = instance_shape[inst]
+    first = shape_inner_start[s]
+    node = inner_node[first + t - (small_inner_end[k] - (shape_inner_start[s + 1] - first))]
+    leaves = tree.node_leaf[tree.shape_node_start[s] + node]
+    leaf_base = tree.shape_leaf_start[s]
+    slot = tree.instance_node_start[inst]
+    lo = wp.vec3(BOX_EMPTY)
+    hi = wp.vec3(-BOX_EMPTY)
+    for j in range(leaves[0], leaves[0] + leaves[1]):
+        leaf = slot + tree.leaf_node[leaf_base + j]
+        lo = wp.min(lo, tree.node_lower[leaf])
+        hi = wp.max(hi, tree.node_upper[leaf])
+    tree.node_lower[slot + node] = lo
+    tree.node_upper[slot + node] = hi
+    if node == 0:
+        instance_lower[inst] = lo
+        instance_upper[inst] = hi
 
 
 for _precision in PRECISIONS:
     _scalar, _vec3, _, _ = precision_types(_precision)
-    for _kernel in (_refit_level_kernel, _refit_instance_kernel):
+    for _kernel in (_refit_level_kernel, _refit_small_leaf_kernel):
         wp.overload(_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
 
 
@@ -268,8 +328,8 @@ class SceneBVH:
         leaf_size: largest number of triangles per leaf.
         margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
             tolerance, so that tree culling never rejects a pair the narrow phase accepts).
-        instance_refit_max_nodes: instances of shapes with at most this many nodes are refit by
-            one thread each, all their nodes in one launch (cheap for small trees); bigger trees
+        instance_refit_max_nodes: instances of shapes with at most this many nodes are refit in
+            two launches, leaves then inner nodes (an inner node reads all its leaves); bigger trees
             are refit level by level, one thread per node.
 
     Attributes:
@@ -297,11 +357,26 @@ class SceneBVH:
         self.num_node_slots = int(inode[-1])
         self.max_depth = max((tr.depth for tr in self.trees), default=0)
 
-        # Instances of small trees: one thread each. The others grouped by shape, and per level the
-        # work blocks of each shape.
+        # Instances of small trees: a thread per leaf, then per inner node. The others grouped by
+        # shape, and per level the work blocks of each shape.
         small = nodes <= instance_refit_max_nodes
         is_small = small[scene.instance_shape_np] if n else np.zeros(0, bool)
-        self.small_instance = wp.array(np.nonzero(is_small)[0].astype(np.int32), dtype=wp.int32, device=d)
+        small_instance = np.nonzero(is_small)[0].astype(np.int32)
+        self.small_instance = wp.array(small_instance, dtype=wp.int32, device=d)
+        leaves = np.array([len(tr.leaf_node) for tr in self.trees], np.int64)
+        inner = nodes - leaves
+        small_shape = scene.instance_shape_np[small_instance]
+        small_leaf_end = np.cumsum(leaves[small_shape])
+        small_inner_end = np.cumsum(inner[small_shape])
+        self.num_small_leaves = int(small_leaf_end[-1]) if len(small_leaf_end) else 0
+        self.num_small_inner = int(small_inner_end[-1]) if len(small_inner_end) else 0
+        if max(self.num_small_leaves, self.num_small_inner) >= 2**31:
+            raise ValueError("scene too large for the BVH refit (2**31 tree nodes of small shapes)")
+        self.small_leaf_end = wp.array(small_leaf_end.astype(np.int32), dtype=wp.int32, device=d)
+        self.small_inner_end = wp.array(small_inner_end.astype(np.int32), dtype=wp.int32, device=d)
+        self.shape_inner_start = wp.array(np.concatenate([[0], np.cumsum(inner)]).astype(np.int32), device=d)
+        self.inner_node = wp.array(np.concatenate([tr.inner_node for tr in self.trees]) if self.trees
+                                   else np.zeros(0, np.int32), dtype=wp.int32, device=d)
         order = np.argsort(scene.instance_shape_np, kind="stable").astype(np.int32)
         per_shape = np.bincount(scene.instance_shape_np, minlength=num_shapes) if n else np.zeros(num_shapes, np.int64)
         per_shape = np.where(small, 0, per_shape)  # small shapes own no level work
@@ -336,6 +411,9 @@ class SceneBVH:
 
         tv.node_child = wp.array(cat([tr.node_child for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
         tv.node_triangle = wp.array(cat([tr.node_triangle for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
+        tv.node_leaf = wp.array(cat([tr.node_leaf for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
+        tv.leaf_node = wp.array(cat([tr.leaf_node for tr in self.trees], (0,)), dtype=wp.int32, device=d)
+        tv.shape_leaf_start = wp.array(np.concatenate([[0], np.cumsum(leaves)]).astype(np.int32), device=d)
         tv.tri_order = wp.array(cat([tr.tri_order for tr in self.trees], (0,)), dtype=wp.int32, device=d)
         tv.instance_node_start = wp.array(inode.astype(np.int32), dtype=wp.int32, device=d)
         tv.node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
@@ -353,9 +431,15 @@ class SceneBVH:
         """Refits all node bounds (and the object boxes) from ``scene.world_vertex``: small trees
         in one launch, the others deepest level first."""
         margin = scene.scalar_type(self.margin_rel)
-        if self.small_instance.shape[0]:
-            wp.launch(_refit_instance_kernel, dim=self.small_instance.shape[0],
-                      inputs=[scene.topology, scene.world_vertex, self.tree, self.small_instance, margin],
+        if self.num_small_leaves:
+            wp.launch(_refit_small_leaf_kernel, dim=self.num_small_leaves,
+                      inputs=[scene.topology, scene.world_vertex, self.tree, self.small_instance, self.small_leaf_end,
+                              margin],
+                      outputs=[self.lower, self.upper], device=self.device)
+        if self.num_small_inner:
+            wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
+                      inputs=[self.tree, scene.instance_shape, self.small_instance, self.small_inner_end,
+                              self.shape_inner_start, self.inner_node],
                       outputs=[self.lower, self.upper], device=self.device)
         for items, block, first, count in reversed(self.levels):
             if items == 0:

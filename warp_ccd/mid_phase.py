@@ -3,12 +3,17 @@
 Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 :class:`~warp_ccd.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
 
-* :class:`MidPhaseBVH` (default): tree-vs-tree traversal of the two objects' trees
-  (:mod:`warp_ccd.bvh`) with a bounded stack, one thread per object pair, or on CUDA one thread
-  per work item after a breadth-first split of each pair into about 8 node pairs. When two nodes' boxes
-  overlap, the one with the smaller volume is kept and the bigger one is opened (the smaller one
-  when the bigger is a leaf); two overlapping leaves give their triangle pairs. Work is about
-  proportional to the number of overlapping node pairs.
+* :class:`MidPhaseBVH` (default): traversal of the two objects' trees (:mod:`warp_ccd.bvh`)
+  from a front of node pairs: every leaf of the object with fewer leaves against the root of the
+  other's tree. One work item per such (leaf, root) pair; each descends the other tree, depth
+  first with a short stack, and the leaf pairs whose boxes overlap give their triangle pairs.
+  That is the set a simultaneous descent of both trees finds (an inner box is the union of its
+  children's, so two leaf boxes overlap only where all their ancestors' do), with the first tree
+  opened to its leaves at once: no thread walks a big pair alone, a pair whose boxes barely
+  overlap costs one box test per leaf of its smaller object, and a frame of a few hundred object
+  pairs still fills the GPU. Work items are laid out by a scan of the leaf counts of the pairs
+  (``wp.utils.array_scan``); a fixed number of threads splits them in contiguous runs, so that
+  the launch size does not depend on the frame and the frame can be a CUDA graph.
 * :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
   ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
   finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
@@ -26,23 +31,15 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH"]
 
-STACK_SIZE = 64
-"""Traversal stack entries per thread: enough for two trees of depth 31 (2**31 triangles each)."""
+STACK_SIZE = 32
+"""Traversal stack entries per thread: a depth-first descent of a tree of depth ``D`` needs
+``D + 1``; a median-split tree of fewer than 2**31 triangles has at most 32 levels."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
-VISIT_APART = wp.constant(0)
-"""A node pair whose boxes are apart: nothing below it."""
-VISIT_LEAVES = wp.constant(1)
-"""Two overlapping leaves: their triangle pairs are candidates."""
-VISIT_OPEN = wp.constant(2)
-"""Overlapping boxes, one of them inner: its two child pairs are visited next."""
-
-
-@wp.func
-def _volume(lo: wp.vec3, hi: wp.vec3) -> float:
-    d = hi - lo
-    return d[0] * d[1] * d[2]
+THREADS_PER_SM = 1024
+"""Threads of the traversal per streaming multiprocessor on CUDA (half of what an H100 keeps
+resident): enough to hide memory latency, few enough that each has a run of items."""
 
 
 @wp.func
@@ -71,199 +68,189 @@ def _emit_leaves(
 
 
 @wp.func
-def _step(
-    tree: TreeView,
-    shape_a: int,
-    shape_b: int,
-    slot_a: int,
-    slot_b: int,
-    na: int,
-    nb: int,
-):
-    """Visits node pair ``(na, nb)``: returns ``(kind, n1a, n1b, n2a, n2b)`` with kind
-    :data:`VISIT_APART`, :data:`VISIT_LEAVES` (emit) or :data:`VISIT_OPEN` (push the two child pairs
-    ``(n1a, n1b)``, ``(n2a, n2b)``). The bigger box (by volume) is opened, the smaller one when the
-    bigger is a leaf."""
-    lo_a = tree.node_lower[slot_a + na]
-    hi_a = tree.node_upper[slot_a + na]
-    lo_b = tree.node_lower[slot_b + nb]
-    hi_b = tree.node_upper[slot_b + nb]
-    if not boxes_overlap(lo_a, hi_a, lo_b, hi_b):
-        return VISIT_APART, na, nb, na, nb
-    ca = tree.node_child[shape_a + na]
-    cb = tree.node_child[shape_b + nb]
-    if ca[0] < 0 and cb[0] < 0:
-        return VISIT_LEAVES, na, nb, na, nb
-    if cb[0] < 0 or (ca[0] >= 0 and _volume(lo_a, hi_a) >= _volume(lo_b, hi_b)):
-        return VISIT_OPEN, ca[0], nb, ca[1], nb
-    return VISIT_OPEN, na, cb[0], na, cb[1]
+def _num_leaves(tree: TreeView, shape: int) -> int:
+    return tree.shape_leaf_start[shape + 1] - tree.shape_leaf_start[shape]
 
 
 @wp.func
-def _pair_layout(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int):
-    """Shapes of objects ``a``, ``b``, their first nodes in the topology, and their first node
-    slots in the per-instance bounds."""
-    sa = instance_shape[a]
-    sb = instance_shape[b]
-    return (sa, sb, tree.shape_node_start[sa], tree.shape_node_start[sb],
-            tree.instance_node_start[a], tree.instance_node_start[b])
-
-
-@wp.func
-def _descend(
-    tree: TreeView,
-    instance_shape: wp.array[wp.int32],
-    item: wp.vec4i,
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    candidate_capacity: int,
-):
-    """Depth-first simultaneous descent from node pair ``(item[2], item[3])`` of objects
-    ``(item[0], item[1])``, with a bounded stack; leaf pairs become candidates."""
-    a = item[0]
-    b = item[1]
-    sa, sb, shape_a, shape_b, slot_a, slot_b = _pair_layout(tree, instance_shape, a, b)
-    stack_a = vec_stack()
-    stack_b = vec_stack()
-    stack_a[0] = item[2]
-    stack_b[0] = item[3]
-    top = int(1)
-    while top > 0:
-        top -= 1
-        kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, stack_a[top], stack_b[top])
-        if kind == VISIT_LEAVES:
-            _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
-                         candidate_capacity)
-        elif kind == VISIT_OPEN:
-            stack_a[top] = n1a
-            stack_b[top] = n1b
-            stack_a[top + 1] = n2a
-            stack_b[top + 1] = n2b
-            top += 2
+def _front_side(tree: TreeView, instance_shape: wp.array[wp.int32], p: wp.vec2i) -> int:
+    """Which object of pair ``p`` opens to its leaves: 0 (``p[0]``) unless ``p[1]`` has fewer."""
+    if _num_leaves(tree, instance_shape[p[1]]) < _num_leaves(tree, instance_shape[p[0]]):
+        return 1
+    return 0
 
 
 @wp.kernel
-def _traverse_kernel(
+def _front_count_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
-    split: int,
-    candidate_capacity: int,
-    work_capacity: int,
     # Outputs
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    work: wp.array[wp.vec4i],
-    work_count: wp.array[wp.int64],
+    pair_front: wp.array[wp.int64],
 ):
-    """One thread per object pair. With ``split <= 1`` the whole traversal. Otherwise a
-    breadth-first expansion from the roots until ``split`` overlapping node pairs wait (or none),
-    which are written as work items ``(a, b, node_a, node_b)`` for :func:`_traverse_work_kernel`:
-    big trees then spread over many threads, in pieces of about equal depth."""
+    """One thread per pair slot: the pair's work items (leaves of its smaller object), 0 past the counter."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
+        pair_front[k] = wp.int64(0)
         return
     p = pair[k]
-    a = p[0]
-    b = p[1]
-    if split <= 1:
-        _descend(tree, instance_shape, wp.vec4i(a, b, 0, 0), candidate, candidate_count, candidate_capacity)
-        return
-    sa, sb, shape_a, shape_b, slot_a, slot_b = _pair_layout(tree, instance_shape, a, b)
-    queue_a = vec_stack()
-    queue_b = vec_stack()
-    head = int(0)
-    tail = int(1)  # queue_a/b[0] = root pair (0, 0)
-    while head < tail and tail - head < split and tail + 2 <= STACK_SIZE:
-        kind, n1a, n1b, n2a, n2b = _step(tree, shape_a, shape_b, slot_a, slot_b, queue_a[head], queue_b[head])
-        head += 1
-        if kind == VISIT_LEAVES:
-            _emit_leaves(tree, a, b, sa, sb, shape_a + n1a, shape_b + n1b, candidate, candidate_count,
-                         candidate_capacity)
-        elif kind == VISIT_OPEN:
-            queue_a[tail] = n1a
-            queue_b[tail] = n1b
-            queue_a[tail + 1] = n2a
-            queue_b[tail + 1] = n2b
-            tail += 2
-    for q in range(head, tail):
-        slot = reserve_slot(work_count, work_capacity)
-        if slot >= 0:
-            work[slot] = wp.vec4i(a, b, queue_a[q], queue_b[q])
+    pair_front[k] = wp.int64(_num_leaves(tree, instance_shape[p[_front_side(tree, instance_shape, p)]]))
+
+
+@wp.func
+def _leaf_vs_tree(
+    tree: TreeView,
+    a: int,
+    b: int,
+    sa: int,
+    sb: int,
+    front: int,
+    leaf: int,
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+    candidate_capacity: int,
+):
+    """Leaf ``leaf`` (shape-local) of the pair's front object (``a`` when ``front`` is 0, else
+    ``b``) against the other object's tree, depth first from its root; overlapping leaf pairs
+    give their triangle pairs (rows keep ``a`` first)."""
+    s_front = sa
+    s_other = sb
+    front_obj = a
+    other_obj = b
+    if front == 1:
+        s_front = sb
+        s_other = sa
+        front_obj = b
+        other_obj = a
+    front_node = tree.shape_node_start[s_front] + leaf
+    front_slot = tree.instance_node_start[front_obj] + leaf
+    lo = tree.node_lower[front_slot]
+    hi = tree.node_upper[front_slot]
+    other_node = tree.shape_node_start[s_other]
+    other_slot = tree.instance_node_start[other_obj]
+    stack = vec_stack()
+    stack[0] = 0
+    top = int(1)
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        if boxes_overlap(lo, hi, tree.node_lower[other_slot + node], tree.node_upper[other_slot + node]):
+            child = tree.node_child[other_node + node]
+            if child[0] < 0:
+                if front == 0:
+                    _emit_leaves(tree, a, b, sa, sb, front_node, other_node + node, candidate, candidate_count,
+                                 candidate_capacity)
+                else:
+                    _emit_leaves(tree, a, b, sa, sb, other_node + node, front_node, candidate, candidate_count,
+                                 candidate_capacity)
+            else:
+                stack[top] = child[1]
+                stack[top + 1] = child[0]
+                top += 2
 
 
 @wp.kernel
-def _traverse_work_kernel(
+def _front_traverse_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
-    work: wp.array[wp.vec4i],
-    work_count: wp.array[wp.int64],
-    work_capacity: int,
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int64],
+    pair_capacity: int,
+    pair_front_end: wp.array[wp.int64],
+    num_threads: int,
     candidate_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
 ):
-    """One thread per work item ``(a, b, node_a, node_b)``: depth-first descent from there."""
-    k = wp.tid()
-    if k >= used_count(work_count, work_capacity):
+    """``num_threads`` threads split the work items (inclusive scan ``pair_front_end`` of the
+    pairs' leaf counts) in contiguous runs; item ``w`` of pair ``k`` is leaf ``w`` (in leaf order)
+    of the pair's front object against the other's tree."""
+    t = wp.tid()
+    num_pairs = used_count(pair_count, pair_capacity)
+    if num_pairs == 0:
         return
-    _descend(tree, instance_shape, work[k], candidate, candidate_count, candidate_capacity)
+    total = pair_front_end[num_pairs - 1]
+    run = (total + wp.int64(num_threads - 1)) / wp.int64(num_threads)
+    item = wp.int64(t) * run
+    end = wp.min(item + run, total)
+    if item >= end:
+        return
+    k = upper_bound(pair_front_end, 0, num_pairs, item)  # the pair whose block holds the first item
+    while item < end:
+        p = pair[k]
+        a = p[0]
+        b = p[1]
+        sa = instance_shape[a]
+        sb = instance_shape[b]
+        front = _front_side(tree, instance_shape, p)
+        s_front = sa
+        if front == 1:
+            s_front = sb
+        block_end = pair_front_end[k]
+        block_start = block_end - wp.int64(_num_leaves(tree, s_front))
+        leaf_base = tree.shape_leaf_start[s_front]
+        stop = wp.min(block_end, end)
+        while item < stop:
+            leaf = tree.leaf_node[leaf_base + int(item - block_start)]
+            _leaf_vs_tree(tree, a, b, sa, sb, front, leaf, candidate, candidate_count, candidate_capacity)
+            item += wp.int64(1)
+        k += 1
 
 
 class MidPhaseBVH:
-    """Tree-vs-tree traversal over the broad phase's object pairs.
+    """Tree traversal over the broad phase's object pairs, from the front of leaves (see module docs).
 
     Args:
         bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
-        split: work items per object pair: 0 or 1 traverses each pair in one thread; ``k > 1``
-            first expands each pair breadth-first into about ``k`` node pairs, each traversed by
-            its own thread (balances big meshes against small ones). Default: 8 on CUDA, 0 on CPU,
-            where there is one thread anyway.
         device: Warp device.
+
+    Attributes:
+        candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
+        num_threads: threads of the traversal kernel (on the CPU one, which loops over all items).
     """
 
-    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, split: int | None = None, device=None):
+    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
-        if 2 * bvh.max_depth + 2 > STACK_SIZE:
+        if bvh.max_depth + 1 > STACK_SIZE:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
-        self.split = (8 if self.device.is_cuda else 0) if split is None else int(split)
-        if not 0 <= self.split <= STACK_SIZE // 2:
-            raise ValueError(f"traversal split must lie in [0, {STACK_SIZE // 2}], got {split}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
-        self.work = GrowableBuffer(wp.vec4i, max(1024, capacity // 4), self.device, "traversal work items")
+        self.num_threads = self.device.sm_count * THREADS_PER_SM if self.device.is_cuda else 1
+        self._front = None
 
     @property
     def counters(self) -> list[GrowableBuffer]:
         """The buffers with counters that :meth:`launch` resets and writes, whose counters the caller
-        reads after it: the candidates, and the traversal's work items when it splits."""
-        return [self.candidates, self.work] if self.split > 1 else [self.candidates]
+        reads after it: the candidates."""
+        return [self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer) -> None:
-        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (reset first)."""
-        for buffer in self.counters:
-            buffer.reset()
-        wp.launch(
-            _traverse_kernel,
-            dim=pairs.capacity,
-            inputs=[self.bvh.tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self.split,
-                    self.candidates.capacity, self.work.capacity],
-            outputs=[self.candidates.data, self.candidates.count, self.work.data, self.work.count],
-            device=self.device,
-        )
-        if self.split > 1:
-            wp.launch(
-                _traverse_work_kernel,
-                dim=self.work.capacity,
-                inputs=[self.bvh.tree, scene.instance_shape, self.work.data, self.work.count, self.work.capacity,
-                        self.candidates.capacity],
-                outputs=[self.candidates.data, self.candidates.count],
-                device=self.device,
-            )
+    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
+        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
+
+        Args:
+            scene: the scene whose trees :attr:`bvh` holds (refit for this frame).
+            pairs: the broad phase's object pairs.
+            reset_counters: zero the candidates' counter first; False when the caller has.
+        """
+        d = self.device
+        if reset_counters:
+            self.candidates.reset()
+        if self._front is None or self._front.shape[0] != pairs.capacity:  # scratch follows the pair capacity
+            self._front = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
+            self._front_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
+        tree = self.bvh.tree
+        wp.launch(_front_count_kernel, dim=pairs.capacity,
+                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity],
+                  outputs=[self._front], device=d)
+        wp.utils.array_scan(self._front, self._front_end, inclusive=True)
+        wp.launch(_front_traverse_kernel, dim=self.num_threads,
+                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._front_end,
+                          self.num_threads, self.candidates.capacity],
+                  outputs=[self.candidates.data, self.candidates.count], device=d)
 
 
 @wp.kernel
@@ -331,8 +318,9 @@ class MidPhaseAllPairs:
         by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer) -> None:
-        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`."""
+    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
+        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
+        counter is set by the write kernel, so ``reset_counters`` changes nothing)."""
         d = self.device
         if self._work is None or self._work.shape[0] != pairs.capacity:
             self._work = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)

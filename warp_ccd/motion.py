@@ -8,7 +8,9 @@ with its own angular velocity:
 
 The orbit (semi-axes ``a``, ``b`` in scene units, angular velocity ``w`` in rad/s) lies in a plane
 inclined by the rotation ``tilt``; the object spins about its own ``spin_axis`` at ``s`` rad/s.
-One kernel computes the poses of all objects; cost O(N), no host work.
+One kernel computes the poses of all objects; cost O(N), no host work. The time can live on the
+device (a float64 array of one element, plus a step added in the kernel), so that a frame that
+advances the time can be captured in a CUDA graph and replayed.
 """
 
 
@@ -21,12 +23,20 @@ from .precision import PRECISIONS, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["EllipseMotion"]
+__all__ = ["EllipseMotion", "advance_time"]
+
+
+@wp.kernel
+def _time_step_kernel(time_step: wp.float64, time_now: wp.array[wp.float64]):
+    """One thread: ``time_now[0] += time_step`` (float64, the same sum as the host's)."""
+    time_now[0] = time_now[0] + time_step
 
 
 @wp.kernel
 def _motion_pose_kernel(
-    time: Any,
+    time_now: wp.array[wp.float64],
+    time_step: wp.float64,
+    scalar: Any,
     motion_centre: wp.array[Any],
     motion_axes: wp.array[wp.vec2],
     motion_orbit: wp.array[wp.vec2],
@@ -37,9 +47,11 @@ def _motion_pose_kernel(
     # Outputs
     instance_pose: wp.array[Any],
 ):
-    """One thread per object: pose at ``time`` (see the module docstring), computed in the type of
-    ``time`` (float32 or float64) like the centres and the poses written."""
+    """One thread per object: pose at ``time_now[0] + time_step`` (added in float64, as the host
+    adds), computed in the type of ``scalar`` (float32 or float64; its value is unused) like the
+    centres and the poses written."""
     i = wp.tid()
+    time = type(scalar)(time_now[0] + time_step)
     axes = motion_axes[i]
     orbit = motion_orbit[i]
     theta = type(time)(orbit[0]) * time + type(time)(orbit[1])
@@ -55,7 +67,7 @@ def _motion_pose_kernel(
 
 for _precision in PRECISIONS:
     _scalar, _vec3, _, _transform = precision_types(_precision)
-    wp.overload(_motion_pose_kernel, {"time": _scalar, "motion_centre": wp.array[_vec3],
+    wp.overload(_motion_pose_kernel, {"scalar": _scalar, "motion_centre": wp.array[_vec3],
                                       "instance_pose": wp.array[_transform]})
 
 
@@ -130,13 +142,27 @@ class EllipseMotion:
             precision=precision,
         )
 
-    def launch(self, time: float, instance_pose: wp.array) -> None:
-        """Writes the poses of all objects at ``time`` (seconds) into ``instance_pose`` ``(N,)``."""
+    def launch(self, time, instance_pose: wp.array, step: float = 0.0) -> None:
+        """Writes the poses of all objects at ``time + step`` (seconds) into ``instance_pose`` ``(N,)``.
+
+        Args:
+            time: a number, or a ``wp.array`` of one float64 on this device (read by the kernel:
+                the launch can be captured in a CUDA graph and replayed as the time changes).
+            instance_pose: ``(N,)`` poses to write.
+            step: seconds added to ``time`` (in float64) before the poses are computed.
+        """
+        if not isinstance(time, wp.array):
+            if getattr(self, "_time", None) is None:
+                self._time = wp.zeros(1, dtype=wp.float64, device=self.device)
+            self._time.fill_(float(time))
+            time = self._time
         wp.launch(
             _motion_pose_kernel,
             dim=self.num_objects,
             inputs=[
-                self.scalar_type(time),
+                time,
+                wp.float64(step),
+                self.scalar_type(0.0),
                 self.motion_centre,
                 self.motion_axes,
                 self.motion_orbit,
@@ -148,3 +174,8 @@ class EllipseMotion:
             outputs=[instance_pose],
             device=self.device,
         )
+
+
+def advance_time(time_now: wp.array, step: float) -> None:
+    """Adds ``step`` seconds to the device time ``time_now`` (one float64; capturable)."""
+    wp.launch(_time_step_kernel, dim=1, inputs=[wp.float64(step)], outputs=[time_now], device=time_now.device)

@@ -852,7 +852,8 @@ class NarrowPhase:
         return [self.hits] if self.contained is None else [self.hits, self.contained]
 
     def launch(self, scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
-               object_lower: wp.array | None = None, object_upper: wp.array | None = None) -> None:
+               object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
+               reset_counters: bool = True) -> None:
         """Tests the candidates of ``scene``: resets and writes the hits and the flags, and the
         segments and the containment pairs when asked for (host reads nothing).
 
@@ -861,12 +862,15 @@ class NarrowPhase:
             candidates: ``wp.vec4i`` candidate triangle pairs.
             object_pairs, object_lower, object_upper: the broad phase's object pairs and the
                 ``(N,)`` object boxes it saw (needed with ``containment``).
+            reset_counters: zero the counters of :attr:`counters` first; False when the caller
+                has zeroed them already (a frame zeroes all its counters with one memset).
         """
         if self.contained is not None and (object_pairs is None or object_lower is None or object_upper is None):
             raise ValueError("containment: launch needs the object pairs and the object boxes")
         d = self.device
-        for buffer in self.counters:
-            buffer.reset()
+        if reset_counters:
+            for buffer in self.counters:
+                buffer.reset()
         self.object_colliding.zero_()
         tol = wp.float64(self.tolerance)
         wp.launch(

@@ -1,25 +1,29 @@
 """The frame: refit (object bounds) -> broad phase -> mid phase -> narrow phase -> result.
 
 :class:`CollisionPipeline` owns one object of each stage and calls their methods in order on the
-scene's device; each stage resets and launches its own work and exposes the buffers with counters
-it writes (``counters``). Between stages the host reads nothing; at the end of the frame it reads every
-counter once (:class:`~warp_ccd.buffers.CounterRead`, a single synchronisation). A counter that
-passed its buffer's capacity makes that buffer grow and the frame run again
-(:func:`~warp_ccd.buffers.launch_until_fit`), so no pair is ever dropped.
+scene's device; each stage launches its own work and exposes the buffers with counters it writes
+(``counters``). All those counters live in one block (:class:`~warp_ccd.buffers.CounterRead`):
+the frame starts by zeroing it (one memset) and ends by copying it to pinned host memory (one
+asynchronous copy) and waiting once; between stages the host reads nothing. On CUDA the whole
+frame, optionally with the scene's motion, is a captured graph replayed each frame
+(:class:`~warp_ccd.frame.CountedFrame`). A counter that passed its buffer's capacity makes that
+buffer grow and the frame run again (then the graph is captured anew), so no pair is ever dropped.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 import warp as wp
 
 from .aabb import InstanceBounds
 from .broad_phase import make_broad_phase
-from .buffers import CounterRead, GrowableBuffer, launch_until_fit
+from .buffers import CounterRead, GrowableBuffer
 from .bvh import SceneBVH
+from .frame import CountedFrame
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .narrow_phase import TOLERANCE, NarrowPhase
 from .scene import Scene
@@ -34,10 +38,17 @@ with the all-pairs mid phase)."""
 class CollisionResult:
     """What one frame found. Arrays are computed on first access and cached.
 
+    A result of :meth:`CollisionPipeline.detect` holds views of the pipeline's device buffers,
+    valid until its next ``detect()`` overwrites them: read what you need first (the numpy
+    properties copy to the host on first access and keep their copy), or keep
+    :meth:`copy`, which owns its arrays.
+
     Attributes:
         num_objects: ``N``.
         timings: per-stage wall times in ms (``refit``, ``broad``, ``mid``, ``narrow``,
             ``total``) when the pipeline was asked for them, else None.
+        host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
+            waiting for the device), in ms.
         device_triangle_pairs: ``(M,)`` ``wp.vec4i`` on the device, unsorted.
         device_colliding: ``(N,)`` int32 flags on the device.
     """
@@ -53,26 +64,36 @@ class CollisionResult:
         self.timings = timings
         self.num_candidates = num_candidates
         self.num_broad_pairs = num_broad_pairs
-        self._tri = None
+        self.host_ms = 0.0
+
+    def copy(self) -> "CollisionResult":
+        """The same result with device arrays of its own (valid after the next ``detect()``)."""
+
+        def own(a):
+            return None if a is None else wp.clone(a)
+
+        out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
+                              self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
+                              own(self.device_segments))
+        out.host_ms = self.host_ms
+        return out
 
     @property
     def num_triangle_pairs(self) -> int:
         """``M``, the number of intersecting triangle pairs."""
         return self.device_triangle_pairs.shape[0]
 
-    @property
+    @cached_property
     def triangle_pairs(self) -> np.ndarray:
         """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, rows sorted.
 
         ``tri_a`` is the local triangle index within object ``obj_a``'s mesh.
         """
-        if self._tri is None:
-            t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
-            self._order = np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))
-            self._tri = t[self._order]
-        return self._tri
+        t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
+        self._order = np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))
+        return t[self._order]
 
-    @property
+    @cached_property
     def segments(self) -> np.ndarray | None:
         """``(M, 2, 3)`` end points of the intersection segment of each row of
         :attr:`triangle_pairs` (same order; a point when they only touch; NaN for coplanar
@@ -82,7 +103,7 @@ class CollisionResult:
         self.triangle_pairs  # noqa: B018 (computes the row order)
         return self.device_segments.numpy().reshape(-1, 2, 3)[self._order]
 
-    @property
+    @cached_property
     def object_pairs(self) -> np.ndarray:
         """``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, of objects whose surfaces intersect; sorted."""
         t = self.triangle_pairs
@@ -90,7 +111,7 @@ class CollisionResult:
             return np.zeros((0, 2), np.int32)
         return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
 
-    @property
+    @cached_property
     def containment_pairs(self) -> np.ndarray | None:
         """``(C, 2)`` int32 rows ``(inner, outer)``: ``inner`` lies wholly inside ``outer`` with no
         surface intersection; sorted. None unless the pipeline was built with ``containment=True``."""
@@ -98,11 +119,15 @@ class CollisionResult:
             return None
         c = self.device_contained.numpy().reshape(-1, 2).astype(np.int32)
         if len(c) and len(self.triangle_pairs):
-            surface = set(map(tuple, self.object_pairs))
-            c = c[[(min(a, b), max(a, b)) not in surface for a, b in c]].reshape(-1, 2)
+            # Drop pairs whose surfaces intersect: pair keys a * N + b (a < b) looked up in the sorted
+            # keys of the object pairs.
+            n = np.int64(self.num_objects)
+            key = np.minimum(c[:, 0], c[:, 1]).astype(np.int64) * n + np.maximum(c[:, 0], c[:, 1])
+            surface = self.object_pairs[:, 0].astype(np.int64) * n + self.object_pairs[:, 1]
+            c = c[~np.isin(key, surface)].reshape(-1, 2)
         return c[np.lexsort((c[:, 1], c[:, 0]))]
 
-    @property
+    @cached_property
     def colliding(self) -> np.ndarray:
         """``(N,)`` bool: the object's surface intersects another object's (or, with containment
         asked for, it contains or lies inside another)."""
@@ -126,10 +151,11 @@ class CollisionPipeline:
             every triangle pair of each object pair).
         narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
         tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
-        timings: when True, synchronise after each stage and report ms per stage.
+        timings: when True, synchronise after each stage and report ms per stage (frames are then
+            launched eagerly).
+        graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
+            False launches every kernel from Python (the CPU always does). Both give the same results.
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
-        traversal_split: work items per object pair in the tree traversal (see
-            :class:`~warp_ccd.mid_phase.MidPhaseBVH`; default 8 on CUDA, 0 on CPU).
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
@@ -143,6 +169,7 @@ class CollisionPipeline:
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
         counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
+        graph: whether frames are replayed as CUDA graphs.
     """
 
     def __init__(
@@ -154,8 +181,8 @@ class CollisionPipeline:
         narrow_phase: str = "moller",
         tolerance: float = TOLERANCE,
         timings: bool = False,
+        graph: bool | None = None,
         leaf_size: int = 1,
-        traversal_split: int | None = None,
         segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
@@ -164,7 +191,7 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
-        for name, value, minimum in (("leaf_size", leaf_size, 1), ("traversal_split", traversal_split, 0),
+        for name, value, minimum in (("leaf_size", leaf_size, 1),
                                      ("pair_capacity", pair_capacity, 1), ("candidate_capacity", candidate_capacity, 1),
                                      ("hit_capacity", hit_capacity, 1)):
             if value is None and name != "leaf_size":
@@ -174,6 +201,12 @@ class CollisionPipeline:
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
                 or not 0.0 <= float(tolerance) < 0.1:
             raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
+        if graph is not None and not isinstance(graph, bool):
+            raise ValueError(f"graph must be True, False or None, got {graph!r}")
+        if graph and not scene.device.is_cuda:
+            raise ValueError(f"graph: CUDA graphs need a CUDA device, the scene is on {scene.device}")
+        if graph and timings:
+            raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
         if mid_phase not in ("bvh", "all_pairs"):
             raise ValueError(f"mid_phase must be 'bvh' or 'all_pairs', got {mid_phase!r}")
         self.scene = scene
@@ -181,12 +214,12 @@ class CollisionPipeline:
         n = scene.num_objects
         d = self.device
         self.timings = bool(timings)
+        self.graph = (scene.device.is_cuda and not self.timings) if graph is None else graph
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
             self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
-            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
-                                   split=traversal_split, device=d)
+            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n), device=d)
         else:
             self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
@@ -195,11 +228,12 @@ class CollisionPipeline:
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
         self.counter_read = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
+        self._frames = {}  # advance step (None: detection alone) -> CountedFrame
         self._times = None
 
-    def _run_frame(self) -> None:
-        """Enqueues one frame (each stage resets what it owns; the pipeline resets ``pairs``); with
-        ``timings``, times each stage."""
+    def _launch_stages(self) -> None:
+        """Enqueues the four stages (the frame's counters were reset before); with ``timings``,
+        times each stage."""
         scene = self.scene
         times = {} if self.timings else None
 
@@ -214,49 +248,80 @@ class CollisionPipeline:
         if times is not None:
             wp.synchronize_device(self.device)
         t = time.perf_counter()
-        self.pairs.reset()
         self.boxes.refit(scene)
         t = mark("refit", t)
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
         t = mark("broad", t)
-        self.mid.launch(scene, self.pairs)
+        self.mid.launch(scene, self.pairs, reset_counters=False)
         t = mark("mid", t)
-        self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper)
+        self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
+                           reset_counters=False)
         mark("narrow", t)
         if times is not None:
             times["total"] = sum(times[s] for s in STAGES)
         self._times = times
 
-    def detect(self) -> CollisionResult:
-        """Runs one frame on the scene's current world vertices.
+    def _frame(self, step: float | None) -> CountedFrame:
+        """The frame that advances the scene by ``step`` first (None: detection alone)."""
+        frame = self._frames.get(step)
+        if frame is None:
+            if step is None:
+                launch = self._launch_stages
+            else:
+                def launch():
+                    self.scene.enqueue_advance(step)
+                    self._launch_stages()
+            frame = CountedFrame(launch, self.counter_read, "graph" if self.graph else "eager")
+            if len(self._frames) > 8:  # a scene stepped by ever new dt: keep a few graphs
+                self._frames.clear()
+            self._frames[step] = frame
+        return frame
+
+    def detect(self, advance: float | None = None) -> CollisionResult:
+        """Runs one frame on the scene's world vertices.
+
+        Args:
+            advance: when given, first moves the scene by this many seconds as
+                :meth:`Scene.advance <warp_ccd.scene.Scene.advance>` does, in the same frame (on
+                CUDA the same graph: one launch for motion and detection).
 
         Returns:
-            A :class:`CollisionResult` that owns copies of this frame's device arrays.
+            A :class:`CollisionResult` holding views of this pipeline's device buffers, valid until
+            the next ``detect()`` (:meth:`CollisionResult.copy` keeps them).
         """
+        start = time.perf_counter()
         n = self.scene.num_objects
         d = self.device
         vec3 = self.scene.vec3_type
+        step = None if advance is None else self.scene.advance_host(advance)
         if n < 2:
+            if step is not None:
+                self.scene.enqueue_advance(step)
             empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.narrow.contained is not None else None
             no_segments = wp.zeros((0, 2), dtype=vec3, device=d) if self.narrow.segments else None
             return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                    {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
                                    device_contained=empty, device_segments=no_segments)
-        launch_until_fit(self._run_frame, self.counter_read)
+        frame = self._frame(step)
+        grew = frame.run_once()
+        wait_ms = frame.wait_ms
+        while grew:  # a buffer grew: detect again on the same world vertices
+            frame = self._frame(None)
+            grew = frame.run_once()
+            wait_ms += frame.wait_ms
         narrow = self.narrow
-        num_hits = narrow.hits.last_count
-        contained = wp.clone(narrow.contained.held()) if narrow.contained is not None else None
-        segments = wp.clone(narrow.segment[:num_hits]) if narrow.segments else None
-        return CollisionResult(
+        result = CollisionResult(
             n,
-            wp.clone(narrow.hits.held()),
-            wp.clone(narrow.object_colliding),
+            narrow.hits.held(),
+            narrow.object_colliding,
             self._times,
             num_candidates=self.mid.candidates.last_count,
             num_broad_pairs=self.pairs.last_count,
-            device_contained=contained,
-            device_segments=segments,
+            device_contained=narrow.contained.held() if narrow.contained is not None else None,
+            device_segments=narrow.segment[: narrow.hits.last_count] if narrow.segments else None,
         )
+        result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
+        return result
 
 
 def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", **options) -> CollisionResult:
@@ -269,8 +334,8 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test in
             double precision (for scenes far from the origin).
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
-            ``narrow_phase``, ``tolerance``, ``timings``, ``leaf_size``, ``traversal_split``,
-            ``segments``, ``containment``, capacities).
+            ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,
+            ``containment``, capacities).
 
     Returns:
         :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``.

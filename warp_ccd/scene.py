@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .motion import EllipseMotion
+from .motion import EllipseMotion, advance_time
 from .precision import PRECISIONS, precision_types
 from .shapes import shape as _named_shape
 from .shapes import validate_mesh
@@ -200,6 +200,7 @@ class Scene:
         scalar_type, vec3_type, transform_type: the Warp types of its precision
             (:func:`~warp_ccd.precision.precision_types`).
         topology: the :class:`MeshTopology` struct kernels take beside ``world_vertex``.
+        time_device: ``(1,)`` float64, the motion's time on the device (see :attr:`time`).
     """
 
     def __init__(
@@ -232,7 +233,6 @@ class Scene:
         self.num_shapes = num_shapes
         self.deforming = bool(deforming)
         self.motion = motion
-        self.time = 0.0
         if motion is not None and motion.num_objects != n:
             raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
         if motion is not None and motion.precision != precision:
@@ -289,8 +289,10 @@ class Scene:
         self.topology.instance_shape = self.instance_shape
         self.topology.instance_vertex_start = self.instance_vertex_start
         self.topology.instance_triangle_start = self.instance_triangle_start
+        self._time = 0.0
+        self.time_device = wp.zeros(1, dtype=wp.float64, device=d)
         if motion is not None:
-            motion.launch(self.time, self.instance_pose)
+            motion.launch(self.time_device, self.instance_pose)
         self._pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
 
     # ------------------------------------------------------------------ construction
@@ -411,15 +413,48 @@ class Scene:
             device=self.device,
         )
 
+    @property
+    def time(self) -> float:
+        """Seconds of motion so far (the host's copy of :attr:`time_device`); setting it moves
+        nothing until the next :meth:`advance`."""
+        return self._time
+
+    @time.setter
+    def time(self, value: float) -> None:
+        value = self._check_step(value, "time")
+        self._time = value
+        self.time_device.fill_(value)
+
+    @staticmethod
+    def _check_step(dt, what: str = "advance: dt") -> float:
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
+            raise ValueError(f"{what} must be a finite number of seconds, got {dt!r}")
+        return float(dt)
+
     def advance(self, dt: float) -> None:
         """Moves time forward by ``dt`` seconds: poses, then world vertices, all in kernels."""
+        self.advance_host(dt)
+        self.enqueue_advance(dt)
+
+    def advance_host(self, dt: float) -> float:
+        """The host's half of :meth:`advance`: validates ``dt`` and adds it to :attr:`time`
+        (for a frame whose device half, :meth:`enqueue_advance`, is replayed from a CUDA graph).
+
+        Returns:
+            ``dt`` as a float.
+        """
         if self.motion is None:
             raise ValueError("advance: this scene has no motion (use set_transforms or set_world_vertices)")
-        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
-            raise ValueError(f"advance: dt must be a finite number of seconds, got {dt!r}")
-        self.time += float(dt)
+        dt = self._check_step(dt)
+        self._time += dt
+        return dt
+
+    def enqueue_advance(self, dt: float) -> None:
+        """The device's half of :meth:`advance`: poses at :attr:`time_device` ``+ dt``, the device
+        time moved on by ``dt``, then the world vertices. Enqueues kernels only (capturable)."""
         if self.num_objects:
-            self.motion.launch(self.time, self.instance_pose)
+            self.motion.launch(self.time_device, self.instance_pose, step=dt)
+            advance_time(self.time_device, dt)
         self.update_world_vertices()
 
     def set_transforms(self, transforms) -> None:

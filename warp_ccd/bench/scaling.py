@@ -5,18 +5,22 @@
 ``Scene.random(N, seed, shapes)`` (constant density, so the work per object does not depend on
 ``N``):
 
-1. **Frames.** ``--warmup`` frames (kernel loading, buffers growing), then ``--frames`` timed
-   ones. Each frame moves the scene once (``scene.advance``, timed as ``motion``) and then runs
-   every method on the same world vertices. Times are wall-clock ms with
+1. **Frames.** ``--warmup`` frames (kernel loading, buffers growing, graphs captured), then
+   ``--frames`` timed ones. Each frame moves the scene once and then runs every method on the same
+   world vertices. On CUDA the move is this package's whole frame, ``detect(advance=dt)`` replayed
+   as one CUDA graph (``total_graph``); the motion alone (``motion``, eager) is timed by moving
+   again by 0 s (the same poses). Times are wall-clock ms with
    ``wp.synchronize_device`` before and after what is timed; each row gives the min and the
    median over the timed frames.
 2. **Methods.**
 
-   * ``warp_ccd``: this package's :class:`~warp_ccd.pipeline.CollisionPipeline`, twice: with
+   * ``warp_ccd``: this package's :class:`~warp_ccd.pipeline.CollisionPipeline`: with
      ``timings=True`` for the stages it reports (whatever their names; it synchronises after each,
-     and the sum is ``detect_synced``), and with ``timings=False`` timed around ``detect()``
-     (``detect``: the frame's launches, its one counter read and the result's copies; the number
-     to quote). ``total`` is ``motion + detect`` of the same frame.
+     and the sum is ``detect_synced``), and timed around ``detect()`` (the frame's launches, its one
+     counter read, the result's views) launched eagerly (``detect_eager``) and, on CUDA, replayed
+     as a graph (``detect_graph``). ``total_eager`` is ``motion + detect_eager``; ``total_graph``
+     the fused frame above; ``total`` and ``detect`` the faster mode by median (the number to
+     quote). ``host_eager`` / ``host_graph``: Python's time in ``detect()`` without the waits.
    * ``warp_builtin`` (peer ``builtin``): Warp's own tools,
      :class:`~warp_ccd.bench.peers.WarpMeshPipeline`, at its best: a frame is refit + query + one
      read of its counter into pinned memory, launched eagerly (``detect_eager``) and, on CUDA, as a
@@ -126,7 +130,8 @@ NXN_MAX_OBJECTS = {"cpu": 3000, "cuda": 20000}
 
 
 class PipelineMethod:
-    """This package's pipeline, timed per stage (``timings=True``) and as a whole (``timings=False``).
+    """This package's pipeline: timed per stage (``timings=True``), and as whole frames in every mode
+    of :func:`device_modes` (``detect_eager``, ``detect_graph``, ``total_graph``, host times).
 
     Args:
         name: row name.
@@ -136,20 +141,47 @@ class PipelineMethod:
 
     def __init__(self, name: str, scene: Scene, **options):
         self.name = name
+        self.scene = scene
         self.device = scene.device
         self.staged = CollisionPipeline(scene, timings=True, **options)
-        self.plain = CollisionPipeline(scene, **options)
+        self.modes = device_modes(scene.device)
+        self.pipes = {m: CollisionPipeline(scene, graph=m == "graph", **options) for m in self.modes}
+        self.plain = self.pipes["eager"]
         self.result = None
 
+    def advance(self, dt: float) -> tuple[float, dict]:
+        """Moves the scene by ``dt``. With a graph mode the move is part of the frame: ``detect(advance=dt)``
+        replayed as one graph, timed as ``total_graph`` (its host time ``host_graph``); the motion alone is
+        then timed by moving again by 0 s (the same poses). Else the motion alone, eagerly.
+
+        Returns:
+            ``(motion ms, {stage: ms})``.
+        """
+        if "graph" not in self.pipes:
+            return synced_ms(lambda: self.scene.advance(dt), self.device), {}
+        pipe = self.pipes["graph"]
+        out = {}
+
+        def frame():
+            out["result"] = pipe.detect(advance=dt)
+
+        times = {"total_graph": synced_ms(frame, self.device), "host_graph": out["result"].host_ms}
+        return synced_ms(lambda: self.scene.advance(0.0), self.device), times
+
     def run(self) -> dict:
-        """One frame; ms per stage, ``detect_synced`` and ``detect``."""
+        """One frame of detection on the scene as it is; ms per stage, ``detect_synced``, ``detect_<mode>``
+        and ``host_eager``."""
         staged = self.staged.detect()
         times = {("detect_synced" if k == "total" else k): v for k, v in (staged.timings or {}).items()}
+        out = {}
+        for mode, pipe in self.pipes.items():
 
-        def detect():
-            self.result = self.plain.detect()
+            def detect(pipe=pipe, mode=mode):
+                out[mode] = pipe.detect()
 
-        times["detect"] = synced_ms(detect, self.device)
+            times[f"detect_{mode}" if len(self.pipes) > 1 else "detect"] = synced_ms(detect, self.device)
+        times["host_eager" if len(self.pipes) > 1 else "host"] = out["eager"].host_ms
+        self.result = out["eager"]
         return times
 
     def triangle_pairs(self) -> np.ndarray:
@@ -493,7 +525,7 @@ def run_case(num_objects: int, triangles: str, args, device) -> CaseResult:
     times = {m.name: StageTimes() for m in methods}
     failed = set()
     for frame in range(args.warmup + args.frames):
-        motion = synced_ms(lambda: scene.advance(DT), device)
+        motion, frame_times = ours.advance(DT)
         for m in methods:
             if m.name in failed:
                 continue
@@ -506,10 +538,11 @@ def run_case(num_objects: int, triangles: str, args, device) -> CaseResult:
                 notes.append(f"ERROR {m.name} failed at frame {frame}: {type(exc).__name__}: {exc}")
                 continue
             if m is ours:
-                t = {"motion": motion, **t}
+                t = {"motion": motion, **t, **frame_times}
             for detect in ("detect", *(f"detect_{mode}" for mode in MODES)):
-                if detect in t:
-                    t["total" + detect[len("detect"):]] = motion + t[detect]
+                total = "total" + detect[len("detect"):]
+                if detect in t and total not in t:
+                    t[total] = motion + t[detect]
             if frame >= args.warmup:
                 times[m.name].add(t)
     live = [m for m in methods if m.name not in failed]

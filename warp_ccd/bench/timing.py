@@ -1,11 +1,11 @@
 """Timing a frame the way a careful Warp user runs it, and summarising the times.
 
 * :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
-* :class:`CountedFrame`: one frame of device work followed by one asynchronous copy of its
-  counters to pinned host memory and one wait, launched eagerly from Python or replayed as a
-  captured graph (``wp.ScopedCapture`` / ``wp.capture_launch``). A counter past its buffer's
-  capacity grows the buffer, and the frame is captured again and rerun: nothing is dropped.
-* :class:`ModeFrames`: the same frame in several modes, run in turn.
+* :class:`~warp_ccd.frame.CountedFrame` (the library's): one frame of device work followed by one
+  asynchronous copy of its counters to pinned host memory and one wait, launched eagerly from
+  Python or replayed as a captured graph. A counter past its buffer's capacity grows the buffer,
+  and the frame is captured again and rerun: nothing is dropped.
+* :class:`ModeFrames`: the same frame in several modes, run in turn (one counter block).
 * :func:`run_stages`: a host-side peer's stages in order, each timed.
 * :class:`StageTimes`: ms per stage over the timed frames; min and median, and for a method
   timed both eagerly and as a graph, the better of the two under the plain stage name.
@@ -19,12 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from ..buffers import CounterRead, launch_until_fit
+from ..buffers import CounterRead
+from ..frame import MODES, CountedFrame
 
 __all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "run_stages", "synced_ms"]
-
-MODES = ("eager", "graph")
-"""How a device frame is launched: from Python each time, or as a replayed graph."""
 
 
 def synced_ms(fn, device) -> float:
@@ -36,79 +34,28 @@ def synced_ms(fn, device) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
-class CountedFrame:
-    """A frame of device work and its single counter read.
+class ModeFrames:
+    """The same frame in each of several modes (a :class:`CountedFrame` each, all reading one
+    :class:`~warp_ccd.buffers.CounterRead`), run in turn.
 
     Args:
-        launch: enqueues the frame's work on ``device`` (counter resets included) and reads
-            nothing on the host; it must not allocate (it is captured in graph mode).
+        launch: enqueues the frame's work (see :class:`CountedFrame`; the counters are reset before it).
         buffers: the :class:`~warp_ccd.buffers.GrowableBuffer` s whose counters the frame reads.
         device: Warp device.
-        mode: ``"eager"`` or ``"graph"``. In graph mode the first frame runs eagerly (kernels
-            load, lazy set-up allocates) and the next is captured; a graph is captured again
-            whenever one of the buffers has grown since (by this frame or another user of them).
-    """
-
-    def __init__(self, launch, buffers: list, device, mode: str = "eager"):
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-        self.launch = launch
-        self.device = wp.get_device(device)
-        self.counter_read = CounterRead(buffers, self.device)
-        self.mode = mode
-        self.graph = None
-        self._captured = None  # (pointer, capacity) of each buffer when the graph was captured
-        self._ran = False  # the first frame runs eagerly (kernels load, lazy set-up allocates)
-
-    def _layout(self) -> list:
-        return [(b.data.ptr, b.capacity) for b in self.counter_read.buffers]
-
-    def _enqueue(self) -> None:
-        self.launch()
-        self.counter_read.enqueue()
-
-    def _frame(self) -> None:
-        """The frame and its counter read, enqueued eagerly or as a (re)captured graph."""
-        if self.mode == "graph" and self._ran:
-            if self.graph is None or self._captured != self._layout():  # new, or a buffer grew since
-                with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
-                    self._enqueue()
-                self.graph, self._captured = capture.graph, self._layout()
-            wp.capture_launch(self.graph)
-        else:
-            self._enqueue()
-        self._ran = True
-
-    def run(self) -> list[int]:
-        """Runs the frame until every buffer held its items (:func:`~warp_ccd.buffers.launch_until_fit`);
-        returns the counts."""
-        return launch_until_fit(self._frame, self.counter_read, reads=True)
-
-    @property
-    def counts(self) -> list[int]:
-        """The counts of the last frame (zeros before the first)."""
-        return self.counter_read.counts
-
-
-class ModeFrames:
-    """The same frame in each of several modes (a :class:`CountedFrame` each), run in turn.
-
-    Args:
-        launch, buffers, device: as for :class:`CountedFrame`.
         modes: the modes (:data:`MODES`, or a subset).
     """
 
     def __init__(self, launch, buffers: list, device, modes):
         self.device = wp.get_device(device)
-        self.frames = {m: CountedFrame(launch, buffers, device, m) for m in modes}
+        counter_read = CounterRead(buffers, self.device)
+        self.frames = {m: CountedFrame(launch, counter_read, m) for m in modes}
 
     @classmethod
     def broad_phase(cls, broad, boxes, pairs, device, modes) -> "ModeFrames":
-        """A broad phase's frame: reset ``pairs``, then ``broad.launch(*boxes(), pairs)``; ``boxes()``
-        gives the ``(lower, upper)`` arrays. Read: ``pairs`` and the broad phase's ``counters``."""
+        """A broad phase's frame: ``broad.launch(*boxes(), pairs)``; ``boxes()`` gives the
+        ``(lower, upper)`` arrays. Read: ``pairs`` and the broad phase's ``counters``."""
 
         def launch():
-            pairs.reset()
             broad.launch(*boxes(), pairs)
 
         return cls(launch, [pairs, *broad.counters], device, modes)

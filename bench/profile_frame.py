@@ -1,0 +1,108 @@
+"""Profile: what one frame does on the device, activity by activity, and what a frame costs as a graph.
+
+For each object count (``--objects``) of the scaling scene (``Scene.random``, polyhedra or
+icospheres), after warm-up frames:
+
+1. **Activities.** One frame, ``detect(advance=dt)`` launched eagerly, recorded with
+   ``wp.timing_begin(cuda_filter=wp.TIMING_ALL)``: every kernel, memset and copy with its device
+   time (eagerly the device idles between launches, so each time is the activity alone). Summed
+   per name: count and ms; their total is the frame's device work.
+2. **Frames.** ``--frames`` frames of ``detect(advance=dt)`` in each mode (eager and, on CUDA, the
+   replayed graph), wall-clock with a synchronisation before and after; min and median, and the
+   host time of the frame (Python's time in ``detect()`` without the wait).
+
+JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"n_objects", "triangles",
+"mode", "ms_min", "ms_median", "host_ms_median"}`` and ``activities`` of ``{"n_objects", "triangles",
+"name", "kind", "count", "ms"}``.
+
+    PYTHONPATH=. python bench/profile_frame.py --device cuda:0 --objects 1000 10000 \\
+        --out bench/results/profile_cuda0.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
+from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.frame import MODES
+from warp_ccd.pipeline import CollisionPipeline
+from warp_ccd.scene import Scene
+
+DT = 1.0 / 60.0
+KINDS = {wp.TIMING_KERNEL: "kernel", wp.TIMING_KERNEL_BUILTIN: "kernel (warp)", wp.TIMING_MEMCPY: "copy",
+         wp.TIMING_MEMSET: "memset", wp.TIMING_GRAPH: "graph"}
+
+
+def activities(pipe: CollisionPipeline) -> list[dict]:
+    """One eager frame, activity by activity: ``{"name", "kind", "count", "ms"}`` summed per name, slowest first."""
+    wp.timing_begin(cuda_filter=wp.TIMING_ALL)
+    pipe.detect(advance=DT)
+    results = wp.timing_end()
+    out = {}
+    for r in results:
+        kind = KINDS.get(r.filter, str(r.filter))
+        row = out.setdefault(r.name, {"name": r.name, "kind": kind, "count": 0, "ms": 0.0})
+        row["count"] += 1
+        row["ms"] += r.elapsed
+    return sorted(out.values(), key=lambda r: -r["ms"])
+
+
+def frames(pipe: CollisionPipeline, count: int) -> dict:
+    """``count`` frames of ``detect(advance=dt)``: ms min and median, host ms median."""
+    ms, host = [], []
+    device = pipe.device
+    for _ in range(count):
+        wp.synchronize_device(device)
+        start = time.perf_counter()
+        result = pipe.detect(advance=DT)
+        wp.synchronize_device(device)
+        ms.append((time.perf_counter() - start) * 1e3)
+        host.append(result.host_ms)
+    return {"ms_min": float(np.min(ms)), "ms_median": float(np.median(ms)), "host_ms_median": float(np.median(host))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--objects", type=lambda t: int(float(t)), nargs="+", default=[1000, 10000])
+    parser.add_argument("--triangles", default="poly", help="'poly' or an icosphere's triangle count (80, 1280)")
+    parser.add_argument("--frames", type=int, default=50)
+    parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    quiet_warp()
+    device = resolve_device(args.device)
+    label, shapes = parse_triangles(args.triangles)
+    modes = MODES if device.is_cuda else ("eager",)
+    doc = {**environment(device), "config": vars(args), "rows": [], "activities": []}
+    for n in args.objects:
+        scene = Scene.random(n, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
+        pipes = {m: CollisionPipeline(scene, graph=m == "graph") for m in modes}
+        for pipe in pipes.values():
+            for _ in range(args.warmup):
+                pipe.detect(advance=DT)
+        acts = activities(pipes["eager"])
+        total = sum(a["ms"] for a in acts)
+        print(f"== {n:,} objects, triangles {label}, {device} ({device.name}): one eager frame, "
+              f"{sum(a['count'] for a in acts)} device activities, {total:.3f} ms of device work")
+        for a in acts:
+            print(f"  {a['ms']:8.4f} ms  x{a['count']:<3} {a['kind']:<14} {a['name']}")
+            doc["activities"].append({"n_objects": n, "triangles": label, **a})
+        for mode, pipe in pipes.items():
+            row = {"n_objects": n, "triangles": label, "mode": mode, **frames(pipe, args.frames)}
+            doc["rows"].append(row)
+            print(f"  frame ({mode}): {row['ms_min']:.3f} ms min, {row['ms_median']:.3f} ms median, "
+                  f"host {row['host_ms_median']:.4f} ms")
+        if args.out:
+            write_json(args.out, doc)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""A frame of device work and its one counter read: launched from Python, or replayed as a CUDA graph.
+
+A frame is: reset every counter of a :class:`~warp_ccd.buffers.CounterRead` (one memset), enqueue
+the work (kernels that stop at device-side counters; launch sizes are capacities), copy the
+counters into pinned host memory (one asynchronous copy), wait once. On CUDA the three are captured
+once in a graph (``wp.ScopedCapture``) and replayed (``wp.capture_launch``): no Python per kernel,
+no allocation, no host read inside the frame.
+
+When a counter passed its buffer's capacity, the buffer grows (new storage), the frame runs again
+eagerly (which also sizes any scratch that follows the buffers' capacities) and the next frame is
+captured anew: a graph is captured only right after an eager run that saw the same storage, and
+replayed only while the storage it was captured with is still the buffers'. Nothing is dropped.
+"""
+
+from __future__ import annotations
+
+import time
+
+import warp as wp
+
+from .buffers import CounterRead
+
+__all__ = ["MODES", "CountedFrame"]
+
+MODES = ("eager", "graph")
+"""How a device frame is launched: from Python each time, or as a replayed graph."""
+
+
+class CountedFrame:
+    """One frame of device work with its counter read, run until every buffer holds its items.
+
+    Args:
+        launch: enqueues the frame's work on the reader's device; reads nothing on the host and
+            allocates nothing once it has run eagerly with the buffers' current storage (it is
+            captured in graph mode). The counters of ``counter_read`` are reset before it.
+        counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer the frame fills.
+        mode: ``"eager"`` or ``"graph"`` (CUDA only).
+
+    Attributes:
+        host_ms: host time of the last :meth:`run_once` (or of all runs of the last :meth:`run`),
+            in ms: Python's time launching and reading, without the time spent waiting.
+        wait_ms: the time spent waiting for the device in the same runs, in ms.
+        captures: graphs captured so far (a capture follows each growth of a buffer).
+    """
+
+    def __init__(self, launch, counter_read: CounterRead, mode: str = "eager"):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        if mode == "graph" and not counter_read.device.is_cuda:
+            raise ValueError(f"graph mode needs a CUDA device, got {counter_read.device}")
+        self.launch = launch
+        self.counter_read = counter_read
+        self.device = counter_read.device
+        self.mode = mode
+        self.graph = None
+        self.captures = 0
+        self.host_ms = 0.0
+        self.wait_ms = 0.0
+        self._captured = None  # storage layout when the graph was captured
+        self._eager = None  # storage layout of the last eager run
+
+    def _layout(self) -> list:
+        buffers = self.counter_read.buffers
+        return [(b.data.ptr, b.capacity) for b in buffers] + self.counter_read.counter_pointers()
+
+    def _enqueue(self) -> None:
+        self.counter_read.reset()
+        self.launch()
+        self.counter_read.enqueue()
+
+    def enqueue(self) -> None:
+        """Enqueues the frame and its read: replays the graph, captures one (right after an eager run
+        on the same storage) or launches eagerly."""
+        layout = self._layout()
+        if self.mode == "graph":
+            if self.graph is not None and self._captured == layout:
+                wp.capture_launch(self.graph)
+                return
+            if self._eager == layout:
+                with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                    self._enqueue()
+                self.graph, self._captured = capture.graph, layout
+                self.captures += 1
+                wp.capture_launch(self.graph)
+                return
+        self._enqueue()
+        self._eager = layout
+
+    def run_once(self) -> bool:
+        """Enqueues the frame, waits, reads the counters; returns True when a buffer grew (the frame's
+        results are incomplete: run it again). Sets :attr:`host_ms` and :attr:`wait_ms`."""
+        start = time.perf_counter()
+        self.enqueue()
+        launched = time.perf_counter()
+        wp.synchronize_device(self.device)
+        waited = time.perf_counter()
+        grew = self.counter_read.finish()
+        self.host_ms = (launched - start + time.perf_counter() - waited) * 1e3
+        self.wait_ms = (waited - launched) * 1e3
+        return grew
+
+    def run(self) -> list[int]:
+        """Runs the frame until every buffer held its items; returns the counts (:attr:`host_ms`,
+        :attr:`wait_ms`: of all its runs)."""
+        host = wait = 0.0
+        while True:
+            grew = self.run_once()
+            host += self.host_ms
+            wait += self.wait_ms
+            if not grew:
+                break
+        self.host_ms, self.wait_ms = host, wait
+        return self.counter_read.counts
+
+    @property
+    def counts(self) -> list[int]:
+        """The counts of the last frame (zeros before the first)."""
+        return self.counter_read.counts
