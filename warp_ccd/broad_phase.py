@@ -11,8 +11,9 @@ boxes overlap):
 
 Sweep and prune, as run on the device each frame:
 
-1. Statistics of the boxes (one strided pass, a few atomics per thread): bounds of the
-   scene, mean extent, variance of the centres per axis.
+1. Statistics of the boxes (one strided pass, reduced per block, a few atomics per block): bounds
+   of the scene, mean extent, variance of the centres per axis. The setup kernel reads them and
+   empties the accumulators for the next frame.
 2. The sweep axis is the axis of greatest variance of the centres; the plane perpendicular to it
    is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
    one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
@@ -20,16 +21,21 @@ Sweep and prune, as run on the device each frame:
 3. Every box is entered in each cell it covers (usually 1 to 4). A box covering more than
    ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the grid; it goes
    to a short list tested against all boxes instead (O(N) per huge box).
-4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by a 64-bit key: cell id in the high
-   word, lower bound along the sweep axis quantised monotonically to 32 bits in the low word.
+4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by a key ``cell << q_bits | q``: the cell
+   id, then the lower bound along the sweep axis quantised monotonically to ``q_bits`` bits. Only
+   the bits in use are sorted (``end_bit``; :func:`sap_key_bits` sizes them from ``N``, and the
+   grid coarsens when it would need more cells): a radix pass costs as much for 1,000 keys as
+   for 10^5, so small scenes sort 16 bits, not 64. Unused entry slots get a key that sorts last.
 5. One thread per entry sweeps forward through its cell while the next quantised lower bound is
    not past its own quantised upper bound, tests the exact boxes, and reports a pair only from
    the cell holding the lower corner of the two boxes' intersection (both boxes are entered
-   there), so no pair is reported twice and none is lost.
+   there), so no pair is reported twice and none is lost. The same threads test the boxes
+   against the big-box list.
 
-Cost per frame: O(N) work plus the output, O(log N)-depth sort; everything stays on the device and
-the host reads nothing. Counters are int64 and every buffer grows: the entry buffer and the pair
-buffer report overflow through their counters.
+Seven launches per frame (statistics, setup, count, scan, emit, sort, sweep); O(N) work plus the
+output, O(log N)-depth sort; everything stays on the device and the host reads nothing, so the
+frame can be a CUDA graph (:meth:`BroadPhase.find_pairs`). Counters are int64 and every buffer
+grows: the entry buffer and the pair buffer report overflow through their counters.
 """
 
 from __future__ import annotations
@@ -205,14 +211,20 @@ CELL_BITS_MAX = 30
 def sap_key_bits(num_boxes: int) -> tuple[int, int]:
     """``(cell_bits, q_bits)`` of the sort keys for ``num_boxes`` boxes: key =
     ``cell << q_bits | q``, sorted on its low ``cell_bits + q_bits`` bits only (a radix pass
-    per 8 bits). The grid has fewer than ``2**cell_bits`` cells (about two per box at most: more
-    would be empty); the lower bounds along the sweep axis are quantised to ``q_bits`` bits,
-    enough to order the few boxes of one grid column (order within a quantum only costs box
-    tests, never a pair)."""
+    per 8 bits: 16 bits at 1,000 boxes, 20 at 10^4, 29 at 10^7). Boxes spread over a volume fill
+    a grid column per cell width, about ``N**(2/3)`` cells in the plane: the grid gets fewer
+    than ``2**cell_bits = 2 * N**(2/3)`` cells (coarser when the scene needs more); the lower
+    bounds along the sweep axis are quantised to ``q_bits`` bits, about 16 quanta per box of a
+    column of ``N**(1/3)``: order within a quantum only costs box tests, never a pair."""
     log_n = max(1, int(num_boxes - 1).bit_length())
-    cell_bits = min(CELL_BITS_MAX, max(4, log_n + 1))
-    q_bits = min(32, max(12, -(-log_n // 3) + 8))
+    cell_bits = min(CELL_BITS_MAX, max(4, -(-2 * log_n // 3) + 1))
+    q_bits = min(32, max(8, -(-log_n // 3) + 4))
     return cell_bits, q_bits
+
+
+STATS_BLOCK = 256
+"""Threads per block of the statistics pass: each block reduces its threads' values in shared
+memory (Warp tiles) and adds them to the accumulators with one atomic per value."""
 
 
 @wp.kernel
@@ -220,22 +232,24 @@ def _sap_stats_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     num_boxes: int,
-    stride: int,
+    num_blocks: int,
     # Outputs
     stat_lo: wp.array[wp.float32],
     stat_hi: wp.array[wp.float32],
     stat_sum: wp.array[wp.float64],
 ):
-    """Strided pass: scene bounds (``stat_lo``/``stat_hi``, 3 each) and sums (``stat_sum``, 9:
-    centres, squared centres, extents per axis), with one atomic per value per thread, into
-    accumulators that the setup kernel of the previous frame (or the constructor) left empty."""
-    t = wp.tid()
+    """Strided pass over the boxes by ``num_blocks`` blocks: scene bounds (``stat_lo``/``stat_hi``,
+    3 each) and sums (``stat_sum``, 9: centres, squared centres, extents per axis), reduced per
+    block, then one atomic per value per block, into accumulators that the setup kernel of the
+    previous frame (or the constructor) left empty."""
+    block, lane = wp.tid()
+    width = wp.block_dim()
     lo = wp.vec3(BOX_EMPTY)
     hi = wp.vec3(-BOX_EMPTY)
     c1 = wp.vec3d(0.0, 0.0, 0.0)
     c2 = wp.vec3d(0.0, 0.0, 0.0)
     ext = wp.vec3d(0.0, 0.0, 0.0)
-    i = t
+    i = block * width + lane
     while i < num_boxes:
         a = lower[i]
         b = upper[i]
@@ -247,13 +261,19 @@ def _sap_stats_kernel(
         c1 = c1 + c
         c2 = c2 + wp.cw_mul(c, c)
         ext = ext + wp.vec3d(wp.float64(b[0] - a[0]), wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
-        i += stride
+        i += num_blocks * width
     for k in range(3):
-        wp.atomic_min(stat_lo, k, lo[k])
-        wp.atomic_max(stat_hi, k, hi[k])
-        wp.atomic_add(stat_sum, k, c1[k])
-        wp.atomic_add(stat_sum, 3 + k, c2[k])
-        wp.atomic_add(stat_sum, 6 + k, ext[k])
+        block_lo = wp.tile_extract(wp.tile_min(wp.tile(lo[k])), 0)
+        block_hi = wp.tile_extract(wp.tile_max(wp.tile(hi[k])), 0)
+        block_c1 = wp.tile_extract(wp.tile_sum(wp.tile(c1[k])), 0)
+        block_c2 = wp.tile_extract(wp.tile_sum(wp.tile(c2[k])), 0)
+        block_ext = wp.tile_extract(wp.tile_sum(wp.tile(ext[k])), 0)
+        if lane == 0:
+            wp.atomic_min(stat_lo, k, block_lo)
+            wp.atomic_max(stat_hi, k, block_hi)
+            wp.atomic_add(stat_sum, k, block_c1)
+            wp.atomic_add(stat_sum, 3 + k, block_c2)
+            wp.atomic_add(stat_sum, 6 + k, block_ext)
 
 
 @wp.func
@@ -512,15 +532,16 @@ class BroadPhaseSAP(BroadPhase):
         graph: as for :class:`BroadPhase`.
         cell_scale: grid cell width relative to the mean box extent.
         max_cells_per_box: boxes covering more cells go to the big-box list.
-        stats_threads: threads of the statistics pass (each handles ``N / stats_threads`` boxes).
+        stats_blocks: most blocks (of :data:`STATS_BLOCK` threads) of the statistics pass; it uses
+            one per 2,048 boxes up to that.
     """
 
     def __init__(self, *, device=None, graph: bool | None = None, cell_scale: float = 2.0, max_cells_per_box: int = 64,
-                 stats_threads: int = 4096):
+                 stats_blocks: int = 512):
         super().__init__(device=device, graph=graph)
         self.cell_scale = float(cell_scale)
         self.max_cells_per_box = int(max_cells_per_box)
-        self.stats_threads = int(stats_threads) if self.device.is_cuda else 1
+        self.stats_blocks = int(stats_blocks)
         d = self.device
         # Empty accumulators; each frame's setup kernel empties them again after reading them.
         self.stat_lo = wp.full(3, BOX_EMPTY, dtype=wp.float32, device=d)
@@ -568,8 +589,9 @@ class BroadPhaseSAP(BroadPhase):
             self.entry.reset()  # no entries (the emit kernel sets the counter otherwise)
             return
         d = self.device
-        wp.launch(_sap_stats_kernel, dim=self.stats_threads, inputs=[lower, upper, n, self.stats_threads],
-                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum], device=d)
+        blocks = max(1, min(self.stats_blocks, -(-n // (8 * STATS_BLOCK)))) if d.is_cuda else 1
+        wp.launch_tiled(_sap_stats_kernel, dim=[blocks], inputs=[lower, upper, n, blocks],
+                        outputs=[self.stat_lo, self.stat_hi, self.stat_sum], block_dim=STATS_BLOCK, device=d)
         wp.launch(_sap_setup_kernel, dim=1,
                   inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
                   outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.grid], device=d)
