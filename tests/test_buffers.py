@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_ccd.buffers import CounterRead, GrowableBuffer, launch_until_fit, reserve_slot, upper_bound
+from warp_ccd.buffers import CounterRead, GrowableBuffer, reserve_slot, upper_bound
+from warp_ccd.frame import CountedFrame
 
 
 @wp.kernel
@@ -39,7 +40,7 @@ def test_upper_bound_matches_searchsorted(device, dtype):
         assert np.array_equal(out.numpy(), want), (first, end)
 
 
-def test_launch_until_fit_grows_and_records_counts(device):
+def test_counted_frame_grows_and_records_counts(device):
     """From capacity 1, the loop grows the buffer until all 1,000 items fit, and each buffer records
     its count; the items held are exactly the ones emitted."""
     items = GrowableBuffer(wp.int32, 1, device, "items")
@@ -52,11 +53,12 @@ def test_launch_until_fit_grows_and_records_counts(device):
         items.reset()
         wp.launch(_emit_kernel, dim=1000, inputs=[items.capacity], outputs=[items.data, items.count], device=device)
 
-    counts = launch_until_fit(launch, counters)
+    frame = CountedFrame(launch, counters)
+    counts = frame.run()
     assert counts == [1000, 0] and len(runs) == 2
     assert items.last_count == 1000 and other.last_count == 0 and items.capacity >= 1000
     assert np.array_equal(np.sort(items.held().numpy()), np.arange(1000))
-    assert launch_until_fit(launch, counters) == [1000, 0] and len(runs) == 3  # fits at once now
+    assert frame.run() == [1000, 0] and len(runs) == 3  # fits at once now
 
 
 def test_held_refuses_a_buffer_that_grew_at_its_read(device):

@@ -334,7 +334,7 @@ def test_graph_and_eager_frames_agree_over_100_frames(device):
     eager = wc.CollisionPipeline(scenes[1], graph=False, **small)
     for _ in range(100):
         _same_frame(graph.detect(advance=1 / 30), eager.detect(advance=1 / 30))
-    frames = list(graph._frames.values())
+    frames = list(graph._frames.frames.values())
     assert any(f.captures for f in frames) and all(f.mode == "graph" for f in frames)
     assert graph.pairs.capacity > 1 and graph.mid.candidates.capacity > 1 and graph.narrow.hits.capacity > 1
 

@@ -44,8 +44,8 @@ import numpy as np
 import warp as wp
 
 from .aabb import BOX_EMPTY, boxes_overlap
-from .buffers import CounterRead, GrowableBuffer, emit_pair, launch_until_fit, used_count
-from .frame import CountedFrame
+from .buffers import CounterRead, GrowableBuffer, emit_pair, used_count
+from .frame import CountedFrame, FrameCache, frame_mode
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -99,12 +99,9 @@ class BroadPhase:
 
     def __init__(self, *, device=None, graph: bool | None = None):
         self.device = wp.get_device(device)
-        if graph and not self.device.is_cuda:
-            raise ValueError(f"graph: CUDA graphs need a CUDA device, got {self.device}")
-        self.graph = self.device.is_cuda if graph is None else bool(graph)
+        self.mode = frame_mode(self.device, graph)
         self.pairs = None
-        self._reader = None
-        self._frames = {}
+        self._frames = None
 
     @property
     def counters(self) -> list[GrowableBuffer]:
@@ -132,17 +129,8 @@ class BroadPhase:
         n = lower.shape[0]
         if self.pairs is None:
             self.pairs = GrowableBuffer(wp.vec2i, max(64, 4 * n), self.device, "broad-phase pairs")
-        key = (lower.ptr, upper.ptr, n)
-        frame = self._frames.get(key)
-        if frame is None:
-            if self._reader is None:
-                self._reader = CounterRead([self.pairs, *self.counters], self.device)
-            if len(self._frames) > 8:  # ever new arrays: keep a few graphs
-                self._frames.clear()
-            frame = CountedFrame(lambda: self.launch(lower, upper, self.pairs), self._reader,
-                                 "graph" if self.graph else "eager")
-            self._frames[key] = frame
-        frame.run()
+            self._frames = FrameCache(CounterRead([self.pairs, *self.counters], self.device), self.mode)
+        self._frames.get((lower.ptr, upper.ptr, n), lambda: self.launch(lower, upper, self.pairs)).run()
         return self.pairs.held()
 
 
@@ -624,7 +612,7 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -
 
     Resets ``pairs``, launches, reads the counters of ``pairs`` and of the broad phase's own
     ``counters`` with one synchronisation, grows what overflowed and launches again if needed
-    (:func:`~warp_ccd.buffers.launch_until_fit`).
+    (an eager :class:`~warp_ccd.frame.CountedFrame`).
 
     Args:
         broad: an object with ``launch(lower, upper, pairs)`` (and ``counters``, when it writes
@@ -632,11 +620,8 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -
         lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
         pairs: ``wp.vec2i`` output buffer.
     """
-    def launch():
-        pairs.reset()
-        broad.launch(lower, upper, pairs)
-
-    return launch_until_fit(launch, CounterRead([pairs, *getattr(broad, "counters", [])], pairs.device))[0]
+    reader = CounterRead([pairs, *getattr(broad, "counters", [])], pairs.device)
+    return CountedFrame(lambda: broad.launch(lower, upper, pairs), reader).run()[0]
 
 
 def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:

@@ -1,10 +1,10 @@
-"""Output buffers with a capacity and a counter, and the loop that makes every item fit.
+"""Output buffers with a capacity and a counter, and the reader of their counters.
 
 A kernel that emits items reserves a slot with :func:`reserve_slot` (an atomic add on the int64
 counter) and writes only while the slot is below the capacity; the counter keeps counting past it,
 in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 (:class:`CounterRead`): if one passed its capacity, that buffer grows and the frame runs again
-(:func:`launch_until_fit`), so no item is ever dropped silently.
+(:class:`~warp_ccd.frame.CountedFrame`), so no item is ever dropped silently.
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
 protocol) and :func:`upper_bound` (which block of a scanned count a flat work item falls in).
@@ -12,7 +12,7 @@ protocol) and :func:`upper_bound` (which block of a scanned count a flat work it
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,6 @@ __all__ = [
     "CounterRead",
     "GrowableBuffer",
     "emit_pair",
-    "launch_until_fit",
     "reserve_slot",
     "upper_bound",
     "used_count",
@@ -213,22 +212,3 @@ class CounterRead:
             b.fitted = not b.ensure(c)
             grew |= not b.fitted
         return grew
-
-
-def launch_until_fit(launch: Callable[[], None], counters: CounterRead, *, reads: bool = False) -> list[int]:
-    """Runs ``launch()`` and reads the counters once; while a buffer overflowed (it has grown
-    since), runs it again. Returns the counts of the run where everything fitted.
-
-    Args:
-        launch: enqueues the work on the counters' device, resetting the counters it fills first;
-            reads nothing on the host.
-        counters: the :class:`CounterRead` of every buffer ``launch`` writes.
-        reads: ``launch`` ends with ``counters.enqueue()`` itself (as a frame captured in a CUDA
-            graph with its read does); otherwise the read is enqueued after it here.
-    """
-    while True:
-        launch()
-        if not reads:
-            counters.enqueue()
-        if not counters.finish():
-            return counters.counts

@@ -254,6 +254,24 @@ def _refit_level_kernel(
     _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
 
 
+@wp.func
+def _small_item(
+    t: int,
+    small_end: wp.array[wp.int32],
+    small_instance: wp.array[wp.int32],
+    instance_shape: wp.array[wp.int32],
+    shape_start: wp.array[wp.int32],
+):
+    """Flat work item ``t`` over the small instances, ``small_end`` the inclusive scan of their
+    per-shape item counts (``shape_start`` offsets per shape): ``(instance, shape, index of the
+    item in the shapes' concatenated list)``."""
+    k = upper_bound(small_end, 0, small_end.shape[0], t)
+    inst = small_instance[k]
+    s = instance_shape[inst]
+    first = shape_start[s]
+    return inst, s, first + t - (small_end[k] - (shape_start[s + 1] - first))
+
+
 @wp.kernel
 def _refit_small_leaf_kernel(
     mesh: MeshTopology,
@@ -268,13 +286,8 @@ def _refit_small_leaf_kernel(
 ):
     """One thread per leaf of each instance of a small shape: the leaf's box from its triangles.
     ``small_leaf_end`` is the inclusive scan of the leaf counts of ``small_instance``."""
-    t = wp.tid()
-    k = upper_bound(small_leaf_end, 0, small_leaf_end.shape[0], t)
-    inst = small_instance[k]
-    s = mesh.instance_shape[inst]
-    first = tree.shape_leaf_start[s]
-    local = t - (small_leaf_end[k] - (tree.shape_leaf_start[s + 1] - first))
-    node = tree.leaf_node[first + local]
+    inst, s, item = _small_item(wp.tid(), small_leaf_end, small_instance, mesh.instance_shape, tree.shape_leaf_start)
+    node = tree.leaf_node[item]
     _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
 
 
@@ -292,12 +305,8 @@ def _refit_small_inner_kernel(
 ):
     """One thread per inner node of each instance of a small shape, after the leaves: the union
     of the boxes of the leaves of its subtree (the same bits as the union of its children's)."""
-    t = wp.tid()
-    k = upper_bound(small_inner_end, 0, small_inner_end.shape[0], t)
-    inst = small_instance[k]
-    s = instance_shape[inst]
-    first = shape_inner_start[s]
-    node = inner_node[first + t - (small_inner_end[k] - (shape_inner_start[s + 1] - first))]
+    inst, s, item = _small_item(wp.tid(), small_inner_end, small_instance, instance_shape, shape_inner_start)
+    node = inner_node[item]
     leaves = tree.node_leaf[tree.shape_node_start[s] + node]
     leaf_base = tree.shape_leaf_start[s]
     slot = tree.instance_node_start[inst]

@@ -20,10 +20,24 @@ import warp as wp
 
 from .buffers import CounterRead
 
-__all__ = ["MODES", "CountedFrame"]
+__all__ = ["MODES", "CountedFrame", "FrameCache", "frame_mode"]
 
 MODES = ("eager", "graph")
 """How a device frame is launched: from Python each time, or as a replayed graph."""
+
+
+def frame_mode(device, graph: bool | None) -> str:
+    """The mode of a ``graph`` option: ``"graph"`` for True, ``"eager"`` for False, None: graph on CUDA.
+
+    Raises:
+        ValueError: ``graph`` is not a bool or None, or asks for a graph on a device without CUDA.
+    """
+    if graph is not None and not isinstance(graph, bool):
+        raise ValueError(f"graph must be True, False or None, got {graph!r}")
+    device = wp.get_device(device)
+    if graph and not device.is_cuda:
+        raise ValueError(f"graph: CUDA graphs need a CUDA device, got {device}")
+    return "graph" if (device.is_cuda if graph is None else graph) else "eager"
 
 
 class CountedFrame:
@@ -116,3 +130,32 @@ class CountedFrame:
     def counts(self) -> list[int]:
         """The counts of the last frame (zeros before the first)."""
         return self.counter_read.counts
+
+
+class FrameCache:
+    """A few :class:`CountedFrame` s over one counter read, by key (a caller's frame variants:
+    the scene's step, the box arrays); a caller with ever new keys starts over past ``limit``.
+
+    Args:
+        counter_read: the :class:`~warp_ccd.buffers.CounterRead` every frame reads.
+        mode: ``"eager"`` or ``"graph"``.
+        limit: most frames kept.
+
+    Attributes:
+        frames: ``{key: CountedFrame}``.
+    """
+
+    def __init__(self, counter_read: CounterRead, mode: str, limit: int = 8):
+        self.counter_read = counter_read
+        self.mode = mode
+        self.limit = limit
+        self.frames = {}
+
+    def get(self, key, launch) -> CountedFrame:
+        """The frame of ``key``, made with ``launch`` (see :class:`CountedFrame`) the first time."""
+        frame = self.frames.get(key)
+        if frame is None:
+            if len(self.frames) >= self.limit:
+                self.frames.clear()
+            frame = self.frames[key] = CountedFrame(launch, self.counter_read, self.mode)
+        return frame

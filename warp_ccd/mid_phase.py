@@ -73,9 +73,9 @@ def _num_leaves(tree: TreeView, shape: int) -> int:
 
 
 @wp.func
-def _front_side(tree: TreeView, instance_shape: wp.array[wp.int32], p: wp.vec2i) -> int:
-    """Which object of pair ``p`` opens to its leaves: 0 (``p[0]``) unless ``p[1]`` has fewer."""
-    if _num_leaves(tree, instance_shape[p[1]]) < _num_leaves(tree, instance_shape[p[0]]):
+def _front_side(tree: TreeView, sa: int, sb: int) -> int:
+    """Which object of a pair of shapes ``(sa, sb)`` opens to its leaves: 0 (``a``) unless ``b`` has fewer."""
+    if _num_leaves(tree, sb) < _num_leaves(tree, sa):
         return 1
     return 0
 
@@ -96,7 +96,9 @@ def _front_count_kernel(
         pair_front[k] = wp.int64(0)
         return
     p = pair[k]
-    pair_front[k] = wp.int64(_num_leaves(tree, instance_shape[p[_front_side(tree, instance_shape, p)]]))
+    sa = instance_shape[p[0]]
+    sb = instance_shape[p[1]]
+    pair_front[k] = wp.int64(wp.min(_num_leaves(tree, sa), _num_leaves(tree, sb)))
 
 
 @wp.func
@@ -185,7 +187,7 @@ def _front_traverse_kernel(
         b = p[1]
         sa = instance_shape[a]
         sb = instance_shape[b]
-        front = _front_side(tree, instance_shape, p)
+        front = _front_side(tree, sa, sb)
         s_front = sa
         if front == 1:
             s_front = sb

@@ -23,7 +23,7 @@ from .aabb import InstanceBounds
 from .broad_phase import make_broad_phase
 from .buffers import CounterRead, GrowableBuffer
 from .bvh import SceneBVH
-from .frame import CountedFrame
+from .frame import CountedFrame, FrameCache, frame_mode
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .narrow_phase import TOLERANCE, NarrowPhase
 from .scene import Scene
@@ -201,10 +201,7 @@ class CollisionPipeline:
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
                 or not 0.0 <= float(tolerance) < 0.1:
             raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
-        if graph is not None and not isinstance(graph, bool):
-            raise ValueError(f"graph must be True, False or None, got {graph!r}")
-        if graph and not scene.device.is_cuda:
-            raise ValueError(f"graph: CUDA graphs need a CUDA device, the scene is on {scene.device}")
+        mode = frame_mode(scene.device, False if graph is None and timings else graph)
         if graph and timings:
             raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
         if mid_phase not in ("bvh", "all_pairs"):
@@ -214,7 +211,7 @@ class CollisionPipeline:
         n = scene.num_objects
         d = self.device
         self.timings = bool(timings)
-        self.graph = (scene.device.is_cuda and not self.timings) if graph is None else graph
+        self.graph = mode == "graph"
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
@@ -228,7 +225,7 @@ class CollisionPipeline:
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
         self.counter_read = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
-        self._frames = {}  # advance step (None: detection alone) -> CountedFrame
+        self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
         self._times = None
 
     def _launch_stages(self) -> None:
@@ -263,19 +260,14 @@ class CollisionPipeline:
 
     def _frame(self, step: float | None) -> CountedFrame:
         """The frame that advances the scene by ``step`` first (None: detection alone)."""
-        frame = self._frames.get(step)
-        if frame is None:
-            if step is None:
-                launch = self._launch_stages
-            else:
-                def launch():
-                    self.scene.enqueue_advance(step)
-                    self._launch_stages()
-            frame = CountedFrame(launch, self.counter_read, "graph" if self.graph else "eager")
-            if len(self._frames) > 8:  # a scene stepped by ever new dt: keep a few graphs
-                self._frames.clear()
-            self._frames[step] = frame
-        return frame
+        if step is None:
+            return self._frames.get(None, self._launch_stages)
+
+        def launch():
+            self.scene.enqueue_advance(step)
+            self._launch_stages()
+
+        return self._frames.get(step, launch)
 
     def detect(self, advance: float | None = None) -> CollisionResult:
         """Runs one frame on the scene's world vertices.

@@ -421,12 +421,12 @@ class Scene:
 
     @time.setter
     def time(self, value: float) -> None:
-        value = self._check_step(value, "time")
+        value = self._seconds(value, "time")
         self._time = value
         self.time_device.fill_(value)
 
     @staticmethod
-    def _check_step(dt, what: str = "advance: dt") -> float:
+    def _seconds(dt, what: str = "advance: dt") -> float:
         if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
             raise ValueError(f"{what} must be a finite number of seconds, got {dt!r}")
         return float(dt)
@@ -445,7 +445,7 @@ class Scene:
         """
         if self.motion is None:
             raise ValueError("advance: this scene has no motion (use set_transforms or set_world_vertices)")
-        dt = self._check_step(dt)
+        dt = self._seconds(dt)
         self._time += dt
         return dt
 
@@ -454,7 +454,7 @@ class Scene:
         time moved on by ``dt``, then the world vertices. Enqueues kernels only (capturable)."""
         if self.num_objects:
             self.motion.launch(self.time_device, self.instance_pose, step=dt)
-            advance_time(self.time_device, dt)
+        advance_time(self.time_device, dt)
         self.update_world_vertices()
 
     def set_transforms(self, transforms) -> None:
