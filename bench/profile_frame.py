@@ -74,8 +74,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--triangles", default="poly", help="'poly' or an icosphere's triangle count (80, 1280)")
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--option", action="append", default=[], metavar="NAME=INT",
+                        help="a CollisionPipeline option with an integer value, e.g. cut_depth=2 (repeatable)")
     parser.add_argument("--out", default=None)
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    options = {}
+    for item in args.option:
+        name, _, value = item.partition("=")
+        options[name] = int(value)
     quiet_warp()
     device = resolve_device(args.device)
     label, shapes = parse_triangles(args.triangles)
@@ -83,13 +89,14 @@ def main(argv: list[str] | None = None) -> int:
     doc = {**environment(device), "config": vars(args), "rows": [], "activities": []}
     for n in args.objects:
         scene = Scene.random(n, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
-        pipes = {m: CollisionPipeline(scene, graph=m == "graph") for m in modes}
+        pipes = {m: CollisionPipeline(scene, graph=m == "graph", **options) for m in modes}
         for pipe in pipes.values():
             for _ in range(args.warmup):
                 pipe.detect(advance=DT)
         acts = activities(pipes["eager"])
         total = sum(a["ms"] for a in acts)
-        print(f"== {n:,} objects, triangles {label}, {device} ({device.name}): one eager frame, "
+        print(f"== {n:,} objects, triangles {label}, {device} ({device.name}){' ' if options else ''}"
+              f"{' '.join(args.option)}: one eager frame, "
               f"{sum(a['count'] for a in acts)} device activities, {total:.3f} ms of device work")
         for a in acts:
             print(f"  {a['ms']:8.4f} ms  x{a['count']:<3} {a['kind']:<14} {a['name']}")

@@ -137,6 +137,20 @@ def test_capacity_one_is_complete(device):
         assert np.array_equal(got, want)
 
 
+def test_sap_grid_entries_grow(device):
+    """Boxes that each cover dozens of grid cells need more entries than the buffer starts with:
+    the frame grows it and runs again, and every pair is found."""
+    rng = np.random.default_rng(11)
+    tiny_lo, tiny_hi = boxes_random(rng, 3000, spread=5.0, size=(0.005, 0.015))
+    mid_lo, mid_hi = boxes_random(rng, 200, spread=5.0, size=(0.45, 0.55))
+    lo, hi = np.concatenate([tiny_lo, mid_lo]), np.concatenate([tiny_hi, mid_hi])
+    bp = wc.BroadPhaseSAP(device=device)
+    got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
+    got = got.numpy().reshape(-1, 2)
+    assert bp.entry.capacity > 2 * len(lo) + 1024  # it grew
+    assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi))
+
+
 def test_float64_input_rounds_outward(device):
     lo = np.array([[0.0, 0, 0], [1.0 + 1e-12, 0, 0]])
     hi = np.array([[1.0, 1, 1], [2.0, 1, 1]])

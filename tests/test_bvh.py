@@ -36,6 +36,14 @@ def tree_invariants(tree, vertices, triangles, leaf_size):
             if left >= 0:
                 assert tree.level_start[level + 1] <= left < right < tree.level_start[level + 2]
     assert tree.depth <= int(np.ceil(np.log2(max(1, m / leaf_size)))) + 1
+    # every cut's subtrees partition the leaves, at most 2**depth of them
+    for depth in range(tree.depth + 1):
+        cut = tree.cut(depth)
+        assert 1 <= len(cut) <= 2**depth
+        under = np.concatenate([tree.leaf_node[f : f + c] for f, c in tree.node_leaf[cut]])
+        assert sorted(under.tolist()) == sorted(tree.leaf_node.tolist())
+    assert np.array_equal(tree.cut(0), [0])
+    assert sorted(tree.cut(tree.depth).tolist()) == sorted(tree.leaf_node.tolist())
 
 
 @pytest.mark.parametrize("leaf_size", [1, 3])
@@ -124,8 +132,9 @@ def test_mixed_scene_matches_oracles(device, seed):
 
 
 @pytest.mark.parametrize(
-    "options", [dict(), dict(leaf_size=2), dict(leaf_size=4), dict(candidate_capacity=1), dict(pair_capacity=1)],
-    ids=["leaf1", "leaf2", "leaf4", "capacity1", "pairs1"])
+    "options", [dict(), dict(leaf_size=2), dict(leaf_size=4), dict(candidate_capacity=1), dict(pair_capacity=1),
+                dict(cut_depth=0), dict(cut_depth=1), dict(cut_depth=6), dict(cut_depth=2, leaf_size=3)],
+    ids=["leaf1", "leaf2", "leaf4", "capacity1", "pairs1", "cut0", "cut1", "cut6", "cut2leaf3"])
 def test_options_same_result(device, options):
     """The traversal finds exactly the candidates that survive the reference's all triangle pairs."""
     scene = mixed_scene(device, n=30, seed=4)

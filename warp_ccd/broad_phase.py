@@ -18,24 +18,26 @@ Sweep and prune, as run on the device each frame:
    is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
    one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
    overlapping one box along one axis grows like N^(2/3); per grid cell it stays constant.
-3. Every box is entered in each cell it covers (usually 1 to 4). A box covering more than
-   ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the grid; it goes
-   to a short list tested against all boxes instead (O(N) per huge box).
-4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by a key ``cell << q_bits | q``: the cell
-   id, then the lower bound along the sweep axis quantised monotonically to ``q_bits`` bits. Only
-   the bits in use are sorted (``end_bit``; :func:`sap_key_bits` sizes them from ``N``, and the
-   grid coarsens when it would need more cells): a radix pass costs as much for 1,000 keys as
-   for 10^5, so small scenes sort 16 bits, not 64. Unused entry slots get a key that sorts last.
+3. Every box is entered in each cell it covers (usually 1 to 4), in slots it reserves with one
+   atomic add (the sort puts them in order, so no count and scan are needed). A box covering
+   more than ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the
+   grid; it goes to a short list tested against all boxes instead (O(N) per huge box).
+4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by an int32 key ``cell << q_bits | q``:
+   the cell id, then the lower bound along the sweep axis quantised monotonically to ``q_bits``
+   bits. Only the bits in use are sorted (``end_bit``; :func:`sap_key_bits` sizes them from
+   ``N``, and the grid coarsens when it would need more cells): a radix pass costs as much for
+   1,000 keys as for 10^5, so small scenes sort 16 bits, not 32. Unused entry slots hold a key
+   that sorts last (written by the statistics pass).
 5. One thread per entry sweeps forward through its cell while the next quantised lower bound is
    not past its own quantised upper bound, tests the exact boxes, and reports a pair only from
    the cell holding the lower corner of the two boxes' intersection (both boxes are entered
    there), so no pair is reported twice and none is lost. The same threads test the boxes
    against the big-box list.
 
-Seven launches per frame (statistics, setup, count, scan, emit, sort, sweep); O(N) work plus the
-output, O(log N)-depth sort; everything stays on the device and the host reads nothing, so the
-frame can be a CUDA graph (:meth:`BroadPhase.find_pairs`). Counters are int64 and every buffer
-grows: the entry buffer and the pair buffer report overflow through their counters.
+Five launches per frame (statistics, setup, emit, sort, sweep); O(N) work plus the output,
+O(log N)-depth sort; everything stays on the device and the host reads nothing, so the frame can
+be a CUDA graph (:meth:`BroadPhase.find_pairs`). Counters are int64 and every buffer grows: the
+entry buffer and the pair buffer report overflow through their counters.
 """
 
 from __future__ import annotations
@@ -182,31 +184,34 @@ class SapGrid:
     axis_min: wp.float64
     qscale: wp.float64
     q_max: wp.float64
-    q_bits: wp.int64
+    q_bits: int
 
 
-KEY_PAD = wp.constant(wp.int64(9223372036854775807))
-"""Sort key of unused entries (the largest int64): its low bits are all ones, so it sorts after
-every real entry whatever the number of key bits sorted."""
+KEY_PAD = wp.constant(wp.int32(2147483647))
+"""Sort key of unused entries (the largest int32): its low bits are all ones, so it sorts after
+every real entry (whose cell bits never are) whatever the number of key bits sorted."""
 
 GRID_CELLS_MAX = wp.constant(32768)
 """Most grid cells along each axis of the grid perpendicular to the sweep axis."""
 
-CELL_BITS_MAX = 30
-"""Most bits of a grid cell id (``GRID_CELLS_MAX`` squared)."""
+KEY_BITS_MAX = 31
+"""Bits of a sort key (int32, sign bit unused): ``cell_bits + q_bits``."""
+
+Q_BITS_MIN = 8
+"""Fewest bits of the quantised lower bound in a key."""
 
 
 def sap_key_bits(num_boxes: int) -> tuple[int, int]:
-    """``(cell_bits, q_bits)`` of the sort keys for ``num_boxes`` boxes: key =
-    ``cell << q_bits | q``, sorted on its low ``cell_bits + q_bits`` bits only (a radix pass
-    per 8 bits: 16 bits at 1,000 boxes, 20 at 10^4, 29 at 10^7). Boxes spread over a volume fill
-    a grid column per cell width, about ``N**(2/3)`` cells in the plane: the grid gets fewer
+    """``(cell_bits, q_bits)`` of the int32 sort keys for ``num_boxes`` boxes: key =
+    ``cell << q_bits | q``, sorted on its low ``cell_bits + q_bits <= 31`` bits only (a radix
+    pass per 8 bits: 16 bits at 1,000 boxes, 20 at 10^4, 26 at 10^6). Boxes spread over a volume
+    fill a grid column per cell width, about ``N**(2/3)`` cells in the plane: the grid gets fewer
     than ``2**cell_bits = 2 * N**(2/3)`` cells (coarser when the scene needs more); the lower
     bounds along the sweep axis are quantised to ``q_bits`` bits, about 16 quanta per box of a
     column of ``N**(1/3)``: order within a quantum only costs box tests, never a pair."""
     log_n = max(1, int(num_boxes - 1).bit_length())
-    cell_bits = min(CELL_BITS_MAX, max(4, -(-2 * log_n // 3) + 1))
-    q_bits = min(32, max(8, -(-log_n // 3) + 4))
+    cell_bits = min(KEY_BITS_MAX - Q_BITS_MIN, max(4, -(-2 * log_n // 3) + 1))
+    q_bits = min(KEY_BITS_MAX - cell_bits, max(Q_BITS_MIN, -(-log_n // 3) + 4))
     return cell_bits, q_bits
 
 
@@ -221,15 +226,18 @@ def _sap_stats_kernel(
     upper: wp.array[wp.vec3],
     num_boxes: int,
     num_blocks: int,
+    entry_capacity: int,
     # Outputs
     stat_lo: wp.array[wp.float32],
     stat_hi: wp.array[wp.float32],
     stat_sum: wp.array[wp.float64],
+    entry_key: wp.array[wp.int32],
 ):
     """Strided pass over the boxes by ``num_blocks`` blocks: scene bounds (``stat_lo``/``stat_hi``,
     3 each) and sums (``stat_sum``, 9: centres, squared centres, extents per axis), reduced per
     block, then one atomic per value per block, into accumulators that the setup kernel of the
-    previous frame (or the constructor) left empty."""
+    previous frame (or the constructor) left empty. The same threads fill the entry keys with
+    the padding key, for the slots this frame's entries leave unused."""
     block, lane = wp.tid()
     width = wp.block_dim()
     lo = wp.vec3(BOX_EMPTY)
@@ -238,6 +246,7 @@ def _sap_stats_kernel(
     c2 = wp.vec3d(0.0, 0.0, 0.0)
     ext = wp.vec3d(0.0, 0.0, 0.0)
     i = block * width + lane
+    stride = num_blocks * width
     while i < num_boxes:
         a = lower[i]
         b = upper[i]
@@ -249,7 +258,11 @@ def _sap_stats_kernel(
         c1 = c1 + c
         c2 = c2 + wp.cw_mul(c, c)
         ext = ext + wp.vec3d(wp.float64(b[0] - a[0]), wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
-        i += num_blocks * width
+        i += stride
+    e = block * width + lane
+    while e < entry_capacity:
+        entry_key[e] = KEY_PAD
+        e += stride
     for k in range(3):
         block_lo = wp.tile_extract(wp.tile_min(wp.tile(lo[k])), 0)
         block_hi = wp.tile_extract(wp.tile_max(wp.tile(hi[k])), 0)
@@ -284,11 +297,12 @@ def _sap_setup_kernel(
     stat_hi: wp.array[wp.float32],
     stat_sum: wp.array[wp.float64],
     big_count: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
     grid: wp.array[SapGrid],
 ):
     """One thread: sweep axis of greatest centre variance, grid of the other two axes with fewer
-    than ``cell_limit`` cells, key quantisation to ``q_bits`` bits. Then empties the statistics
-    and the big-box list for the next frame (saving a memset each)."""
+    than ``cell_limit`` cells, key quantisation to ``q_bits`` bits. Empties the big-box list and
+    the entry counter for this frame, and the statistics for the next (saving a memset each)."""
     inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
     best = int(0)
     best_var = wp.float64(-1.0)
@@ -321,8 +335,8 @@ def _sap_setup_kernel(
     g.ny = ny
     g.nz = nz
     g.axis_min = wp.float64(stat_lo[best])
-    g.q_bits = wp.int64(q_bits)
-    g.q_max = wp.float64((wp.int64(1) << g.q_bits) - wp.int64(1))
+    g.q_bits = q_bits
+    g.q_max = wp.float64((1 << q_bits) - 1)
     span = wp.float64(stat_hi[best]) - g.axis_min
     g.qscale = wp.float64(0.0)
     if span > wp.float64(0.0):
@@ -334,6 +348,7 @@ def _sap_setup_kernel(
     for k in range(9):
         stat_sum[k] = wp.float64(0.0)
     big_count[0] = 0
+    entry_count[0] = wp.int64(0)
 
 
 @wp.func
@@ -345,36 +360,11 @@ def _cell(x: float, origin: float, inv_cell: float, count: int) -> int:
 
 
 @wp.func
-def _quantise(x: float, g: SapGrid) -> wp.int64:
+def _quantise(x: float, g: SapGrid) -> int:
     """Monotonic quantisation of ``x`` along the sweep axis to ``g.q_bits`` bits."""
     q = wp.floor((wp.float64(x) - g.axis_min) * g.qscale)
     q = wp.clamp(q, wp.float64(0.0), g.q_max)
-    return wp.int64(q)
-
-
-@wp.kernel
-def _sap_count_kernel(
-    lower: wp.array[wp.vec3],
-    upper: wp.array[wp.vec3],
-    grid: wp.array[SapGrid],
-    max_cells_per_box: int,
-    # Outputs
-    entry_count: wp.array[wp.int64],
-    big_box: wp.array[wp.int32],
-    big_count: wp.array[wp.int32],
-):
-    """One thread per box: number of grid cells it covers, or 0 and a place in the big list."""
-    i = wp.tid()
-    g = grid[0]
-    lo = lower[i]
-    hi = upper[i]
-    cy = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny) - _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny) + 1
-    cz = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz) - _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz) + 1
-    if cy * cz > max_cells_per_box:
-        entry_count[i] = wp.int64(0)
-        big_box[wp.atomic_add(big_count, 0, 1)] = i
-    else:
-        entry_count[i] = wp.int64(cy * cz)
+    return int(q)
 
 
 @wp.kernel
@@ -382,25 +372,20 @@ def _sap_emit_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
-    entry_count: wp.array[wp.int64],
-    entry_start: wp.array[wp.int64],
+    max_cells_per_box: int,
     entry_capacity: int,
     # Outputs
-    entry_key: wp.array[wp.int64],
+    box_cells: wp.array[wp.int32],
+    big_box: wp.array[wp.int32],
+    big_count: wp.array[wp.int32],
+    entry_key: wp.array[wp.int32],
     entry_box: wp.array[wp.int32],
-    entry_total: wp.array[wp.int64],
+    entry_count: wp.array[wp.int64],
 ):
-    """One thread per box (and per unused entry slot): one (key, box) entry per covered cell;
-    slots past the total get the padding key, which sorts last."""
+    """One thread per box: one (key, box) entry per grid cell it covers, in slots reserved with
+    one atomic add (the sort orders them), or, covering more than ``max_cells_per_box`` cells,
+    none and a place in the big list; ``box_cells`` records the count (0 for a big box)."""
     i = wp.tid()
-    n = entry_count.shape[0]
-    total = entry_start[n - 1] + entry_count[n - 1]
-    if i == 0:
-        entry_total[0] = total
-    if wp.int64(i) >= total and i < entry_capacity:
-        entry_key[i] = KEY_PAD
-    if i >= n or entry_count[i] == wp.int64(0):
-        return
     g = grid[0]
     lo = lower[i]
     hi = upper[i]
@@ -408,13 +393,18 @@ def _sap_emit_kernel(
     y1 = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny)
     z0 = _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz)
     z1 = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz)
+    cells = (y1 - y0 + 1) * (z1 - z0 + 1)
+    if cells > max_cells_per_box:
+        box_cells[i] = 0
+        big_box[wp.atomic_add(big_count, 0, 1)] = i
+        return
+    box_cells[i] = cells
+    slot = wp.atomic_add(entry_count, 0, wp.int64(cells))
     q = _quantise(lo[g.axis], g)
-    slot = entry_start[i]
     for y in range(y0, y1 + 1):
         for z in range(z0, z1 + 1):
             if slot < wp.int64(entry_capacity):
-                cell = wp.int64(y * g.nz + z)
-                entry_key[int(slot)] = (cell << g.q_bits) | q
+                entry_key[int(slot)] = ((y * g.nz + z) << g.q_bits) | q
                 entry_box[int(slot)] = i
             slot += wp.int64(1)
 
@@ -426,7 +416,7 @@ def _sweep_entry(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     g: SapGrid,
-    entry_key: wp.array[wp.int64],
+    entry_key: wp.array[wp.int32],
     entry_box: wp.array[wp.int32],
     pair_capacity: int,
     pair: wp.array[wp.vec2i],
@@ -435,13 +425,13 @@ def _sweep_entry(
     """Sorted entry ``e`` sweeps forward within its cell and reports the pairs it owns."""
     key = entry_key[e]
     cell = key >> g.q_bits
-    low_mask = (wp.int64(1) << g.q_bits) - wp.int64(1)
+    low_mask = (1 << g.q_bits) - 1
     i = entry_box[e]
     lo_i = lower[i]
     hi_i = upper[i]
     q_hi = _quantise(hi_i[g.axis], g)
-    cy = int(cell) / g.nz
-    cz = int(cell) - cy * g.nz
+    cy = cell / g.nz
+    cz = cell - cy * g.nz
     for f in range(e + 1, total):
         key_f = entry_key[f]
         if (key_f >> g.q_bits) != cell:
@@ -464,7 +454,7 @@ def _big_box_pairs(
     j: int,
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
-    entry_count: wp.array[wp.int64],
+    box_cells: wp.array[wp.int32],
     big_box: wp.array[wp.int32],
     nb: int,
     pair_capacity: int,
@@ -474,7 +464,7 @@ def _big_box_pairs(
     """Box ``j`` against every big box ``i`` (a pair of two big boxes once)."""
     lo_j = lower[j]
     hi_j = upper[j]
-    j_big = entry_count[j] == wp.int64(0)
+    j_big = box_cells[j] == 0
     for b in range(nb):
         i = big_box[b]
         if i == j or (j_big and j < i):
@@ -488,11 +478,11 @@ def _sap_sweep_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
-    entry_key: wp.array[wp.int64],
+    entry_key: wp.array[wp.int32],
     entry_box: wp.array[wp.int32],
-    entry_total: wp.array[wp.int64],
-    entry_capacity: int,
     entry_count: wp.array[wp.int64],
+    entry_capacity: int,
+    box_cells: wp.array[wp.int32],
     big_box: wp.array[wp.int32],
     big_count: wp.array[wp.int32],
     pair_capacity: int,
@@ -502,12 +492,12 @@ def _sap_sweep_kernel(
 ):
     """Thread ``t``: sorted entry ``t`` sweeps its cell; box ``t`` is tested against the big boxes."""
     t = wp.tid()
-    total = used_count(entry_total, entry_capacity)
+    total = used_count(entry_count, entry_capacity)
     if t < total:
         _sweep_entry(t, total, lower, upper, grid[0], entry_key, entry_box, pair_capacity, pair, pair_count)
     nb = big_count[0]
     if nb > 0 and t < lower.shape[0]:
-        _big_box_pairs(t, lower, upper, entry_count, big_box, nb, pair_capacity, pair, pair_count)
+        _big_box_pairs(t, lower, upper, box_cells, big_box, nb, pair_capacity, pair, pair_count)
 
 
 class BroadPhaseSAP(BroadPhase):
@@ -537,15 +527,14 @@ class BroadPhaseSAP(BroadPhase):
         self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
         self.num_boxes = -1
-        self.entry = GrowableBuffer(wp.int64, 1024, d, "sap grid entries", factor=2)
+        self.entry = GrowableBuffer(wp.int32, 1024, d, "sap grid entries", factor=2)
 
     def _resize(self, n: int) -> None:
         if n == self.num_boxes:
             return
         d = self.device
         self.num_boxes = n
-        self.entry_count = wp.zeros(max(n, 1), dtype=wp.int64, device=d)
-        self.entry_start = wp.zeros(max(n, 1), dtype=wp.int64, device=d)
+        self.box_cells = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
         self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
         self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
         self.entry.ensure(2 * n + 1024)
@@ -560,40 +549,37 @@ class BroadPhaseSAP(BroadPhase):
     @property
     def counters(self) -> list[GrowableBuffer]:
         """The buffers of its own with counters that :meth:`launch` writes, whose counters the caller
-        reads after it (besides ``pairs``): the grid entries (their counter set by a kernel)."""
+        reads after it (besides ``pairs``): the grid entries (their counter emptied by a kernel)."""
         return [self.entry]
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
-        Seven launches: statistics, setup, count, scan, emit, sort (of the key bits in use),
-        sweep. The caller resets ``pairs`` (or not, to append). After the frame, check ``pairs`` and
-        :attr:`counters`; if a counter passed its capacity, ``ensure`` it and launch again
-        (:func:`find_pairs` does).
+        Five launches: statistics (and padding of the keys), setup, emit, sort (of the key bits
+        in use), sweep. The caller resets ``pairs`` (or not, to append). After the frame, check
+        ``pairs`` and :attr:`counters`; if a counter passed its capacity, ``ensure`` it and launch
+        again (:func:`find_pairs` does).
         """
         n = lower.shape[0]
         self._resize(n)
         if n < 2:
-            self.entry.reset()  # no entries (the emit kernel sets the counter otherwise)
+            self.entry.reset()  # no entries (the setup kernel empties the counter otherwise)
             return
         d = self.device
-        blocks = max(1, min(self.stats_blocks, -(-n // (8 * STATS_BLOCK)))) if d.is_cuda else 1
-        wp.launch_tiled(_sap_stats_kernel, dim=[blocks], inputs=[lower, upper, n, blocks],
-                        outputs=[self.stat_lo, self.stat_hi, self.stat_sum], block_dim=STATS_BLOCK, device=d)
-        wp.launch(_sap_setup_kernel, dim=1,
-                  inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
-                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.grid], device=d)
-        wp.launch(_sap_count_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box],
-                  outputs=[self.entry_count, self.big_box, self.big_count], device=d)
-        wp.utils.array_scan(self.entry_count, self.entry_start, inclusive=False)
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        wp.launch(_sap_emit_kernel, dim=max(n, cap),
-                  inputs=[lower, upper, self.grid, self.entry_count, self.entry_start, cap],
-                  outputs=[key, box, self.entry.count], device=d)
+        blocks = max(1, min(self.stats_blocks, -(-n // (8 * STATS_BLOCK)))) if d.is_cuda else 1
+        wp.launch_tiled(_sap_stats_kernel, dim=[blocks], inputs=[lower, upper, n, blocks, cap],
+                        outputs=[self.stat_lo, self.stat_hi, self.stat_sum, key], block_dim=STATS_BLOCK, device=d)
+        wp.launch(_sap_setup_kernel, dim=1,
+                  inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
+                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.entry.count, self.grid],
+                  device=d)
+        wp.launch(_sap_emit_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box, cap],
+                  outputs=[self.box_cells, self.big_box, self.big_count, key, box, self.entry.count], device=d)
         wp.utils.radix_sort_pairs(key, box, cap, end_bit=self.cell_bits + self.q_bits)
         wp.launch(_sap_sweep_kernel, dim=max(n, cap),
-                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.entry_count, self.big_box,
+                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.box_cells, self.big_box,
                           self.big_count, pairs.capacity],
                   outputs=[pairs.data, pairs.count], device=d)
 

@@ -59,6 +59,7 @@ class ShapeTree:
         node_leaf: ``(K, 2)`` int32 ``(first, count)``: the node's subtree holds the leaves
             ``leaf_node[first:first + count]``.
         inner_node: ``(K - L,)`` int32 the inner nodes.
+        node_depth: ``(K,)`` int32 level of each node (the root's is 0).
     """
 
     def __init__(self, node_child, node_parent, node_triangle, tri_order, level_start):
@@ -78,6 +79,17 @@ class ShapeTree:
         end = np.searchsorted(leaf_start, node_triangle[:, 0] + node_triangle[:, 1], side="left")
         self.node_leaf = np.stack([first, end - first], axis=1).astype(np.int32)
         self.inner_node = np.nonzero(~is_leaf)[0].astype(np.int32)
+        self.node_depth = (np.searchsorted(level_start, np.arange(len(node_child)), side="right") - 1).astype(np.int32)
+
+    def cut(self, depth: int) -> np.ndarray:
+        """The nodes at level ``depth`` and the leaves above it: subtrees that partition the
+        leaves, at most ``2**depth`` of them (all leaves when the tree is shallower).
+
+        Returns:
+            ``(C,)`` int32 local node ids, in breadth-first order.
+        """
+        is_leaf = self.node_child[:, 0] < 0
+        return np.nonzero((self.node_depth == depth) | (is_leaf & (self.node_depth < depth)))[0].astype(np.int32)
 
     @property
     def num_nodes(self) -> int:
@@ -169,7 +181,13 @@ def build_tree(vertices: np.ndarray, triangles: np.ndarray, leaf_size: int = 1) 
 
 @wp.struct
 class TreeView:
-    """What the refit and traversal kernels need: topology per shape, bounds per instance."""
+    """What the refit and traversal kernels need: topology per shape, bounds per instance.
+
+    Per shape ``s``, its nodes are ``shape_node_start[s] + local id``, its leaves (shape-local
+    ids) ``leaf_node[shape_leaf_start[s]:shape_leaf_start[s + 1]]`` and its cut (subtrees that
+    partition the leaves, :meth:`ShapeTree.cut`) ``cut_node[shape_cut_start[s]:...]``; the bounds
+    of instance ``i`` are ``node_lower/upper[instance_node_start[i] + local id]``.
+    """
 
     shape_node_start: wp.array[wp.int32]
     shape_tri_order_start: wp.array[wp.int32]
@@ -178,6 +196,8 @@ class TreeView:
     node_triangle: wp.array[wp.vec2i]
     node_leaf: wp.array[wp.vec2i]
     leaf_node: wp.array[wp.int32]
+    shape_cut_start: wp.array[wp.int32]
+    cut_node: wp.array[wp.int32]
     tri_order: wp.array[wp.int32]
     instance_node_start: wp.array[wp.int32]
     node_lower: wp.array[wp.vec3]
@@ -340,6 +360,8 @@ class SceneBVH:
         instance_refit_max_nodes: instances of shapes with at most this many nodes are refit in
             two launches, leaves then inner nodes (an inner node reads all its leaves); bigger trees
             are refit level by level, one thread per node.
+        cut_depth: level of each tree's cut (:meth:`ShapeTree.cut`, at most ``2**cut_depth``
+            subtrees), where the traversal starts its descents.
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`refit`.
@@ -347,9 +369,12 @@ class SceneBVH:
         trees: per-shape :class:`ShapeTree` (host).
     """
 
-    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255):
+    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
+                 cut_depth: int = 3):
         if leaf_size < 1:
             raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
+        if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
+            raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
         self.device = scene.device
         self.margin_rel = float(margin_rel)
         self.leaf_size = int(leaf_size)
@@ -423,6 +448,11 @@ class SceneBVH:
         tv.node_leaf = wp.array(cat([tr.node_leaf for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
         tv.leaf_node = wp.array(cat([tr.leaf_node for tr in self.trees], (0,)), dtype=wp.int32, device=d)
         tv.shape_leaf_start = wp.array(np.concatenate([[0], np.cumsum(leaves)]).astype(np.int32), device=d)
+        cuts = [tr.cut(int(cut_depth)) for tr in self.trees]
+        tv.shape_cut_start = wp.array(np.concatenate([[0], np.cumsum([len(c) for c in cuts])]).astype(np.int32),
+                                      dtype=wp.int32, device=d)
+        tv.cut_node = wp.array(cat(cuts, (0,)), dtype=wp.int32, device=d)
+        self.cut_depth = int(cut_depth)
         tv.tri_order = wp.array(cat([tr.tri_order for tr in self.trees], (0,)), dtype=wp.int32, device=d)
         tv.instance_node_start = wp.array(inode.astype(np.int32), dtype=wp.int32, device=d)
         tv.node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)

@@ -156,6 +156,8 @@ class CollisionPipeline:
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
             False launches every kernel from Python (the CPU always does). Both give the same results.
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
+        cut_depth: tree level where the traversal's descents start (``bvh`` mid phase; see
+            :mod:`warp_ccd.mid_phase`): more, shorter work items as it grows; 0 descends from the roots.
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
@@ -183,6 +185,7 @@ class CollisionPipeline:
         timings: bool = False,
         graph: bool | None = None,
         leaf_size: int = 1,
+        cut_depth: int = 3,
         segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
@@ -215,7 +218,7 @@ class CollisionPipeline:
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
-            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance)
+            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth)
             self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n), device=d)
         else:
             self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
