@@ -3,10 +3,11 @@
 For each object count (``--objects``) of the scaling scene (``Scene.random``, polyhedra or
 icospheres), after warm-up frames:
 
-1. **Activities.** One frame, ``detect(advance=dt)`` launched eagerly, recorded with
+1. **Activities.** Ten frames of ``detect(advance=dt)`` launched eagerly, each recorded with
    ``wp.timing_begin(cuda_filter=wp.TIMING_ALL)``: every kernel, memset and copy with its device
-   time (eagerly the device idles between launches, so each time is the activity alone). Summed
-   per name: count and ms; their total is the frame's device work.
+   time (eagerly the device idles between launches, so each time is the activity alone, plus the
+   few microseconds of its events). Per name: count per frame and the median of its ms over the
+   frames; their total is the frame's device work. (CUB's sort and scan kernels are not listed.)
 2. **Frames.** ``--frames`` frames of ``detect(advance=dt)`` in each mode (eager and, on CUDA, the
    replayed graph), wall-clock with a synchronisation before and after; min and median, and the
    host time of the frame (Python's time in ``detect()`` without the wait).
@@ -39,18 +40,25 @@ KINDS = {wp.TIMING_KERNEL: "kernel", wp.TIMING_KERNEL_BUILTIN: "kernel (warp)", 
          wp.TIMING_MEMSET: "memset", wp.TIMING_GRAPH: "graph"}
 
 
-def activities(pipe: CollisionPipeline) -> list[dict]:
-    """One eager frame, activity by activity: ``{"name", "kind", "count", "ms"}`` summed per name, slowest first."""
-    wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-    pipe.detect(advance=DT)
-    results = wp.timing_end()
-    out = {}
-    for r in results:
-        kind = KINDS.get(r.filter, str(r.filter))
-        row = out.setdefault(r.name, {"name": r.name, "kind": kind, "count": 0, "ms": 0.0})
-        row["count"] += 1
-        row["ms"] += r.elapsed
-    return sorted(out.values(), key=lambda r: -r["ms"])
+def activities(pipe: CollisionPipeline, count: int = 10) -> list[dict]:
+    """``count`` eager frames, activity by activity: ``{"name", "kind", "count", "ms"}`` per name,
+    ``ms`` the median over the frames of its time in a frame, slowest first."""
+    per_frame = []
+    for _ in range(count):
+        wp.timing_begin(cuda_filter=wp.TIMING_ALL)
+        pipe.detect(advance=DT)
+        frame = {}
+        for r in wp.timing_end():
+            row = frame.setdefault(r.name, {"name": r.name, "kind": KINDS.get(r.filter, str(r.filter)), "count": 0,
+                                            "ms": 0.0})
+            row["count"] += 1
+            row["ms"] += r.elapsed
+        per_frame.append(frame)
+    out = []
+    for name, row in per_frame[0].items():
+        times = [f[name]["ms"] for f in per_frame if name in f]
+        out.append({**row, "ms": float(np.median(times))})
+    return sorted(out, key=lambda r: -r["ms"])
 
 
 def frames(pipe: CollisionPipeline, count: int) -> dict:
@@ -96,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         acts = activities(pipes["eager"])
         total = sum(a["ms"] for a in acts)
         print(f"== {n:,} objects, triangles {label}, {device} ({device.name}){' ' if options else ''}"
-              f"{' '.join(args.option)}: one eager frame, "
+              f"{' '.join(args.option)}: an eager frame (medians of 10), "
               f"{sum(a['count'] for a in acts)} device activities, {total:.3f} ms of device work")
         for a in acts:
             print(f"  {a['ms']:8.4f} ms  x{a['count']:<3} {a['kind']:<14} {a['name']}")

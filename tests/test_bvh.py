@@ -145,15 +145,15 @@ def test_options_same_result(device, options):
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
 
 
-@pytest.mark.parametrize("num_threads", [1, 2, 7, 64, 100000])
-def test_traversal_runs_split_anywhere(device, num_threads):
-    """However many threads share the work items, runs that start or end inside a pair's block
-    give the same candidates (the CPU's default is one thread, CUDA's many)."""
+@pytest.mark.parametrize("num_blocks", [1, 2, 7, 64, 100000])
+def test_traversal_rounds_split_anywhere(device, num_blocks):
+    """However many threads share the work items, rounds that start or end inside a pair's block
+    of items give the same candidates (the CPU's default is one thread, CUDA's many)."""
     scene = mixed_scene(device, n=30, seed=4)
     scene.advance(0.4)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene)
-    pipe.mid.num_threads = num_threads
+    pipe.mid.num_blocks = num_blocks
     got = pipe.detect()
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     assert got.num_candidates == wc.CollisionPipeline(scene).detect().num_candidates

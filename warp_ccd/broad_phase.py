@@ -18,8 +18,9 @@ Sweep and prune, as run on the device each frame:
    is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
    one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
    overlapping one box along one axis grows like N^(2/3); per grid cell it stays constant.
-3. Every box is entered in each cell it covers (usually 1 to 4), in slots it reserves with one
-   atomic add (the sort puts them in order, so no count and scan are needed). A box covering
+3. Every box is entered in each cell it covers (usually 1 to 4), in slots that its block of
+   threads reserves with one atomic add (:func:`~warp_ccd.buffers.block_reserve`; the sort puts
+   the entries in order, so no count and scan are needed). A box covering
    more than ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the
    grid; it goes to a short list tested against all boxes instead (O(N) per huge box).
 4. Entries are sorted with ``wp.utils.radix_sort_pairs`` by an int32 key ``cell << q_bits | q``:
@@ -31,8 +32,8 @@ Sweep and prune, as run on the device each frame:
 5. One thread per entry sweeps forward through its cell while the next quantised lower bound is
    not past its own quantised upper bound, tests the exact boxes, and reports a pair only from
    the cell holding the lower corner of the two boxes' intersection (both boxes are entered
-   there), so no pair is reported twice and none is lost. The same threads test the boxes
-   against the big-box list.
+   there), so no pair is reported twice and none is lost; a block's pairs are reserved with one
+   atomic add. The same threads test the boxes against the big-box list.
 
 Five launches per frame (statistics, setup, emit, sort, sweep); O(N) work plus the output,
 O(log N)-depth sort; everything stays on the device and the host reads nothing, so the frame can
@@ -46,7 +47,16 @@ import numpy as np
 import warp as wp
 
 from .aabb import BOX_EMPTY, boxes_overlap
-from .buffers import CounterRead, GrowableBuffer, emit_pair, used_count
+from .buffers import (
+    ITEM_LIST_SIZE,
+    CounterRead,
+    GrowableBuffer,
+    block_dim_for,
+    block_reserve,
+    emit_pair,
+    used_count,
+    vec_items,
+)
 from .frame import CountedFrame, FrameCache, frame_mode
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -371,6 +381,7 @@ def _quantise(x: float, g: SapGrid) -> int:
 def _sap_emit_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
+    num_boxes: int,
     grid: wp.array[SapGrid],
     max_cells_per_box: int,
     entry_capacity: int,
@@ -382,31 +393,40 @@ def _sap_emit_kernel(
     entry_box: wp.array[wp.int32],
     entry_count: wp.array[wp.int64],
 ):
-    """One thread per box: one (key, box) entry per grid cell it covers, in slots reserved with
-    one atomic add (the sort orders them), or, covering more than ``max_cells_per_box`` cells,
-    none and a place in the big list; ``box_cells`` records the count (0 for a big box)."""
-    i = wp.tid()
+    """One thread per box: one (key, box) entry per grid cell it covers, in slots its block
+    reserves with one atomic add (the sort orders them), or, covering more than
+    ``max_cells_per_box`` cells, none and a place in the big list; ``box_cells`` records the
+    count (0 for a big box)."""
+    block, lane = wp.tid()
+    i = block * wp.block_dim() + lane
     g = grid[0]
-    lo = lower[i]
-    hi = upper[i]
-    y0 = _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny)
-    y1 = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny)
-    z0 = _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz)
-    z1 = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz)
-    cells = (y1 - y0 + 1) * (z1 - z0 + 1)
-    if cells > max_cells_per_box:
-        box_cells[i] = 0
-        big_box[wp.atomic_add(big_count, 0, 1)] = i
-        return
-    box_cells[i] = cells
-    slot = wp.atomic_add(entry_count, 0, wp.int64(cells))
-    q = _quantise(lo[g.axis], g)
-    for y in range(y0, y1 + 1):
-        for z in range(z0, z1 + 1):
-            if slot < wp.int64(entry_capacity):
-                entry_key[int(slot)] = ((y * g.nz + z) << g.q_bits) | q
-                entry_box[int(slot)] = i
-            slot += wp.int64(1)
+    y0 = int(0)
+    y1 = int(-1)
+    z0 = int(0)
+    z1 = int(-1)
+    q = int(0)
+    cells = int(0)
+    if i < num_boxes:
+        lo = lower[i]
+        hi = upper[i]
+        y0 = _cell(lo[g.ay], g.origin_y, g.inv_cell_y, g.ny)
+        y1 = _cell(hi[g.ay], g.origin_y, g.inv_cell_y, g.ny)
+        z0 = _cell(lo[g.az], g.origin_z, g.inv_cell_z, g.nz)
+        z1 = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz)
+        cells = (y1 - y0 + 1) * (z1 - z0 + 1)
+        q = _quantise(lo[g.axis], g)
+        if cells > max_cells_per_box:
+            cells = 0
+            big_box[wp.atomic_add(big_count, 0, 1)] = i
+        box_cells[i] = cells
+    slot = block_reserve(entry_count, lane, cells)
+    if cells > 0:
+        for y in range(y0, y1 + 1):
+            for z in range(z0, z1 + 1):
+                if slot < wp.int64(entry_capacity):
+                    entry_key[int(slot)] = ((y * g.nz + z) << g.q_bits) | q
+                    entry_box[int(slot)] = i
+                slot += wp.int64(1)
 
 
 @wp.func
@@ -422,7 +442,10 @@ def _sweep_entry(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """Sorted entry ``e`` sweeps forward within its cell and reports the pairs it owns."""
+    """Sorted entry ``e`` sweeps forward within its cell: the boxes of the pairs it owns, the
+    first :data:`ITEM_LIST_SIZE` gathered (returned with their number), any more emitted at once."""
+    found = vec_items()
+    num_found = int(0)
     key = entry_key[e]
     cell = key >> g.q_bits
     low_mask = (1 << g.q_bits) - 1
@@ -446,7 +469,12 @@ def _sweep_entry(
             oy = _cell(wp.max(lo_i[g.ay], lo_j[g.ay]), g.origin_y, g.inv_cell_y, g.ny)
             oz = _cell(wp.max(lo_i[g.az], lo_j[g.az]), g.origin_z, g.inv_cell_z, g.nz)
             if oy == cy and oz == cz:
-                emit_pair(i, j, pair, pair_count, pair_capacity)
+                if num_found < ITEM_LIST_SIZE:
+                    found[num_found] = j
+                    num_found += 1
+                else:
+                    emit_pair(i, j, pair, pair_count, pair_capacity)
+    return found, num_found
 
 
 @wp.func
@@ -490,11 +518,23 @@ def _sap_sweep_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """Thread ``t``: sorted entry ``t`` sweeps its cell; box ``t`` is tested against the big boxes."""
-    t = wp.tid()
+    """Thread ``t``: sorted entry ``t`` sweeps its cell, its block reserves the pairs found with
+    one atomic add; box ``t`` is tested against the big boxes."""
+    block, lane = wp.tid()
+    t = block * wp.block_dim() + lane
     total = used_count(entry_count, entry_capacity)
+    found = vec_items()
+    num_found = int(0)
+    i = int(0)
     if t < total:
-        _sweep_entry(t, total, lower, upper, grid[0], entry_key, entry_box, pair_capacity, pair, pair_count)
+        i = entry_box[t]
+        found, num_found = _sweep_entry(t, total, lower, upper, grid[0], entry_key, entry_box, pair_capacity, pair,
+                                        pair_count)
+    slot = block_reserve(pair_count, lane, num_found)
+    for m in range(num_found):
+        if slot < wp.int64(pair_capacity):
+            pair[int(slot)] = wp.vec2i(wp.min(i, found[m]), wp.max(i, found[m]))
+        slot += wp.int64(1)
     nb = big_count[0]
     if nb > 0 and t < lower.shape[0]:
         _big_box_pairs(t, lower, upper, box_cells, big_box, nb, pair_capacity, pair, pair_count)
@@ -575,13 +615,16 @@ class BroadPhaseSAP(BroadPhase):
                   inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
                   outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.entry.count, self.grid],
                   device=d)
-        wp.launch(_sap_emit_kernel, dim=n, inputs=[lower, upper, self.grid, self.max_cells_per_box, cap],
-                  outputs=[self.box_cells, self.big_box, self.big_count, key, box, self.entry.count], device=d)
+        width = block_dim_for(d)
+        wp.launch_tiled(_sap_emit_kernel, dim=[-(-n // width)],
+                        inputs=[lower, upper, n, self.grid, self.max_cells_per_box, cap],
+                        outputs=[self.box_cells, self.big_box, self.big_count, key, box, self.entry.count],
+                        block_dim=width, device=d)
         wp.utils.radix_sort_pairs(key, box, cap, end_bit=self.cell_bits + self.q_bits)
-        wp.launch(_sap_sweep_kernel, dim=max(n, cap),
-                  inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.box_cells, self.big_box,
-                          self.big_count, pairs.capacity],
-                  outputs=[pairs.data, pairs.count], device=d)
+        wp.launch_tiled(_sap_sweep_kernel, dim=[-(-max(n, cap) // width)],
+                        inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.box_cells, self.big_box,
+                                self.big_count, pairs.capacity],
+                        outputs=[pairs.data, pairs.count], block_dim=width, device=d)
 
 
 def make_broad_phase(method: str, *, device=None, graph: bool | None = None):

@@ -7,7 +7,13 @@ in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 (:class:`~warp_ccd.frame.CountedFrame`), so no item is ever dropped silently.
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
-protocol) and :func:`upper_bound` (which block of a scanned count a flat work item falls in).
+protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in) and
+:func:`block_reserve` (slots for a whole block of threads with one atomic add).
+
+Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
+their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
+entries one by one): a kernel that emits many items reserves them per block
+(:func:`block_reserve`: a scan of the block's counts in shared memory, one atomic, a broadcast).
 """
 
 from __future__ import annotations
@@ -21,17 +27,52 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = [
+    "BLOCK_DIM",
     "COUNT_LIMIT",
+    "ITEM_LIST_SIZE",
     "CounterRead",
     "GrowableBuffer",
+    "block_dim_for",
+    "block_reserve",
     "emit_pair",
     "reserve_slot",
     "upper_bound",
     "used_count",
+    "vec_items",
 ]
 
 COUNT_LIMIT = 2**31 - 1
 """Items are indexed in int32: a stage that would need more items than this raises OverflowError."""
+
+
+BLOCK_DIM = 256
+"""Threads per block of the kernels that reserve their output per block (:func:`block_reserve`)."""
+
+ITEM_LIST_SIZE = wp.constant(16)
+"""Items a thread gathers in registers (:data:`vec_items`) before its block reserves their slots."""
+
+vec_items = wp.types.vector(length=ITEM_LIST_SIZE, dtype=wp.int32)
+
+
+def block_dim_for(device) -> int:
+    """Block size of the per-block kernels on ``device``: :data:`BLOCK_DIM` on CUDA; on the CPU 1
+    (Warp runs a CPU block as one thread) unless ``wp.config.enable_cpu_blocks`` is set."""
+    return BLOCK_DIM if wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks else 1
+
+
+@wp.func
+def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
+    """Cooperative: every thread of the block calls it (``lane`` its index in the block) with its
+    number of items; reserves them all with one atomic add on ``count`` and returns the thread's
+    first slot. Like :func:`reserve_slot`, the counter counts past the capacity: the caller writes
+    only slots below it."""
+    start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
+    total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
+    base = wp.int64(0)
+    if lane == 0 and total > 0:
+        base = wp.atomic_add(count, 0, wp.int64(total))
+    base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
+    return base + wp.int64(start)
 
 
 @wp.func

@@ -15,9 +15,10 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   tree's: at 1,000 polyhedra the slowest of the root-first items visited 71 nodes), and a frame
   of a hundred object pairs still fills the GPU. Testing the cut's boxes costs what a descent
   from the root spends above it (about two tests per level). Work items are laid out by a scan
-  of the item counts of the pairs (``wp.utils.array_scan``); a fixed number of threads splits
-  them in contiguous runs, so that the launch size does not depend on the frame and the frame
-  can be a CUDA graph.
+  of the item counts of the pairs (``wp.utils.array_scan``); a fixed grid of threads takes them
+  in rounds, one item per thread per round (the launch size does not depend on the frame, so
+  the frame can be a CUDA graph), and each round a block reserves the rows of all its items with
+  one atomic add (:func:`~warp_ccd.buffers.block_reserve`).
 * :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
   ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
   finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
@@ -28,7 +29,16 @@ from __future__ import annotations
 import warp as wp
 
 from .aabb import boxes_overlap
-from .buffers import GrowableBuffer, upper_bound, used_count
+from .buffers import (
+    BLOCK_DIM,
+    ITEM_LIST_SIZE,
+    GrowableBuffer,
+    block_dim_for,
+    block_reserve,
+    upper_bound,
+    used_count,
+    vec_items,
+)
 from .bvh import SceneBVH, TreeView
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -41,15 +51,12 @@ STACK_SIZE = 32
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
-FOUND_SIZE = wp.constant(16)
-"""Overlapping leaves a work item gathers before it reserves their candidate rows with one
-atomic add (a cut subtree of a small tree has fewer leaves: usually one atomic per item)."""
-
-vec_found = wp.types.vector(length=FOUND_SIZE, dtype=wp.int32)
 
 THREADS_PER_SM = 1024
 """Threads of the traversal per streaming multiprocessor on CUDA (half of what an H100 keeps
-resident): enough to hide memory latency, few enough that each has a run of items."""
+resident): enough to hide memory latency, few enough that each has several items at scale."""
+
+assert THREADS_PER_SM % BLOCK_DIM == 0
 
 
 @wp.func
@@ -98,47 +105,47 @@ def _front_count_kernel(
 
 
 @wp.func
-def _emit_found(
+def _leaf_rows(tree: TreeView, front_node: int, found: vec_items, num_found: int) -> int:
+    """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``
+    (shape-global node ids): the products of their triangle counts."""
+    count_front = tree.node_triangle[front_node][1]
+    rows = int(0)
+    for m in range(num_found):
+        rows += count_front * tree.node_triangle[found[m]][1]
+    return rows
+
+
+@wp.func
+def _write_rows(
     tree: TreeView,
     a: int,
     b: int,
-    sa: int,
-    sb: int,
+    s_front: int,
+    s_other: int,
     front: int,
     front_node: int,
-    found: vec_found,
-    num_found: int,
+    other_node: int,
+    slot: wp.int64,
     candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
-):
-    """The triangle pairs of the front leaf ``front_node`` with each of the ``num_found`` leaves
-    of the other object (shape-global node ids): one atomic reserves them all, rows keep ``a``
-    first."""
+) -> wp.int64:
+    """Writes the triangle pairs of the front leaf and one leaf of the other object (shape-global
+    node ids) from ``slot`` on (rows keep ``a`` first); returns the next slot."""
     rf = tree.node_triangle[front_node]
-    total = int(0)
-    for m in range(num_found):
-        total += rf[1] * tree.node_triangle[found[m]][1]
-    slot = wp.atomic_add(candidate_count, 0, wp.int64(total))
-    s_front = sa
-    s_other = sb
-    if front == 1:
-        s_front = sb
-        s_other = sa
+    ro = tree.node_triangle[other_node]
     base_f = tree.shape_tri_order_start[s_front]
     base_o = tree.shape_tri_order_start[s_other]
-    for m in range(num_found):
-        ro = tree.node_triangle[found[m]]
-        for i in range(rf[0], rf[0] + rf[1]):
-            tri_f = tree.tri_order[base_f + i]
-            for j in range(ro[0], ro[0] + ro[1]):
-                if slot < wp.int64(candidate_capacity):
-                    tri_o = tree.tri_order[base_o + j]
-                    if front == 0:
-                        candidate[int(slot)] = wp.vec4i(a, tri_f, b, tri_o)
-                    else:
-                        candidate[int(slot)] = wp.vec4i(a, tri_o, b, tri_f)
-                slot += wp.int64(1)
+    for i in range(rf[0], rf[0] + rf[1]):
+        tri_f = tree.tri_order[base_f + i]
+        for j in range(ro[0], ro[0] + ro[1]):
+            if slot < wp.int64(candidate_capacity):
+                tri_o = tree.tri_order[base_o + j]
+                if front == 0:
+                    candidate[int(slot)] = wp.vec4i(a, tri_f, b, tri_o)
+                else:
+                    candidate[int(slot)] = wp.vec4i(a, tri_o, b, tri_f)
+            slot += wp.int64(1)
+    return slot
 
 
 @wp.func
@@ -146,34 +153,28 @@ def _leaf_vs_subtree(
     tree: TreeView,
     a: int,
     b: int,
-    sa: int,
-    sb: int,
+    s_front: int,
+    s_other: int,
     front: int,
+    front_obj: int,
+    other_obj: int,
     leaf: int,
     sub: int,
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
 ):
-    """Leaf ``leaf`` (shape-local) of the pair's front object (``a`` when ``front`` is 0, else
-    ``b``) against the subtree of node ``sub`` of the other object's tree, depth first; the
-    overlapping leaves are gathered and their triangle pairs emitted :data:`FOUND_SIZE` at a time."""
-    s_front = sa
-    s_other = sb
-    front_obj = a
-    other_obj = b
-    if front == 1:
-        s_front = sb
-        s_other = sa
-        front_obj = b
-        other_obj = a
+    """Leaf ``leaf`` (shape-local) of the pair's front object against the subtree of node ``sub``
+    of the other object's tree, depth first: the overlapping leaves (shape-global ids), the first
+    :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows of any more
+    emitted at once (one atomic add each)."""
     front_node = tree.shape_node_start[s_front] + leaf
     front_slot = tree.instance_node_start[front_obj] + leaf
     lo = tree.node_lower[front_slot]
     hi = tree.node_upper[front_slot]
     other_node = tree.shape_node_start[s_other]
     other_slot = tree.instance_node_start[other_obj]
-    found = vec_found()
+    found = vec_items()
     num_found = int(0)
     stack = vec_stack()
     stack[0] = sub
@@ -184,19 +185,19 @@ def _leaf_vs_subtree(
         if boxes_overlap(lo, hi, tree.node_lower[other_slot + node], tree.node_upper[other_slot + node]):
             child = tree.node_child[other_node + node]
             if child[0] < 0:
-                if num_found == FOUND_SIZE:
-                    _emit_found(tree, a, b, sa, sb, front, front_node, found, num_found, candidate, candidate_count,
+                if num_found < ITEM_LIST_SIZE:
+                    found[num_found] = other_node + node
+                    num_found += 1
+                else:
+                    rows = _leaf_rows(tree, front_node, vec_items(other_node + node), 1)
+                    slot = wp.atomic_add(candidate_count, 0, wp.int64(rows))
+                    _write_rows(tree, a, b, s_front, s_other, front, front_node, other_node + node, slot, candidate,
                                 candidate_capacity)
-                    num_found = 0
-                found[num_found] = other_node + node
-                num_found += 1
             else:
                 stack[top] = child[1]
                 stack[top + 1] = child[0]
                 top += 2
-    if num_found > 0:
-        _emit_found(tree, a, b, sa, sb, front, front_node, found, num_found, candidate, candidate_count,
-                    candidate_capacity)
+    return found, num_found
 
 
 @wp.kernel
@@ -207,51 +208,65 @@ def _front_traverse_kernel(
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     pair_item_end: wp.array[wp.int64],
-    num_threads: int,
+    num_blocks: int,
     candidate_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
 ):
-    """``num_threads`` threads split the work items (inclusive scan ``pair_item_end`` of the
-    pairs' item counts) in contiguous runs; item ``w`` of pair ``k`` is leaf ``w / C`` (in leaf
-    order) of the pair's front object against cut subtree ``w % C`` of the other's ``C``."""
-    t = wp.tid()
+    """``num_blocks`` blocks of threads take the work items (inclusive scan ``pair_item_end`` of the
+    pairs' item counts) in rounds, one item per thread per round; item ``w`` of pair ``k`` is leaf
+    ``w / C`` (in leaf order) of the pair's front object against cut subtree ``w % C`` of the
+    other's ``C``. Each round, a block reserves all its threads' rows with one atomic add."""
+    block, lane = wp.tid()
+    width = wp.block_dim()
+    num_threads = wp.int64(num_blocks * width)
+    t = wp.int64(block * width + lane)
     num_pairs = used_count(pair_count, pair_capacity)
     if num_pairs == 0:
-        return
+        return  # the whole grid returns: no block is left waiting in block_reserve
     total = pair_item_end[num_pairs - 1]
-    run = (total + wp.int64(num_threads - 1)) / wp.int64(num_threads)
-    item = wp.int64(t) * run
-    end = wp.min(item + run, total)
-    if item >= end:
-        return
-    k = upper_bound(pair_item_end, 0, num_pairs, item)  # the pair whose block holds the first item
-    while item < end:
-        p = pair[k]
-        a = p[0]
-        b = p[1]
-        sa = instance_shape[a]
-        sb = instance_shape[b]
-        front = _front_side(tree, sa, sb)
-        s_front = sa
-        s_other = sb
-        if front == 1:
-            s_front = sb
-            s_other = sa
-        num_cut = wp.int64(_num_cut(tree, s_other))
-        block_end = pair_item_end[k]
-        block_start = block_end - wp.int64(_num_leaves(tree, s_front)) * num_cut
-        leaf_base = tree.shape_leaf_start[s_front]
-        cut_base = tree.shape_cut_start[s_other]
-        stop = wp.min(block_end, end)
-        while item < stop:
-            w = item - block_start
-            leaf = tree.leaf_node[leaf_base + int(w / num_cut)]
-            sub = tree.cut_node[cut_base + int(w % num_cut)]
-            _leaf_vs_subtree(tree, a, b, sa, sb, front, leaf, sub, candidate, candidate_count, candidate_capacity)
-            item += wp.int64(1)
-        k += 1
+    rounds = (total + num_threads - wp.int64(1)) / num_threads  # the same in every thread
+    k = int(0)
+    item = t
+    for _round in range(int(rounds)):
+        found = vec_items()
+        num_found = int(0)
+        a = int(0)
+        b = int(0)
+        s_front = int(0)
+        s_other = int(0)
+        front = int(0)
+        front_node = int(0)
+        if item < total:
+            k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
+            p = pair[k]
+            a = p[0]
+            b = p[1]
+            sa = instance_shape[a]
+            sb = instance_shape[b]
+            front = _front_side(tree, sa, sb)
+            s_front = sa
+            s_other = sb
+            front_obj = a
+            other_obj = b
+            if front == 1:
+                s_front = sb
+                s_other = sa
+                front_obj = b
+                other_obj = a
+            num_cut = wp.int64(_num_cut(tree, s_other))
+            w = item - (pair_item_end[k] - wp.int64(_num_leaves(tree, s_front)) * num_cut)
+            leaf = tree.leaf_node[tree.shape_leaf_start[s_front] + int(w / num_cut)]
+            sub = tree.cut_node[tree.shape_cut_start[s_other] + int(w % num_cut)]
+            front_node = tree.shape_node_start[s_front] + leaf
+            found, num_found = _leaf_vs_subtree(tree, a, b, s_front, s_other, front, front_obj, other_obj, leaf, sub,
+                                                candidate, candidate_count, candidate_capacity)
+        slot = block_reserve(candidate_count, int(lane), _leaf_rows(tree, front_node, found, num_found))
+        for m in range(num_found):
+            slot = _write_rows(tree, a, b, s_front, s_other, front, front_node, found[m], slot, candidate,
+                               candidate_capacity)
+        item += num_threads
 
 
 class MidPhaseBVH:
@@ -264,7 +279,8 @@ class MidPhaseBVH:
 
     Attributes:
         candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
-        num_threads: threads of the traversal kernel (on the CPU one, which loops over all items).
+        num_blocks, block_dim: the traversal kernel's grid (on the CPU one block of one thread,
+            which takes every item in turn).
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):
@@ -273,7 +289,8 @@ class MidPhaseBVH:
         if bvh.max_depth + 1 > STACK_SIZE:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
-        self.num_threads = self.device.sm_count * THREADS_PER_SM if self.device.is_cuda else 1
+        self.block_dim = block_dim_for(self.device)
+        self.num_blocks = self.device.sm_count * THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
         self._items = None
 
     @property
@@ -301,10 +318,10 @@ class MidPhaseBVH:
                   inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity],
                   outputs=[self._items], device=d)
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
-        wp.launch(_front_traverse_kernel, dim=self.num_threads,
-                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._item_end,
-                          self.num_threads, self.candidates.capacity],
-                  outputs=[self.candidates.data, self.candidates.count], device=d)
+        wp.launch_tiled(_front_traverse_kernel, dim=[self.num_blocks],
+                        inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._item_end,
+                                self.num_blocks, self.candidates.capacity],
+                        outputs=[self.candidates.data, self.candidates.count], block_dim=self.block_dim, device=d)
 
 
 @wp.kernel
