@@ -227,7 +227,11 @@ def sap_key_bits(num_boxes: int) -> tuple[int, int]:
 
 STATS_BLOCK = 256
 """Threads per block of the statistics pass: each block reduces its threads' values in shared
-memory (Warp tiles) and adds them to the accumulators with one atomic per value."""
+memory (Warp tiles, two reductions of vectors) and adds them to the accumulators with one atomic
+per value."""
+
+vec6f = wp.types.vector(length=6, dtype=wp.float32)
+vec9d = wp.types.vector(length=9, dtype=wp.float64)
 
 
 @wp.kernel
@@ -250,41 +254,33 @@ def _sap_stats_kernel(
     the padding key, for the slots this frame's entries leave unused."""
     block, lane = wp.tid()
     width = wp.block_dim()
-    lo = wp.vec3(BOX_EMPTY)
-    hi = wp.vec3(-BOX_EMPTY)
-    c1 = wp.vec3d(0.0, 0.0, 0.0)
-    c2 = wp.vec3d(0.0, 0.0, 0.0)
-    ext = wp.vec3d(0.0, 0.0, 0.0)
+    bounds = vec6f(BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY)  # (lo, -hi): both by min
+    sums = vec9d()  # centres, squared centres, extents
     i = block * width + lane
     stride = num_blocks * width
     while i < num_boxes:
         a = lower[i]
         b = upper[i]
-        lo = wp.min(lo, a)
-        hi = wp.max(hi, b)
+        bounds = wp.min(bounds, vec6f(a[0], a[1], a[2], -b[0], -b[1], -b[2]))
         c = wp.vec3d(wp.float64(0.5) * (wp.float64(a[0]) + wp.float64(b[0])),
                      wp.float64(0.5) * (wp.float64(a[1]) + wp.float64(b[1])),
                      wp.float64(0.5) * (wp.float64(a[2]) + wp.float64(b[2])))
-        c1 = c1 + c
-        c2 = c2 + wp.cw_mul(c, c)
-        ext = ext + wp.vec3d(wp.float64(b[0] - a[0]), wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
+        sums = sums + vec9d(c[0], c[1], c[2], c[0] * c[0], c[1] * c[1], c[2] * c[2], wp.float64(b[0] - a[0]),
+                            wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
         i += stride
     e = block * width + lane
     while e < entry_capacity:
         entry_key[e] = KEY_PAD
         e += stride
-    for k in range(3):
-        block_lo = wp.tile_extract(wp.tile_min(wp.tile(lo[k])), 0)
-        block_hi = wp.tile_extract(wp.tile_max(wp.tile(hi[k])), 0)
-        block_c1 = wp.tile_extract(wp.tile_sum(wp.tile(c1[k])), 0)
-        block_c2 = wp.tile_extract(wp.tile_sum(wp.tile(c2[k])), 0)
-        block_ext = wp.tile_extract(wp.tile_sum(wp.tile(ext[k])), 0)
-        if lane == 0:
-            wp.atomic_min(stat_lo, k, block_lo)
-            wp.atomic_max(stat_hi, k, block_hi)
-            wp.atomic_add(stat_sum, k, block_c1)
-            wp.atomic_add(stat_sum, 3 + k, block_c2)
-            wp.atomic_add(stat_sum, 6 + k, block_ext)
+    # Two block reductions (of vectors), then one atomic per value.
+    block_bounds = wp.tile_extract(wp.tile_reduce(wp.min, wp.tile(bounds, preserve_type=True)), 0)
+    block_sums = wp.tile_extract(wp.tile_sum(wp.tile(sums, preserve_type=True)), 0)
+    if lane == 0:
+        for k in range(3):
+            wp.atomic_min(stat_lo, k, block_bounds[k])
+            wp.atomic_max(stat_hi, k, -block_bounds[3 + k])
+        for k in range(9):
+            wp.atomic_add(stat_sum, k, block_sums[k])
 
 
 @wp.func

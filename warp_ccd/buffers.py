@@ -215,6 +215,7 @@ class CounterRead:
             wp.copy(self.block, b.count, dest_offset=slot, src_offset=0, count=1)
             b.count = self.block[slot : slot + 1]
         self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        self._host_view = self.host.numpy()[: len(self.buffers)]  # made once: a frame's read is a tolist()
         self.counts = [0] * len(self.buffers)
 
     def _strays(self) -> list[tuple[int, GrowableBuffer]]:
@@ -246,7 +247,7 @@ class CounterRead:
             OverflowError: a counter reached :data:`COUNT_LIMIT`.
         """
         wp.synchronize_device(self.device)
-        self.counts = [int(c) for c in self.host.numpy()[: len(self.buffers)]]
+        self.counts = self._host_view.tolist()
         grew = False
         for b, c in zip(self.buffers, self.counts):
             b.last_count = c

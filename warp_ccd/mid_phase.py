@@ -226,6 +226,8 @@ def _front_traverse_kernel(
     if num_pairs == 0:
         return  # the whole grid returns: no block is left waiting in block_reserve
     total = pair_item_end[num_pairs - 1]
+    if wp.int64(block * width) >= total:
+        return  # the whole block: its items, t + r * num_threads, are all past the last
     rounds = (total + num_threads - wp.int64(1)) / num_threads  # the same in every thread
     k = int(0)
     item = t

@@ -49,22 +49,53 @@ class CollisionResult:
             ``total``) when the pipeline was asked for them, else None.
         host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
             waiting for the device), in ms.
-        device_triangle_pairs: ``(M,)`` ``wp.vec4i`` on the device, unsorted.
         device_colliding: ``(N,)`` int32 flags on the device.
     """
 
-    def __init__(self, num_objects: int, device_triangle_pairs: wp.array, device_colliding: wp.array,
+    def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained: wp.array | None = None, device_segments: wp.array | None = None):
+                 device_contained=None, device_segments=None, num_triangle_pairs: int | None = None):
+        # A device array, or a function that makes the view (a view costs Python some 10 us:
+        # detect() leaves them to the first access); the count of rows must then be given.
+        for name, value in (("device_triangle_pairs", device_triangle_pairs), ("device_contained", device_contained),
+                            ("device_segments", device_segments)):
+            if callable(value):
+                self._make[name] = value
+            else:
+                self.__dict__[name] = value
+        if num_triangle_pairs is None:
+            num_triangle_pairs = device_triangle_pairs.shape[0]
         self.num_objects = num_objects
-        self.device_segments = device_segments
-        self.device_triangle_pairs = device_triangle_pairs
         self.device_colliding = device_colliding
-        self.device_contained = device_contained
         self.timings = timings
         self.num_candidates = num_candidates
         self.num_broad_pairs = num_broad_pairs
+        self._num_triangle_pairs = int(num_triangle_pairs)
         self.host_ms = 0.0
+
+    @cached_property
+    def _make(self) -> dict:
+        return {}
+
+    def _view(self, name: str):
+        make = self._make.get(name)
+        return None if make is None else make()
+
+    @cached_property
+    def device_triangle_pairs(self) -> wp.array:
+        """``(M,)`` ``wp.vec4i`` on the device, unsorted."""
+        return self._view("device_triangle_pairs")
+
+    @cached_property
+    def device_contained(self) -> wp.array | None:
+        """``(K,)`` ``wp.vec2i`` ``(inner, outer)`` pairs on the device, or None without ``containment``."""
+        return self._view("device_contained")
+
+    @cached_property
+    def device_segments(self) -> wp.array | None:
+        """``(M, 2)`` segment end points on the device (rows of :attr:`device_triangle_pairs`), or
+        None without ``segments``."""
+        return self._view("device_segments")
 
     def copy(self) -> "CollisionResult":
         """The same result with device arrays of its own (valid after the next ``detect()``)."""
@@ -81,7 +112,7 @@ class CollisionResult:
     @property
     def num_triangle_pairs(self) -> int:
         """``M``, the number of intersecting triangle pairs."""
-        return self.device_triangle_pairs.shape[0]
+        return self._num_triangle_pairs
 
     @cached_property
     def triangle_pairs(self) -> np.ndarray:
@@ -305,15 +336,19 @@ class CollisionPipeline:
             grew = frame.run_once()
             wait_ms += frame.wait_ms
         narrow = self.narrow
+        hits, num_hits = narrow.hits, narrow.hits.last_count
+        contained = narrow.contained
+        num_contained = contained.last_count if contained is not None else 0
         result = CollisionResult(
             n,
-            narrow.hits.held(),
+            lambda: hits.data[:num_hits],
             narrow.object_colliding,
             self._times,
             num_candidates=self.mid.candidates.last_count,
             num_broad_pairs=self.pairs.last_count,
-            device_contained=narrow.contained.held() if narrow.contained is not None else None,
-            device_segments=narrow.segment[: narrow.hits.last_count] if narrow.segments else None,
+            device_contained=(lambda: contained.data[:num_contained]) if contained is not None else None,
+            device_segments=(lambda: narrow.segment[:num_hits]) if narrow.segments else None,
+            num_triangle_pairs=num_hits,
         )
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
         return result
