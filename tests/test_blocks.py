@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.buffers import BLOCK_DIM, block_dim_for, block_reserve
+from warp_ccd.buffers import BLOCK_DIM, CounterRead, GrowableBuffer, block_dim_for, block_reserve
 
 from oracles import box_pairs_numpy
 
@@ -54,11 +54,23 @@ def test_sap_in_blocks(device, blocks):
     lo[:40] = 3.0  # 40 identical boxes: 39 pairs for the first entry among them
     hi = lo + rng.uniform(0.2, 1.5, (600, 3)).astype(np.float32)
     hi[:40] = 4.0
+    wlo = wp.array(lo, dtype=wp.vec3, device=device)
+    whi = wp.array(hi, dtype=wp.vec3, device=device)
     bp = wc.BroadPhaseSAP(device=device)
     bp._resize(len(lo))
     bp.entry._allocate(1)
-    got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
-    got = got.numpy().reshape(-1, 2)
+    pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
+    counters = CounterRead([pairs, *bp.counters], device)
+    rounds = 0
+    while True:  # both buffers overflow first: grow, run again
+        rounds += 1
+        pairs.reset()
+        bp.launch(wlo, whi, pairs)
+        counters.enqueue()
+        if not counters.finish():
+            break
+    got = pairs.numpy(pairs.last_count)
+    assert rounds >= 2
     assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi))
 
 

@@ -280,6 +280,7 @@ def test_segment_of_crossing_triangles(device, precision):
     [
         (lambda s: wc.CollisionPipeline(s, leaf_size=1.5), "leaf_size"),
         (lambda s: wc.CollisionPipeline(s, leaf_size=True), "leaf_size"),
+        (lambda s: wc.CollisionPipeline(s, leaf_size=1000), "leaf_size"),
         (lambda s: wc.CollisionPipeline(s, cut_depth=-1), "cut_depth"),
         (lambda s: wc.CollisionPipeline(s, cut_depth=2.0), "cut_depth"),
         (lambda s: wc.CollisionPipeline(s, graph=1), "graph"),

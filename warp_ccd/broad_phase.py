@@ -251,7 +251,7 @@ def _sap_stats_kernel(
     3 each) and sums (``stat_sum``, 9: centres, squared centres, extents per axis), reduced per
     block, then one atomic per value per block, into accumulators that the setup kernel of the
     previous frame (or the constructor) left empty. The same threads fill the entry keys with
-    the padding key, for the slots this frame's entries leave unused."""
+    the padding key (the emit kernel overwrites the slots this frame's entries use)."""
     block, lane = wp.tid()
     width = wp.block_dim()
     bounds = vec6f(BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY)  # (lo, -hi): both by min
@@ -515,7 +515,8 @@ def _sap_sweep_kernel(
     pair_count: wp.array[wp.int64],
 ):
     """Thread ``t``: sorted entry ``t`` sweeps its cell, its block reserves the pairs found with
-    one atomic add; box ``t`` is tested against the big boxes."""
+    one atomic add (an entry's first :data:`~warp_ccd.buffers.ITEM_LIST_SIZE`; any more take one
+    atomic each); box ``t`` is tested against the big boxes."""
     block, lane = wp.tid()
     t = block * wp.block_dim() + lane
     total = used_count(entry_count, entry_capacity)

@@ -62,10 +62,11 @@ def block_dim_for(device) -> int:
 
 @wp.func
 def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
-    """Cooperative: every thread of the block calls it (``lane`` its index in the block) with its
-    number of items; reserves them all with one atomic add on ``count`` and returns the thread's
-    first slot. Like :func:`reserve_slot`, the counter counts past the capacity: the caller writes
-    only slots below it."""
+    """Cooperative: every thread of the block calls it (``lane``: its own index in the block, from
+    ``wp.tid()``) with its number of items; reserves them all with one atomic add on ``count`` and
+    returns the thread's first slot. Like :func:`reserve_slot`, the counter counts past the
+    capacity: the caller writes only slots below it. The block's items must stay below 2**31
+    (int32 scan)."""
     start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
     total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
     base = wp.int64(0)

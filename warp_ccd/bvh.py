@@ -42,6 +42,10 @@ from .scene import MeshTopology, mesh_triangle
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
+LEAF_SIZE_MAX = 256
+"""Most triangles per leaf: a traversal thread emits up to 16 leaf pairs of ``leaf_size**2``
+rows at once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
+
 __all__ = ["SceneBVH", "ShapeTree", "TreeView", "build_tree"]
 
 
@@ -371,8 +375,8 @@ class SceneBVH:
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
                  cut_depth: int = 3):
-        if leaf_size < 1:
-            raise ValueError(f"leaf_size must be >= 1, got {leaf_size}")
+        if not 1 <= leaf_size <= LEAF_SIZE_MAX:
+            raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
         if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
             raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
         self.device = scene.device

@@ -281,8 +281,8 @@ class MidPhaseBVH:
 
     Attributes:
         candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
-        num_blocks, block_dim: the traversal kernel's grid (on the CPU one block of one thread,
-            which takes every item in turn).
+        num_blocks, block_dim: the traversal kernel's grid (on the CPU one block, of one thread
+            that takes every item in turn unless ``wp.config.enable_cpu_blocks`` is set).
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):

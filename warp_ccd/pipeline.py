@@ -22,7 +22,7 @@ import warp as wp
 from .aabb import InstanceBounds
 from .broad_phase import make_broad_phase
 from .buffers import CounterRead, GrowableBuffer
-from .bvh import SceneBVH
+from .bvh import LEAF_SIZE_MAX, SceneBVH
 from .frame import CountedFrame, FrameCache, frame_mode
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .narrow_phase import TOLERANCE, NarrowPhase
@@ -64,6 +64,8 @@ class CollisionResult:
             else:
                 self.__dict__[name] = value
         if num_triangle_pairs is None:
+            if callable(device_triangle_pairs):
+                raise ValueError("CollisionResult: a device_triangle_pairs made on access needs num_triangle_pairs")
             num_triangle_pairs = device_triangle_pairs.shape[0]
         self.num_objects = num_objects
         self.device_colliding = device_colliding
@@ -225,6 +227,8 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        if isinstance(leaf_size, (int, np.integer)) and not isinstance(leaf_size, bool) and leaf_size > LEAF_SIZE_MAX:
+            raise ValueError(f"leaf_size must be at most {LEAF_SIZE_MAX}, got {leaf_size}")
         for name, value, minimum in (("leaf_size", leaf_size, 1),
                                      ("pair_capacity", pair_capacity, 1), ("candidate_capacity", candidate_capacity, 1),
                                      ("hit_capacity", hit_capacity, 1)):
