@@ -7,9 +7,10 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.buffers import BLOCK_DIM, CounterRead, GrowableBuffer, block_dim_for, block_reserve
+from warp_ccd.buffers import BLOCK_DIM, block_dim_for, block_reserve
 
 from oracles import box_pairs_numpy
+from test_broad_phase import pairs_from_capacity_one
 
 
 @pytest.fixture
@@ -59,19 +60,9 @@ def test_sap_in_blocks(device, blocks):
     bp = wc.BroadPhaseSAP(device=device)
     bp._resize(len(lo))
     bp.entry._allocate(1)
-    pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
-    counters = CounterRead([pairs, *bp.counters], device)
-    rounds = 0
-    while True:  # both buffers overflow first: grow, run again
-        rounds += 1
-        pairs.reset()
-        bp.launch(wlo, whi, pairs)
-        counters.enqueue()
-        if not counters.finish():
-            break
-    got = pairs.numpy(pairs.last_count)
+    got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)  # both buffers overflow first
     assert rounds >= 2
-    assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi))
+    assert np.array_equal(got, box_pairs_numpy(lo, hi))
 
 
 @pytest.mark.parametrize("cut_depth", [0, 3])

@@ -107,32 +107,36 @@ def test_tiny_counts(device, n):
         assert np.array_equal(got.reshape(-1, 2), box_pairs_numpy(lo, hi).reshape(-1, 2))
 
 
-def test_capacity_one_is_complete(device):
-    """Starting from buffers of capacity 1, every pair is still returned (buffers grow)."""
-    import warp as wp
-
+def pairs_from_capacity_one(bp, wlo, whi, device):
+    """Runs ``bp`` from a pair buffer of capacity 1 (and its own buffers as they are) until every
+    buffer holds its items, growing them as the counters ask; returns ``(sorted pairs, runs)``."""
     from warp_ccd.buffers import CounterRead, GrowableBuffer
 
+    pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
+    counters = CounterRead([pairs, *bp.counters], device)
+    rounds = 0
+    while True:
+        rounds += 1
+        pairs.reset()
+        bp.launch(wlo, whi, pairs)
+        counters.enqueue()
+        if not counters.finish():
+            break
+    got = pairs.numpy(pairs.last_count)
+    return got[np.lexsort((got[:, 1], got[:, 0]))], rounds
+
+
+def test_capacity_one_is_complete(device):
+    """Starting from buffers of capacity 1, every pair is still returned (buffers grow)."""
     rng = np.random.default_rng(3)
     lo, hi = boxes_clustered(rng, 800)
     want = box_pairs_numpy(lo, hi)
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
     for bp in (wc.BroadPhaseSAP(device=device), wc.BroadPhaseNxN(device=device)):
-        pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
         for b in bp.counters:
             b._allocate(1)
-        counters = CounterRead([pairs, *bp.counters], device)
-        rounds = 0
-        while True:
-            rounds += 1
-            pairs.reset()
-            bp.launch(wlo, whi, pairs)
-            counters.enqueue()
-            if not counters.finish():
-                break
-        got = pairs.numpy(pairs.last_count)
-        got = got[np.lexsort((got[:, 1], got[:, 0]))]
+        got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)
         assert rounds >= 2
         assert np.array_equal(got, want)
 
