@@ -7,8 +7,8 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   from a front of node pairs: every leaf of the object with fewer leaves against every subtree
   of the other's cut (its nodes at level ``cut_depth``, and the leaves above; at most 8 subtrees
   by default). One work item per such (leaf, subtree) pair; each descends its subtree, depth
-  first with a short stack, gathers the leaves whose boxes overlap its own and reserves their
-  triangle pairs with one atomic add. That is the set a simultaneous descent of both trees
+  first with a short stack, and gathers the leaves whose boxes overlap its own: their triangle
+  pairs are the candidates. That is the set a simultaneous descent of both trees
   finds (an inner box is the union of its children's, so two leaf boxes overlap only where all
   their ancestors' do), with the first tree opened to its leaves and the second to its cut at
   once: no thread walks a big pair alone, the longest descent is a subtree's (not a whole
@@ -50,7 +50,6 @@ STACK_SIZE = 32
 ``D + 1``; a median-split tree of fewer than 2**31 triangles has at most 32 levels."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
-
 
 THREADS_PER_SM = 1024
 """Threads of the traversal per streaming multiprocessor on CUDA (half of what an H100 keeps

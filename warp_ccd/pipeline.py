@@ -57,6 +57,7 @@ class CollisionResult:
                  device_contained=None, device_segments=None, num_triangle_pairs: int | None = None):
         # A device array, or a function that makes the view (a view costs Python some 10 us:
         # detect() leaves them to the first access); the count of rows must then be given.
+        self._make = {}
         for name, value in (("device_triangle_pairs", device_triangle_pairs), ("device_contained", device_contained),
                             ("device_segments", device_segments)):
             if callable(value):
@@ -74,10 +75,6 @@ class CollisionResult:
         self.num_broad_pairs = num_broad_pairs
         self._num_triangle_pairs = int(num_triangle_pairs)
         self.host_ms = 0.0
-
-    @cached_property
-    def _make(self) -> dict:
-        return {}
 
     def _view(self, name: str):
         make = self._make.get(name)
@@ -227,15 +224,16 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
-        if isinstance(leaf_size, (int, np.integer)) and not isinstance(leaf_size, bool) and leaf_size > LEAF_SIZE_MAX:
-            raise ValueError(f"leaf_size must be at most {LEAF_SIZE_MAX}, got {leaf_size}")
-        for name, value, minimum in (("leaf_size", leaf_size, 1),
-                                     ("pair_capacity", pair_capacity, 1), ("candidate_capacity", candidate_capacity, 1),
-                                     ("hit_capacity", hit_capacity, 1)):
+        for name, value, minimum, maximum in (("leaf_size", leaf_size, 1, LEAF_SIZE_MAX),
+                                              ("pair_capacity", pair_capacity, 1, None),
+                                              ("candidate_capacity", candidate_capacity, 1, None),
+                                              ("hit_capacity", hit_capacity, 1, None)):
             if value is None and name != "leaf_size":
                 continue
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-                raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum \
+                    or (maximum is not None and value > maximum):
+                bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+                raise ValueError(f"{name} must be an integer {bounds}, got {value!r}")
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
                 or not 0.0 <= float(tolerance) < 0.1:
             raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
