@@ -98,6 +98,24 @@ def test_equals_numpy(device, method, dist):
         assert len(want) > 0
 
 
+def test_sap_key_bits():
+    """16-bit keys (two radix passes) up to 16,384 boxes, wider keys above, never past 31 bits."""
+    from warp_ccd.broad_phase import SMALL_SCENE_BOXES, sap_key_bits
+
+    assert sap_key_bits(2) == sap_key_bits(1000) == sap_key_bits(SMALL_SCENE_BOXES) == (8, 8)
+    assert sum(sap_key_bits(SMALL_SCENE_BOXES + 1)) > 16
+    for n in (10**5, 10**6, 10**7, 2**31 - 1):
+        cell_bits, q_bits = sap_key_bits(n)
+        assert q_bits >= 8 and cell_bits + q_bits <= 31
+
+
+@pytest.mark.parametrize("n", [16384, 16385])
+def test_sap_either_side_of_16_bit_keys(device, n):
+    rng = np.random.default_rng(n)
+    lo, hi = boxes_random(rng, n, spread=40.0, size=(0.3, 2.0))
+    assert np.array_equal(wc.broad_phase_pairs(lo, hi, device=device), box_pairs_numpy(lo, hi))
+
+
 @pytest.mark.parametrize("n", [0, 1, 2, 3])
 def test_tiny_counts(device, n):
     rng = np.random.default_rng(n)

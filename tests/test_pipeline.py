@@ -5,6 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.narrow_phase import METHOD_MOLLER, tri_tri_batch_kernel
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 
@@ -105,6 +106,57 @@ def test_touching_cubes_count(device):
     assert res.object_pairs.tolist() == [[0, 1]]
     res = wc.collide([cube_at(0), cube_at(side * 1.001)], device=device)
     assert res.object_pairs.tolist() == []
+
+
+def _all_triangle_pairs_moller(meshes, device):
+    """Every triangle pair of every object pair, decided by Möller's test in one function (the
+    pipeline decides its step 4 in a second kernel): rows ``(obj_a, tri_a, obj_b, tri_b)``."""
+    rows, ta, tb = [], [], []
+    for a in range(len(meshes)):
+        for b in range(a + 1, len(meshes)):
+            (va, fa), (vb, fb) = meshes[a], meshes[b]
+            for i in range(len(fa)):
+                for j in range(len(fb)):
+                    rows.append((a, i, b, j))
+                    ta.append(va[fa[i]])
+                    tb.append(vb[fb[j]])
+    result = wp.zeros(len(rows), dtype=wp.int32, device=device)
+    wp.launch(tri_tri_batch_kernel, dim=len(rows),
+              inputs=[wp.array(np.float32(ta), dtype=wp.vec3, device=device),
+                      wp.array(np.float32(tb), dtype=wp.vec3, device=device), METHOD_MOLLER,
+                      wp.float64(wc.TOLERANCE)], outputs=[result], device=device)
+    return np.int32(rows)[result.numpy() == 1].reshape(-1, 4)
+
+
+def test_touching_without_crossing(device):
+    """Pairs that touch but do not cross (a vertex over a face, an edge over a face's edge, a fifth
+    of the tolerance apart): the pipeline's split step 4 finds exactly what Möller's test in one
+    function does."""
+    ov, ot = wc.shape("octahedron")
+    cv, ct = wc.shape("cube")
+    top = float(cv[:, 2].max())
+    half = float(cv[:, 0].max())
+    lowest = float(ov[:, 2].min())
+    turn = np.float32([[np.cos(0.3), -np.sin(0.3), 0], [np.sin(0.3), np.cos(0.3), 0], [0, 0, 1]])
+    c45 = np.cos(np.pi / 4)
+    edge = np.float32([[1, 0, 0], [0, c45, -c45], [0, c45, c45]])
+    reach = float((cv @ edge.T)[:, 2].max())
+    gap = 0.2 * wc.TOLERANCE * 2 * half  # within eps (the tolerance times the longest edge)
+    meshes = [
+        (cv, ct),
+        ((ov @ turn.T) + np.float32([0.1, -0.05, top - lowest + gap]), ot),  # vertex over the top face
+        (cv + np.float32([5.0, 0, 0]), ct),
+        ((cv @ edge.T) @ turn.T + np.float32([5.0, 0.0, top + reach + gap]), ct),  # edge over the top face
+        (cv + np.float32([10.0, 0, 0]), ct),
+        ((ov @ turn.T) + np.float32([10.0 + half * 0.5, 0.0, top - lowest + 1e-2]), ot),  # a gap: apart
+    ]
+    meshes = [(np.float32(v), np.int32(t)) for v, t in meshes]
+    want = _all_triangle_pairs_moller(meshes, device)
+    assert len(want) > 0 and {(0, 1), (2, 3)} <= set(map(tuple, want[:, [0, 2]].tolist()))
+    for capacity in (None, 1):
+        res = wc.collide(meshes, device=device, **({} if capacity is None else dict(hit_capacity=capacity)))
+        assert np.array_equal(res.triangle_pairs, want)
+        assert res.object_pairs.tolist() == [[0, 1], [2, 3]]
 
 
 def test_far_from_origin_and_tiny(device):
