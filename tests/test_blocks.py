@@ -8,7 +8,6 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.buffers import BLOCK_DIM, block_dim_for, block_reserve
-from warp_ccd.mid_phase import _block_upper_bound
 
 from oracles import box_pairs_numpy
 from test_broad_phase import pairs_from_capacity_one
@@ -80,32 +79,8 @@ def test_traversal_in_blocks(device, blocks, cut_depth):
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
 
 
-@wp.kernel
-def _block_upper_bound_kernel(values: wp.array[wp.int64], num: int, x: wp.array[wp.int64],
-                              found: wp.array[wp.int32]):
-    block, lane = wp.tid()
-    k = _block_upper_bound(values, num, x[block], lane)
-    if lane == 0:
-        found[block] = k
-
-
-@pytest.mark.parametrize("num", [1, 200, 256, 257, 5000, 70000])
-def test_block_upper_bound(device, blocks, num):
-    """The traversal's block-wide search finds what a binary search does: first index whose value
-    exceeds x, over strictly increasing ends (one search step for up to 65,536 values, two above)."""
-    rng = np.random.default_rng(num)
-    ends = np.cumsum(rng.integers(1, 9, num)).astype(np.int64)
-    x = np.concatenate([rng.integers(0, ends[-1] + 2, 40), ends[rng.integers(0, num, 8)], [0, ends[-1] - 1, ends[-1]]])
-    values = wp.array(np.concatenate([ends, np.full(7, ends[-1])]), dtype=wp.int64, device=device)  # flat past num
-    found = wp.zeros(len(x), dtype=wp.int32, device=device)
-    wp.launch_tiled(_block_upper_bound_kernel, dim=[len(x)],
-                    inputs=[values, num, wp.array(x, dtype=wp.int64, device=device)], outputs=[found],
-                    block_dim=BLOCK_DIM, device=device)
-    assert found.numpy().tolist() == np.searchsorted(ends, x, side="right").tolist()
-
-
 def test_traversal_in_blocks_many_pairs(device, blocks):
-    """More object pairs than a block's window of pairs: the block-wide search of the items' pairs."""
+    """More object pairs than a block has threads: a block's items span many pairs."""
     scene = wc.Scene.random(700, seed=3, density=0.25, device=device)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     got = wc.CollisionPipeline(scene).detect()

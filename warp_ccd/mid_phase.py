@@ -45,10 +45,9 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH"]
 
-STACK_SIZE = 64
-"""Traversal stack entries per thread: a depth-first descent of a subtree of depth ``D`` that
-stacks both children of each node it opens holds at most ``D + 1`` pairs; a median-split tree
-of fewer than 2**31 triangles has at most 32 levels."""
+STACK_SIZE = 32
+"""Traversal stack entries per thread: a depth-first descent of a tree of depth ``D`` needs
+``D + 1``; a median-split tree of fewer than 2**31 triangles has at most 32 levels."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
@@ -57,37 +56,6 @@ THREADS_PER_SM = 1024
 resident): enough to hide memory latency, few enough that each has several items at scale."""
 
 assert THREADS_PER_SM % BLOCK_DIM == 0
-
-
-PAIR_WINDOW = wp.constant(BLOCK_DIM)
-"""Pairs a block of the traversal reads at once when it finds the pairs of its items: the block's
-width (on CUDA)."""
-
-
-@wp.func
-def _block_upper_bound(values: wp.array[wp.int64], num: int, x: wp.int64, lane: int) -> int:
-    """Cooperative (every thread of a block of :data:`PAIR_WINDOW` threads, the same ``x``):
-    :func:`~warp_ccd.buffers.upper_bound` over ``values[:num]``, by a search that reads one
-    sample per thread a step and counts the samples not above ``x`` (a block sum): each step
-    narrows the range :data:`PAIR_WINDOW`-fold, so 10^5 pairs take two dependent reads where a
-    binary search takes 17."""
-    lo = int(0)
-    hi = num
-    while hi - lo > PAIR_WINDOW:
-        span = wp.int64(hi - lo)
-        below = int(0)
-        if values[lo + int(wp.int64(lane + 1) * span / wp.int64(PAIR_WINDOW)) - 1] <= x:
-            below = 1
-        c = wp.tile_extract(wp.tile_sum(wp.tile(below)), 0)
-        # The bound lies past sample c - 1 and at or before sample c.
-        if c < PAIR_WINDOW:
-            hi = lo + int(wp.int64(c + 1) * span / wp.int64(PAIR_WINDOW))
-        lo = lo + int(wp.int64(c) * span / wp.int64(PAIR_WINDOW))
-    below = int(0)
-    if lane < hi - lo:
-        if values[lo + lane] <= x:
-            below = 1
-    return lo + wp.tile_extract(wp.tile_sum(wp.tile(below)), 0)
 
 
 @wp.func
@@ -136,27 +104,41 @@ def _front_count_kernel(
 
 
 @wp.func
+def _leaf_rows(tree: TreeView, front_node: int, found: vec_items, num_found: int) -> int:
+    """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``
+    (shape-global node ids): the products of their triangle counts."""
+    count_front = tree.node_triangle[front_node][1]
+    rows = int(0)
+    for m in range(num_found):
+        rows += count_front * tree.node_triangle[found[m]][1]
+    return rows
+
+
+@wp.func
 def _write_rows(
     tree: TreeView,
     a: int,
     b: int,
+    s_front: int,
+    s_other: int,
     front: int,
-    base_front: int,
-    base_other: int,
-    range_front: wp.vec2i,
-    range_other: wp.vec2i,
+    front_node: int,
+    other_node: int,
     slot: wp.int64,
     candidate: wp.array[wp.vec4i],
     candidate_capacity: int,
 ) -> wp.int64:
-    """Writes the triangle pairs of the front leaf and one leaf of the other object, given by their
-    ``(start, count)`` in ``tri_order`` after the shapes' ``base_front``/``base_other``, from
-    ``slot`` on (rows keep ``a`` first); returns the next slot."""
-    for i in range(range_front[0], range_front[0] + range_front[1]):
-        tri_f = tree.tri_order[base_front + i]
-        for j in range(range_other[0], range_other[0] + range_other[1]):
+    """Writes the triangle pairs of the front leaf and one leaf of the other object (shape-global
+    node ids) from ``slot`` on (rows keep ``a`` first); returns the next slot."""
+    rf = tree.node_triangle[front_node]
+    ro = tree.node_triangle[other_node]
+    base_f = tree.shape_tri_order_start[s_front]
+    base_o = tree.shape_tri_order_start[s_other]
+    for i in range(rf[0], rf[0] + rf[1]):
+        tri_f = tree.tri_order[base_f + i]
+        for j in range(ro[0], ro[0] + ro[1]):
             if slot < wp.int64(candidate_capacity):
-                tri_o = tree.tri_order[base_other + j]
+                tri_o = tree.tri_order[base_o + j]
                 if front == 0:
                     candidate[int(slot)] = wp.vec4i(a, tri_f, b, tri_o)
                 else:
@@ -170,57 +152,51 @@ def _leaf_vs_subtree(
     tree: TreeView,
     a: int,
     b: int,
+    s_front: int,
+    s_other: int,
     front: int,
-    front_slot: int,
-    other_node: int,
-    other_slot: int,
+    front_obj: int,
+    other_obj: int,
+    leaf: int,
     sub: int,
-    base_front: int,
-    base_other: int,
-    range_front: wp.vec2i,
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
 ):
-    """The front leaf (bounds at ``front_slot``, triangles ``range_front``) against the subtree of
-    node ``sub`` of the other object's tree (its shape's nodes from ``other_node``, its bounds from
-    ``other_slot``), depth first, both children of a node a step (their reads in flight together;
-    a node's triangle range is read with its children, so a leaf found needs no further read): the
-    ``(start, count)`` triangle ranges of the overlapping leaves, the first
-    :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned (starts, counts, number), the rows of any
-    more emitted at once (one atomic add each)."""
+    """Leaf ``leaf`` (shape-local) of the pair's front object against the subtree of node ``sub``
+    of the other object's tree, depth first: the overlapping leaves (shape-global ids), the first
+    :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows of any more
+    emitted at once (one atomic add each)."""
+    front_node = tree.shape_node_start[s_front] + leaf
+    front_slot = tree.instance_node_start[front_obj] + leaf
     lo = tree.node_lower[front_slot]
     hi = tree.node_upper[front_slot]
-    found_start = vec_items()
-    found_count = vec_items()
+    other_node = tree.shape_node_start[s_other]
+    other_slot = tree.instance_node_start[other_obj]
+    found = vec_items()
     num_found = int(0)
-    stack = vec_stack()  # the children (two entries) of inner nodes whose boxes overlapped
-    top = int(0)
-    pending = wp.vec2i(sub, -1)  # the nodes whose boxes this step tests
-    while True:
-        for side in range(2):
-            node = pending[side]
-            if node >= 0:
-                child = tree.node_child[other_node + node]
-                rng = tree.node_triangle[other_node + node]
-                if boxes_overlap(lo, hi, tree.node_lower[other_slot + node], tree.node_upper[other_slot + node]):
-                    if child[0] >= 0:
-                        stack[top] = child[0]
-                        stack[top + 1] = child[1]
-                        top += 2
-                    elif num_found < ITEM_LIST_SIZE:
-                        found_start[num_found] = rng[0]
-                        found_count[num_found] = rng[1]
-                        num_found += 1
-                    else:
-                        slot = wp.atomic_add(candidate_count, 0, wp.int64(range_front[1] * rng[1]))
-                        _write_rows(tree, a, b, front, base_front, base_other, range_front, rng, slot, candidate,
-                                    candidate_capacity)
-        if top == 0:
-            break
-        top -= 2
-        pending = wp.vec2i(stack[top], stack[top + 1])
-    return found_start, found_count, num_found
+    stack = vec_stack()
+    stack[0] = sub
+    top = int(1)
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        if boxes_overlap(lo, hi, tree.node_lower[other_slot + node], tree.node_upper[other_slot + node]):
+            child = tree.node_child[other_node + node]
+            if child[0] < 0:
+                if num_found < ITEM_LIST_SIZE:
+                    found[num_found] = other_node + node
+                    num_found += 1
+                else:
+                    rows = _leaf_rows(tree, front_node, vec_items(other_node + node), 1)
+                    slot = wp.atomic_add(candidate_count, 0, wp.int64(rows))
+                    _write_rows(tree, a, b, s_front, s_other, front, front_node, other_node + node, slot, candidate,
+                                candidate_capacity)
+            else:
+                stack[top] = child[1]
+                stack[top + 1] = child[0]
+                top += 2
+    return found, num_found
 
 
 @wp.kernel
@@ -255,36 +231,16 @@ def _front_traverse_kernel(
     k = int(0)
     item = t
     for _round in range(int(rounds)):
-        found_start = vec_items()
-        found_count = vec_items()
+        found = vec_items()
         num_found = int(0)
         a = int(0)
         b = int(0)
+        s_front = int(0)
+        s_other = int(0)
         front = int(0)
-        base_front = int(0)
-        base_other = int(0)
-        range_front = wp.vec2i()
-        if width == PAIR_WINDOW:
-            # The pairs of the block's items this round: the first by a block-wide search, the
-            # others among the next PAIR_WINDOW (each pair has an item at least), read into
-            # shared memory at once and searched there by each thread.
-            first = _block_upper_bound(pair_item_end, num_pairs, item - wp.int64(lane), int(lane))
-            window = wp.tile_load(pair_item_end, shape=(PAIR_WINDOW,), offset=(first,), storage="shared")
-            if item < total:
-                lo = int(0)
-                hi = wp.min(PAIR_WINDOW, num_pairs - first)
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if window[mid] > item:
-                        hi = mid
-                    else:
-                        lo = mid + 1
-                k = first + lo
-                if lo == PAIR_WINDOW:  # not in the window: only if some pair had no items
-                    k = upper_bound(pair_item_end, k, num_pairs, item)
-        elif item < total:
-            k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
+        front_node = int(0)
         if item < total:
+            k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
             p = pair[k]
             a = p[0]
             b = p[1]
@@ -304,20 +260,13 @@ def _front_traverse_kernel(
             w = item - (pair_item_end[k] - wp.int64(_num_leaves(tree, s_front)) * num_cut)
             leaf = tree.leaf_node[tree.shape_leaf_start[s_front] + int(w / num_cut)]
             sub = tree.cut_node[tree.shape_cut_start[s_other] + int(w % num_cut)]
-            range_front = tree.node_triangle[tree.shape_node_start[s_front] + leaf]
-            base_front = tree.shape_tri_order_start[s_front]
-            base_other = tree.shape_tri_order_start[s_other]
-            found_start, found_count, num_found = _leaf_vs_subtree(
-                tree, a, b, front, tree.instance_node_start[front_obj] + leaf, tree.shape_node_start[s_other],
-                tree.instance_node_start[other_obj], sub, base_front, base_other, range_front, candidate,
-                candidate_count, candidate_capacity)
-        rows = int(0)
+            front_node = tree.shape_node_start[s_front] + leaf
+            found, num_found = _leaf_vs_subtree(tree, a, b, s_front, s_other, front, front_obj, other_obj, leaf, sub,
+                                                candidate, candidate_count, candidate_capacity)
+        slot = block_reserve(candidate_count, int(lane), _leaf_rows(tree, front_node, found, num_found))
         for m in range(num_found):
-            rows += found_count[m]
-        slot = block_reserve(candidate_count, int(lane), range_front[1] * rows)
-        for m in range(num_found):
-            slot = _write_rows(tree, a, b, front, base_front, base_other, range_front,
-                               wp.vec2i(found_start[m], found_count[m]), slot, candidate, candidate_capacity)
+            slot = _write_rows(tree, a, b, s_front, s_other, front, front_node, found[m], slot, candidate,
+                               candidate_capacity)
         item += num_threads
 
 
@@ -338,7 +287,7 @@ class MidPhaseBVH:
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
-        if 2 * (bvh.max_depth + 1) > STACK_SIZE:
+        if bvh.max_depth + 1 > STACK_SIZE:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.block_dim = block_dim_for(self.device)
