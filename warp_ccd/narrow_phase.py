@@ -712,6 +712,22 @@ def _pair_triangles(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i
     return a0, a1, a2, b0, b1, b2
 
 
+@wp.func
+def _append_hit(
+    c: wp.vec4i,
+    hit_capacity: int,
+    hit: wp.array[wp.vec4i],
+    hit_count: wp.array[wp.int64],
+    object_colliding: wp.array[wp.int32],
+):
+    """Appends the triangle pair ``c`` to the hits (capacity + counter) and flags its two objects."""
+    slot = reserve_slot(hit_count, hit_capacity)
+    if slot >= 0:
+        hit[slot] = c
+    object_colliding[c[0]] = 1
+    object_colliding[c[2]] = 1
+
+
 @wp.kernel
 def _narrow_moller_kernel(
     mesh: MeshTopology,
@@ -748,11 +764,7 @@ def _narrow_moller_kernel(
             touch[slot] = c
             touch_flag[slot] = 0
     elif kind != CONTACT_NONE:
-        slot = reserve_slot(hit_count, hit_capacity)
-        if slot >= 0:
-            hit[slot] = c
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
+        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
 @wp.kernel
@@ -789,11 +801,7 @@ def _narrow_touch_kernel(
     else:
         near = _edge_near_face(e - 3, b0, b1, b2, a0, a1, a2, na, eps)
     if near and wp.atomic_add(touch_flag, u, 1) == 0:
-        slot = reserve_slot(hit_count, hit_capacity)
-        if slot >= 0:
-            hit[slot] = c
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
+        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
 @wp.kernel
@@ -817,11 +825,7 @@ def _narrow_edge_face_kernel(
     c = candidate[k]
     a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex, c)
     if tri_tri_edge_face(a0, a1, a2, b0, b1, b2, tol_rel):
-        slot = reserve_slot(hit_count, hit_capacity)
-        if slot >= 0:
-            hit[slot] = c
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
+        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
 @wp.kernel
