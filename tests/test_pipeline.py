@@ -5,9 +5,9 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.narrow_phase import METHOD_MOLLER, tri_tri_batch_kernel
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
+from test_narrow_phase import run_test
 
 
 def check_against_oracles(scene, result, device):
@@ -120,12 +120,7 @@ def _all_triangle_pairs_moller(meshes, device):
                     rows.append((a, i, b, j))
                     ta.append(va[fa[i]])
                     tb.append(vb[fb[j]])
-    result = wp.zeros(len(rows), dtype=wp.int32, device=device)
-    wp.launch(tri_tri_batch_kernel, dim=len(rows),
-              inputs=[wp.array(np.float32(ta), dtype=wp.vec3, device=device),
-                      wp.array(np.float32(tb), dtype=wp.vec3, device=device), METHOD_MOLLER,
-                      wp.float64(wc.TOLERANCE)], outputs=[result], device=device)
-    return np.int32(rows)[result.numpy() == 1].reshape(-1, 4)
+    return np.int32(rows)[run_test(ta, tb, device)].reshape(-1, 4)
 
 
 def test_touching_without_crossing(device):

@@ -27,8 +27,8 @@ Sweep and prune, as run on the device each frame:
    the cell id, then the lower bound along the sweep axis quantised monotonically to ``q_bits``
    bits. Only the bits in use are sorted (``end_bit``; :func:`sap_key_bits` sizes them from
    ``N``, and the grid coarsens when it would need more cells): a radix pass costs as much for
-   1,000 keys as for 10^5, so scenes up to 16,384 boxes sort 16 bits, not 32. Unused entry slots hold a key
-   that sorts last (written by the statistics pass).
+   1,000 keys as for 10^5, so scenes up to 16,384 boxes sort 16 bits, not 32. Unused entry
+   slots hold a key that sorts last (written by the statistics pass).
 5. One thread per entry sweeps forward through its cell while the next quantised lower bound is
    not past its own quantised upper bound, tests the exact boxes, and reports a pair only from
    the cell holding the lower corner of the two boxes' intersection (both boxes are entered
