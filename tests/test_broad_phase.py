@@ -160,16 +160,17 @@ def test_capacity_one_is_complete(device):
 
 
 def test_sap_grid_entries_grow(device):
-    """Boxes that each cover dozens of grid cells need more entries than the buffer starts with:
+    """Boxes that each cover a dozen grid cells need more entries than the buffer starts with:
     the frame grows it and runs again, and every pair is found."""
     rng = np.random.default_rng(11)
     tiny_lo, tiny_hi = boxes_random(rng, 3000, spread=5.0, size=(0.005, 0.015))
-    mid_lo, mid_hi = boxes_random(rng, 200, spread=5.0, size=(0.45, 0.55))
+    mid_lo, mid_hi = boxes_random(rng, 300, spread=5.0, size=(2.45, 2.55))
     lo, hi = np.concatenate([tiny_lo, mid_lo]), np.concatenate([tiny_hi, mid_hi])
     bp = wc.BroadPhaseSAP(device=device)
     got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
     got = got.numpy().reshape(-1, 2)
-    assert bp.entry.capacity > 2 * len(lo) + 1024  # it grew
+    assert bp.entry.last_count > 1.7 * len(lo) + 16  # more than the room it starts with
+    assert bp.entry.capacity >= bp.entry.last_count  # it grew
     assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi))
 
 
@@ -220,3 +221,32 @@ def test_find_pairs_frame_after_frame(device, method):
         assert np.array_equal(got, box_pairs_numpy(lo, lo + size))
     with pytest.raises(ValueError, match="lower"):
         bp.find_pairs(lo, upper)
+
+
+def test_sap_statistics_last_block(device):
+    """The statistics pass runs in several blocks, and the last block to finish lays out the grid:
+    frame after frame (moving boxes), the sweep axis is that of greatest variance of the centres,
+    the grid starts at the lowest box, every accumulator is empty again after the frame, and the
+    pairs are the numpy truth."""
+    from warp_ccd.aabb import BOX_EMPTY
+
+    rng = np.random.default_rng(5)
+    n = 9000  # three blocks on the CPU, 36 on CUDA
+    bp = wc.BroadPhaseSAP(device=device)
+    lower = wp.empty(n, dtype=wp.vec3, device=device)
+    upper = wp.empty(n, dtype=wp.vec3, device=device)
+    for stretch in ((40.0, 10.0, 10.0), (10.0, 10.0, 40.0), (10.0, 40.0, 10.0)):
+        lo, hi = boxes_random(rng, n, spread=1.0, size=(0.02, 0.2))
+        lo, hi = lo * np.float32(stretch), hi * np.float32(stretch)
+        lower.assign(lo)
+        upper.assign(hi)
+        got = bp.find_pairs(lower, upper).numpy().reshape(-1, 2)
+        assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi))
+        grid = bp.grid.numpy()[0]
+        axis = int(np.argmax(stretch))
+        assert grid["axis"] == axis
+        ay = (axis + 1) % 3
+        assert grid["origin_y"] == lo[:, ay].min()
+        assert bp.blocks_done.numpy()[0] == 0
+        assert (bp.stat_sum.numpy() == 0).all()
+        assert (bp.stat_lo.numpy() == BOX_EMPTY).all() and (bp.stat_hi.numpy() == -BOX_EMPTY).all()

@@ -69,3 +69,19 @@ def test_held_refuses_a_buffer_that_grew_at_its_read(device):
     assert counters.finish() and not items.fitted and items.last_count == 10
     with pytest.raises(RuntimeError, match="items: the buffer grew"):
         items.held()
+
+
+def test_counter_read_generation():
+    """A reader's generation moves when one of its buffers gets new storage, or when a later reader
+    adopts a counter: a graph of its frames is then stale. A buffer adopted away still moves the
+    generation of both readers when it grows."""
+    a = GrowableBuffer(wp.int32, 4, "cpu", "a")
+    b = GrowableBuffer(wp.int32, 4, "cpu", "b")
+    first = CounterRead([a, b], "cpu")
+    g = first.generation
+    assert not a.ensure(4) and first.generation == g  # fits: same storage
+    assert a.ensure(5) and first.generation == g + 1
+    second = CounterRead([b], "cpu")
+    assert first.generation == g + 2 and second.generation == 0
+    assert b.ensure(100)
+    assert first.generation == g + 3 and second.generation == 1

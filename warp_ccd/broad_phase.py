@@ -11,9 +11,10 @@ boxes overlap):
 
 Sweep and prune, as run on the device each frame:
 
-1. Statistics of the boxes (one strided pass, reduced per block, a few atomics per block): bounds
-   of the scene, mean extent, variance of the centres per axis. The setup kernel reads them and
-   empties the accumulators for the next frame.
+1. Statistics of the boxes (one box per thread up to 131,072 boxes, reduced per block, a few
+   atomics per block): bounds of the scene, mean extent, variance of the centres per axis. The
+   last block to finish (a counter behind a memory fence) reads them, lays out the grid below and
+   empties the accumulators for the next frame, so the layout costs no launch of its own.
 2. The sweep axis is the axis of greatest variance of the centres; the plane perpendicular to it
    is divided into a grid of cells ``cell_scale`` times the mean box extent wide. Sweeping along
    one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
@@ -35,7 +36,7 @@ Sweep and prune, as run on the device each frame:
    there), so no pair is reported twice and none is lost; a block's pairs are reserved with one
    atomic add. The same threads test the boxes against the big-box list.
 
-Five launches per frame (statistics, setup, emit, sort, sweep); O(N) work plus the output,
+Four launches per frame (statistics with the layout, emit, sort, sweep); O(N) work plus the output,
 O(log N)-depth sort; everything stays on the device and the host reads nothing, so the frame can
 be a CUDA graph (:meth:`BroadPhase.find_pairs`). Counters are int64 and every buffer grows: the
 entry buffer and the pair buffer report overflow through their counters.
@@ -53,6 +54,7 @@ from .buffers import (
     GrowableBuffer,
     block_dim_for,
     block_reserve,
+    device_fence,
     emit_pair,
     used_count,
     vec_items,
@@ -240,8 +242,90 @@ STATS_BLOCK = 256
 memory (Warp tiles, two reductions of vectors) and adds them to the accumulators with one atomic
 per value."""
 
+STATS_BOXES_PER_CPU_LANE = 16
+"""Boxes per lane of the statistics pass on the CPU (one on CUDA): the CPU runs a block's lanes one
+after another, and each block's reductions cost it more than the boxes do."""
+
 vec6f = wp.types.vector(length=6, dtype=wp.float32)
 vec9d = wp.types.vector(length=9, dtype=wp.float64)
+
+
+@wp.func
+def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: float) -> float:
+    cell = cell_scale * mean_extent
+    cell = wp.max(cell, span / max_cells)
+    if cell <= 0.0:
+        cell = 1.0
+    return cell
+
+
+@wp.func
+def _sap_setup(
+    num_boxes: int,
+    cell_scale: float,
+    cell_limit: int,
+    q_bits: int,
+    stat_lo: wp.array[wp.float32],
+    stat_hi: wp.array[wp.float32],
+    stat_sum: wp.array[wp.float64],
+    big_count: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
+    grid: wp.array[SapGrid],
+):
+    """One thread, once every block has added its statistics: sweep axis of greatest centre
+    variance, grid of the other two axes with fewer than ``cell_limit`` cells, key quantisation
+    to ``q_bits`` bits. Reads the accumulators by exchanging them with their empty values (atomics:
+    the values other blocks added, and empty for the next frame); empties the big-box list and
+    the entry counter for this frame."""
+    lo = wp.vec3()
+    hi = wp.vec3()
+    for k in range(3):
+        lo[k] = wp.atomic_exch(stat_lo, k, BOX_EMPTY)
+        hi[k] = wp.atomic_exch(stat_hi, k, -BOX_EMPTY)
+    sums = vec9d()
+    for k in range(9):
+        sums[k] = wp.atomic_exch(stat_sum, k, wp.float64(0.0))
+    inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
+    best = int(0)
+    best_var = wp.float64(-1.0)
+    for k in range(3):
+        mean = sums[k] * inv_n
+        var = sums[3 + k] * inv_n - mean * mean
+        if var > best_var:
+            best_var = var
+            best = k
+    g = SapGrid()
+    g.axis = best
+    g.ay = (best + 1) % 3
+    g.az = (best + 2) % 3
+    max_cells = float(GRID_CELLS_MAX - 1)
+    span_y = hi[g.ay] - lo[g.ay]
+    span_z = hi[g.az] - lo[g.az]
+    cell_y = _cell_size(float(sums[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
+    cell_z = _cell_size(float(sums[6 + g.az] * inv_n), span_z, cell_scale, max_cells)
+    ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
+    nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
+    while ny * nz >= cell_limit:  # coarser cells until the ids fit their bits
+        cell_y = cell_y * 1.5
+        cell_z = cell_z * 1.5
+        ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
+        nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
+    g.origin_y = lo[g.ay]
+    g.origin_z = lo[g.az]
+    g.inv_cell_y = 1.0 / cell_y
+    g.inv_cell_z = 1.0 / cell_z
+    g.ny = ny
+    g.nz = nz
+    g.axis_min = wp.float64(lo[best])
+    g.q_bits = q_bits
+    g.q_max = wp.float64((1 << q_bits) - 1)
+    span = wp.float64(hi[best]) - g.axis_min
+    g.qscale = wp.float64(0.0)
+    if span > wp.float64(0.0):
+        g.qscale = g.q_max / span
+    grid[0] = g
+    big_count[0] = 0
+    entry_count[0] = wp.int64(0)
 
 
 @wp.kernel
@@ -251,17 +335,26 @@ def _sap_stats_kernel(
     num_boxes: int,
     num_blocks: int,
     entry_capacity: int,
+    cell_scale: float,
+    cell_limit: int,
+    q_bits: int,
     # Outputs
     stat_lo: wp.array[wp.float32],
     stat_hi: wp.array[wp.float32],
     stat_sum: wp.array[wp.float64],
+    blocks_done: wp.array[wp.int32],
     entry_key: wp.array[wp.int32],
+    big_count: wp.array[wp.int32],
+    entry_count: wp.array[wp.int64],
+    grid: wp.array[SapGrid],
 ):
     """Strided pass over the boxes by ``num_blocks`` blocks: scene bounds (``stat_lo``/``stat_hi``,
     3 each) and sums (``stat_sum``, 9: centres, squared centres, extents per axis), reduced per
-    block, then one atomic per value per block, into accumulators that the setup kernel of the
-    previous frame (or the constructor) left empty. The same threads fill the entry keys with
-    the padding key (the emit kernel overwrites the slots this frame's entries use)."""
+    block, then one atomic per value per block, into accumulators that the previous frame (or the
+    constructor) left empty. The same threads fill the entry keys with the padding key (the emit
+    kernel overwrites the slots this frame's entries use). The last block to finish (counted in
+    ``blocks_done``, fenced) lays out this frame's grid (:func:`_sap_setup`) and empties the
+    accumulators and ``blocks_done`` for the next."""
     block, lane = wp.tid()
     width = wp.block_dim()
     bounds = vec6f(BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY)  # (lo, -hi): both by min
@@ -291,80 +384,12 @@ def _sap_stats_kernel(
             wp.atomic_max(stat_hi, k, -block_bounds[3 + k])
         for k in range(9):
             wp.atomic_add(stat_sum, k, block_sums[k])
-
-
-@wp.func
-def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: float) -> float:
-    cell = cell_scale * mean_extent
-    cell = wp.max(cell, span / max_cells)
-    if cell <= 0.0:
-        cell = 1.0
-    return cell
-
-
-@wp.kernel
-def _sap_setup_kernel(
-    num_boxes: int,
-    cell_scale: float,
-    cell_limit: int,
-    q_bits: int,
-    # Outputs (the statistics are read, then emptied for the next frame)
-    stat_lo: wp.array[wp.float32],
-    stat_hi: wp.array[wp.float32],
-    stat_sum: wp.array[wp.float64],
-    big_count: wp.array[wp.int32],
-    entry_count: wp.array[wp.int64],
-    grid: wp.array[SapGrid],
-):
-    """One thread: sweep axis of greatest centre variance, grid of the other two axes with fewer
-    than ``cell_limit`` cells, key quantisation to ``q_bits`` bits. Empties the big-box list and
-    the entry counter for this frame, and the statistics for the next (saving a memset each)."""
-    inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
-    best = int(0)
-    best_var = wp.float64(-1.0)
-    for k in range(3):
-        mean = stat_sum[k] * inv_n
-        var = stat_sum[3 + k] * inv_n - mean * mean
-        if var > best_var:
-            best_var = var
-            best = k
-    g = SapGrid()
-    g.axis = best
-    g.ay = (best + 1) % 3
-    g.az = (best + 2) % 3
-    max_cells = float(GRID_CELLS_MAX - 1)
-    span_y = stat_hi[g.ay] - stat_lo[g.ay]
-    span_z = stat_hi[g.az] - stat_lo[g.az]
-    cell_y = _cell_size(float(stat_sum[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
-    cell_z = _cell_size(float(stat_sum[6 + g.az] * inv_n), span_z, cell_scale, max_cells)
-    ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
-    nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
-    while ny * nz >= cell_limit:  # coarser cells until the ids fit their bits
-        cell_y = cell_y * 1.5
-        cell_z = cell_z * 1.5
-        ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
-        nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
-    g.origin_y = stat_lo[g.ay]
-    g.origin_z = stat_lo[g.az]
-    g.inv_cell_y = 1.0 / cell_y
-    g.inv_cell_z = 1.0 / cell_z
-    g.ny = ny
-    g.nz = nz
-    g.axis_min = wp.float64(stat_lo[best])
-    g.q_bits = q_bits
-    g.q_max = wp.float64((1 << q_bits) - 1)
-    span = wp.float64(stat_hi[best]) - g.axis_min
-    g.qscale = wp.float64(0.0)
-    if span > wp.float64(0.0):
-        g.qscale = g.q_max / span
-    grid[0] = g
-    for k in range(3):
-        stat_lo[k] = BOX_EMPTY
-        stat_hi[k] = -BOX_EMPTY
-    for k in range(9):
-        stat_sum[k] = wp.float64(0.0)
-    big_count[0] = 0
-    entry_count[0] = wp.int64(0)
+        device_fence()  # this block's sums are visible before its count
+        if wp.atomic_add(blocks_done, 0, 1) == num_blocks - 1:
+            device_fence()
+            _sap_setup(num_boxes, cell_scale, cell_limit, q_bits, stat_lo, stat_hi, stat_sum, big_count, entry_count,
+                       grid)
+            blocks_done[0] = 0
 
 
 @wp.func
@@ -558,7 +583,8 @@ class BroadPhaseSAP(BroadPhase):
         cell_scale: grid cell width relative to the mean box extent.
         max_cells_per_box: boxes covering more cells go to the big-box list.
         stats_blocks: most blocks (of :data:`STATS_BLOCK` threads) of the statistics pass; it uses
-            one per 2,048 boxes up to that.
+            one per 256 boxes up to that (a box per thread: each box more per thread adds a
+            round trip to memory).
     """
 
     def __init__(self, *, device=None, graph: bool | None = None, cell_scale: float = 2.0, max_cells_per_box: int = 64,
@@ -568,13 +594,15 @@ class BroadPhaseSAP(BroadPhase):
         self.max_cells_per_box = int(max_cells_per_box)
         self.stats_blocks = int(stats_blocks)
         d = self.device
-        # Empty accumulators; each frame's setup kernel empties them again after reading them.
+        # Empty accumulators; each frame's last statistics block empties them again after reading them.
         self.stat_lo = wp.full(3, BOX_EMPTY, dtype=wp.float32, device=d)
         self.stat_hi = wp.full(3, -BOX_EMPTY, dtype=wp.float32, device=d)
         self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
+        self.blocks_done = wp.zeros(1, dtype=wp.int32, device=d)
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
         self.num_boxes = -1
-        self.entry = GrowableBuffer(wp.int32, 1024, d, "sap grid entries", factor=2)
+        # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
+        self.entry = GrowableBuffer(wp.int32, 1024, d, "sap grid entries", factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
         if n == self.num_boxes:
@@ -584,7 +612,7 @@ class BroadPhaseSAP(BroadPhase):
         self.box_cells = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
         self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
         self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
-        self.entry.ensure(2 * n + 1024)
+        self.entry.ensure(n + n // 2)  # room for 1.7 entries a box (they cover 1.5 to 2.5 cells): grows if short
         self._entry_box = None
         self.cell_bits, self.q_bits = sap_key_bits(n)
 
@@ -602,26 +630,25 @@ class BroadPhaseSAP(BroadPhase):
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
-        Five launches: statistics (and padding of the keys), setup, emit, sort (of the key bits
-        in use), sweep. The caller resets ``pairs`` (or not, to append). After the frame, check
-        ``pairs`` and :attr:`counters`; if a counter passed its capacity, ``ensure`` it and launch
-        again (:func:`find_pairs` does).
+        Four launches: statistics (with the padding of the keys and the grid layout), emit, sort
+        (of the key bits in use), sweep. The caller resets ``pairs`` (or not, to append). After
+        the frame, check ``pairs`` and :attr:`counters`; if a counter passed its capacity,
+        ``ensure`` it and launch again (:func:`find_pairs` does).
         """
         n = lower.shape[0]
         self._resize(n)
         if n < 2:
-            self.entry.reset()  # no entries (the setup kernel empties the counter otherwise)
+            self.entry.reset()  # no entries (the statistics pass empties the counter otherwise)
             return
         d = self.device
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        blocks = max(1, min(self.stats_blocks, -(-n // (8 * STATS_BLOCK)))) if d.is_cuda else 1
-        wp.launch_tiled(_sap_stats_kernel, dim=[blocks], inputs=[lower, upper, n, blocks, cap],
-                        outputs=[self.stat_lo, self.stat_hi, self.stat_sum, key], block_dim=STATS_BLOCK, device=d)
-        wp.launch(_sap_setup_kernel, dim=1,
-                  inputs=[n, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
-                  outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.big_count, self.entry.count, self.grid],
-                  device=d)
+        per_block = STATS_BLOCK * (1 if d.is_cuda else STATS_BOXES_PER_CPU_LANE)
+        blocks = max(1, min(self.stats_blocks, -(-n // per_block)))
+        wp.launch_tiled(_sap_stats_kernel, dim=[blocks],
+                        inputs=[lower, upper, n, blocks, cap, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
+                        outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.blocks_done, key, self.big_count,
+                                 self.entry.count, self.grid], block_dim=STATS_BLOCK, device=d)
         width = block_dim_for(d)
         wp.launch_tiled(_sap_emit_kernel, dim=[-(-n // width)],
                         inputs=[lower, upper, n, self.grid, self.max_cells_per_box, cap],

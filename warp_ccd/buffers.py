@@ -7,8 +7,9 @@ in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 (:class:`~warp_ccd.frame.CountedFrame`), so no item is ever dropped silently.
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
-protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in) and
-:func:`block_reserve` (slots for a whole block of threads with one atomic add).
+protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),
+:func:`block_reserve` (slots for a whole block of threads with one atomic add) and
+:func:`device_fence` (for a kernel whose last block finishes the work of all).
 
 Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
 their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
@@ -18,6 +19,7 @@ entries one by one): a kernel that emits many items reserves them per block
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,6 +36,7 @@ __all__ = [
     "GrowableBuffer",
     "block_dim_for",
     "block_reserve",
+    "device_fence",
     "emit_pair",
     "reserve_slot",
     "upper_bound",
@@ -74,6 +77,19 @@ def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
         base = wp.atomic_add(count, 0, wp.int64(total))
     base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
     return base + wp.int64(start)
+
+
+@wp.func_native("""
+#if defined(__CUDA_ARCH__)
+__threadfence();
+#endif
+""")
+def device_fence():
+    """Memory fence over the device (CUDA's ``__threadfence``; nothing on the CPU, whose blocks run
+    one after another): the calling thread's earlier writes and atomics are seen by every thread
+    before its later ones. For a last-block-done counter: the blocks add their results, fence,
+    count themselves; the block that counts last fences and reads the sum."""
+    ...
 
 
 @wp.func
@@ -123,6 +139,9 @@ class GrowableBuffer:
         device: Warp device.
         name: what the buffer holds, for error messages.
         factor: storage is ``factor * capacity`` items (2 for radix-sort scratch).
+        doubling: a growth at least doubles the capacity (few regrowths); False: it becomes the
+            items needed plus an eighth (for a buffer whose every slot costs work each frame, such
+            as keys sorted in full).
 
     Attributes:
         last_count: the counter as the host last read it (:class:`CounterRead`), 0 before; once
@@ -131,20 +150,24 @@ class GrowableBuffer:
             then grew: its new storage holds nothing yet).
     """
 
-    def __init__(self, dtype, capacity: int, device, name: str, factor: int = 1):
+    def __init__(self, dtype, capacity: int, device, name: str, factor: int = 1, doubling: bool = True):
         self.dtype = dtype
         self.device = wp.get_device(device)
         self.name = name
         self.factor = factor
+        self.doubling = doubling
         self.capacity = 0
         self.last_count = 0
         self.fitted = True
         self.count = wp.zeros(1, dtype=wp.int64, device=self.device)
+        self.readers = weakref.WeakSet()  # the CounterReads that read it
         self._allocate(max(1, int(capacity)))
 
     def _allocate(self, capacity: int) -> None:
         self.capacity = capacity
         self.data = wp.empty(self.factor * capacity, dtype=self.dtype, device=self.device)
+        for reader in self.readers:
+            reader.generation += 1  # graphs of the readers' frames hold the old storage
 
     def reset(self) -> None:
         """Sets the counter to zero (on the device, no host sync)."""
@@ -160,7 +183,8 @@ class GrowableBuffer:
             raise OverflowError(f"{self.name}: {needed} items exceed the limit of {COUNT_LIMIT} per buffer")
         if needed <= self.capacity:
             return False
-        self._allocate(int(min(COUNT_LIMIT - 1, max(needed + needed // 4 + 16, 2 * self.capacity))))
+        grown = max(needed + needed // 4 + 16, 2 * self.capacity) if self.doubling else needed + needed // 8 + 16
+        self._allocate(int(min(COUNT_LIMIT - 1, grown)))
         return True
 
     def numpy(self, count: int | None = None) -> np.ndarray:
@@ -186,9 +210,15 @@ class GrowableBuffer:
         return self.data[: self.last_count]
 
 
+@wp.kernel
+def _publish_counters_kernel(block: wp.array[wp.int64], host: wp.array[wp.int64]):
+    """Counter ``k`` into host memory (pinned, mapped into the device's address space)."""
+    host[wp.tid()] = block[wp.tid()]
+
+
 class CounterRead:
     """The counters of several buffers in one device block, reset with one memset and copied to
-    the host with one asynchronous copy, then read with one wait.
+    the host by one small kernel, then read with one wait.
 
     On construction the reader adopts the buffers' counters: each buffer's ``count`` becomes a view
     of one slot of :attr:`block` (its value kept). :meth:`reset` zeroes them all at once and
@@ -205,6 +235,8 @@ class CounterRead:
     Attributes:
         block: ``(len(buffers),)`` int64 counters on the device.
         counts: the counts of the last :meth:`finish`.
+        generation: counts the new storages of its buffers (and counters adopted away by a later
+            reader): a graph captured at one generation is stale at the next.
     """
 
     def __init__(self, buffers: Sequence[GrowableBuffer], device):
@@ -212,10 +244,17 @@ class CounterRead:
         self.device = wp.get_device(device)
         k = max(1, len(self.buffers))
         self.block = wp.zeros(k, dtype=wp.int64, device=self.device)
+        self.generation = 0
         for slot, b in enumerate(self.buffers):
             wp.copy(self.block, b.count, dest_offset=slot, src_offset=0, count=1)
             b.count = self.block[slot : slot + 1]
+            for reader in b.readers:
+                reader.generation += 1  # its counter moved out of the former reader's block
+            b.readers.add(self)
         self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        # The pinned block as the device sees it (mapped host memory: the same address on CUDA).
+        self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k,), device=self.device)
+                             if self.device.is_cuda else self.host)
         self._host_view = self.host.numpy()[: len(self.buffers)]  # made once: a frame's read is a tolist()
         self.counts = [0] * len(self.buffers)
 
@@ -224,10 +263,6 @@ class CounterRead:
         base = self.block.ptr
         return [(k, b) for k, b in enumerate(self.buffers) if b.count.ptr != base + 8 * k]
 
-    def counter_pointers(self) -> list[int]:
-        """Device addresses of the counters (a captured frame is stale when one changes)."""
-        return [b.count.ptr for b in self.buffers]
-
     def reset(self) -> None:
         """Zeroes every counter (one memset; capturable)."""
         self.block.zero_()
@@ -235,19 +270,31 @@ class CounterRead:
             b.reset()
 
     def enqueue(self) -> None:
-        """Copies every counter to the host (one asynchronous copy; capturable)."""
+        """Copies every counter to the host: one kernel writing into the pinned block, which CUDA maps
+        into the device's address space (capturable; a kernel node of a graph ends sooner than a
+        device-to-host copy node: 0.002-0.007 ms a frame on an H100)."""
         if self.buffers:
-            wp.copy(self.host, self.block, count=len(self.buffers))
+            wp.launch(_publish_counters_kernel, dim=len(self.buffers), inputs=[self.block],
+                      outputs=[self._host_mapped], device=self.device)
         for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 
     def finish(self) -> bool:
-        """Waits for the device, records the counts; returns True when a buffer grew (run again).
+        """Waits for the device, then :meth:`read`; returns True when a buffer grew (run again).
 
         Raises:
             OverflowError: a counter reached :data:`COUNT_LIMIT`.
         """
         wp.synchronize_device(self.device)
+        return self.read()
+
+    def read(self) -> bool:
+        """Records the counts that the device copied (call after waiting for it), grows the buffers
+        that overflowed; returns True when one grew (run again).
+
+        Raises:
+            OverflowError: a counter reached :data:`COUNT_LIMIT`.
+        """
         self.counts = self._host_view.tolist()
         grew = False
         for b, c in zip(self.buffers, self.counts):

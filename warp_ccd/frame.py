@@ -2,14 +2,16 @@
 
 A frame is: reset every counter of a :class:`~warp_ccd.buffers.CounterRead` (one memset), enqueue
 the work (kernels that stop at device-side counters; launch sizes are capacities), copy the
-counters into pinned host memory (one asynchronous copy), wait once. On CUDA the three are captured
-once in a graph (``wp.ScopedCapture``) and replayed (``wp.capture_launch``): no Python per kernel,
-no allocation, no host read inside the frame.
+counters into pinned host memory (one small kernel: the pinned block is mapped into the device's
+address space), wait once. On CUDA the three are captured once in a graph (``wp.ScopedCapture``)
+and replayed (``wp.capture_launch``): no Python per kernel, no allocation, no host read inside
+the frame.
 
 When a counter passed its buffer's capacity, the buffer grows (new storage), the frame runs again
 eagerly (which also sizes any scratch that follows the buffers' capacities) and the next frame is
-captured anew: a graph is captured only right after an eager run that saw the same storage, and
-replayed only while the storage it was captured with is still the buffers'. Nothing is dropped.
+captured anew: a graph is captured only right after an eager run, and replayed only while none of
+the frame's buffers got new storage since (:attr:`CounterRead.generation
+<warp_ccd.buffers.CounterRead.generation>`, one integer to compare). Nothing is dropped.
 """
 
 from __future__ import annotations
@@ -70,12 +72,8 @@ class CountedFrame:
         self.captures = 0
         self.host_ms = 0.0
         self.wait_ms = 0.0
-        self._captured = None  # storage layout when the graph was captured
-        self._eager = None  # storage layout of the last eager run
-
-    def _layout(self) -> list:
-        buffers = self.counter_read.buffers
-        return [(b.data.ptr, b.capacity) for b in buffers] + self.counter_read.counter_pointers()
+        self._captured = None  # storage generation when the graph was captured
+        self._eager = None  # storage generation of the last eager run
 
     def _enqueue(self) -> None:
         self.counter_read.reset()
@@ -85,7 +83,7 @@ class CountedFrame:
     def enqueue(self) -> None:
         """Enqueues the frame and its read: replays the graph, captures one (right after an eager run
         on the same storage) or launches eagerly."""
-        layout = self._layout()
+        layout = self.counter_read.generation  # a buffer's new storage makes the graph stale
         if self.mode == "graph":
             if self.graph is not None and self._captured == layout:
                 wp.capture_launch(self.graph)
@@ -108,7 +106,7 @@ class CountedFrame:
         launched = time.perf_counter()
         wp.synchronize_device(self.device)
         waited = time.perf_counter()
-        grew = self.counter_read.finish()
+        grew = self.counter_read.read()
         self.host_ms = (launched - start + time.perf_counter() - waited) * 1e3
         self.wait_ms = (waited - launched) * 1e3
         return grew

@@ -22,7 +22,7 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 ``world_vertex`` directly (``set_world_vertices`` or a kernel of one's own) for deforming meshes.
 """
 
-
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -427,6 +427,8 @@ class Scene:
 
     @staticmethod
     def _seconds(dt, what: str = "advance: dt") -> float:
+        if type(dt) is float and math.isfinite(dt):  # the common case, checked fast (host time of a frame)
+            return dt
         if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
             raise ValueError(f"{what} must be a finite number of seconds, got {dt!r}")
         return float(dt)
