@@ -53,6 +53,8 @@ def test_bench_end_to_end(device, tmp_path, capsys):
     assert {r["triangles_per_object"] for r in rows if r["triangles"] == "80"} == {80}
     stages = {r["stage"] for r in rows if r["method"] == "warp_ccd"}
     assert {"motion", "detect", "total"} <= stages and len(stages) >= 5  # plus the pipeline's own stages
+    if wp.get_device(device).is_cuda:  # frames back to back after the checks
+        assert {"loop_graph", "host_loop_graph"} <= stages
     assert {"warp_ccd", "warp_builtin", "warp_ccd_nxn"} <= {r["method"] for r in rows}
     assert len(doc["memory"]) == 4 and all(m["pipeline_peak_bytes"] > 0 for m in doc["memory"])
     assert doc["checks"] and all(c["ok"] for c in doc["checks"]) and doc["ok"]
@@ -219,6 +221,13 @@ def test_bench_scripts_run(device, tmp_path, capsys):
                           "--warmup", "1", "--no-memory", "--out", str(out), "--plot", str(tmp_path / "p.png")]) == 0
     doc = json.loads(out.read_text())
     assert {r["method"] for r in doc["rows"]} == {"warp_ccd", "warp_builtin"}
+    breakdown = load_script("host_breakdown")
+    out = tmp_path / "host.json"
+    assert breakdown.main(["--device", device, "--objects", "40", "--triangles", "poly", "--frames", "2",
+                           "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["variant"] for r in rows] == ["plain", "again"]
+    assert all(0 <= r["min"]["host"] <= r["median"]["host"] and r["median"]["wait"] >= 0 for r in rows)
     capsys.readouterr()
 
 

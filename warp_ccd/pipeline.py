@@ -4,7 +4,7 @@
 scene's device; each stage launches its own work and exposes the buffers with counters it writes
 (``counters``). All those counters live in one block (:class:`~warp_ccd.buffers.CounterRead`):
 the frame starts by zeroing it (one memset) and ends by copying it to pinned host memory (one
-asynchronous copy) and waiting once; between stages the host reads nothing. On CUDA the whole
+small kernel) and waiting once; between stages the host reads nothing. On CUDA the whole
 frame, optionally with the scene's motion, is a captured graph replayed each frame
 (:class:`~warp_ccd.frame.CountedFrame`). A counter that passed its buffer's capacity makes that
 buffer grow and the frame run again (then the graph is captured anew), so no pair is ever dropped.
