@@ -11,7 +11,7 @@ boxes overlap):
 
 Sweep and prune, as run on the device each frame:
 
-1. Statistics of the boxes (one box per thread up to 131,072 boxes, reduced per block, a few
+1. Statistics of the boxes (on CUDA one box per thread up to 131,072 boxes, reduced per block, a few
    atomics per block): bounds of the scene, mean extent, variance of the centres per axis. The
    last block to finish (a counter behind a memory fence) reads them, lays out the grid below and
    empties the accumulators for the next frame, so the layout costs no launch of its own.
@@ -242,9 +242,10 @@ STATS_BLOCK = 256
 memory (Warp tiles, two reductions of vectors) and adds them to the accumulators with one atomic
 per value."""
 
-STATS_BOXES_PER_CPU_LANE = 16
-"""Boxes per lane of the statistics pass on the CPU (one on CUDA): the CPU runs a block's lanes one
-after another, and each block's reductions cost it more than the boxes do."""
+STATS_CPU_BLOCK_BOXES = 4096
+"""Boxes per block of the statistics pass on the CPU (on CUDA one a thread, 256 a block): Warp runs
+a CPU block as one thread (256 with ``wp.config.enable_cpu_blocks``), whose reductions cost more
+than its boxes; a few blocks keep the last-block layout in use there too."""
 
 vec6f = wp.types.vector(length=6, dtype=wp.float32)
 vec9d = wp.types.vector(length=9, dtype=wp.float64)
@@ -582,9 +583,9 @@ class BroadPhaseSAP(BroadPhase):
         graph: as for :class:`BroadPhase`.
         cell_scale: grid cell width relative to the mean box extent.
         max_cells_per_box: boxes covering more cells go to the big-box list.
-        stats_blocks: most blocks (of :data:`STATS_BLOCK` threads) of the statistics pass; it uses
-            one per 256 boxes up to that (a box per thread: each box more per thread adds a
-            round trip to memory).
+        stats_blocks: most blocks (of :data:`STATS_BLOCK` threads) of the statistics pass; on
+            CUDA it uses one per 256 boxes up to that (a box per thread: each box more per thread
+            adds a round trip to memory).
     """
 
     def __init__(self, *, device=None, graph: bool | None = None, cell_scale: float = 2.0, max_cells_per_box: int = 64,
@@ -600,21 +601,23 @@ class BroadPhaseSAP(BroadPhase):
         self.stat_sum = wp.zeros(9, dtype=wp.float64, device=d)
         self.blocks_done = wp.zeros(1, dtype=wp.int32, device=d)
         self.grid = wp.zeros(1, dtype=SapGrid, device=d)
-        self.num_boxes = -1
+        self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
+        self._scratch_boxes = -1  # boxes the per-box scratch holds
+        self._entry_box = None
         # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
         self.entry = GrowableBuffer(wp.int32, 1024, d, "sap grid entries", factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
-        if n == self.num_boxes:
-            return
-        d = self.device
-        self.num_boxes = n
-        self.box_cells = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
-        self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
-        self.big_count = wp.zeros(1, dtype=wp.int32, device=d)
+        """Scratch for ``n`` boxes. It only grows: a captured frame holds its pointers, so a frame of
+        fewer boxes uses the larger scratch, and new scratch marks the frames reading the entries
+        stale (:meth:`~warp_ccd.buffers.GrowableBuffer.mark_stale`)."""
+        if n > self._scratch_boxes:
+            d = self.device
+            self._scratch_boxes = n
+            self.box_cells = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+            self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
+            self.entry.mark_stale()
         self.entry.ensure(n + n // 2)  # room for 1.7 entries a box (they cover 1.5 to 2.5 cells): grows if short
-        self._entry_box = None
-        self.cell_bits, self.q_bits = sap_key_bits(n)
 
     def _entry_arrays(self):
         if self._entry_box is None or self._entry_box.shape[0] != 2 * self.entry.capacity:
@@ -643,10 +646,11 @@ class BroadPhaseSAP(BroadPhase):
         d = self.device
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        per_block = STATS_BLOCK * (1 if d.is_cuda else STATS_BOXES_PER_CPU_LANE)
+        cell_bits, q_bits = sap_key_bits(n)
+        per_block = STATS_BLOCK if d.is_cuda else STATS_CPU_BLOCK_BOXES
         blocks = max(1, min(self.stats_blocks, -(-n // per_block)))
         wp.launch_tiled(_sap_stats_kernel, dim=[blocks],
-                        inputs=[lower, upper, n, blocks, cap, self.cell_scale, (1 << self.cell_bits) - 1, self.q_bits],
+                        inputs=[lower, upper, n, blocks, cap, self.cell_scale, (1 << cell_bits) - 1, q_bits],
                         outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.blocks_done, key, self.big_count,
                                  self.entry.count, self.grid], block_dim=STATS_BLOCK, device=d)
         width = block_dim_for(d)
@@ -654,7 +658,7 @@ class BroadPhaseSAP(BroadPhase):
                         inputs=[lower, upper, n, self.grid, self.max_cells_per_box, cap],
                         outputs=[self.box_cells, self.big_box, self.big_count, key, box, self.entry.count],
                         block_dim=width, device=d)
-        wp.utils.radix_sort_pairs(key, box, cap, end_bit=self.cell_bits + self.q_bits)
+        wp.utils.radix_sort_pairs(key, box, cap, end_bit=cell_bits + q_bits)
         wp.launch_tiled(_sap_sweep_kernel, dim=[-(-max(n, cap) // width)],
                         inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.box_cells, self.big_box,
                                 self.big_count, pairs.capacity],

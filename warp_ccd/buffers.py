@@ -166,8 +166,14 @@ class GrowableBuffer:
     def _allocate(self, capacity: int) -> None:
         self.capacity = capacity
         self.data = wp.empty(self.factor * capacity, dtype=self.dtype, device=self.device)
+        self.mark_stale()  # graphs of the readers' frames hold the old storage
+
+    def mark_stale(self) -> None:
+        """Moves on the :attr:`~CounterRead.generation` of every reader of this buffer: storage that
+        their frames use changed (this buffer's, or scratch that a stage keeps beside it), so
+        their captured graphs are stale."""
         for reader in self.readers:
-            reader.generation += 1  # graphs of the readers' frames hold the old storage
+            reader.generation += 1
 
     def reset(self) -> None:
         """Sets the counter to zero (on the device, no host sync)."""
@@ -252,9 +258,12 @@ class CounterRead:
                 reader.generation += 1  # its counter moved out of the former reader's block
             b.readers.add(self)
         self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
-        # The pinned block as the device sees it (mapped host memory: the same address on CUDA).
-        self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k,), device=self.device)
-                             if self.device.is_cuda else self.host)
+        # The pinned block as the device sees it: with unified addressing, pinned host memory is
+        # mapped at the same address (else None: a copy node instead).
+        self._host_mapped = self.host
+        if self.device.is_cuda:
+            self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k,), device=self.device)
+                                 if self.device.is_uva else None)
         self._host_view = self.host.numpy()[: len(self.buffers)]  # made once: a frame's read is a tolist()
         self.counts = [0] * len(self.buffers)
 
@@ -272,10 +281,13 @@ class CounterRead:
     def enqueue(self) -> None:
         """Copies every counter to the host: one kernel writing into the pinned block, which CUDA maps
         into the device's address space (capturable; a kernel node of a graph ends sooner than a
-        device-to-host copy node: 0.002-0.007 ms a frame on an H100)."""
-        if self.buffers:
+        device-to-host copy node: 0.002-0.007 ms a frame on an H100). A device without unified
+        addressing gets the copy."""
+        if self.buffers and self._host_mapped is not None:
             wp.launch(_publish_counters_kernel, dim=len(self.buffers), inputs=[self.block],
                       outputs=[self._host_mapped], device=self.device)
+        elif self.buffers:
+            wp.copy(self.host, self.block, count=len(self.buffers))
         for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 
