@@ -254,8 +254,7 @@ class CounterRead:
         for slot, b in enumerate(self.buffers):
             wp.copy(self.block, b.count, dest_offset=slot, src_offset=0, count=1)
             b.count = self.block[slot : slot + 1]
-            for reader in b.readers:
-                reader.generation += 1  # its counter moved out of the former reader's block
+            b.mark_stale()  # its counter moved out of the former readers' block
             b.readers.add(self)
         self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         # The pinned block as the device sees it: with unified addressing, pinned host memory is
@@ -283,11 +282,12 @@ class CounterRead:
         into the device's address space (capturable; a kernel node of a graph ends sooner than a
         device-to-host copy node: 0.002-0.007 ms a frame on an H100). A device without unified
         addressing gets the copy."""
-        if self.buffers and self._host_mapped is not None:
-            wp.launch(_publish_counters_kernel, dim=len(self.buffers), inputs=[self.block],
-                      outputs=[self._host_mapped], device=self.device)
-        elif self.buffers:
-            wp.copy(self.host, self.block, count=len(self.buffers))
+        if self.buffers:
+            if self._host_mapped is not None:
+                wp.launch(_publish_counters_kernel, dim=len(self.buffers), inputs=[self.block],
+                          outputs=[self._host_mapped], device=self.device)
+            else:
+                wp.copy(self.host, self.block, count=len(self.buffers))
         for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 

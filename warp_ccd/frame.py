@@ -82,21 +82,21 @@ class CountedFrame:
 
     def enqueue(self) -> None:
         """Enqueues the frame and its read: replays the graph, captures one (right after an eager run
-        on the same storage) or launches eagerly."""
-        layout = self.counter_read.generation  # a buffer's new storage makes the graph stale
+        at the same storage generation) or launches eagerly."""
+        generation = self.counter_read.generation  # a buffer's new storage makes the graph stale
         if self.mode == "graph":
-            if self.graph is not None and self._captured == layout:
+            if self.graph is not None and self._captured == generation:
                 wp.capture_launch(self.graph)
                 return
-            if self._eager == layout:
+            if self._eager == generation:
                 with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
                     self._enqueue()
-                self.graph, self._captured = capture.graph, layout
+                self.graph, self._captured = capture.graph, generation
                 self.captures += 1
                 wp.capture_launch(self.graph)
                 return
         self._enqueue()
-        self._eager = layout
+        self._eager = generation
 
     def run_once(self) -> bool:
         """Enqueues the frame, waits, reads the counters; returns True when a buffer grew (the frame's

@@ -162,14 +162,20 @@ class PipelineMethod:
         """
         if "graph" not in self.pipes:
             return synced_ms(lambda: self.scene.advance(dt), self.device), {}
+        wall, host = self._graph_frame(dt)
+        times = {"total_graph": wall, "host_graph": host}
+        return synced_ms(lambda: self.scene.advance(0.0), self.device), times
+
+    def _graph_frame(self, dt: float) -> tuple[float, float]:
+        """One fused graph frame ``detect(advance=dt)``: ``(wall ms, host ms)``."""
         pipe = self.pipes["graph"]
         out = {}
 
         def frame():
             out["result"] = pipe.detect(advance=dt)
 
-        times = {"total_graph": synced_ms(frame, self.device), "host_graph": out["result"].host_ms}
-        return synced_ms(lambda: self.scene.advance(0.0), self.device), times
+        wall = synced_ms(frame, self.device)
+        return wall, out["result"].host_ms
 
     def loop(self, dt: float, count: int) -> list[dict]:
         """``count`` fused graph frames ``detect(advance=dt)`` back to back, nothing else between them
@@ -177,16 +183,7 @@ class PipelineMethod:
         Empty without a graph mode."""
         if "graph" not in self.pipes:
             return []
-        pipe = self.pipes["graph"]
-        out, rows = {}, []
-
-        def frame():
-            out["result"] = pipe.detect(advance=dt)
-
-        for _ in range(count):
-            wall = synced_ms(frame, self.device)
-            rows.append({"loop_graph": wall, "host_loop_graph": out["result"].host_ms})
-        return rows
+        return [dict(zip(("loop_graph", "host_loop_graph"), self._graph_frame(dt))) for _ in range(count)]
 
     def run(self) -> dict:
         """One frame of detection on the scene as it is; ms per stage, ``detect_synced``, ``detect_<mode>``

@@ -2,7 +2,7 @@
 
 * :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
 * :class:`~warp_ccd.frame.CountedFrame` (the library's): one frame of device work followed by one
-  asynchronous copy of its counters to pinned host memory and one wait, launched eagerly from
+  small kernel copying its counters into pinned host memory and one wait, launched eagerly from
   Python or replayed as a captured graph. A counter past its buffer's capacity grows the buffer,
   and the frame is captured again and rerun: nothing is dropped.
 * :class:`ModeFrames`: the same frame in several modes, run in turn (one counter block).
