@@ -14,8 +14,9 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   once: no thread walks a big pair alone, the longest descent is a subtree's (not a whole
   tree's: at 1,000 polyhedra the slowest of the root-first items visited 71 nodes), and a frame
   of a hundred object pairs still fills the GPU. Testing the cut's boxes costs what a descent
-  from the root spends above it (about two tests per level). Work items are laid out by a scan
-  of the item counts of the pairs (``wp.utils.array_scan``); a fixed grid of threads takes them
+  from the root spends above it (about two tests per level). A first kernel writes each pair's
+  :class:`FrontPair` (its sides' starts in the tree arrays) and item count; work items are laid
+  out by a scan of those counts (``wp.utils.array_scan``); a fixed grid of threads takes them
   in rounds, one item per thread per round (the launch size does not depend on the frame, so
   the frame can be a CUDA graph), and each round a block reserves the rows of all its items with
   one atomic add (:func:`~warp_ccd.buffers.block_reserve`).
@@ -51,11 +52,34 @@ STACK_SIZE = 32
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
-THREADS_PER_SM = 1024
-"""Threads of the traversal per streaming multiprocessor on CUDA (half of what an H100 keeps
-resident): enough to hide memory latency, few enough that each has several items at scale."""
+THREADS_PER_SM = 512
+"""Threads of the traversal per streaming multiprocessor on CUDA: the kernel takes 96 registers a
+thread, so an H100 SM keeps two blocks of 256 resident; 512 is one wave (1,024 was two, the second
+mostly blocks that find no item: 0.035 against 0.038 ms at 10^4 objects, the same at 10^3 and 10^5)."""
 
 assert THREADS_PER_SM % BLOCK_DIM == 0
+
+
+@wp.struct
+class FrontPair:
+    """What the traversal needs of one object pair, laid out once per pair by
+    :func:`_front_count_kernel` so that a work item reads it in one step (not through the pair, its
+    shapes, then their starts: four dependent reads). The front object is the one opened to its
+    leaves; ``a < b`` are the pair's objects as the rows name them."""
+
+    a: int
+    b: int
+    front: int  # 0: a is the front object, 1: b
+    num_leaves: int  # of the front object's tree
+    num_cut: int  # subtrees of the other's cut
+    leaf_start: int  # the front shape's leaves in TreeView.leaf_node
+    cut_start: int  # the other shape's cut in TreeView.cut_node
+    front_node_start: int  # shape-global node id of the front shape's local node 0
+    other_node_start: int
+    front_slot_start: int  # the front instance's node boxes in TreeView.node_lower/upper
+    other_slot_start: int
+    front_tri_start: int  # the front shape's triangle order in TreeView.tri_order
+    other_tri_start: int
 
 
 @wp.func
@@ -69,19 +93,35 @@ def _num_cut(tree: TreeView, shape: int) -> int:
 
 
 @wp.func
-def _front_side(tree: TreeView, sa: int, sb: int) -> int:
-    """Which object of a pair of shapes ``(sa, sb)`` opens to its leaves: 0 (``a``) unless ``b`` has fewer."""
+def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int) -> FrontPair:
+    """The :class:`FrontPair` of objects ``a < b``: ``a`` opens to its leaves unless ``b`` has fewer."""
+    sa = instance_shape[a]
+    sb = instance_shape[b]
+    r = FrontPair()
+    r.a = a
+    r.b = b
+    r.front = 0
+    s_front = sa
+    s_other = sb
+    front_obj = a
+    other_obj = b
     if _num_leaves(tree, sb) < _num_leaves(tree, sa):
-        return 1
-    return 0
-
-
-@wp.func
-def _pair_items(tree: TreeView, sa: int, sb: int) -> wp.int64:
-    """Work items of a pair of shapes: leaves of the front object times the cut of the other."""
-    if _front_side(tree, sa, sb) == 1:
-        return wp.int64(_num_leaves(tree, sb)) * wp.int64(_num_cut(tree, sa))
-    return wp.int64(_num_leaves(tree, sa)) * wp.int64(_num_cut(tree, sb))
+        r.front = 1
+        s_front = sb
+        s_other = sa
+        front_obj = b
+        other_obj = a
+    r.num_leaves = _num_leaves(tree, s_front)
+    r.num_cut = _num_cut(tree, s_other)
+    r.leaf_start = tree.shape_leaf_start[s_front]
+    r.cut_start = tree.shape_cut_start[s_other]
+    r.front_node_start = tree.shape_node_start[s_front]
+    r.other_node_start = tree.shape_node_start[s_other]
+    r.front_slot_start = tree.instance_node_start[front_obj]
+    r.other_slot_start = tree.instance_node_start[other_obj]
+    r.front_tri_start = tree.shape_tri_order_start[s_front]
+    r.other_tri_start = tree.shape_tri_order_start[s_other]
+    return r
 
 
 @wp.kernel
@@ -92,36 +132,40 @@ def _front_count_kernel(
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     # Outputs
+    front_pair: wp.array[FrontPair],
     pair_items: wp.array[wp.int64],
 ):
-    """One thread per pair slot: the pair's work items (:func:`_pair_items`), 0 past the counter."""
+    """One thread per pair slot: the pair's :class:`FrontPair` and work items (leaves of the front
+    object times the cut of the other), 0 items past the counter."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
         pair_items[k] = wp.int64(0)
         return
     p = pair[k]
-    pair_items[k] = _pair_items(tree, instance_shape[p[0]], instance_shape[p[1]])
+    r = _front_pair(tree, instance_shape, p[0], p[1])
+    front_pair[k] = r
+    pair_items[k] = wp.int64(r.num_leaves) * wp.int64(r.num_cut)
+
+
+@wp.func
+def _leaf_pair_rows(tree: TreeView, front_node: int, other_node: int) -> int:
+    """Candidate rows of two leaves (shape-global node ids): the product of their triangle counts."""
+    return tree.node_triangle[front_node][1] * tree.node_triangle[other_node][1]
 
 
 @wp.func
 def _leaf_rows(tree: TreeView, front_node: int, found: vec_items, num_found: int) -> int:
-    """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``
-    (shape-global node ids): the products of their triangle counts."""
-    count_front = tree.node_triangle[front_node][1]
+    """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``."""
     rows = int(0)
     for m in range(num_found):
-        rows += count_front * tree.node_triangle[found[m]][1]
+        rows += _leaf_pair_rows(tree, front_node, found[m])
     return rows
 
 
 @wp.func
 def _write_rows(
     tree: TreeView,
-    a: int,
-    b: int,
-    s_front: int,
-    s_other: int,
-    front: int,
+    r: FrontPair,
     front_node: int,
     other_node: int,
     slot: wp.int64,
@@ -132,17 +176,15 @@ def _write_rows(
     node ids) from ``slot`` on (rows keep ``a`` first); returns the next slot."""
     rf = tree.node_triangle[front_node]
     ro = tree.node_triangle[other_node]
-    base_f = tree.shape_tri_order_start[s_front]
-    base_o = tree.shape_tri_order_start[s_other]
     for i in range(rf[0], rf[0] + rf[1]):
-        tri_f = tree.tri_order[base_f + i]
+        tri_f = tree.tri_order[r.front_tri_start + i]
         for j in range(ro[0], ro[0] + ro[1]):
             if slot < wp.int64(candidate_capacity):
-                tri_o = tree.tri_order[base_o + j]
-                if front == 0:
-                    candidate[int(slot)] = wp.vec4i(a, tri_f, b, tri_o)
+                tri_o = tree.tri_order[r.other_tri_start + j]
+                if r.front == 0:
+                    candidate[int(slot)] = wp.vec4i(r.a, tri_f, r.b, tri_o)
                 else:
-                    candidate[int(slot)] = wp.vec4i(a, tri_o, b, tri_f)
+                    candidate[int(slot)] = wp.vec4i(r.a, tri_o, r.b, tri_f)
             slot += wp.int64(1)
     return slot
 
@@ -150,13 +192,7 @@ def _write_rows(
 @wp.func
 def _leaf_vs_subtree(
     tree: TreeView,
-    a: int,
-    b: int,
-    s_front: int,
-    s_other: int,
-    front: int,
-    front_obj: int,
-    other_obj: int,
+    r: FrontPair,
     leaf: int,
     sub: int,
     candidate: wp.array[wp.vec4i],
@@ -166,13 +202,11 @@ def _leaf_vs_subtree(
     """Leaf ``leaf`` (shape-local) of the pair's front object against the subtree of node ``sub``
     of the other object's tree, depth first: the overlapping leaves (shape-global ids), the first
     :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows of any more
-    emitted at once (one atomic add each)."""
-    front_node = tree.shape_node_start[s_front] + leaf
-    front_slot = tree.instance_node_start[front_obj] + leaf
-    lo = tree.node_lower[front_slot]
-    hi = tree.node_upper[front_slot]
-    other_node = tree.shape_node_start[s_other]
-    other_slot = tree.instance_node_start[other_obj]
+    emitted at once (one atomic add each). A node's children are read with its box, before its
+    test: one dependent read a node, not two."""
+    front_node = r.front_node_start + leaf
+    lo = tree.node_lower[r.front_slot_start + leaf]
+    hi = tree.node_upper[r.front_slot_start + leaf]
     found = vec_items()
     num_found = int(0)
     stack = vec_stack()
@@ -181,17 +215,17 @@ def _leaf_vs_subtree(
     while top > 0:
         top -= 1
         node = stack[top]
-        if boxes_overlap(lo, hi, tree.node_lower[other_slot + node], tree.node_upper[other_slot + node]):
-            child = tree.node_child[other_node + node]
+        slot = r.other_slot_start + node
+        child = tree.node_child[r.other_node_start + node]
+        if boxes_overlap(lo, hi, tree.node_lower[slot], tree.node_upper[slot]):
             if child[0] < 0:
                 if num_found < ITEM_LIST_SIZE:
-                    found[num_found] = other_node + node
+                    found[num_found] = r.other_node_start + node
                     num_found += 1
                 else:
-                    rows = _leaf_rows(tree, front_node, vec_items(other_node + node), 1)
-                    slot = wp.atomic_add(candidate_count, 0, wp.int64(rows))
-                    _write_rows(tree, a, b, s_front, s_other, front, front_node, other_node + node, slot, candidate,
-                                candidate_capacity)
+                    other_node = r.other_node_start + node
+                    first = wp.atomic_add(candidate_count, 0, wp.int64(_leaf_pair_rows(tree, front_node, other_node)))
+                    _write_rows(tree, r, front_node, other_node, first, candidate, candidate_capacity)
             else:
                 stack[top] = child[1]
                 stack[top + 1] = child[0]
@@ -202,8 +236,7 @@ def _leaf_vs_subtree(
 @wp.kernel
 def _front_traverse_kernel(
     tree: TreeView,
-    instance_shape: wp.array[wp.int32],
-    pair: wp.array[wp.vec2i],
+    front_pair: wp.array[FrontPair],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     pair_item_end: wp.array[wp.int64],
@@ -233,40 +266,27 @@ def _front_traverse_kernel(
     for _round in range(int(rounds)):
         found = vec_items()
         num_found = int(0)
-        a = int(0)
-        b = int(0)
-        s_front = int(0)
-        s_other = int(0)
-        front = int(0)
+        r = FrontPair()
         front_node = int(0)
         if item < total:
             k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
-            p = pair[k]
-            a = p[0]
-            b = p[1]
-            sa = instance_shape[a]
-            sb = instance_shape[b]
-            front = _front_side(tree, sa, sb)
-            s_front = sa
-            s_other = sb
-            front_obj = a
-            other_obj = b
-            if front == 1:
-                s_front = sb
-                s_other = sa
-                front_obj = b
-                other_obj = a
-            num_cut = wp.int64(_num_cut(tree, s_other))
-            w = item - (pair_item_end[k] - wp.int64(_num_leaves(tree, s_front)) * num_cut)
-            leaf = tree.leaf_node[tree.shape_leaf_start[s_front] + int(w / num_cut)]
-            sub = tree.cut_node[tree.shape_cut_start[s_other] + int(w % num_cut)]
-            front_node = tree.shape_node_start[s_front] + leaf
-            found, num_found = _leaf_vs_subtree(tree, a, b, s_front, s_other, front, front_obj, other_obj, leaf, sub,
-                                                candidate, candidate_count, candidate_capacity)
+            r = front_pair[k]
+            w = item - (pair_item_end[k] - wp.int64(r.num_leaves) * wp.int64(r.num_cut))
+            leaf_index = int(0)
+            cut_index = int(0)
+            if w < wp.int64(2147483647):  # 32-bit division where it fits (nearly always)
+                leaf_index = int(w) / r.num_cut
+                cut_index = int(w) - leaf_index * r.num_cut
+            else:
+                leaf_index = int(w / wp.int64(r.num_cut))
+                cut_index = int(w - wp.int64(leaf_index) * wp.int64(r.num_cut))
+            leaf = tree.leaf_node[r.leaf_start + leaf_index]
+            front_node = r.front_node_start + leaf
+            found, num_found = _leaf_vs_subtree(tree, r, leaf, tree.cut_node[r.cut_start + cut_index], candidate,
+                                                candidate_count, candidate_capacity)
         slot = block_reserve(candidate_count, int(lane), _leaf_rows(tree, front_node, found, num_found))
         for m in range(num_found):
-            slot = _write_rows(tree, a, b, s_front, s_other, front, front_node, found[m], slot, candidate,
-                               candidate_capacity)
+            slot = _write_rows(tree, r, front_node, found[m], slot, candidate, candidate_capacity)
         item += num_threads
 
 
@@ -314,13 +334,14 @@ class MidPhaseBVH:
         if self._items is None or self._items.shape[0] != pairs.capacity:  # scratch follows the pair capacity
             self._items = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._item_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
+            self._front_pair = wp.zeros(pairs.capacity, dtype=FrontPair, device=d)
         tree = self.bvh.tree
         wp.launch(_front_count_kernel, dim=pairs.capacity,
                   inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity],
-                  outputs=[self._items], device=d)
+                  outputs=[self._front_pair, self._items], device=d)
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
         wp.launch_tiled(_front_traverse_kernel, dim=[self.num_blocks],
-                        inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._item_end,
+                        inputs=[tree, self._front_pair, pairs.count, pairs.capacity, self._item_end,
                                 self.num_blocks, self.candidates.capacity],
                         outputs=[self.candidates.data, self.candidates.count], block_dim=self.block_dim, device=d)
 
