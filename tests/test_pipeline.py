@@ -53,6 +53,32 @@ def test_pipeline_options_agree(device, options):
     assert np.array_equal(got.colliding, ref.colliding)
 
 
+@pytest.mark.parametrize("cut_depth", [0, 3])
+def test_traversal_cut_levels(device, cut_depth):
+    """A frame starts its descents at the cut, or one level deeper when the last frame's items (at
+    most doubled by that level) fit one round of the grid; both find the same pairs."""
+    scene = wc.Scene.random(80, seed=2, shapes=("cube", "icosphere2", "dodecahedron"), density=0.2, device=device)
+    scene.advance(0.3)
+    ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
+    pipe = wc.CollisionPipeline(scene, cut_depth=cut_depth)
+    mid = pipe.mid
+    threads = mid.num_blocks * mid.block_dim
+    for last_items in (0, 2**62):  # each level once: a frame whose buffers grow runs again, and chooses again
+        mid._load.assign(np.array([last_items, 0], np.int64))
+        pipe.detect()
+    items = {}
+    for last_items, last_deep, deep in ((0, 0, 1), (threads // 2, 0, 1), (threads // 2 + 1, 0, 0), (threads, 1, 1),
+                                        (threads + 1, 1, 0), (2**62, 0, 0)):
+        mid._load.assign(np.array([last_items, last_deep], np.int64))
+        got = pipe.detect()
+        assert mid._cut_level.numpy()[0] == deep
+        assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+        assert np.array_equal(mid._load.numpy(), [mid._item_end.numpy()[got.num_broad_pairs - 1], deep])
+        items[deep] = mid._load.numpy()[0]
+    assert ref.num_triangle_pairs > 0
+    assert items[1] > items[0]  # the deeper cut has more subtrees
+
+
 def test_timings(device):
     scene = wc.Scene.random(100, seed=1, device=device)
     res = wc.CollisionPipeline(scene, timings=True).detect()

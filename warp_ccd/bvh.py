@@ -188,8 +188,9 @@ class TreeView:
     """What the refit and traversal kernels need: topology per shape, bounds per instance.
 
     Per shape ``s``, its nodes are ``shape_node_start[s] + local id``, its leaves (shape-local
-    ids) ``leaf_node[shape_leaf_start[s]:shape_leaf_start[s + 1]]`` and its cut (subtrees that
-    partition the leaves, :meth:`ShapeTree.cut`) ``cut_node[shape_cut_start[s]:...]``; the bounds
+    ids) ``leaf_node[shape_leaf_start[s]:shape_leaf_start[s + 1]]`` and its two cuts (subtrees
+    that partition the leaves, :meth:`ShapeTree.cut`), at the scene's ``cut_depth`` and one level
+    deeper: ``cut_node[shape_cut_start[2 s + deep]:shape_cut_start[2 s + deep + 1]]``; the bounds
     of instance ``i`` are ``node_lower/upper[instance_node_start[i] + local id]``.
     """
 
@@ -365,7 +366,8 @@ class SceneBVH:
             two launches, leaves then inner nodes (an inner node reads all its leaves); bigger trees
             are refit level by level, one thread per node.
         cut_depth: level of each tree's cut (:meth:`ShapeTree.cut`, at most ``2**cut_depth``
-            subtrees), where the traversal starts its descents.
+            subtrees), where the traversal starts its descents; the trees also keep the cut one
+            level deeper, for frames with little work (:class:`~warp_ccd.mid_phase.MidPhaseBVH`).
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`refit`.
@@ -452,7 +454,7 @@ class SceneBVH:
         tv.node_leaf = wp.array(cat([tr.node_leaf for tr in self.trees], (0, 2)), dtype=wp.vec2i, device=d)
         tv.leaf_node = wp.array(cat([tr.leaf_node for tr in self.trees], (0,)), dtype=wp.int32, device=d)
         tv.shape_leaf_start = wp.array(np.concatenate([[0], np.cumsum(leaves)]).astype(np.int32), device=d)
-        cuts = [tr.cut(int(cut_depth)) for tr in self.trees]
+        cuts = [tr.cut(int(cut_depth) + deep) for tr in self.trees for deep in (0, 1)]  # shape-major
         tv.shape_cut_start = wp.array(np.concatenate([[0], np.cumsum([len(c) for c in cuts])]).astype(np.int32),
                                       dtype=wp.int32, device=d)
         tv.cut_node = wp.array(cat(cuts, (0,)), dtype=wp.int32, device=d)

@@ -19,7 +19,9 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   out by a scan of those counts (``wp.utils.array_scan``); a fixed grid of threads takes them
   in rounds, one item per thread per round (the launch size does not depend on the frame, so
   the frame can be a CUDA graph), and each round a block reserves the rows of all its items with
-  one atomic add (:func:`~warp_ccd.buffers.block_reserve`).
+  one atomic add (:func:`~warp_ccd.buffers.block_reserve`). A light frame, one whose items would
+  fit the grid once even if twice as many (judged by the last frame's, which the traversal
+  records on the device), starts one level below the cut: twice the items, shorter descents.
 * :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
   ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
   finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
@@ -88,13 +90,33 @@ def _num_leaves(tree: TreeView, shape: int) -> int:
 
 
 @wp.func
-def _num_cut(tree: TreeView, shape: int) -> int:
-    return tree.shape_cut_start[shape + 1] - tree.shape_cut_start[shape]
+def _cut_start(tree: TreeView, shape: int, deep: int) -> int:
+    """Where the shape's cut (``deep`` 0) or its cut one level deeper (1) starts in ``cut_node``."""
+    return tree.shape_cut_start[2 * shape + deep]
 
 
 @wp.func
-def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int) -> FrontPair:
-    """The :class:`FrontPair` of objects ``a < b``: ``a`` opens to its leaves unless ``b`` has fewer."""
+def _num_cut(tree: TreeView, shape: int, deep: int) -> int:
+    return _cut_start(tree, shape, deep + 1) - _cut_start(tree, shape, deep)
+
+
+@wp.func
+def _deep_cut(load: wp.array[wp.int64], num_threads: int) -> int:
+    """1 when this frame's traversal starts one level below the cut: when the last frame's items,
+    at most doubled by that level (``2**(d + 1)`` subtrees against ``2**d``), fit in one round of
+    the grid; else 0. ``load``: the last frame's items and whether it went deep."""
+    room = wp.int64(num_threads)
+    if load[1] == wp.int64(0):
+        room = room / wp.int64(2)
+    if load[0] <= room:
+        return 1
+    return 0
+
+
+@wp.func
+def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int, deep: int) -> FrontPair:
+    """The :class:`FrontPair` of objects ``a < b``: ``a`` opens to its leaves unless ``b`` has fewer;
+    the other starts from its cut, or one level deeper (``deep``)."""
     sa = instance_shape[a]
     sb = instance_shape[b]
     r = FrontPair()
@@ -112,9 +134,9 @@ def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: i
         front_obj = b
         other_obj = a
     r.num_leaves = _num_leaves(tree, s_front)
-    r.num_cut = _num_cut(tree, s_other)
+    r.num_cut = _num_cut(tree, s_other, deep)
     r.leaf_start = tree.shape_leaf_start[s_front]
-    r.cut_start = tree.shape_cut_start[s_other]
+    r.cut_start = _cut_start(tree, s_other, deep)
     r.front_node_start = tree.shape_node_start[s_front]
     r.other_node_start = tree.shape_node_start[s_other]
     r.front_slot_start = tree.instance_node_start[front_obj]
@@ -131,18 +153,26 @@ def _front_count_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
+    load: wp.array[wp.int64],
+    num_threads: int,
     # Outputs
     front_pair: wp.array[FrontPair],
     pair_items: wp.array[wp.int64],
+    cut_level: wp.array[wp.int32],
 ):
     """One thread per pair slot: the pair's :class:`FrontPair` and work items (leaves of the front
-    object times the cut of the other), 0 items past the counter."""
+    object times the cut of the other), 0 items past the counter; every pair starts from the cut,
+    or one level below it when the last frame's ``load`` was light (:func:`_deep_cut`, the choice
+    also written to ``cut_level``)."""
     k = wp.tid()
+    deep = _deep_cut(load, num_threads)
+    if k == 0:
+        cut_level[0] = deep
     if k >= used_count(pair_count, pair_capacity):
         pair_items[k] = wp.int64(0)
         return
     p = pair[k]
-    r = _front_pair(tree, instance_shape, p[0], p[1])
+    r = _front_pair(tree, instance_shape, p[0], p[1], deep)
     front_pair[k] = r
     pair_items[k] = wp.int64(r.num_leaves) * wp.int64(r.num_cut)
 
@@ -158,8 +188,8 @@ def _leaf_rows(tree: TreeView, front_node: int, found: vec_items, num_found: int
     """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``."""
     rows = int(0)
     for m in range(num_found):
-        rows += _leaf_pair_rows(tree, front_node, found[m])
-    return rows
+        rows += tree.node_triangle[found[m]][1]
+    return rows * tree.node_triangle[front_node][1]
 
 
 @wp.func
@@ -242,22 +272,30 @@ def _front_traverse_kernel(
     pair_item_end: wp.array[wp.int64],
     num_blocks: int,
     candidate_capacity: int,
+    cut_level: wp.array[wp.int32],
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
+    load: wp.array[wp.int64],
 ):
     """``num_blocks`` blocks of threads take the work items (inclusive scan ``pair_item_end`` of the
     pairs' item counts) in rounds, one item per thread per round; item ``w`` of pair ``k`` is leaf
     ``w / C`` (in leaf order) of the pair's front object against cut subtree ``w % C`` of the
-    other's ``C``. Each round, a block reserves all its threads' rows with one atomic add."""
+    other's ``C``. Each round, a block reserves all its threads' rows with one atomic add. The
+    first thread records the frame's ``load`` (items, deep cut or not) for the next frame's choice."""
     block, lane = wp.tid()
     width = wp.block_dim()
     num_threads = wp.int64(num_blocks * width)
     t = wp.int64(block * width + lane)
     num_pairs = used_count(pair_count, pair_capacity)
+    total = wp.int64(0)
+    if num_pairs > 0:
+        total = pair_item_end[num_pairs - 1]
+    if t == wp.int64(0):
+        load[0] = total
+        load[1] = wp.int64(cut_level[0])
     if num_pairs == 0:
         return  # the whole grid returns: no block is left waiting in block_reserve
-    total = pair_item_end[num_pairs - 1]
     if wp.int64(block * width) >= total:
         return  # the whole block: its items, t + r * num_threads, are all past the last
     rounds = (total + num_threads - wp.int64(1)) / num_threads  # the same in every thread
@@ -312,6 +350,9 @@ class MidPhaseBVH:
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.block_dim = block_dim_for(self.device)
         self.num_blocks = self.device.sm_count * THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
+        # The last frame's items and cut level (:func:`_deep_cut`); it starts as a heavy frame.
+        self._load = wp.array([2**62, 0], dtype=wp.int64, device=self.device)
+        self._cut_level = wp.zeros(1, dtype=wp.int32, device=self.device)
         self._items = None
 
     @property
@@ -337,13 +378,15 @@ class MidPhaseBVH:
             self._front_pair = wp.zeros(pairs.capacity, dtype=FrontPair, device=d)
         tree = self.bvh.tree
         wp.launch(_front_count_kernel, dim=pairs.capacity,
-                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity],
-                  outputs=[self._front_pair, self._items], device=d)
+                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._load,
+                          self.num_blocks * self.block_dim],
+                  outputs=[self._front_pair, self._items, self._cut_level], device=d)
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
         wp.launch_tiled(_front_traverse_kernel, dim=[self.num_blocks],
                         inputs=[tree, self._front_pair, pairs.count, pairs.capacity, self._item_end,
-                                self.num_blocks, self.candidates.capacity],
-                        outputs=[self.candidates.data, self.candidates.count], block_dim=self.block_dim, device=d)
+                                self.num_blocks, self.candidates.capacity, self._cut_level],
+                        outputs=[self.candidates.data, self.candidates.count, self._load],
+                        block_dim=self.block_dim, device=d)
 
 
 @wp.kernel

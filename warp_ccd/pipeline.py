@@ -188,6 +188,7 @@ class CollisionPipeline:
         leaf_size: triangles per tree leaf (``bvh`` mid phase).
         cut_depth: tree level where the traversal's descents start (``bvh`` mid phase; see
             :mod:`warp_ccd.mid_phase`): more, shorter work items as it grows; 0 descends from the roots.
+            A frame whose work fits the GPU's threads once starts one level deeper.
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
