@@ -63,20 +63,23 @@ def test_traversal_cut_levels(device, cut_depth):
     pipe = wc.CollisionPipeline(scene, cut_depth=cut_depth)
     mid = pipe.mid
     threads = mid.num_blocks * mid.block_dim
-    for last_items in (0, 2**62):  # each level once: a frame whose buffers grow runs again, and chooses again
-        mid._load.assign(np.array([last_items, 0], np.int64))
-        pipe.detect()
-    items = {}
+    pipe.detect()  # sizes the buffers (both levels find the same candidates), so no frame below runs twice
+    items, candidates = {}, {}
     for last_items, last_deep, deep in ((0, 0, 1), (threads // 2, 0, 1), (threads // 2 + 1, 0, 0), (threads, 1, 1),
                                         (threads + 1, 1, 0), (2**62, 0, 0)):
         mid._load.assign(np.array([last_items, last_deep], np.int64))
         got = pipe.detect()
+        assert got.num_broad_pairs > 0
         assert mid._cut_level.numpy()[0] == deep
         assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
         assert np.array_equal(mid._load.numpy(), [mid._item_end.numpy()[got.num_broad_pairs - 1], deep])
         items[deep] = mid._load.numpy()[0]
+        rows = mid.candidates.data.numpy()[: got.num_candidates]
+        candidates.setdefault(deep, sorted(map(tuple, rows.tolist())))
+        assert sorted(map(tuple, rows.tolist())) == candidates[deep]
     assert ref.num_triangle_pairs > 0
     assert items[1] > items[0]  # the deeper cut has more subtrees
+    assert candidates[0] == candidates[1]  # and finds the same triangle pairs
 
 
 def test_timings(device):

@@ -104,7 +104,8 @@ def _num_cut(tree: TreeView, shape: int, deep: int) -> int:
 def _deep_cut(load: wp.array[wp.int64], num_threads: int) -> int:
     """1 when this frame's traversal starts one level below the cut: when the last frame's items,
     at most doubled by that level (``2**(d + 1)`` subtrees against ``2**d``), fit in one round of
-    the grid; else 0. ``load``: the last frame's items and whether it went deep."""
+    the grid; else 0. ``load``: the last frame's items and whether it went deep (a frame run again
+    after a buffer grew judges by its first, cut-short run: at worst one heavy frame goes deep)."""
     room = wp.int64(num_threads)
     if load[1] == wp.int64(0):
         room = room / wp.int64(2)
