@@ -74,9 +74,8 @@ def test_traversal_cut_levels(device, cut_depth):
         assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
         assert np.array_equal(mid._load.numpy(), [mid._item_end.numpy()[got.num_broad_pairs - 1], deep])
         items[deep] = mid._load.numpy()[0]
-        rows = mid.candidates.data.numpy()[: got.num_candidates]
-        candidates.setdefault(deep, sorted(map(tuple, rows.tolist())))
-        assert sorted(map(tuple, rows.tolist())) == candidates[deep]
+        rows = sorted(map(tuple, mid.candidates.data.numpy()[: got.num_candidates].tolist()))
+        assert candidates.setdefault(deep, rows) == rows
     assert ref.num_triangle_pairs > 0
     assert items[1] > items[0]  # the deeper cut has more subtrees
     assert candidates[0] == candidates[1]  # and finds the same triangle pairs
