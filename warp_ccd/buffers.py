@@ -307,10 +307,13 @@ class CounterRead:
         Raises:
             OverflowError: a counter reached :data:`COUNT_LIMIT`.
         """
-        self.counts = self._host_view.tolist()
+        self.counts = counts = self._host_view.tolist()
         grew = False
-        for b, c in zip(self.buffers, self.counts):
+        for b, c in zip(self.buffers, counts):
             b.last_count = c
-            b.fitted = not b.ensure(c)
-            grew |= not b.fitted
+            if c > b.capacity:  # the rare case: grow (or raise past COUNT_LIMIT)
+                b.fitted = not b.ensure(c)
+                grew |= not b.fitted
+            else:
+                b.fitted = True
         return grew

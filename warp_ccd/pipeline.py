@@ -54,31 +54,29 @@ class CollisionResult:
 
     def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained=None, device_segments=None, num_triangle_pairs: int | None = None):
-        # A device array, or a function that makes the view (a view costs Python some 10 us:
-        # detect() leaves them to the first access); the count of rows must then be given.
-        self._make = {}
-        for name, value in (("device_triangle_pairs", device_triangle_pairs), ("device_contained", device_contained),
-                            ("device_segments", device_segments)):
-            if callable(value):
-                self._make[name] = value
-            else:
-                self.__dict__[name] = value
-        if num_triangle_pairs is None:
-            if callable(device_triangle_pairs):
-                raise ValueError("CollisionResult: a device_triangle_pairs made on access needs num_triangle_pairs")
-            num_triangle_pairs = device_triangle_pairs.shape[0]
-        self.num_objects = num_objects
-        self.device_colliding = device_colliding
-        self.timings = timings
-        self.num_candidates = num_candidates
-        self.num_broad_pairs = num_broad_pairs
-        self._num_triangle_pairs = int(num_triangle_pairs)
-        self.host_ms = 0.0
+                 device_contained=None, device_segments=None):
+        self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
+                             num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
+                             _num_triangle_pairs=int(device_triangle_pairs.shape[0]), host_ms=0.0, _rows={},
+                             device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
+                             device_segments=device_segments)
+
+    @classmethod
+    def _of_buffers(cls, num_objects: int, rows: dict, device_colliding: wp.array, timings: dict | None,
+                    num_candidates: int, num_broad_pairs: int) -> CollisionResult:
+        """A result over a pipeline's buffers, made in a few steps (it is Python's time of every
+        frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
+        and ``device_segments`` to ``(buffer array, count)``, sliced on first access (a view
+        costs Python some 10 us; a name left out is None)."""
+        result = cls.__new__(cls)
+        result.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
+                               num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
+                               _num_triangle_pairs=rows["device_triangle_pairs"][1], host_ms=0.0, _rows=rows)
+        return result
 
     def _view(self, name: str):
-        make = self._make.get(name)
-        return None if make is None else make()
+        held = self._rows.get(name)
+        return None if held is None else held[0][: held[1]]
 
     @cached_property
     def device_triangle_pairs(self) -> wp.array:
@@ -297,6 +295,9 @@ class CollisionPipeline:
 
     def _frame(self, step: float | None) -> CountedFrame:
         """The frame that advances the scene by ``step`` first (None: detection alone)."""
+        frame = self._frames.frames.get(step)
+        if frame is not None:
+            return frame
         if step is None:
             return self._frames.get(None, self._launch_stages)
 
@@ -318,19 +319,13 @@ class CollisionPipeline:
             A :class:`CollisionResult` holding views of this pipeline's device buffers, valid until
             the next ``detect()`` (:meth:`CollisionResult.copy` keeps them).
         """
+        # Every step here is host time of every frame, a few microseconds in all: no allocation
+        # but the result, no view made before it is asked for.
         start = time.perf_counter()
-        n = self.scene.num_objects
-        d = self.device
-        vec3 = self.scene.vec3_type
-        step = None if advance is None else self.scene.advance_host(advance)
-        if n < 2:
-            if step is not None:
-                self.scene.enqueue_advance(step)
-            empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.narrow.contained is not None else None
-            no_segments = wp.zeros((0, 2), dtype=vec3, device=d) if self.narrow.segments else None
-            return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
-                                   {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
-                                   device_contained=empty, device_segments=no_segments)
+        scene = self.scene
+        step = None if advance is None else scene.advance_host(advance)
+        if scene.num_objects < 2:
+            return self._no_pairs(step)
         frame = self._frame(step)
         grew = frame.run_once()
         wait_ms = frame.wait_ms
@@ -339,22 +334,27 @@ class CollisionPipeline:
             grew = frame.run_once()
             wait_ms += frame.wait_ms
         narrow = self.narrow
-        hits, num_hits = narrow.hits, narrow.hits.last_count
-        contained = narrow.contained
-        num_contained = contained.last_count if contained is not None else 0
-        result = CollisionResult(
-            n,
-            lambda: hits.data[:num_hits],
-            narrow.object_colliding,
-            self._times,
-            num_candidates=self.mid.candidates.last_count,
-            num_broad_pairs=self.pairs.last_count,
-            device_contained=(lambda: contained.data[:num_contained]) if contained is not None else None,
-            device_segments=(lambda: narrow.segment[:num_hits]) if narrow.segments else None,
-            num_triangle_pairs=num_hits,
-        )
+        hits = narrow.hits
+        rows = {"device_triangle_pairs": (hits.data, hits.last_count)}
+        if narrow.contained is not None:
+            rows["device_contained"] = (narrow.contained.data, narrow.contained.last_count)
+        if narrow.segments:
+            rows["device_segments"] = (narrow.segment, hits.last_count)
+        result = CollisionResult._of_buffers(scene.num_objects, rows, narrow.object_colliding, self._times,
+                                             self.mid.candidates.last_count, self.pairs.last_count)
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
         return result
+
+    def _no_pairs(self, step: float | None) -> CollisionResult:
+        """The result of a scene of fewer than two objects (moved by ``step`` first, when given)."""
+        n, d = self.scene.num_objects, self.device
+        if step is not None:
+            self.scene.enqueue_advance(step)
+        empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.narrow.contained is not None else None
+        no_segments = wp.zeros((0, 2), dtype=self.scene.vec3_type, device=d) if self.narrow.segments else None
+        return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
+                               {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
+                               device_contained=empty, device_segments=no_segments)
 
 
 def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", **options) -> CollisionResult:
