@@ -713,6 +713,14 @@ def _pair_triangles(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i
 
 
 @wp.func
+def _centred_row(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i, tol_rel: wp.float64):
+    """The two triangles of row ``c`` centred on their centroid, with normals, tolerance and
+    degeneracy flags (:func:`_centre_pair`), in the precision of ``world_vertex``."""
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    return _centre_pair(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel))
+
+
+@wp.func
 def _append_hit(
     c: wp.vec4i,
     hit_capacity: int,
@@ -754,9 +762,7 @@ def _narrow_moller_kernel(
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
-    tol = type(v0[0])(tol_rel)
-    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centre_pair(v0, v1, v2, u0, u1, u2, tol)
+    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centred_row(mesh, world_vertex, c, tol_rel)
     kind, p, q = _moller_crossing(a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b)
     if kind == CONTACT_TOUCH_TEST:
         slot = reserve_slot(touch_count, touch_capacity)
@@ -792,9 +798,7 @@ def _narrow_touch_kernel(
     if u >= used_count(touch_count, touch_capacity):
         return
     c = touch[u]
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
-    tol = type(v0[0])(tol_rel)
-    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centre_pair(v0, v1, v2, u0, u1, u2, tol)
+    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centred_row(mesh, world_vertex, c, tol_rel)
     near = False
     if e < 3:
         near = _edge_near_face(e, a0, a1, a2, b0, b1, b2, nb, eps)
