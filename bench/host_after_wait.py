@@ -17,10 +17,13 @@ three pieces of host work are timed, each by itself after its own wait:
 * ``detect``: ``detect(advance=dt)`` of a pipeline over a small scene (``--objects``, a frame of
   about 0.1 ms on an H100): its ``host_ms`` in us, the same code and scene after every wait.
 
-For ``python``, the thread's CPU time is taken too (``time.thread_time_ns``): when the wall time
-grows and the CPU time does not, the thread was not running. ``steal_ms`` is the steal time
-``/proc/stat`` reports for all CPUs over each case (a virtual machine's host running something
-else), per repetition.
+For ``python``, the thread's CPU time is taken too (``time.thread_time_ns``, around the wall
+clock's readings, so it includes them and its own call: 1-6 us more than the wall time when warm):
+when the wall time grows and the CPU time does not, the thread was not running. ``steal_ms`` is
+the steal time ``/proc/stat`` reports for all CPUs over each case (a virtual machine's host
+running something else), per repetition; it counts in clock ticks (10 ms) summed over the CPUs.
+The ``sync`` wait is as long as the kernel calibrated once at the start, about ``T``. The
+``detect`` row means host time only on CUDA: on the CPU, Warp runs the kernels inside the launch.
 
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"method",
 "wait_ms", "work", "us_min", "us_median", "cpu_us_median", "steal_ms"}``.
@@ -31,6 +34,7 @@ JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import types
@@ -76,7 +80,7 @@ def _steal_ms() -> float | None:
     try:
         with open("/proc/stat") as f:
             fields = f.readline().split()
-        return int(fields[8]) * 1000.0 / 100.0  # USER_HZ ticks
+        return int(fields[8]) * 1000.0 / os.sysconf("SC_CLK_TCK")
     except (OSError, IndexError, ValueError):
         return None
 

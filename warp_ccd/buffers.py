@@ -311,7 +311,7 @@ class CounterRead:
         grew = False
         for b, c in zip(self.buffers, counts):
             b.last_count = c
-            if c > b.capacity:  # the rare case: grow (or raise past COUNT_LIMIT)
+            if c > b.capacity or c >= COUNT_LIMIT:  # the rare case: grow (or raise past COUNT_LIMIT)
                 b.fitted = not b.ensure(c)
                 grew |= not b.fitted
             else:

@@ -714,8 +714,9 @@ def _pair_triangles(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i
 
 @wp.func
 def _centred_row(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i, tol_rel: wp.float64):
-    """The two triangles of row ``c`` centred on their centroid, with normals, tolerance and
-    degeneracy flags (:func:`_centre_pair`), in the precision of ``world_vertex``."""
+    """The two triangles of row ``c`` centred on the pair's centroid, with their normals, the
+    absolute tolerance ``eps`` and degeneracy flags (:func:`_centre_pair`), in the precision of
+    ``world_vertex``."""
     v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
     return _centre_pair(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel))
 

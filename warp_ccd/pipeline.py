@@ -50,6 +50,10 @@ class CollisionResult:
         host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
             waiting for the device), in ms.
         device_colliding: ``(N,)`` int32 flags on the device.
+
+    Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
+    (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
+    ``device_contained``, ``device_segments``) and the counts it reports.
     """
 
     def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
@@ -319,8 +323,8 @@ class CollisionPipeline:
             A :class:`CollisionResult` holding views of this pipeline's device buffers, valid until
             the next ``detect()`` (:meth:`CollisionResult.copy` keeps them).
         """
-        # Every step here is host time of every frame, a few microseconds in all: no allocation
-        # but the result, no view made before it is asked for.
+        # Every step here is host time of every frame, a few microseconds in all: no array
+        # allocated, no view made before it is asked for.
         start = time.perf_counter()
         scene = self.scene
         step = None if advance is None else scene.advance_host(advance)
