@@ -59,10 +59,9 @@ class CollisionResult:
     def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
                  device_contained=None, device_segments=None):
-        self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
-                             num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
-                             _num_triangle_pairs=int(device_triangle_pairs.shape[0]), host_ms=0.0, _rows={},
-                             device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
+        self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
+                   int(device_triangle_pairs.shape[0]), {})
+        self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
                              device_segments=device_segments)
 
     @classmethod
@@ -73,10 +72,16 @@ class CollisionResult:
         and ``device_segments`` to ``(buffer array, count)``, sliced on first access (a view
         costs Python some 10 us; a name left out is None)."""
         result = cls.__new__(cls)
-        result.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
-                               num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
-                               _num_triangle_pairs=rows["device_triangle_pairs"][1], host_ms=0.0, _rows=rows)
+        result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
+                     rows["device_triangle_pairs"][1], rows)
         return result
+
+    def _hold(self, num_objects: int, device_colliding: wp.array, timings: dict | None, num_candidates: int,
+              num_broad_pairs: int, num_triangle_pairs: int, rows: dict) -> None:
+        """Sets what every result holds (``rows``: the views made on first access, as in :meth:`_of_buffers`)."""
+        self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
+                             num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
+                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, _rows=rows)
 
     def _view(self, name: str):
         held = self._rows.get(name)
