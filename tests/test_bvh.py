@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.bvh import build_tree
+from warp_ccd.bvh_build import build_tree, centroid_keys
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 
@@ -13,7 +13,7 @@ def tree_invariants(tree, vertices, triangles, leaf_size):
     m = len(triangles)
     assert sorted(tree.tri_order.tolist()) == list(range(m))
     in_leaves = []
-    centroid = vertices[triangles].astype(np.float64).mean(axis=1)
+    centroid = centroid_keys(vertices, triangles)
     for node in range(tree.num_nodes):
         start, count = tree.node_triangle[node]
         left, right = tree.node_child[node]
@@ -71,7 +71,7 @@ def refit_contains(scene, bvh):
     hi = bvh.tree.node_upper.numpy()
     start = bvh.tree.instance_node_start.numpy()
     for i in range(scene.num_objects):
-        tr = bvh.trees[scene.instance_shape_np[i]]
+        tr = bvh.shape_tree(scene.instance_shape_np[i])
         base = start[i]
         tri = scene.shape_meshes[scene.instance_shape_np[i]][1]
         vs = wv[scene.instance_vertex_start_np[i] :]

@@ -11,7 +11,8 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 """
 
 from .broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
-from .bvh import SceneBVH, build_tree
+from .bvh import SceneBVH
+from .bvh_build import build_tree
 from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .motion import EllipseMotion
 from .narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
