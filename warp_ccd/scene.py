@@ -31,8 +31,8 @@ import warp as wp
 
 from .motion import EllipseMotion, advance_time
 from .precision import PRECISIONS, precision_types
+from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
-from .shapes import validate_mesh
 
 # Forward kernels only; no FMA contraction, so that world vertices from the same poses are the same
 # bits on every device (the narrow phase's verdicts then agree too).
@@ -185,7 +185,8 @@ class Scene:
     Most users build scenes with :meth:`random` or :meth:`from_meshes`.
 
     Args:
-        shapes: sequence of ``(vertices (n, 3), triangles (m, 3))`` meshes, each validated.
+        shapes: sequence of ``(vertices (n, 3), triangles (m, 3))`` meshes, each validated, or a
+            :class:`~warp_ccd.shapes.MeshSet` that :func:`~warp_ccd.shapes.validate_meshes` returned.
         instance_shape: ``(N,)`` shape id of each object.
         instance_scale: ``(N,)`` uniform scale of each object (default 1).
         poses: ``(N, 7)`` rows ``(px, py, pz, qx, qy, qz, qw)`` (default identity).
@@ -219,8 +220,15 @@ class Scene:
         self.device = wp.get_device(device)
         self.precision = precision
         fdtype = np.float64 if precision == "float64" else np.float32
-        self.shape_meshes = [validate_mesh(v, t, name=f"shape {k}", dtype=fdtype) for k, (v, t) in enumerate(shapes)]
-        num_shapes = len(self.shape_meshes)
+        if isinstance(shapes, MeshSet):
+            packed = shapes
+            if packed.vertices.dtype != fdtype:
+                packed = MeshSet(packed.vertices.astype(fdtype), packed.triangles, packed.vertex_start,
+                                 packed.triangle_start)
+        else:
+            packed = validate_meshes(shapes, kind="shape", dtype=fdtype)
+        self.shapes = packed
+        num_shapes = len(packed)
         inst = np.asarray(instance_shape)
         if inst.ndim != 1 or (inst.size and not np.issubdtype(inst.dtype, np.integer)):
             raise ValueError(
@@ -251,10 +259,10 @@ class Scene:
             raise ValueError(f"poses: row {int(np.argmax(bad))} is not finite or its quaternion is not unit")
 
         # Host-side topology (static): offsets of shapes and instances.
-        shape_nv = np.array([v.shape[0] for v, _ in self.shape_meshes], np.int64)
-        shape_nt = np.array([t.shape[0] for _, t in self.shape_meshes], np.int64)
-        self.shape_vertex_start_np = np.concatenate([[0], np.cumsum(shape_nv)]).astype(np.int32)
-        self.shape_triangle_start_np = np.concatenate([[0], np.cumsum(shape_nt)]).astype(np.int32)
+        shape_nv = np.diff(packed.vertex_start)
+        shape_nt = np.diff(packed.triangle_start)
+        self.shape_vertex_start_np = packed.vertex_start.astype(np.int32)
+        self.shape_triangle_start_np = packed.triangle_start.astype(np.int32)
         self.instance_shape_np = inst.astype(np.int32)
         inst_nv = shape_nv[inst] if n else np.zeros(0, np.int64)
         inst_nt = shape_nt[inst] if n else np.zeros(0, np.int64)
@@ -269,11 +277,9 @@ class Scene:
         self.instance_scale_np = scale
 
         d = self.device
-        cat_v = np.concatenate([v for v, _ in self.shape_meshes]) if num_shapes else np.zeros((0, 3), fdtype)
-        cat_t = np.concatenate([t for _, t in self.shape_meshes]) if num_shapes else np.zeros((0, 3), np.int32)
         vec3 = self.vec3_type
-        self.shape_vertex = wp.array(cat_v, dtype=vec3, device=d)
-        self.shape_triangle = wp.array(cat_t, dtype=wp.vec3i, device=d)
+        self.shape_vertex = wp.array(packed.vertices, dtype=vec3, device=d)
+        self.shape_triangle = wp.array(packed.triangles, dtype=wp.vec3i, device=d)
         self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
         self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
         self.instance_shape = wp.array(self.instance_shape_np, dtype=wp.int32, device=d)
@@ -366,24 +372,29 @@ class Scene:
         """
         if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
             raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
-        shapes, inst, seen = [], [], {}
-        for i, m in enumerate(meshes):
-            if not isinstance(m, (tuple, list)) or len(m) != 2:
-                raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(m).__name__}")
-            key = (id(m[0]), id(m[1]))
-            if key in seen and not deforming:
-                inst.append(seen[key])
-                continue
-            shapes.append(validate_mesh(m[0], m[1], name=f"mesh {i}", dtype=np.float64))
-            seen[key] = len(shapes) - 1
-            inst.append(len(shapes) - 1)
-        n = len(inst)
+        pairs = [type(m) in (tuple, list) and len(m) == 2 for m in meshes]
+        if not all(pairs):
+            i = pairs.index(False)
+            raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(meshes[i]).__name__}")
+        n = len(meshes)
+        if deforming or n == 0:
+            source = np.arange(n)
+            inst = source
+        else:  # the very same arrays share one shape, numbered in order of first use
+            key = np.array([(id(v), id(t)) for v, t in meshes], np.int64)
+            _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+            by_use = np.argsort(first)
+            rank = np.empty_like(by_use)
+            rank[by_use] = np.arange(len(by_use))
+            source = first[by_use]
+            inst = rank[inverse.reshape(-1)]
+        packed = validate_meshes([meshes[i] for i in source], labels=source, kind="mesh", dtype=np.float64)
         poses = None
         if transforms is not None:
             if deforming:
                 raise ValueError("transforms: a deforming scene takes world vertices, not transforms")
             poses = transforms_to_poses(transforms, n)
-        return cls(shapes, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
+        return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
                    precision=precision)
 
     # ------------------------------------------------------------------ motion
@@ -506,6 +517,14 @@ class Scene:
         self.world_vertex.assign(v)
 
     # ------------------------------------------------------------------ views
+    @property
+    def shape_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per shape ``(local vertices (n, 3), triangles (m, 3) int32)``: views of :attr:`shapes`
+        (made on first use: one Python pair per shape, for export and inspection)."""
+        if getattr(self, "_shape_meshes", None) is None:
+            self._shape_meshes = self.shapes.meshes()
+        return self._shape_meshes
+
     def world_vertex32(self) -> wp.array:
         """World vertices as float32 ``wp.vec3`` (for rendering and export): ``world_vertex`` itself
         in a float32 scene, a copy rounded to nearest (refreshed on each call) in a float64 one."""

@@ -5,8 +5,10 @@ positions in local coordinates (unit size: every vertex lies on the unit sphere,
 circumradius is 1), ``triangles`` an ``(m, 3)`` int32 array of vertex indices wound
 counter-clockwise seen from outside (the normal ``(b - a) x (c - a)`` points outward).
 
-All meshes that enter the library pass :func:`validate_mesh`, which raises a ``ValueError``
-naming the object and the problem instead of letting malformed data reach a kernel.
+All meshes that enter the library pass :func:`validate_mesh` or, many at once,
+:func:`validate_meshes` (the same checks over the concatenated arrays: no Python per mesh beyond
+gathering them), which raise a ``ValueError`` naming the object and the problem instead of letting
+malformed data reach a kernel.
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ __all__ = [
     "shape",
     "tetrahedron",
     "triangle",
+    "MeshSet",
     "validate_mesh",
+    "validate_meshes",
 ]
 
 
@@ -232,3 +236,112 @@ def validate_mesh(vertices, triangles, name: str = "mesh", dtype=np.float32) -> 
         )
     out = v32 if dtype == np.float32 else v.astype(dtype)
     return np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32))
+
+
+class MeshSet:
+    """Many triangle meshes packed end to end (what :func:`validate_meshes` returns).
+
+    Attributes:
+        vertices: ``(V, 3)`` float32 or float64, all meshes' vertices.
+        triangles: ``(T, 3)`` int32 mesh-local vertex indices.
+        vertex_start, triangle_start: ``(S + 1,)`` int64 offsets of each mesh.
+    """
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
+                 triangle_start: np.ndarray):
+        self.vertices = vertices
+        self.triangles = triangles
+        self.vertex_start = vertex_start
+        self.triangle_start = triangle_start
+
+    def __len__(self) -> int:
+        return len(self.vertex_start) - 1
+
+    def mesh(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Mesh ``k`` as ``(vertices, triangles)`` views."""
+        v0, v1 = self.vertex_start[k], self.vertex_start[k + 1]
+        t0, t1 = self.triangle_start[k], self.triangle_start[k + 1]
+        return self.vertices[v0:v1], self.triangles[t0:t1]
+
+    def meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Every mesh as ``(vertices, triangles)`` views (one Python pair per mesh)."""
+        vs = np.split(self.vertices, self.vertex_start[1:-1])
+        ts = np.split(self.triangles, self.triangle_start[1:-1])
+        return list(zip(vs, ts))
+
+
+def validate_meshes(meshes, labels=None, kind: str = "mesh", dtype=np.float32) -> MeshSet:
+    """Checks many triangle meshes at once (the checks of :func:`validate_mesh`, vectorised over
+    their concatenation) and packs them.
+
+    Args:
+        meshes: sequence of ``(vertices (n, 3), triangles (m, 3))`` pairs.
+        labels: ``(S,)`` integers naming the meshes in errors (``"{kind} {label}"``; default
+            their positions).
+        kind: the word before the label (``"mesh"``, ``"shape"``).
+        dtype: ``np.float32`` or ``np.float64``: type of the packed vertices.
+
+    Returns:
+        The :class:`MeshSet`.
+
+    Raises:
+        ValueError: naming the first bad mesh and the problem, as :func:`validate_mesh` does.
+    """
+    labels = np.arange(len(meshes)) if labels is None else np.asarray(labels)
+
+    def name(k) -> str:
+        return f"{kind} {int(labels[k])}"
+
+    def each() -> None:  # the slow path, only to name a problem the fast one cannot place
+        for k, (v, t) in enumerate(meshes):
+            validate_mesh(v, t, name=name(k), dtype=dtype)
+
+    if len(meshes) == 0:
+        return MeshSet(np.zeros((0, 3), dtype), np.zeros((0, 3), np.int32), np.zeros(1, np.int64),
+                       np.zeros(1, np.int64))
+    try:
+        vs = [np.asarray(v) for v, _ in meshes]
+        ts = [np.asarray(t) for _, t in meshes]
+        v = np.concatenate(vs)
+        t = np.concatenate(ts)
+    except Exception:  # ragged, non-numeric, wrong ranks: let the per-mesh checks say which
+        each()
+        raise
+    num_v = np.fromiter(map(len, vs), np.int64, len(vs))
+    num_t = np.fromiter(map(len, ts), np.int64, len(ts))
+    if v.ndim != 2 or v.shape[1] != 3 or t.ndim != 2 or t.shape[1] != 3 \
+            or not (np.issubdtype(v.dtype, np.integer) or np.issubdtype(v.dtype, np.floating)) \
+            or t.dtype == bool or not np.issubdtype(t.dtype, np.integer):
+        each()
+        raise ValueError(f"{kind}es: inconsistent arrays")  # not reached: some mesh is bad
+    vstart = np.concatenate([[0], np.cumsum(num_v)])
+    tstart = np.concatenate([[0], np.cumsum(num_t)])
+    few = num_v < 3
+    if few.any():
+        k = int(np.argmax(few))
+        raise ValueError(f"{name(k)}: a mesh needs at least 3 vertices, got {num_v[k]}")
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all():
+        row = int(np.argmin(finite))
+        k = int(np.searchsorted(vstart, row, side="right") - 1)
+        raise ValueError(f"{name(k)}: vertex {row - vstart[k]} is not finite ({v[row].tolist()})")
+    with np.errstate(over="ignore"):
+        v32 = v.astype(np.float32)
+    fits = np.isfinite(v32).all(axis=1)
+    if not fits.all():
+        k = int(np.searchsorted(vstart, int(np.argmin(fits)), side="right") - 1)
+        big = np.abs(v[vstart[k]:vstart[k + 1]]).max()
+        raise ValueError(f"{name(k)}: vertices overflow float32 (largest magnitude {big:.3g})")
+    empty = num_t == 0
+    if empty.any():
+        raise ValueError(f"{name(int(np.argmax(empty)))}: the mesh has no triangles")
+    limit = np.repeat(num_v, num_t)[:, None]
+    bad = ((t < 0) | (t >= limit)).any(axis=1)
+    if bad.any():
+        row = int(np.argmax(bad))
+        k = int(np.searchsorted(tstart, row, side="right") - 1)
+        raise ValueError(f"{name(k)}: triangle {row - tstart[k]} has vertex index out of range "
+                         f"[0, {num_v[k]}): {t[row].tolist()}")
+    out = v32 if dtype == np.float32 else v.astype(dtype)
+    return MeshSet(np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32)), vstart.astype(np.int64),
+                   tstart.astype(np.int64))
