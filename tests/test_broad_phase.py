@@ -164,7 +164,7 @@ def test_sap_grid_entries_grow(device):
     the frame grows it and runs again, and every pair is found."""
     rng = np.random.default_rng(11)
     tiny_lo, tiny_hi = boxes_random(rng, 3000, spread=5.0, size=(0.005, 0.015))
-    mid_lo, mid_hi = boxes_random(rng, 300, spread=5.0, size=(2.45, 2.55))
+    mid_lo, mid_hi = boxes_random(rng, 600, spread=5.0, size=(2.45, 2.55))
     lo, hi = np.concatenate([tiny_lo, mid_lo]), np.concatenate([tiny_hi, mid_hi])
     bp = wc.BroadPhaseSAP(device=device)
     bp._resize(len(lo))

@@ -61,6 +61,40 @@ def test_counted_frame_grows_and_records_counts(device):
     assert frame.run() == [1000, 0] and len(runs) == 3  # fits at once now
 
 
+@wp.kernel
+def _relay_kernel(src: wp.array[int], src_count: wp.array[wp.int64], src_capacity: int, capacity: int,
+                  data: wp.array[int], count: wp.array[wp.int64]):
+    """Emits one item for every item of ``src`` that was stored (a downstream stage)."""
+    k = wp.tid()
+    if wp.int64(k) < wp.min(src_count[0], wp.int64(src_capacity)):
+        slot = reserve_slot(count, capacity)
+        if slot >= 0:
+            data[slot] = src[k]
+
+
+def test_downstream_buffers_grow_with_the_shortfall(device):
+    """With stages, a buffer fed by one that overflowed 10x grows as if its count were 10x too: the
+    second run fits both; without stages it takes a run per stage."""
+    for stages, want_runs in (([0, 1], 2), (None, 3)):
+        first = GrowableBuffer(wp.int32, 100, device, "first")
+        second = GrowableBuffer(wp.int32, 100, device, "second", doubling=False)
+        counters = CounterRead([first, second], device, stages=stages)
+        runs = []
+
+        def launch(first=first, second=second, runs=runs):
+            runs.append(1)
+            wp.launch(_emit_kernel, dim=1000, inputs=[first.capacity], outputs=[first.data, first.count],
+                      device=device)
+            wp.launch(_relay_kernel, dim=first.capacity,
+                      inputs=[first.data, first.count, first.capacity, second.capacity],
+                      outputs=[second.data, second.count], device=device)
+
+        assert CountedFrame(launch, counters).run() == [1000, 1000] and len(runs) == want_runs
+        assert np.array_equal(np.sort(second.held().numpy()), np.arange(1000))
+    with pytest.raises(ValueError, match="stages"):
+        CounterRead([first], device, stages=[0, 1])
+
+
 def test_held_refuses_a_buffer_that_grew_at_its_read(device):
     items = GrowableBuffer(wp.int32, 1, device, "items")
     counters = CounterRead([items], device)

@@ -237,6 +237,11 @@ class CounterRead:
     Args:
         buffers: the buffers, fixed for the reader's life (their storage may grow).
         device: Warp device of the buffers.
+        stages: optional ``(len(buffers),)`` order of the buffers in the frame's data flow (a
+            buffer is filled from the items of buffers of lower stages). When a buffer overflows
+            by a factor ``r``, those of later stages counted only the items that came through,
+            so they grow to ``r`` times their count too: the next run usually fits everything,
+            where growing one stage per run would take a run per stage.
 
     Attributes:
         block: ``(len(buffers),)`` int64 counters on the device.
@@ -245,8 +250,11 @@ class CounterRead:
             reader): a graph captured at one generation is stale at the next.
     """
 
-    def __init__(self, buffers: Sequence[GrowableBuffer], device):
+    def __init__(self, buffers: Sequence[GrowableBuffer], device, stages: Sequence[int] | None = None):
         self.buffers = list(buffers)
+        if stages is not None and len(stages) != len(self.buffers):
+            raise ValueError(f"stages: expected {len(self.buffers)} entries, got {len(stages)}")
+        self.stages = None if stages is None else [int(x) for x in stages]
         self.device = wp.get_device(device)
         k = max(1, len(self.buffers))
         self.block = wp.zeros(k, dtype=wp.int64, device=self.device)
@@ -309,11 +317,24 @@ class CounterRead:
         """
         self.counts = counts = self._host_view.tolist()
         grew = False
-        for b, c in zip(self.buffers, counts):
+        short = None
+        for k, (b, c) in enumerate(zip(self.buffers, counts)):
             b.last_count = c
             if c > b.capacity or c >= COUNT_LIMIT:  # the rare case: grow (or raise past COUNT_LIMIT)
+                short = short or {}
+                short[k] = c / max(b.capacity, 1)
                 b.fitted = not b.ensure(c)
                 grew |= not b.fitted
             else:
                 b.fitted = True
+        if short and self.stages is not None:
+            self._extrapolate(counts, short)
         return grew
+
+    def _extrapolate(self, counts: list[int], short: dict[int, float]) -> None:
+        """Grows the buffers downstream of those that overflowed (``short``: slot -> count over
+        capacity) as if their counts scaled by the same factor."""
+        for k, (b, c) in enumerate(zip(self.buffers, counts)):
+            r = max((x for j, x in short.items() if self.stages[j] < self.stages[k]), default=1.0)
+            if r > 1.0 and b.ensure(min(COUNT_LIMIT - 1, int(c * r) + 1)):
+                b.fitted = False

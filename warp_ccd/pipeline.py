@@ -201,6 +201,10 @@ class CollisionPipeline:
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
+        rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
+            vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
+            <warp_ccd.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
+            the results are the same, the traversal faster); 0 (default) never.
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
@@ -210,6 +214,9 @@ class CollisionPipeline:
         counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
+        runs: how many times the last :meth:`detect` ran its frame (more than 1 when a buffer
+            grew; buffers keep their sizes, so later frames of similar scenes run once).
+        rebuilds: tree rebuilds so far (``rebuild_every``).
     """
 
     def __init__(
@@ -229,6 +236,7 @@ class CollisionPipeline:
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
         hit_capacity: int | None = None,
+        rebuild_every: int = 0,
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
@@ -250,6 +258,10 @@ class CollisionPipeline:
             raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
         if mid_phase not in ("bvh", "all_pairs"):
             raise ValueError(f"mid_phase must be 'bvh' or 'all_pairs', got {mid_phase!r}")
+        if isinstance(rebuild_every, bool) or not isinstance(rebuild_every, (int, np.integer)) or rebuild_every < 0 \
+                or (rebuild_every and mid_phase != "bvh"):
+            raise ValueError(f"rebuild_every must be an integer >= 0 (> 0 only with the bvh mid phase), "
+                             f"got {rebuild_every!r}")
         self.scene = scene
         self.device = scene.device
         n = scene.num_objects
@@ -268,8 +280,16 @@ class CollisionPipeline:
                                   capacity=hit_capacity or max(256, 4 * n), segments=segments,
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
-        self.counter_read = CounterRead([self.pairs, *(b for stage in stages for b in stage.counters)], d)
+        buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
+        # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
+        # mid phase's 2, the narrow phase's 3 (a shortfall upstream scales the estimates downstream).
+        flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
+        self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
+        self.runs = 0
+        self.rebuild_every = int(rebuild_every)
+        self.rebuilds = 0
+        self._detects = 0
         self._times = None
 
     def _launch_stages(self) -> None:
@@ -336,12 +356,23 @@ class CollisionPipeline:
         if scene.num_objects < 2:
             return self._no_pairs(step)
         frame = self._frame(step)
+        if self.rebuild_every:
+            self._detects += 1
+            if self._detects % self.rebuild_every == 0:
+                if step is not None:  # the frame moves the scene first: move it, then rebuild and detect
+                    scene.enqueue_advance(step)
+                    frame = self._frame(None)
+                self.boxes.rebuild(scene)
+                self.rebuilds += 1
         grew = frame.run_once()
         wait_ms = frame.wait_ms
+        runs = 1
         while grew:  # a buffer grew: detect again on the same world vertices
             frame = self._frame(None)
             grew = frame.run_once()
             wait_ms += frame.wait_ms
+            runs += 1
+        self.runs = runs
         narrow = self.narrow
         hits = narrow.hits
         rows = {"device_triangle_pairs": (hits.data, hits.last_count)}
@@ -386,4 +417,9 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         ValueError / TypeError: naming the bad mesh or transform and the problem.
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
+    # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
+    # 16 + 8 bytes a triangle, for this call only), where a persistent pipeline starts lean and grows.
+    n, tris = scene.num_objects, scene.num_triangles
+    options.setdefault("candidate_capacity", max(1024, 16 * n, tris))
+    options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
     return CollisionPipeline(scene, **options).detect()

@@ -1,0 +1,212 @@
+"""Tree builds by kernels: the same trees as the numpy reference, every layout array, on every
+device; sizes from the counts alone; rebuilds from moved vertices; vectorised mesh validation."""
+
+import numpy as np
+import pytest
+import warp as wp
+
+import warp_ccd as wc
+from warp_ccd.bvh_build import TreeBuild, build_tree, tree_sizes
+from warp_ccd.shapes import validate_mesh, validate_meshes
+
+
+def soup(rng, m: int, ties: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``m`` random triangles (rounded coordinates give equal centroid keys when ``ties``)."""
+    v = rng.normal(size=(3 * m, 3)) * rng.uniform(0.1, 10)
+    if ties:
+        v = np.round(v)
+    return v, np.arange(3 * m).reshape(-1, 3)
+
+
+def built(meshes, device, **options) -> TreeBuild:
+    vs = [np.asarray(v, np.float32) for v, _ in meshes]
+    vstart = np.concatenate([[0], np.cumsum([len(v) for v in vs])]).astype(np.int32)
+    tstart = np.concatenate([[0], np.cumsum([len(t) for _, t in meshes])])
+    tri = wp.array(np.concatenate([t for _, t in meshes]).astype(np.int32), dtype=wp.vec3i, device=device)
+    b = TreeBuild(tri, tstart, device=device, **options)
+    b.layout()
+    b.order(wp.array(np.concatenate(vs), dtype=wp.vec3, device=device), wp.array(vstart, dtype=wp.int32,
+                                                                                device=device))
+    return b
+
+
+def assert_same_trees(b: TreeBuild, meshes, leaf_size: int, cut_depth: int) -> None:
+    leaf_node, inner_node, cut_node = b.leaf_node.numpy(), b.inner_node.numpy(), b.cut_node.numpy()
+    for s, (v, t) in enumerate(meshes):
+        want = build_tree(v, t, leaf_size)
+        got = b.shape_tree(s)
+        for name in ("node_child", "node_parent", "node_triangle", "tri_order", "level_start", "leaf_node",
+                     "node_leaf", "inner_node", "node_depth"):
+            assert np.array_equal(getattr(got, name), getattr(want, name)), (s, len(t), name)
+        # The concatenated device lists hold the same, at the shape's offsets.
+        assert np.array_equal(leaf_node[b.shape_leaf_start[s]:b.shape_leaf_start[s + 1]], want.leaf_node)
+        assert np.array_equal(inner_node[b.shape_inner_start[s]:b.shape_inner_start[s + 1]], want.inner_node)
+        for deep in (0, 1):
+            cut = cut_node[b.shape_cut_start[2 * s + deep]:b.shape_cut_start[2 * s + deep + 1]]
+            assert np.array_equal(cut, want.cut(cut_depth + deep)), (s, deep)
+
+
+@pytest.mark.parametrize("leaf_size", [1, 2, 3, 7])
+@pytest.mark.parametrize("small, presort", [(None, None), (4, None), (16, None), (None, False), (None, True)])
+def test_kernels_build_the_reference_trees(device, leaf_size, small, presort):
+    """Sizes from 1 to 400 triangles (all the layouts of small counts, ties among centroids), split
+    level by level or by one thread a subtree, presorted or sorted by insertion: bit for bit the
+    trees of the numpy reference."""
+    rng = np.random.default_rng(leaf_size)
+    counts = [1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 16, 17, 31, 33, 63, 64, 65, 100, 255, 400]
+    if presort is False:
+        counts = [c for c in counts if c <= 100]  # insertion sorts of unsorted lists: keep them short
+    meshes = [soup(rng, m, ties=k % 3 == 1) for k, m in enumerate(counts)]
+    for cut_depth in (0, 3):
+        b = built(meshes, device, leaf_size=leaf_size, cut_depth=cut_depth, small=small, presort=presort)
+        assert_same_trees(b, meshes, leaf_size, cut_depth)
+
+
+def test_single_big_shape_levels(device):
+    """One shape of 5,000 triangles split over many levels by the level-by-level kernels."""
+    rng = np.random.default_rng(3)
+    meshes = [soup(rng, 5000)]
+    b = built(meshes, device, small=8)
+    assert b.num_global_levels == 10
+    assert_same_trees(b, meshes, 1, 3)
+
+
+def test_identical_and_degenerate_triangles(device):
+    """All centroids equal (17 copies of one triangle), points and slivers: the order falls back on
+    triangle ids, as numpy's stable sort does."""
+    v = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 2], [-0.0, -0.0, -0.0]])
+    same = (v, np.zeros((17, 3), np.int32) + [0, 1, 2])
+    points = (v, np.array([[3, 3, 3], [4, 4, 4], [0, 0, 0], [4, 4, 4]] * 5, np.int32))
+    b = built([same, points], device, small=4)
+    assert_same_trees(b, [same, points], 1, 3)
+
+
+def test_tree_sizes_match_the_reference():
+    for leaf_size in (1, 2, 5):
+        m = np.arange(1, 300)
+        sizes = tree_sizes(m, leaf_size)
+        for k, count in enumerate(m):
+            tree = build_tree(*soup(np.random.default_rng(0), int(count)), leaf_size)
+            assert sizes.num_nodes[k] == tree.num_nodes and sizes.num_leaves[k] == len(tree.leaf_node)
+            assert sizes.num_levels[k] == tree.depth
+            for d in range(tree.depth):
+                first, count_d = sizes.level(d)
+                assert first[k] == tree.level_start[d]
+                assert count_d[k] == tree.level_start[d + 1] - tree.level_start[d]
+
+
+def test_scene_trees_are_the_reference(device):
+    """SceneBVH builds every shape of a scene (float64 too) with the kernels: the reference's trees."""
+    shapes = [wc.shape(s) for s in ("tetrahedron", "cube", "icosahedron")] + [wc.icosphere(3)]
+    for precision in ("float32", "float64"):
+        scene = wc.Scene(shapes, [0, 1, 2, 3, 3], device=device, precision=precision)
+        bvh = wc.SceneBVH(scene)
+        for s, (v, t) in enumerate(shapes):
+            want, got = build_tree(v, t), bvh.shape_tree(s)
+            assert np.array_equal(got.tri_order, want.tri_order) and np.array_equal(got.node_child, want.node_child)
+
+
+def test_rebuild_sorts_the_moved_vertices(device):
+    """After a deforming mesh moves, rebuild gives the tree of its new vertices (the layout stays) and
+    the frame's pairs stay those of the reference mid phase."""
+    v, t = wc.icosphere(3)
+    rng = np.random.default_rng(5)
+    t = t[rng.permutation(len(t))]
+    others = [(v * 0.5 + np.float32([1.2, 0, 0]), t), (v * 0.5 + np.float32([-1.0, 0.5, 0]), t)]
+    scene = wc.Scene.from_meshes([(v, t), *others], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    moved = np.stack([v[:, 0] * 2.5, v[:, 1], v[:, 2] * 0.4], axis=1).astype(np.float32)
+    scene.set_world_vertices(np.concatenate([moved, *(m[0] for m in others)]))
+    before = pipe.detect().triangle_pairs
+    layout = pipe.boxes.build.node_child.numpy().copy()
+    pipe.boxes.rebuild(scene)
+    assert np.array_equal(pipe.boxes.shape_tree(0).tri_order, build_tree(moved, t).tri_order)
+    assert np.array_equal(pipe.boxes.build.node_child.numpy(), layout)
+    after = pipe.detect().triangle_pairs
+    ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect().triangle_pairs
+    assert len(ref) > 0 and np.array_equal(after, ref) and np.array_equal(before, ref)
+
+
+def test_rebuild_every(device):
+    """``rebuild_every=k`` rebuilds before every k-th frame; results equal a pipeline that never does."""
+    v, t = wc.icosphere(2)
+    scene = wc.Scene.from_meshes([(v, t), (v + np.float32([1.5, 0, 0]), t)], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene, rebuild_every=2)
+    plain = wc.CollisionPipeline(scene)
+    for k in range(4):
+        scene.set_world_vertices(np.concatenate([v * (1 + 0.2 * k), v + np.float32([1.5, 0, 0])]))
+        assert np.array_equal(pipe.detect().triangle_pairs, plain.detect().triangle_pairs)
+    assert pipe.rebuilds == 2
+    with pytest.raises(ValueError, match="rebuild_every"):
+        wc.CollisionPipeline(scene, rebuild_every=-1)
+
+
+# ------------------------------------------------------------------------------------ validation
+BAD_MESHES = [
+    (np.zeros((2, 3)), [[0, 1, 1]], "at least 3 vertices"),
+    ([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]], [[0, 1, 2]], r"vertex 1 is not finite"),
+    ([[0, 0, 0], [1e39, 0, 0], [0, 1, 0]], [[0, 1, 2]], "overflow float32"),
+    (np.eye(3), np.zeros((0, 3), np.int64), "no triangles"),
+    (np.eye(3), [[0, 1, 3]], r"triangle 0 has vertex index out of range \[0, 3\)"),
+    (np.eye(3), [[0, 1, 2], [0, -1, 2]], r"triangle 1 has vertex index out of range"),
+    (np.eye(3), [[0.0, 1.0, 2.0]], "integer vertex indices"),
+    (np.eye(3)[:, :2], [[0, 1, 2]], r"shape \(n, 3\)"),
+    ([[0, 0, 0], [1, 0], [0, 1, 0]], [[0, 1, 2]], "not an array of numbers"),
+    (np.array([["a", "b", "c"]] * 3), [[0, 1, 2]], "real numbers"),
+]
+
+
+@pytest.mark.parametrize("vertices, triangles, match", BAD_MESHES)
+def test_validate_meshes_names_the_bad_mesh(vertices, triangles, match):
+    """The vectorised checks name the same mesh and problem as the per-mesh ones."""
+    good = wc.shape("cube")
+    meshes = [good, good, (vertices, triangles), good]
+    with pytest.raises(ValueError, match=match) as vectorised:
+        validate_meshes(meshes, labels=[3, 5, 8, 9])
+    assert str(vectorised.value).startswith("mesh 8:")
+    with pytest.raises(ValueError) as single:
+        validate_mesh(vertices, triangles, name="mesh 8")
+    assert str(vectorised.value) == str(single.value)
+    with pytest.raises(ValueError, match="mesh 2:"):
+        wc.collide(meshes)
+
+
+def test_validate_meshes_packs():
+    rng = np.random.default_rng(0)
+    meshes = [soup(rng, m) for m in (1, 5, 3)] + [wc.shape("cube")]
+    packed = validate_meshes(meshes, dtype=np.float64)
+    assert len(packed) == 4 and packed.vertices.dtype == np.float64 and packed.triangles.dtype == np.int32
+    for k, (v, t) in enumerate(meshes):
+        pv, pt = packed.mesh(k)
+        assert np.array_equal(pv, np.asarray(v, np.float64)) and np.array_equal(pt, t)
+    assert len(validate_meshes([])) == 0
+
+
+def test_from_meshes_shares_only_the_same_arrays():
+    a, b = wc.shape("cube"), wc.shape("tetrahedron")
+    copy = (a[0].copy(), a[1])
+    scene = wc.Scene.from_meshes([b, a, b, copy, a], device="cpu")
+    assert scene.num_shapes == 3 and scene.instance_shape_np.tolist() == [0, 1, 0, 2, 1]
+    assert np.array_equal(scene.shape_meshes[2][0], copy[0])
+
+
+def test_one_shot_runs_its_frame_once(device, monkeypatch):
+    """collide() sizes its buffers from the scene: one run of the frame for 1,000 polyhedra and for
+    big meshes in contact."""
+    runs = []
+    detect = wc.CollisionPipeline.detect
+
+    def counted(self, *args, **kwargs):
+        result = detect(self, *args, **kwargs)
+        runs.append(self.runs)
+        return result
+
+    monkeypatch.setattr(wc.CollisionPipeline, "detect", counted)
+    rng = np.random.default_rng(2)
+    scene = wc.Scene.random(1000, seed=2, device=device)
+    scene.advance(0.3)
+    assert len(wc.collide(scene.world_meshes(), device=device).object_pairs) > 0
+    v, t = wc.icosphere(4)
+    meshes = [(v * rng.uniform(1, 2) + rng.uniform(-2, 2, 3).astype(np.float32), t) for _ in range(6)]
+    assert len(wc.collide(meshes, device=device).object_pairs) > 0
+    assert runs == [1, 1]
