@@ -48,15 +48,20 @@ POLYHEDRA = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
 
 
 def timed(fn, device, repeats: int) -> tuple[float, float]:
-    """``(min, median)`` wall ms of ``fn()`` up to the device's end, after one warm-up call."""
+    """``(min, median)`` wall ms of ``fn()`` up to the device's end (None: host work only), after
+    one warm-up call."""
+    def sync():
+        if device is not None:
+            wp.synchronize_device(device)
+
     fn()
-    wp.synchronize_device(device)
+    sync()
     times = []
     for _ in range(repeats):
-        wp.synchronize_device(device)
+        sync()
         t = time.perf_counter()
         fn()
-        wp.synchronize_device(device)
+        sync()
         times.append((time.perf_counter() - t) * 1e3)
     return float(np.min(times)), float(np.median(times))
 
@@ -135,7 +140,7 @@ def bench_builds(device, cases, repeats: int, smalls: list[int], insertion_max: 
             add("wp.Bvh lbvh grouped", timed(lambda: wp.Bvh(lowers, uppers, constructor="lbvh", groups=groups),
                                              device, repeats))
         if num_shapes * triangles <= reference_limit:
-            add("numpy reference", timed(lambda: [build_tree(v, t) for v, t in meshes], "cpu", max(1, repeats // 4)))
+            add("numpy reference", timed(lambda: [build_tree(v, t) for v, t in meshes], None, max(1, repeats // 4)))
     return rows
 
 
