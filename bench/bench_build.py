@@ -11,7 +11,8 @@ Three parts, in one process on one device:
   seconds. Wall time from the first launch to the device's end (what a user waits for), min and
   median over ``--repeats`` after a warm-up. ``--small`` adds rows of the kernels with other
   subtree sizes finished per thread; small shapes also get a row without the radix presort
-  (insertion sorts only).
+  (insertion sorts only). On CUDA, one build of each case is also profiled activity by activity
+  (``build_activities``: kernels, sorts, scans, copies with their device time).
 * **rebuild**: deforming meshes whose vertices move far from where their trees were built
   (icospheres stretched and twisted into long spirals): candidate triangle pairs and mid-phase
   time of a frame with the refit trees, then after :meth:`SceneBVH.rebuild
@@ -91,7 +92,8 @@ def shapes_of(num_shapes: int, triangles: int, rng) -> list:
 
 
 def bench_builds(device, cases, repeats: int, smalls: list[int], insertion_max: int, reference_limit: int,
-                 rng) -> list[dict]:
+                 rng, profiles: list) -> list[dict]:
+    """Rows of build times; appends each case's device activities (CUDA) to ``profiles``."""
     rows = []
     for num_shapes, triangles in cases:
         meshes = shapes_of(num_shapes, triangles, rng)
@@ -121,10 +123,28 @@ def bench_builds(device, cases, repeats: int, smalls: list[int], insertion_max: 
             add(method, timed(build, device, repeats), global_levels=b.num_global_levels, presort=b.presort,
                 small=b.small)
             if small is None:
+                add("kernels_init", timed(lambda: TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np,
+                                                            device=device), device, repeats))
                 b = build()
                 add("kernels_layout", timed(b.layout, device, repeats))
                 add("kernels_order", timed(lambda b=b: b.order(scene.shape_vertex, scene.shape_vertex_start),
                                            device, repeats))
+        if device.is_cuda:  # where one build's device time goes, kernel by kernel
+            wp.synchronize_device(device)
+            wp.timing_begin(cuda_filter=wp.TIMING_ALL)
+            build()
+            wp.synchronize_device(device)
+            activity = {}
+            for r in wp.timing_end():
+                count, ms = activity.get(r.name, (0, 0.0))
+                activity[r.name] = (count + 1, ms + r.elapsed)
+            top = sorted(activity.items(), key=lambda kv: -kv[1][1])
+            profiles.append({"n_shapes": num_shapes, "triangles_per_shape": triangles,
+                             "device_ms": sum(ms for _, ms in activity.values()),
+                             "activities": [{"name": k, "count": c, "ms": ms} for k, (c, ms) in top]})
+            print(f"{label:>18} device time {profiles[-1]['device_ms']:.3f} ms in "
+                  f"{sum(c for c, _ in activity.values())} activities; top: "
+                  + ", ".join(f"{k[:40]} x{c} {ms:.3f}" for k, (c, ms) in top[:4]), flush=True)
         # Warp's LBVH over the same triangles: one mesh, or one grouped Bvh over all triangle boxes.
         points = scene.shape_vertex
         tri = scene.shape_triangle_start_np
@@ -265,7 +285,7 @@ def bench_one_shot(device, repeats: int, rng, profile: str | None = None) -> lis
             pstats.Stats(profiler, stream=text).sort_stats("cumulative").print_stats(40)
             profiles.append(f"== one-shot collide(), {name}, on {device}\n{text.getvalue()}")
         row = {"scene": name, "objects": len(meshes), "triangles": tris, "method": "warp_ccd collide()",
-               "ms_min": lo, "ms_median": med, "object_pairs": int(len(res.object_pairs))}
+               "ms_min": lo, "ms_median": med, "object_pairs": int(len(res.object_pairs)), "frame_runs": res.runs}
         rows.append(row)
         print("one-shot:", row, flush=True)
         try:
@@ -312,8 +332,9 @@ def main(argv=None) -> None:
     cases = [tuple(int(float(x)) for x in c.split("x")) for c in args.cases]
     doc = {"benchmark": "build", **environment(device),
            "config": {"repeats": args.repeats, "small_subtree": SMALL_SUBTREE, "small": args.small}}
+    doc["build_activities"] = []
     doc["builds"] = bench_builds(device, cases, args.repeats, args.small, args.insertion_max, args.reference_limit,
-                                 rng)
+                                 rng, doc["build_activities"])
     if args.rebuild:
         count, tris = (int(x) for x in args.rebuild.split("x"))
         doc["rebuild"] = bench_rebuild(device, count, int(round(np.log(tris / 20) / np.log(4))), args.repeats, rng)

@@ -14,7 +14,7 @@ from typing import Any
 
 import warp as wp
 
-from .precision import PRECISIONS, precision_types
+from .precision import precision_overloads
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -108,9 +108,8 @@ def _instance_bounds_kernel(
     instance_upper[i] = box_upper32(hi + m)
 
 
-for _precision in PRECISIONS:
-    _scalar, _vec3, _, _ = precision_types(_precision)
-    wp.overload(_instance_bounds_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
+_INSTANCE_BOUNDS = precision_overloads(_instance_bounds_kernel,
+                                       lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
 
 
 class InstanceBounds:
@@ -138,7 +137,7 @@ class InstanceBounds:
         if self.lower.shape[0] == 0:
             return
         wp.launch(
-            _instance_bounds_kernel,
+            _INSTANCE_BOUNDS[scene.precision],
             dim=self.lower.shape[0],
             inputs=[scene.world_vertex, scene.instance_vertex_start, scene.scalar_type(self.margin_rel)],
             outputs=[self.lower, self.upper],

@@ -617,7 +617,7 @@ class BroadPhaseSAP(BroadPhase):
             self.box_cells = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
             self.big_box = wp.zeros(max(n, 1), dtype=wp.int32, device=d)
             self.entry.mark_stale()
-        self.entry.ensure(n + 3 * n // 4)  # room for 2 entries a box (they cover 1.5 to 2.5 cells): grows if short
+        self.entry.ensure(2 * n)  # room for 2 entries a box (they cover 1.5 to 2.5 cells): grows if short
 
     def _entry_arrays(self):
         if self._entry_box is None or self._entry_box.shape[0] != 2 * self.entry.capacity:

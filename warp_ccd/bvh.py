@@ -40,7 +40,7 @@ import warp as wp
 from .aabb import BOX_EMPTY, box_lower32, box_upper32
 from .buffers import upper_bound
 from .bvh_build import ShapeTree, TreeBuild
-from .precision import PRECISIONS, precision_types
+from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -217,10 +217,9 @@ def _refit_small_inner_kernel(
         instance_upper[inst] = hi
 
 
-for _precision in PRECISIONS:
-    _scalar, _vec3, _, _ = precision_types(_precision)
-    for _kernel in (_refit_level_kernel, _refit_small_leaf_kernel):
-        wp.overload(_kernel, {"world_vertex": wp.array[_vec3], "margin_rel": _scalar})
+_REFIT_LEVEL, _REFIT_SMALL_LEAF = (
+    precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
+    for k in (_refit_level_kernel, _refit_small_leaf_kernel))
 
 
 class SceneBVH:
@@ -357,7 +356,7 @@ class SceneBVH:
         in one launch, the others deepest level first."""
         margin = scene.scalar_type(self.margin_rel)
         if self.num_small_leaves:
-            wp.launch(_refit_small_leaf_kernel, dim=self.num_small_leaves,
+            wp.launch(_REFIT_SMALL_LEAF[scene.precision], dim=self.num_small_leaves,
                       inputs=[scene.topology, scene.world_vertex, self.tree, self.small_instance, self.small_leaf_end,
                               margin],
                       outputs=[self.lower, self.upper], device=self.device)
@@ -370,7 +369,7 @@ class SceneBVH:
             if items == 0:
                 continue
             wp.launch(
-                _refit_level_kernel,
+                _REFIT_LEVEL[scene.precision],
                 dim=items,
                 inputs=[scene.topology, scene.world_vertex, self.tree, block, first, count, self.shape_instance,
                         self.shape_instance_start, margin],

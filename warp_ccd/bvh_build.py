@@ -43,7 +43,7 @@ import numpy as np
 import warp as wp
 
 from .buffers import upper_bound
-from .precision import PRECISIONS, precision_types
+from .precision import precision_overloads
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -51,10 +51,12 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 __all__ = ["INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild", "TreeSizes", "build_tree", "centroid_keys",
            "tree_sizes"]
 
-SMALL_SUBTREE = 64
+SMALL_SUBTREE = 8
 """Largest subtree (in triangles) that one thread finishes alone (:func:`_finish_kernel`) on CUDA;
 bigger nodes are split level by level over all shapes. At least ``2 * leaf_size`` is used. On the
-CPU, where Warp runs a kernel on one thread, each shape is finished whole (its lists presorted)."""
+CPU, where Warp runs a kernel on one thread, each shape is finished whole (its lists presorted).
+A thread's work on its own block of the lists is uncoalesced: on an H100, 10^5 shapes of 80
+triangles took 26 ms finished from 32-triangle subtrees, 33 ms from whole shapes."""
 
 INSERTION_SORT_MAX = 64
 """Shapes of at most this many triangles sort their lists by insertion in :func:`_finish_kernel`;
@@ -431,9 +433,7 @@ def _key_kernel(
         tri_list[axis * num_triangles + g] = g
 
 
-for _precision in PRECISIONS:
-    _, _vec3, _, _ = precision_types(_precision)
-    wp.overload(_key_kernel, {"shape_vertex": wp.array[_vec3], "world_vertex": wp.array[_vec3]})
+_KEY = precision_overloads(_key_kernel, lambda s, v, q, t: {"shape_vertex": wp.array[v], "world_vertex": wp.array[v]})
 
 
 @wp.kernel
@@ -787,7 +787,8 @@ class TreeBuild:
         d = self.device
         if world_vertex is None:
             world_vertex, shape_world_start = shape_vertex, self._no_world
-        wp.launch(_key_kernel, dim=n,
+        precision = "float64" if shape_vertex.dtype == wp.vec3d else "float32"
+        wp.launch(_KEY[precision], dim=n,
                   inputs=[shape_vertex, shape_vertex_start, world_vertex, shape_world_start, self.shape_triangle,
                           self._tstart, n],
                   outputs=[self._tri_shape, self._tri_key, self._tri_list], device=d)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .precision import PRECISIONS, precision_types
+from .precision import precision_overloads, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -65,10 +65,8 @@ def _motion_pose_kernel(
     instance_pose[i] = wp.transformation(pos, wp.normalize(rot), dtype=type(time))
 
 
-for _precision in PRECISIONS:
-    _scalar, _vec3, _, _transform = precision_types(_precision)
-    wp.overload(_motion_pose_kernel, {"scalar": _scalar, "motion_centre": wp.array[_vec3],
-                                      "instance_pose": wp.array[_transform]})
+_MOTION_POSE = precision_overloads(_motion_pose_kernel, lambda s, v, q, t: {
+    "scalar": s, "motion_centre": wp.array[v], "instance_pose": wp.array[t]})
 
 
 def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -157,7 +155,7 @@ class EllipseMotion:
             self._time.fill_(float(time))
             time = self._time
         wp.launch(
-            _motion_pose_kernel,
+            _MOTION_POSE[self.precision],
             dim=self.num_objects,
             inputs=[
                 time,

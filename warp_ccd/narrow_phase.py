@@ -73,7 +73,7 @@ from typing import Any
 import warp as wp
 
 from .buffers import GrowableBuffer, reserve_slot, used_count
-from .precision import PRECISIONS, precision_types
+from .precision import PRECISIONS, precision_overloads, precision_types
 from .scene import MeshTopology, mesh_triangle
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
@@ -928,14 +928,14 @@ def tri_tri_segment_batch_kernel(
 
 # Both precisions, declared up front: the module compiles once, for float32 and float64 together.
 # The kernels take the tolerance in float64 and round it to the vertices' precision.
+_NARROW_MOLLER, _NARROW_TOUCH, _NARROW_EDGE_FACE, _CONTAINMENT = (
+    precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+    for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_edge_face_kernel, _containment_kernel))
+_SEGMENT = precision_overloads(_segment_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
+                                                                  "segment": wp.array2d[v]})
 for _precision in PRECISIONS:
     _, _vec3, _, _ = precision_types(_precision)
-    _vertices, _triangles = wp.array[_vec3], wp.array2d[_vec3]
-    wp.overload(_narrow_moller_kernel, {"world_vertex": _vertices})
-    wp.overload(_narrow_touch_kernel, {"world_vertex": _vertices})
-    wp.overload(_narrow_edge_face_kernel, {"world_vertex": _vertices})
-    wp.overload(_segment_kernel, {"world_vertex": _vertices, "segment": _triangles})
-    wp.overload(_containment_kernel, {"world_vertex": _vertices})
+    _triangles = wp.array2d[_vec3]
     wp.overload(tri_tri_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles})
     wp.overload(tri_tri_segment_batch_kernel, {"tri_a": _triangles, "tri_b": _triangles, "segment": _triangles})
 
@@ -1016,7 +1016,7 @@ class NarrowPhase:
         tol = wp.float64(self.tolerance)
         hits = self.hits
         if self.touch is None:
-            wp.launch(_narrow_edge_face_kernel, dim=candidates.capacity,
+            wp.launch(_NARROW_EDGE_FACE[scene.precision], dim=candidates.capacity,
                       inputs=[scene.topology, scene.world_vertex, candidates.data, candidates.count,
                               candidates.capacity, tol, hits.capacity],
                       outputs=[hits.data, hits.count, self.object_colliding], device=d)
@@ -1024,24 +1024,24 @@ class NarrowPhase:
             touch = self.touch
             if self.touch_flag is None or self.touch_flag.shape[0] != touch.capacity:  # follows the capacity
                 self.touch_flag = wp.zeros(touch.capacity, dtype=wp.int32, device=d)
-            wp.launch(_narrow_moller_kernel, dim=candidates.capacity,
+            wp.launch(_NARROW_MOLLER[scene.precision], dim=candidates.capacity,
                       inputs=[scene.topology, scene.world_vertex, candidates.data, candidates.count,
                               candidates.capacity, tol, hits.capacity, touch.capacity],
                       outputs=[hits.data, hits.count, self.object_colliding, touch.data, touch.count,
                                self.touch_flag], device=d)
-            wp.launch(_narrow_touch_kernel, dim=6 * touch.capacity,
+            wp.launch(_NARROW_TOUCH[scene.precision], dim=6 * touch.capacity,
                       inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity, tol,
                               hits.capacity],
                       outputs=[self.touch_flag, hits.data, hits.count, self.object_colliding], device=d)
         if self.segments:
             if self.segment is None or self.segment.shape[0] != hits.capacity or self.segment.dtype != scene.vec3_type:
                 self.segment = wp.zeros((hits.capacity, 2), dtype=scene.vec3_type, device=d)
-            wp.launch(_segment_kernel, dim=hits.capacity,
+            wp.launch(_SEGMENT[scene.precision], dim=hits.capacity,
                       inputs=[scene.topology, scene.world_vertex, hits.data, hits.count, hits.capacity, tol],
                       outputs=[self.segment], device=d)
         if self.contained is not None:
             wp.launch(
-                _containment_kernel,
+                _CONTAINMENT[scene.precision],
                 dim=object_pairs.capacity,
                 inputs=[scene.topology, scene.world_vertex, object_lower, object_upper, object_pairs.data,
                         object_pairs.count, object_pairs.capacity, self.contained.capacity],

@@ -49,6 +49,7 @@ class CollisionResult:
             ``total``) when the pipeline was asked for them, else None.
         host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
             waiting for the device), in ms.
+        runs: how many times ``detect()`` ran the frame for it (more than 1 when a buffer grew).
         device_colliding: ``(N,)`` int32 flags on the device.
 
     Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
@@ -81,7 +82,7 @@ class CollisionResult:
         """Sets what every result holds (``rows``: the views made on first access, as in :meth:`_of_buffers`)."""
         self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
                              num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
-                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, _rows=rows)
+                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows)
 
     def _view(self, name: str):
         held = self._rows.get(name)
@@ -112,7 +113,7 @@ class CollisionResult:
         out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
                               self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
                               own(self.device_segments))
-        out.host_ms = self.host_ms
+        out.host_ms, out.runs = self.host_ms, self.runs
         return out
 
     @property
@@ -383,6 +384,7 @@ class CollisionPipeline:
         result = CollisionResult._of_buffers(scene.num_objects, rows, narrow.object_colliding, self._times,
                                              self.mid.candidates.last_count, self.pairs.last_count)
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
+        result.runs = runs
         return result
 
     def _no_pairs(self, step: float | None) -> CollisionResult:

@@ -30,7 +30,7 @@ import numpy as np
 import warp as wp
 
 from .motion import EllipseMotion, advance_time
-from .precision import PRECISIONS, precision_types
+from .precision import precision_overloads, precision_types
 from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
 
@@ -86,10 +86,8 @@ def _world_vertex_kernel(
     world_vertex[v] = wp.transform_point(instance_pose[i], p * type(p[0])(instance_scale[i]))
 
 
-for _precision in PRECISIONS:
-    _, _vec3, _, _transform = precision_types(_precision)
-    wp.overload(_world_vertex_kernel, {"shape_vertex": wp.array[_vec3], "instance_pose": wp.array[_transform],
-                                       "world_vertex": wp.array[_vec3]})
+_WORLD_VERTEX = precision_overloads(_world_vertex_kernel, lambda s, v, q, t: {
+    "shape_vertex": wp.array[v], "instance_pose": wp.array[t], "world_vertex": wp.array[v]})
 
 
 @wp.kernel
@@ -409,7 +407,7 @@ class Scene:
         if self.num_world_vertices == 0:
             return
         wp.launch(
-            _world_vertex_kernel,
+            _WORLD_VERTEX[self.precision],
             dim=self.num_world_vertices,
             inputs=[
                 self.shape_vertex,

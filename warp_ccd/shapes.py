@@ -320,25 +320,22 @@ def validate_meshes(meshes, labels=None, kind: str = "mesh", dtype=np.float32) -
     if few.any():
         k = int(np.argmax(few))
         raise ValueError(f"{name(k)}: a mesh needs at least 3 vertices, got {num_v[k]}")
-    finite = np.isfinite(v).all(axis=1)
-    if not finite.all():
-        row = int(np.argmin(finite))
+    if not np.isfinite(v).all():  # (flat reductions first: the rows only to name the culprit)
+        row = int(np.argmin(np.isfinite(v).all(axis=1)))
         k = int(np.searchsorted(vstart, row, side="right") - 1)
         raise ValueError(f"{name(k)}: vertex {row - vstart[k]} is not finite ({v[row].tolist()})")
     with np.errstate(over="ignore"):
         v32 = v.astype(np.float32)
-    fits = np.isfinite(v32).all(axis=1)
-    if not fits.all():
-        k = int(np.searchsorted(vstart, int(np.argmin(fits)), side="right") - 1)
+    if not np.isfinite(v32).all():
+        k = int(np.searchsorted(vstart, int(np.argmin(np.isfinite(v32).all(axis=1))), side="right") - 1)
         big = np.abs(v[vstart[k]:vstart[k + 1]]).max()
         raise ValueError(f"{name(k)}: vertices overflow float32 (largest magnitude {big:.3g})")
     empty = num_t == 0
     if empty.any():
         raise ValueError(f"{name(int(np.argmax(empty)))}: the mesh has no triangles")
     limit = np.repeat(num_v, num_t)[:, None]
-    bad = ((t < 0) | (t >= limit)).any(axis=1)
-    if bad.any():
-        row = int(np.argmax(bad))
+    if t.min() < 0 or (t >= limit).any():
+        row = int(np.argmax(((t < 0) | (t >= limit)).any(axis=1)))
         k = int(np.searchsorted(tstart, row, side="right") - 1)
         raise ValueError(f"{name(k)}: triangle {row - tstart[k]} has vertex index out of range "
                          f"[0, {num_v[k]}): {t[row].tolist()}")
