@@ -39,10 +39,12 @@ def assert_same_trees(b: TreeBuild, meshes, leaf_size: int, cut_depth: int) -> N
                      "node_leaf", "inner_node", "node_depth"):
             assert np.array_equal(getattr(got, name), getattr(want, name)), (s, len(t), name)
         # The concatenated device lists hold the same, at the shape's offsets.
-        assert np.array_equal(leaf_node[b.shape_leaf_start[s]:b.shape_leaf_start[s + 1]], want.leaf_node)
-        assert np.array_equal(inner_node[b.shape_inner_start[s]:b.shape_inner_start[s + 1]], want.inner_node)
+        layout = b.shape_layout[s]
+        assert np.array_equal(leaf_node[b.layout_leaf_start[layout]:b.layout_leaf_start[layout + 1]], want.leaf_node)
+        assert np.array_equal(inner_node[b.layout_inner_start[layout]:b.layout_inner_start[layout + 1]],
+                              want.inner_node)
         for deep in (0, 1):
-            cut = cut_node[b.shape_cut_start[2 * s + deep]:b.shape_cut_start[2 * s + deep + 1]]
+            cut = cut_node[b.layout_cut_start[2 * layout + deep]:b.layout_cut_start[2 * layout + deep + 1]]
             assert np.array_equal(cut, want.cut(cut_depth + deep)), (s, deep)
 
 
@@ -56,10 +58,18 @@ def test_kernels_build_the_reference_trees(device, leaf_size, small, presort):
     counts = [1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 16, 17, 31, 33, 63, 64, 65, 100, 255, 400]
     if presort is False:
         counts = [c for c in counts if c <= 100]  # insertion sorts of unsorted lists: keep them short
-    meshes = [soup(rng, m, ties=k % 3 == 1) for k, m in enumerate(counts)]
+    meshes = [soup(rng, m, ties=k % 3 == 1) for k, m in enumerate(counts + counts[::3])]  # some counts twice
     for cut_depth in (0, 3):
         b = built(meshes, device, leaf_size=leaf_size, cut_depth=cut_depth, small=small, presort=presort)
         assert_same_trees(b, meshes, leaf_size, cut_depth)
+
+
+def test_shapes_of_one_count_share_a_layout(device):
+    rng = np.random.default_rng(4)
+    meshes = [soup(rng, m) for m in (80, 80, 7, 80, 7)]
+    b = built(meshes, device)
+    assert b.shape_layout.tolist() == [1, 1, 0, 1, 0] and len(b.layout_node_start) == 3
+    assert_same_trees(b, meshes, 1, 3)
 
 
 def test_single_big_shape_levels(device):

@@ -54,23 +54,27 @@ __all__ = ["SceneBVH", "TreeView"]
 
 @wp.struct
 class TreeView:
-    """What the refit and traversal kernels need: topology per shape, bounds per instance.
+    """What the refit and traversal kernels need: layouts shared by the shapes of one triangle count,
+    triangle order per shape, bounds per instance.
 
-    Per shape ``s``, its nodes are ``shape_node_start[s] + local id``, its leaves (shape-local
-    ids) ``leaf_node[shape_leaf_start[s]:shape_leaf_start[s + 1]]`` and its two cuts (subtrees
-    that partition the leaves, :meth:`~warp_ccd.bvh_build.ShapeTree.cut`), at the scene's ``cut_depth`` and one level
-    deeper: ``cut_node[shape_cut_start[2 s + deep]:shape_cut_start[2 s + deep + 1]]``; the bounds
-    of instance ``i`` are ``node_lower/upper[instance_node_start[i] + local id]``.
+    Shape ``s`` has layout ``l = shape_layout[s]`` (a tree's layout depends on its triangle count
+    alone, :mod:`warp_ccd.bvh_build`): its nodes are ``layout_node_start[l] + local id``, its
+    leaves (local ids) ``leaf_node[layout_leaf_start[l]:layout_leaf_start[l + 1]]`` and its two
+    cuts (subtrees that partition the leaves, :meth:`~warp_ccd.bvh_build.ShapeTree.cut`), at the
+    scene's ``cut_depth`` and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
+    layout_cut_start[2 l + deep + 1]]``; its triangle order starts at ``shape_tri_order_start[s]``;
+    the bounds of instance ``i`` are ``node_lower/upper[instance_node_start[i] + local id]``.
     """
 
-    shape_node_start: wp.array[wp.int32]
+    shape_layout: wp.array[wp.int32]
+    layout_node_start: wp.array[wp.int32]
     shape_tri_order_start: wp.array[wp.int32]
-    shape_leaf_start: wp.array[wp.int32]
+    layout_leaf_start: wp.array[wp.int32]
     node_child: wp.array[wp.vec2i]
     node_triangle: wp.array[wp.vec2i]
     node_leaf: wp.array[wp.vec2i]
     leaf_node: wp.array[wp.int32]
-    shape_cut_start: wp.array[wp.int32]
+    layout_cut_start: wp.array[wp.int32]
     cut_node: wp.array[wp.int32]
     tri_order: wp.array[wp.int32]
     instance_node_start: wp.array[wp.int32]
@@ -92,7 +96,7 @@ def _refit_node(
 ):
     """Box of ``node`` (local id in shape ``s``) of instance ``inst``: from its triangles (leaf,
     padded by the tolerance) or its children's boxes; the root's box is the object's box."""
-    shape_node = tree.shape_node_start[s] + node
+    shape_node = tree.layout_node_start[tree.shape_layout[s]] + node
     slot = tree.instance_node_start[inst] + node
     child = tree.node_child[shape_node]
     lo = wp.vec3(0.0)
@@ -154,16 +158,18 @@ def _small_item(
     small_end: wp.array[wp.int32],
     small_instance: wp.array[wp.int32],
     instance_shape: wp.array[wp.int32],
-    shape_start: wp.array[wp.int32],
+    shape_layout: wp.array[wp.int32],
+    layout_start: wp.array[wp.int32],
 ):
     """Flat work item ``t`` over the small instances, ``small_end`` the inclusive scan of their
-    per-shape item counts (``shape_start`` offsets per shape): ``(instance, shape, index of the
-    item in the shapes' concatenated list)``."""
+    per-layout item counts (``layout_start`` offsets per layout): ``(instance, shape, index of the
+    item in the layouts' concatenated list)``."""
     k = upper_bound(small_end, 0, small_end.shape[0], t)
     inst = small_instance[k]
     s = instance_shape[inst]
-    first = shape_start[s]
-    return inst, s, first + t - (small_end[k] - (shape_start[s + 1] - first))
+    layout = shape_layout[s]
+    first = layout_start[layout]
+    return inst, s, first + t - (small_end[k] - (layout_start[layout + 1] - first))
 
 
 @wp.kernel
@@ -180,7 +186,8 @@ def _refit_small_leaf_kernel(
 ):
     """One thread per leaf of each instance of a small shape: the leaf's box from its triangles.
     ``small_leaf_end`` is the inclusive scan of the leaf counts of ``small_instance``."""
-    inst, s, item = _small_item(wp.tid(), small_leaf_end, small_instance, mesh.instance_shape, tree.shape_leaf_start)
+    inst, s, item = _small_item(wp.tid(), small_leaf_end, small_instance, mesh.instance_shape, tree.shape_layout,
+                                tree.layout_leaf_start)
     node = tree.leaf_node[item]
     _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
 
@@ -191,7 +198,7 @@ def _refit_small_inner_kernel(
     instance_shape: wp.array[wp.int32],
     small_instance: wp.array[wp.int32],
     small_inner_end: wp.array[wp.int32],
-    shape_inner_start: wp.array[wp.int32],
+    layout_inner_start: wp.array[wp.int32],
     inner_node: wp.array[wp.int32],
     # Outputs
     instance_lower: wp.array[wp.vec3],
@@ -199,10 +206,12 @@ def _refit_small_inner_kernel(
 ):
     """One thread per inner node of each instance of a small shape, after the leaves: the union
     of the boxes of the leaves of its subtree (the same bits as the union of its children's)."""
-    inst, s, item = _small_item(wp.tid(), small_inner_end, small_instance, instance_shape, shape_inner_start)
+    inst, s, item = _small_item(wp.tid(), small_inner_end, small_instance, instance_shape, tree.shape_layout,
+                                layout_inner_start)
     node = inner_node[item]
-    leaves = tree.node_leaf[tree.shape_node_start[s] + node]
-    leaf_base = tree.shape_leaf_start[s]
+    layout = tree.shape_layout[s]
+    leaves = tree.node_leaf[tree.layout_node_start[layout] + node]
+    leaf_base = tree.layout_leaf_start[layout]
     slot = tree.instance_node_start[inst]
     lo = wp.vec3(BOX_EMPTY)
     hi = wp.vec3(-BOX_EMPTY)
@@ -265,7 +274,6 @@ class SceneBVH:
         num_shapes = scene.num_shapes
         n = scene.num_objects
         nodes = sizes.num_nodes
-        self.shape_node_start_np = build.shape_node_start.astype(np.int32)
         inst_nodes = nodes[scene.instance_shape_np] if n else np.zeros(0, np.int64)
         inode = np.concatenate([[0], np.cumsum(inst_nodes)])
         if inode[-1] >= 2**31:
@@ -296,7 +304,6 @@ class SceneBVH:
             raise ValueError("scene too large for the BVH refit (2**31 tree nodes of small shapes)")
         self.small_leaf_end = wp.array(small_leaf_end.astype(np.int32), dtype=wp.int32, device=d)
         self.small_inner_end = wp.array(small_inner_end.astype(np.int32), dtype=wp.int32, device=d)
-        self.shape_inner_start = wp.array(build.shape_inner_start.astype(np.int32), dtype=wp.int32, device=d)
         self.inner_node = build.inner_node
         order = np.argsort(scene.instance_shape_np, kind="stable").astype(np.int32)
         per_shape = np.bincount(scene.instance_shape_np, minlength=num_shapes) if n else np.zeros(num_shapes, np.int64)
@@ -319,14 +326,15 @@ class SceneBVH:
             ))
 
         tv = TreeView()
-        tv.shape_node_start = wp.array(self.shape_node_start_np, dtype=wp.int32, device=d)
+        tv.shape_layout = build.shape_layout_device
+        tv.layout_node_start = build.layout_node_start_device
         tv.shape_tri_order_start = scene.shape_triangle_start
         tv.node_child = build.node_child
         tv.node_triangle = build.node_triangle
         tv.node_leaf = build.node_leaf
         tv.leaf_node = build.leaf_node
-        tv.shape_leaf_start = wp.array(build.shape_leaf_start.astype(np.int32), dtype=wp.int32, device=d)
-        tv.shape_cut_start = wp.array(build.shape_cut_start.astype(np.int32), dtype=wp.int32, device=d)
+        tv.layout_leaf_start = build.layout_leaf_start_device
+        tv.layout_cut_start = build.layout_cut_start_device
         tv.cut_node = build.cut_node
         tv.tri_order = build.tri_order
         tv.instance_node_start = wp.array(inode.astype(np.int32), dtype=wp.int32, device=d)
@@ -363,7 +371,7 @@ class SceneBVH:
         if self.num_small_inner:
             wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
                       inputs=[self.tree, scene.instance_shape, self.small_instance, self.small_inner_end,
-                              self.shape_inner_start, self.inner_node],
+                              self.build.layout_inner_start_device, self.inner_node],
                       outputs=[self.lower, self.upper], device=self.device)
         for items, block, first, count in reversed(self.levels):
             if items == 0:

@@ -76,7 +76,7 @@ class FrontPair:
     num_cut: int  # subtrees of the other's cut
     leaf_start: int  # the front shape's leaves in TreeView.leaf_node
     cut_start: int  # the other shape's cut in TreeView.cut_node
-    front_node_start: int  # shape-global node id of the front shape's local node 0
+    front_node_start: int  # global node id of the front shape's local node 0 (in its layout)
     other_node_start: int
     front_slot_start: int  # the front instance's node boxes in TreeView.node_lower/upper
     other_slot_start: int
@@ -85,19 +85,19 @@ class FrontPair:
 
 
 @wp.func
-def _num_leaves(tree: TreeView, shape: int) -> int:
-    return tree.shape_leaf_start[shape + 1] - tree.shape_leaf_start[shape]
+def _num_leaves(tree: TreeView, layout: int) -> int:
+    return tree.layout_leaf_start[layout + 1] - tree.layout_leaf_start[layout]
 
 
 @wp.func
-def _cut_start(tree: TreeView, shape: int, deep: int) -> int:
-    """Where the shape's cut (``deep`` 0) or its cut one level deeper (1) starts in ``cut_node``."""
-    return tree.shape_cut_start[2 * shape + deep]
+def _cut_start(tree: TreeView, layout: int, deep: int) -> int:
+    """Where the layout's cut (``deep`` 0) or its cut one level deeper (1) starts in ``cut_node``."""
+    return tree.layout_cut_start[2 * layout + deep]
 
 
 @wp.func
-def _num_cut(tree: TreeView, shape: int, deep: int) -> int:
-    return _cut_start(tree, shape, deep + 1) - _cut_start(tree, shape, deep)
+def _num_cut(tree: TreeView, layout: int, deep: int) -> int:
+    return _cut_start(tree, layout, deep + 1) - _cut_start(tree, layout, deep)
 
 
 @wp.func
@@ -128,18 +128,20 @@ def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: i
     s_other = sb
     front_obj = a
     other_obj = b
-    if _num_leaves(tree, sb) < _num_leaves(tree, sa):
+    if _num_leaves(tree, tree.shape_layout[sb]) < _num_leaves(tree, tree.shape_layout[sa]):
         r.front = 1
         s_front = sb
         s_other = sa
         front_obj = b
         other_obj = a
-    r.num_leaves = _num_leaves(tree, s_front)
-    r.num_cut = _num_cut(tree, s_other, deep)
-    r.leaf_start = tree.shape_leaf_start[s_front]
-    r.cut_start = _cut_start(tree, s_other, deep)
-    r.front_node_start = tree.shape_node_start[s_front]
-    r.other_node_start = tree.shape_node_start[s_other]
+    l_front = tree.shape_layout[s_front]
+    l_other = tree.shape_layout[s_other]
+    r.num_leaves = _num_leaves(tree, l_front)
+    r.num_cut = _num_cut(tree, l_other, deep)
+    r.leaf_start = tree.layout_leaf_start[l_front]
+    r.cut_start = _cut_start(tree, l_other, deep)
+    r.front_node_start = tree.layout_node_start[l_front]
+    r.other_node_start = tree.layout_node_start[l_other]
     r.front_slot_start = tree.instance_node_start[front_obj]
     r.other_slot_start = tree.instance_node_start[other_obj]
     r.front_tri_start = tree.shape_tri_order_start[s_front]
