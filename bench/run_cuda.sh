@@ -31,7 +31,7 @@ if [ -n "${SMOKE:-}" ]; then
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
-    builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="4 16 32"; rebuild="27x5120"
+    builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="16"; rebuild="27x5120"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }

@@ -39,7 +39,7 @@ import warp as wp
 
 from .aabb import BOX_EMPTY, box_lower32, box_upper32
 from .buffers import upper_bound
-from .bvh_build import ShapeTree, TreeBuild
+from .bvh_build import ShapeTree, TreeBuild, packed_upload
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
@@ -312,18 +312,17 @@ class SceneBVH:
         self.shape_instance = wp.array(order, dtype=wp.int32, device=d)
         self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32), device=d)
         self.levels = []  # (items, block_start, level_first, level_count) per level
+        level_arrays = []
         for level in range(self.max_depth if per_shape.any() else 0):
             first, count = sizes.level(level)
             items = count * per_shape
             block = np.concatenate([[0], np.cumsum(items)])
             if block[-1] >= 2**31:
                 raise ValueError("scene too large for the BVH refit (2**31 work items on one level)")
-            self.levels.append((
-                int(block[-1]),
-                wp.array(block.astype(np.int32), device=d),
-                wp.array(first.astype(np.int32), device=d),
-                wp.array(np.maximum(count, 1).astype(np.int32), device=d),
-            ))
+            self.levels.append(int(block[-1]))
+            level_arrays += [block, first, np.maximum(count, 1)]
+        views = packed_upload(level_arrays, d) if level_arrays else []  # one copy for all levels
+        self.levels = [(items, *views[3 * k: 3 * k + 3]) for k, items in enumerate(self.levels)]
 
         tv = TreeView()
         tv.shape_layout = build.shape_layout_device

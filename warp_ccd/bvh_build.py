@@ -50,7 +50,7 @@ from .precision import precision_overloads
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild", "TreeSizes", "build_tree", "centroid_keys",
-           "tree_sizes"]
+           "packed_upload", "tree_sizes"]
 
 SMALL_SUBTREE = 8
 """Largest subtree (in triangles) that one thread finishes alone (:func:`_finish_kernel`) on CUDA;
@@ -96,6 +96,15 @@ class TreeSizes:
         self.num_inner = self.num_nodes - self.num_leaves
         self.num_levels = self.q + 1 + (self.split > 0)
 
+    def take(self, index: np.ndarray) -> "TreeSizes":
+        """The sizes of the trees ``index`` (gathered, not recomputed)."""
+        out = object.__new__(TreeSizes)
+        out.leaf_size = self.leaf_size
+        for name in ("m", "q", "split", "num_nodes", "num_leaves", "num_inner"):
+            setattr(out, name, getattr(self, name)[index])
+        out.num_levels = out.q + 1 + (out.split > 0)
+        return out
+
     def level(self, d: int) -> tuple[np.ndarray, np.ndarray]:
         """``(first node, node count)`` of level ``d`` of every shape (count 0 past its last)."""
         first = np.full(self.m.shape, (1 << d) - 1, np.int64)
@@ -105,6 +114,28 @@ class TreeSizes:
     def cut_size(self, depth: int) -> np.ndarray:
         """Nodes in the cut at ``depth`` of every shape: ``2**depth``, or all leaves below."""
         return np.where(depth <= self.q, np.int64(1) << min(depth, 62), self.num_leaves)
+
+
+def _distinct(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(index, values)``: the distinct values of ``m`` ascending, and each entry's index among
+    them (``np.unique(..., return_inverse=True)``, by counting when the values are small)."""
+    if len(m) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    top = int(m.max())
+    if top > 4 * len(m) + 4096:
+        values, index = np.unique(m, return_inverse=True)
+        return index.reshape(-1), values
+    present = np.zeros(top + 1, np.bool_)
+    present[m] = True
+    return (np.cumsum(present) - 1)[m], np.flatnonzero(present)
+
+
+def packed_upload(arrays: list, device) -> list:
+    """Integer numpy arrays to int32 device arrays with one copy: views of one upload."""
+    lengths = [len(a) for a in arrays]
+    block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
+    ends = np.cumsum(lengths)
+    return [block[int(e - k):int(e)] for e, k in zip(ends, lengths)]
 
 
 def tree_sizes(m, leaf_size: int) -> TreeSizes:
@@ -702,41 +733,35 @@ class TreeBuild:
         if small is None:
             small = SMALL_SUBTREE if d.is_cuda else 2**31 - 1
         self.small = max(int(small), 2 * self.leaf_size)
-        self.sizes = tree_sizes(m, self.leaf_size)
-        layout_m, shape_layout = np.unique(m, return_inverse=True)
-        self.shape_layout = shape_layout.reshape(-1).astype(np.int64)
+        self.shape_layout, layout_m = _distinct(m)
         self.layout_sizes = sizes = tree_sizes(layout_m, self.leaf_size)
+        self.sizes = sizes.take(self.shape_layout)  # per shape: numpy work per layout, not per shape
 
         def offsets(counts):
             return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
         self.layout_node_start = offsets(sizes.num_nodes)
-        if self.layout_node_start[-1] >= 2**31 or (self.sizes.num_nodes.sum() if len(m) else 0) >= 2**31:
-            raise ValueError(f"scene too large for the tree build: {self.sizes.num_nodes.sum()} tree nodes")
+        if self.layout_node_start[-1] >= 2**31:
+            raise ValueError(f"scene too large for the tree build: {self.layout_node_start[-1]} tree nodes")
         self.layout_leaf_start = offsets(sizes.num_leaves)
         self.layout_inner_start = offsets(sizes.num_inner)
         cuts = np.stack([sizes.cut_size(self.cut_depth), sizes.cut_size(self.cut_depth + 1)], axis=1).reshape(-1)
         self.layout_cut_start = offsets(cuts)
         # Levels split over all shapes at once: until the nodes hold at most `small` triangles.
-        self.global_levels = _bit_length((m + self.small - 1) // self.small - 1)
+        self.global_levels = _bit_length((layout_m + self.small - 1) // self.small - 1)[self.shape_layout]
         self.num_global_levels = int(self.global_levels.max()) if len(m) else 0
         subtree_end = np.cumsum(np.int64(1) << self.global_levels)
         self.num_subtrees = int(subtree_end[-1]) if len(m) else 0
 
-        def dev(a, dtype=wp.int32):
-            return wp.array(np.asarray(a).astype(np.int32), dtype=dtype, device=d)
-
         self.shape_triangle = shape_triangle
         self.shape_triangle_start = tstart
-        self._tstart = dev(tstart)
-        self._global_levels = dev(self.global_levels)
-        self._subtree_end = dev(subtree_end)
-        self._layout_m = dev(layout_m)
-        self.shape_layout_device = dev(self.shape_layout)
-        self.layout_node_start_device = dev(self.layout_node_start)
-        self.layout_leaf_start_device = dev(self.layout_leaf_start)
-        self.layout_inner_start_device = dev(self.layout_inner_start)
-        self.layout_cut_start_device = dev(self.layout_cut_start)
+        # Every small per-shape and per-layout array in one upload (one copy, not ten).
+        (self._tstart, self._global_levels, self._subtree_end, self._layout_m, self.shape_layout_device,
+         self.layout_node_start_device, self.layout_leaf_start_device, self.layout_inner_start_device,
+         self.layout_cut_start_device) = packed_upload(
+            [tstart, self.global_levels, subtree_end, layout_m, self.shape_layout, self.layout_node_start,
+             self.layout_leaf_start, self.layout_inner_start, self.layout_cut_start], d)
+        self._no_world = wp.full(len(m), -1, dtype=wp.int32, device=d)
         k = int(self.layout_node_start[-1])
         n = self.num_triangles
         self.node_child = wp.empty(k, dtype=wp.vec2i, device=d)
@@ -764,7 +789,6 @@ class TreeBuild:
             self._sort_value = self._scratch[2 * n: 4 * n]
             self._sort_shape = self._scratch[4 * n:] if len(m) > 1 else None
         self._shape_bits = int(_bit_length(np.array([max(len(m) - 1, 0)]))[0])
-        self._no_world = dev(np.full(len(m), -1))
 
     def layout(self) -> None:
         """Launches the layouts (one thread per node of each distinct triangle count)."""
