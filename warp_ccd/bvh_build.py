@@ -514,22 +514,6 @@ def _node_at(m: int, depth: int, p: int):
 
 
 @wp.func
-def _node_on_path(start: int, count: int, path: int, steps: int):
-    """``(start, count)`` of the node ``steps`` levels below the node ``(start, count)`` (levels
-    complete down there) along ``path``: its bits, most significant first, 1 for a right child."""
-    s = int(start)
-    c = int(count)
-    for r in range(steps):
-        left = c // 2
-        if ((path >> (steps - 1 - r)) & 1) == 1:
-            s += left
-            c -= left
-        else:
-            c = left
-    return s, c
-
-
-@wp.func
 def _split_axis(tri_key: wp.array[wp.vec3], tri_list: wp.array[wp.int32], list_base: int, num_triangles: int,
                 first: int, count: int) -> int:
     """Longest axis of the centroid keys of the list block ``first .. first + count``: the first and
@@ -635,7 +619,15 @@ def _finish_kernel(
     j = t - (shape_subtree_end[s] - (1 << d0))
     first = shape_triangle_start[s]
     m = shape_triangle_start[s + 1] - first
-    start, count = _node_on_path(0, m, j, d0)
+    start = int(0)
+    count = int(m)
+    for r in range(d0):
+        left = count // 2
+        if ((j >> (d0 - 1 - r)) & 1) == 1:
+            start += left
+            count -= left
+        else:
+            count = left
     n = num_triangles
     lists = (d0 % 2) * 3 * n
     scratch = (1 - d0 % 2) * 3 * n
@@ -659,7 +651,15 @@ def _finish_kernel(
     for depth in range(d0, q + 1):
         rel = depth - d0
         for jj in range(1 << rel):
-            ns, nc = _node_on_path(start, count, jj, rel)
+            ns = int(start)
+            nc = int(count)
+            for r in range(rel):
+                left = nc // 2
+                if ((jj >> (rel - 1 - r)) & 1) == 1:
+                    ns += left
+                    nc -= left
+                else:
+                    nc = left
             if nc <= leaf_size:
                 continue
             axis = _split_axis(tri_key, tri_list, lists, n, first + ns, nc)
