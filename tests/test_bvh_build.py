@@ -220,3 +220,25 @@ def test_one_shot_runs_its_frame_once(device, monkeypatch):
     meshes = [(v * rng.uniform(1, 2) + rng.uniform(-2, 2, 3).astype(np.float32), t) for _ in range(6)]
     assert len(wc.collide(meshes, device=device).object_pairs) > 0
     assert runs == [1, 1]
+
+
+def test_validate_meshes_mixed_arrays():
+    """Mixed kinds of arrays: bool ones are refused as validate_mesh refuses them, int64 beside
+    uint64 indices are fine, pairs may be any tuple type, and the first bad mesh is named."""
+    from collections import namedtuple
+
+    cube = wc.shape("cube")
+    with pytest.raises(ValueError, match="mesh 1: triangles must be integer"):
+        validate_meshes([cube, (np.eye(3), np.array([[True, False, True]]))])
+    with pytest.raises(ValueError, match="mesh 1: vertices must be real numbers"):
+        validate_meshes([cube, (np.eye(3, dtype=bool), [[0, 1, 2]])])
+    packed = validate_meshes([(cube[0], cube[1].astype(np.int64)), (cube[0], cube[1].astype(np.uint64))])
+    assert np.array_equal(packed.triangles, np.concatenate([cube[1], cube[1]]))
+    with pytest.raises(ValueError, match=r"^mesh 0: triangle 0 has vertex index out of range"):
+        validate_meshes([(np.eye(3), [[0, 1, 5]]), ([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])])
+    with pytest.raises(ValueError, match=r"^mesh 0: vertices overflow"):
+        validate_meshes([([[1e39, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
+                         ([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])])
+    pair = namedtuple("Pair", "vertices triangles")
+    assert wc.Scene.from_meshes([pair(*cube), pair(*wc.shape("tetrahedron"))]).num_shapes == 2
+    assert wc.Scene((m for m in [cube, cube]), [0, 1]).num_shapes == 2

@@ -224,7 +224,7 @@ class Scene:
                 packed = MeshSet(packed.vertices.astype(fdtype), packed.triangles, packed.vertex_start,
                                  packed.triangle_start)
         else:
-            packed = validate_meshes(shapes, kind="shape", dtype=fdtype)
+            packed = validate_meshes(list(shapes), kind="shape", dtype=fdtype)
         self.shapes = packed
         num_shapes = len(packed)
         inst = np.asarray(instance_shape)
@@ -370,7 +370,7 @@ class Scene:
         """
         if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
             raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
-        pairs = [type(m) in (tuple, list) and len(m) == 2 for m in meshes]
+        pairs = [isinstance(m, (tuple, list)) and len(m) == 2 for m in meshes]
         if not all(pairs):
             i = pairs.index(False)
             raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(meshes[i]).__name__}")

@@ -285,7 +285,8 @@ def validate_meshes(meshes, labels=None, kind: str = "mesh", dtype=np.float32) -
         The :class:`MeshSet`.
 
     Raises:
-        ValueError: naming the first bad mesh and the problem, as :func:`validate_mesh` does.
+        ValueError: naming the first bad mesh and its first problem, as :func:`validate_mesh` does
+            for that mesh.
     """
     labels = np.arange(len(meshes)) if labels is None else np.asarray(labels)
 
@@ -302,43 +303,58 @@ def validate_meshes(meshes, labels=None, kind: str = "mesh", dtype=np.float32) -
     try:
         vs = [np.asarray(v) for v, _ in meshes]
         ts = [np.asarray(t) for _, t in meshes]
-        v = np.concatenate(vs)
-        t = np.concatenate(ts)
-    except Exception:  # ragged, non-numeric, wrong ranks: let the per-mesh checks say which
+    except Exception:  # ragged, not pairs: let the per-mesh checks say which
         each()
         raise
+    # Ranks, widths and kinds of number, from one attribute of each array (bool, strings, objects,
+    # wrong shapes: the per-mesh checks name the mesh).
+    if {x.shape[1:] for x in vs} != {(3,)} or {x.shape[1:] for x in ts} != {(3,)} \
+            or not {x.dtype.kind for x in vs} <= set("iuf") or not {x.dtype.kind for x in ts} <= set("iu"):
+        each()
+        raise ValueError("meshes: arrays of inconsistent shapes or types")  # not reached: some mesh is bad
+    v = np.concatenate(vs)
+    t = np.concatenate(ts, dtype=np.int64, casting="unsafe")
     num_v = np.fromiter(map(len, vs), np.int64, len(vs))
     num_t = np.fromiter(map(len, ts), np.int64, len(ts))
-    if v.ndim != 2 or v.shape[1] != 3 or t.ndim != 2 or t.shape[1] != 3 \
-            or not (np.issubdtype(v.dtype, np.integer) or np.issubdtype(v.dtype, np.floating)) \
-            or t.dtype == bool or not np.issubdtype(t.dtype, np.integer):
-        each()
-        raise ValueError(f"{kind}es: inconsistent arrays")  # not reached: some mesh is bad
     vstart = np.concatenate([[0], np.cumsum(num_v)])
     tstart = np.concatenate([[0], np.cumsum(num_t)])
-    few = num_v < 3
-    if few.any():
-        k = int(np.argmax(few))
-        raise ValueError(f"{name(k)}: a mesh needs at least 3 vertices, got {num_v[k]}")
-    if not np.isfinite(v).all():  # (flat reductions first: the rows only to name the culprit)
-        row = int(np.argmin(np.isfinite(v).all(axis=1)))
-        k = int(np.searchsorted(vstart, row, side="right") - 1)
-        raise ValueError(f"{name(k)}: vertex {row - vstart[k]} is not finite ({v[row].tolist()})")
+
+    def mesh_of_vertex(row):
+        return int(np.searchsorted(vstart, row, side="right") - 1)
+
+    # Each check over all meshes (flat reductions first, rows only to name the culprit); the error
+    # names the first bad mesh, and for it the first problem in validate_mesh's order.
+    found = []  # (mesh, check, message)
+    few = np.flatnonzero(num_v < 3)
+    if len(few):
+        k = int(few[0])
+        found.append((k, 0, f"{name(k)}: a mesh needs at least 3 vertices, got {num_v[k]}"))
+    finite = None
+    if not np.isfinite(v).all():
+        finite = np.isfinite(v).all(axis=1)
+        row = int(np.argmin(finite))
+        k = mesh_of_vertex(row)
+        found.append((k, 1, f"{name(k)}: vertex {row - vstart[k]} is not finite ({v[row].tolist()})"))
     with np.errstate(over="ignore"):
         v32 = v.astype(np.float32)
     if not np.isfinite(v32).all():
-        k = int(np.searchsorted(vstart, int(np.argmin(np.isfinite(v32).all(axis=1))), side="right") - 1)
-        big = np.abs(v[vstart[k]:vstart[k + 1]]).max()
-        raise ValueError(f"{name(k)}: vertices overflow float32 (largest magnitude {big:.3g})")
-    empty = num_t == 0
-    if empty.any():
-        raise ValueError(f"{name(int(np.argmax(empty)))}: the mesh has no triangles")
+        over = ~np.isfinite(v32).all(axis=1) & (True if finite is None else finite)
+        if over.any():
+            k = mesh_of_vertex(int(np.argmax(over)))
+            big = np.abs(v[vstart[k]:vstart[k + 1]]).max()
+            found.append((k, 2, f"{name(k)}: vertices overflow float32 (largest magnitude {big:.3g})"))
+    empty = np.flatnonzero(num_t == 0)
+    if len(empty):
+        k = int(empty[0])
+        found.append((k, 3, f"{name(k)}: the mesh has no triangles"))
     limit = np.repeat(num_v, num_t)[:, None]
-    if t.min() < 0 or (t >= limit).any():
+    if len(t) and (t.min() < 0 or (t >= limit).any()):
         row = int(np.argmax(((t < 0) | (t >= limit)).any(axis=1)))
         k = int(np.searchsorted(tstart, row, side="right") - 1)
-        raise ValueError(f"{name(k)}: triangle {row - tstart[k]} has vertex index out of range "
-                         f"[0, {num_v[k]}): {t[row].tolist()}")
+        found.append((k, 4, f"{name(k)}: triangle {row - tstart[k]} has vertex index out of range "
+                            f"[0, {num_v[k]}): {t[row].tolist()}"))
+    if found:
+        raise ValueError(min(found)[2])
     out = v32 if dtype == np.float32 else v.astype(dtype)
     return MeshSet(np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32)), vstart.astype(np.int64),
                    tstart.astype(np.int64))
