@@ -42,6 +42,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.scaling import environment, write_json
+from warp_ccd.bench.timing import synced_ms
 from warp_ccd.bvh_build import SMALL_SUBTREE, TreeBuild, build_tree
 from warp_ccd.cli_common import resolve_device
 
@@ -49,21 +50,10 @@ POLYHEDRA = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
 
 
 def timed(fn, device, repeats: int) -> tuple[float, float]:
-    """``(min, median)`` wall ms of ``fn()`` up to the device's end (None: host work only), after
-    one warm-up call."""
-    def sync():
-        if device is not None:
-            wp.synchronize_device(device)
-
+    """``(min, median)`` wall ms of ``fn()`` up to the device's end (None: Warp's default device, for
+    host work), after one warm-up call."""
     fn()
-    sync()
-    times = []
-    for _ in range(repeats):
-        sync()
-        t = time.perf_counter()
-        fn()
-        sync()
-        times.append((time.perf_counter() - t) * 1e3)
+    times = [synced_ms(fn, device) for _ in range(repeats)]
     return float(np.min(times)), float(np.median(times))
 
 

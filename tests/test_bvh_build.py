@@ -6,7 +6,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bvh_build import TreeBuild, build_tree, tree_sizes
+from warp_ccd.bvh_build import TreeBuild, TreeSizes, build_tree
 from warp_ccd.shapes import validate_mesh, validate_meshes
 
 
@@ -94,7 +94,7 @@ def test_identical_and_degenerate_triangles(device):
 def test_tree_sizes_match_the_reference():
     for leaf_size in (1, 2, 5):
         m = np.arange(1, 300)
-        sizes = tree_sizes(m, leaf_size)
+        sizes = TreeSizes(m, leaf_size)
         for k, count in enumerate(m):
             tree = build_tree(*soup(np.random.default_rng(0), int(count)), leaf_size)
             assert sizes.num_nodes[k] == tree.num_nodes and sizes.num_leaves[k] == len(tree.leaf_node)
@@ -208,7 +208,7 @@ def test_one_shot_runs_its_frame_once(device, monkeypatch):
 
     def counted(self, *args, **kwargs):
         result = detect(self, *args, **kwargs)
-        runs.append(self.runs)
+        runs.append(result.runs)
         return result
 
     monkeypatch.setattr(wc.CollisionPipeline, "detect", counted)

@@ -280,11 +280,13 @@ class SceneBVH:
             raise ValueError(f"scene too large for the BVH: {inode[-1]} tree nodes (limit 2**31 - 1)")
         self.num_node_slots = int(inode[-1])
         self.max_depth = int(sizes.num_levels.max()) if num_shapes else 0
-        # The shape whose first instance's world vertices a rebuild reads (-1: none, its own vertices).
+        # Where each shape's first instance's world vertices start, which a rebuild reads (-1: no
+        # instance, the shape's own vertices).
         first = np.full(num_shapes, n, np.int64)
         np.minimum.at(first, scene.instance_shape_np, np.arange(n))
-        world_start = np.where(first < n, scene.instance_vertex_start_np[np.minimum(first, max(n - 1, 0))]
-                               if n else -1, -1)
+        world_start = np.full(num_shapes, -1, np.int64)
+        has = first < n
+        world_start[has] = scene.instance_vertex_start_np[first[has]]
         self._shape_world_start = wp.array(world_start.astype(np.int32), dtype=wp.int32, device=d)
 
         # Instances of small trees: a thread per leaf, then per inner node. The others grouped by
@@ -311,18 +313,17 @@ class SceneBVH:
         order = order[~is_small[order]] if n else order
         self.shape_instance = wp.array(order, dtype=wp.int32, device=d)
         self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32), device=d)
-        self.levels = []  # (items, block_start, level_first, level_count) per level
-        level_arrays = []
+        level_items, level_arrays = [], []
         for level in range(self.max_depth if per_shape.any() else 0):
-            first, count = sizes.level(level)
-            items = count * per_shape
-            block = np.concatenate([[0], np.cumsum(items)])
+            level_first, count = sizes.level(level)
+            block = np.concatenate([[0], np.cumsum(count * per_shape)])
             if block[-1] >= 2**31:
                 raise ValueError("scene too large for the BVH refit (2**31 work items on one level)")
-            self.levels.append(int(block[-1]))
-            level_arrays += [block, first, np.maximum(count, 1)]
+            level_items.append(int(block[-1]))
+            level_arrays += [block, level_first, np.maximum(count, 1)]
         views = packed_upload(level_arrays, d) if level_arrays else []  # one copy for all levels
-        self.levels = [(items, *views[3 * k: 3 * k + 3]) for k, items in enumerate(self.levels)]
+        # (items, block_start, level_first, level_count) per level
+        self.levels = [(items, *views[3 * k: 3 * k + 3]) for k, items in enumerate(level_items)]
 
         tv = TreeView()
         tv.shape_layout = build.shape_layout_device

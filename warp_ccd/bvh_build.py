@@ -12,7 +12,7 @@ batched build cheap:
    triangle range, children, parent, depth, leaf range and place in the cuts follow from its id
    by a walk from the root of ``O(depth)`` arithmetic steps: one thread per node of every layout,
    one launch (:func:`_layout_kernel`), no sort, no scan; the host computes the sizes with a few
-   numpy operations over the shapes (:func:`tree_sizes`).
+   numpy operations over the layouts (:class:`TreeSizes`).
 2. **Only the order of the triangles depends on the geometry.** It comes from three lists of each
    shape's triangles sorted by centroid along x, y, z (one stable radix sort per axis, then one by
    shape), partitioned stably level by level (the classic O(m log m) k-d build): a node's side of
@@ -51,7 +51,7 @@ from .precision import precision_overloads
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild", "TreeSizes", "build_tree", "centroid_keys",
-           "packed_upload", "tree_sizes"]
+           "packed_upload"]
 
 SMALL_SUBTREE = 8
 """Largest subtree (in triangles) that one thread finishes alone (:func:`_finish_kernel`) on CUDA;
@@ -83,7 +83,7 @@ class TreeSizes:
     Attributes:
         q: ``(S,)`` the last complete level: the first with ``m >> q <= L``.
         split: ``(S,)`` nodes of level ``q`` that split (``L + 1`` triangles each).
-        num_nodes, num_leaves, num_inner, num_levels: ``(S,)`` int64.
+        num_nodes, num_leaves, num_inner: ``(S,)`` int64; ``num_levels`` follows from ``q`` and ``split``.
     """
 
     def __init__(self, m, leaf_size: int):
@@ -96,7 +96,11 @@ class TreeSizes:
         self.num_nodes = (np.int64(1) << (self.q + 1)) - 1 + 2 * self.split
         self.num_leaves = (np.int64(1) << self.q) + self.split
         self.num_inner = self.num_nodes - self.num_leaves
-        self.num_levels = self.q + 1 + (self.split > 0)
+
+    @property
+    def num_levels(self) -> np.ndarray:
+        """``(S,)`` levels of each tree: down to ``q``, and one more where level ``q`` splits."""
+        return self.q + 1 + (self.split > 0)
 
     def take(self, index: np.ndarray) -> "TreeSizes":
         """The sizes of the trees ``index`` (gathered, not recomputed)."""
@@ -104,7 +108,6 @@ class TreeSizes:
         out.leaf_size = self.leaf_size
         for name in ("m", "q", "split", "num_nodes", "num_leaves", "num_inner"):
             setattr(out, name, getattr(self, name)[index])
-        out.num_levels = out.q + 1 + (out.split > 0)
         return out
 
     def level(self, d: int) -> tuple[np.ndarray, np.ndarray]:
@@ -138,11 +141,6 @@ def packed_upload(arrays: list, device) -> list:
     block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
     ends = np.cumsum(lengths)
     return [block[int(e - k):int(e)] for e, k in zip(ends, lengths)]
-
-
-def tree_sizes(m, leaf_size: int) -> TreeSizes:
-    """The :class:`TreeSizes` of shapes of ``m`` triangles."""
-    return TreeSizes(m, leaf_size)
 
 
 # ---------------------------------------------------------------------------------------------- reference
@@ -736,7 +734,7 @@ class TreeBuild:
             small = SMALL_SUBTREE if d.is_cuda else 2**31 - 1
         self.small = max(int(small), 2 * self.leaf_size)
         self.shape_layout, layout_m = _distinct(m)
-        self.layout_sizes = sizes = tree_sizes(layout_m, self.leaf_size)
+        self.layout_sizes = sizes = TreeSizes(layout_m, self.leaf_size)
         self.sizes = sizes.take(self.shape_layout)  # per shape: numpy work per layout, not per shape
 
         def offsets(counts):

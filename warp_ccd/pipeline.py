@@ -215,8 +215,6 @@ class CollisionPipeline:
         counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
-        runs: how many times the last :meth:`detect` ran its frame (more than 1 when a buffer
-            grew; buffers keep their sizes, so later frames of similar scenes run once).
         rebuilds: tree rebuilds so far (``rebuild_every``).
     """
 
@@ -287,7 +285,6 @@ class CollisionPipeline:
         flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
-        self.runs = 0
         self.rebuild_every = int(rebuild_every)
         self.rebuilds = 0
         self._detects = 0
@@ -356,15 +353,15 @@ class CollisionPipeline:
         step = None if advance is None else scene.advance_host(advance)
         if scene.num_objects < 2:
             return self._no_pairs(step)
-        frame = self._frame(step)
         if self.rebuild_every:
             self._detects += 1
             if self._detects % self.rebuild_every == 0:
-                if step is not None:  # the frame moves the scene first: move it, then rebuild and detect
+                if step is not None:  # the frame would move the scene first: move it, then rebuild and detect
                     scene.enqueue_advance(step)
-                    frame = self._frame(None)
+                    step = None
                 self.boxes.rebuild(scene)
                 self.rebuilds += 1
+        frame = self._frame(step)
         grew = frame.run_once()
         wait_ms = frame.wait_ms
         runs = 1
@@ -373,7 +370,6 @@ class CollisionPipeline:
             grew = frame.run_once()
             wait_ms += frame.wait_ms
             runs += 1
-        self.runs = runs
         narrow = self.narrow
         hits = narrow.hits
         rows = {"device_triangle_pairs": (hits.data, hits.last_count)}

@@ -24,6 +24,7 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 
 import math
 from collections.abc import Sequence
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -515,13 +516,11 @@ class Scene:
         self.world_vertex.assign(v)
 
     # ------------------------------------------------------------------ views
-    @property
+    @cached_property
     def shape_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per shape ``(local vertices (n, 3), triangles (m, 3) int32)``: views of :attr:`shapes`
         (made on first use: one Python pair per shape, for export and inspection)."""
-        if getattr(self, "_shape_meshes", None) is None:
-            self._shape_meshes = self.shapes.meshes()
-        return self._shape_meshes
+        return self.shapes.meshes()
 
     def world_vertex32(self) -> wp.array:
         """World vertices as float32 ``wp.vec3`` (for rendering and export): ``world_vertex`` itself
