@@ -298,7 +298,7 @@ class Scene:
         self.time_device = wp.zeros(1, dtype=wp.float64, device=d)
         if motion is not None:
             motion.launch(self.time_device, self.instance_pose)
-        self._pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
+        self.pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -396,15 +396,50 @@ class Scene:
         return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
                    precision=precision)
 
+    @classmethod
+    def from_usd(cls, stage_or_path, *, prims=None, time=None, device=None, precision: str = "float32",
+                 **options) -> "Scene":
+        """A scene of the meshes of a USD stage, at one time code (see :class:`~warp_ccd.usd_import.UsdMeshImport`).
+
+        Every ``UsdGeom.Mesh`` under ``prims`` (instance proxies and PointInstancer instances
+        included; invisible, guide and proxy prims left out) is one object, polygons fanned into
+        triangles, placed by its world transform. ``scene.usd`` holds the import: object names
+        (``scene.usd.object_path``), the USD face of every triangle (``scene.usd.faces``), and
+        ``scene.usd.set_frame(k)`` for the other time codes of ``options["times"]``.
+
+        Args:
+            stage_or_path: a ``Usd.Stage`` or a USD file path.
+            prims: prim paths or ``fnmatch`` patterns (default: the whole stage).
+            time: the time code (default: the stage's start time code, or 0 without a time range);
+                or pass ``times=[...]`` to prepare several and move with ``scene.usd.set_frame``.
+            device: Warp device.
+            precision: ``"float32"`` or ``"float64"``.
+            **options: ``times``, ``include_invisible``, ``include_purposes`` of
+                :class:`~warp_ccd.usd_import.UsdMeshImport`.
+
+        Raises:
+            ValueError: naming the file or the prim at fault (see :class:`~warp_ccd.usd_import.UsdMeshImport`).
+        """
+        from .usd_import import UsdMeshImport
+
+        if time is not None:
+            if "times" in options:
+                raise ValueError("from_usd: give time or times, not both")
+            options["times"] = [time]
+        return UsdMeshImport(stage_or_path, prims=prims, device=device, precision=precision, **options).scene
+
     # ------------------------------------------------------------------ motion
     def update_world_vertices(self) -> None:
         """Recomputes ``world_vertex`` from the poses (not for deforming scenes: their caller writes
         the world vertices; they start as the meshes were given)."""
         if self.deforming:
             return
-        self._pose_world_vertices()
+        self.pose_world_vertices()
 
-    def _pose_world_vertices(self) -> None:
+    def pose_world_vertices(self) -> None:
+        """Computes every object's world vertices from the shapes, scales and poses (one kernel),
+        deforming or not: for a scene that mixes both, whose caller then overwrites the deforming
+        objects' vertices (as :class:`~warp_ccd.usd_import.UsdMeshImport` does)."""
         if self.num_world_vertices == 0:
             return
         wp.launch(

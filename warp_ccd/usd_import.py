@@ -1,0 +1,685 @@
+"""USD import: the meshes of a stage as a :class:`~warp_ccd.scene.Scene`, at each time code asked for.
+
+:class:`UsdMeshImport` traverses the stage once and reads, per mesh, its topology and points, and
+per object its world transform at every time code asked for:
+
+* **Objects.** Every ``UsdGeom.Mesh`` under the chosen prims is one object, instance proxies of
+  instanceable prims included; a ``UsdGeom.PointInstancer`` gives one object per (instance,
+  mesh of its prototype), with the instance transform (the prototype root's own transform
+  included, as USD computes it) and the instancer's mask at the first time code. Invisible prims
+  (``visibility = invisible`` at the first time code) and prims of purpose ``guide`` or
+  ``proxy`` are skipped with their subtrees unless asked for; so are meshes without faces.
+* **Triangles.** Polygons are fanned (``n - 2`` triangles from a face of ``n`` vertices; faces in
+  ``holeIndices`` are left out); :attr:`UsdMeshImport.triangle_face` maps every triangle of the
+  scene back to its USD face index. Faces of fewer than 3 vertices, indices outside the points,
+  non-finite points and animated topology are errors naming the prim.
+* **Shapes** are stored once and shared by the objects that show them: instance proxies of one
+  prototype, a PointInstancer's instances of one prototype, and meshes whose points and
+  triangles are byte for byte the same.
+* **Transforms.** A world transform ``M`` (USD's row-vector convention, ``p_world = p M``) whose
+  linear part is a rotation times a uniform scale becomes a pose and ``instance_scale``. One with
+  a non-uniform scale, a shear or a reflection is baked into a shape of its own (the points times
+  the linear part at the first time code), and the object moves rigidly from there while the
+  rest of its transform stays a rotation and a uniform scale.
+* **Rigid or deforming.** An object is deforming when its points are time-sampled, or when its
+  transform changes shape over time (an animated non-uniform scale): its world vertices are
+  computed on the host each frame (``points(t) M(t)``) and copied to the device. Every other
+  object is rigid: only its pose (and scale) changes, and the scene's kernel places its vertices.
+
+Cost: the stage is traversed once. Per time code, one ``UsdGeom.XformCache`` lookup per object
+whose world transform is time-varying, one ``ComputeInstanceTransformsAtTime`` per animated
+PointInstancer, and one ``points`` read per time-sampled mesh; static transforms and points are
+read once. Poses of every time code are read and decomposed up front (numpy over the objects, no
+per-object Python beyond the lookups), which is where an animated transform that does not stay a
+similarity is found. Objects are ordered static rigid, animated rigid, then deforming, so that a
+frame copies two contiguous pose slices and one contiguous tail of world vertices.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .scene import Scene, _matrix_to_quat
+from .shapes import MeshSet
+
+__all__ = ["UsdMeshImport", "open_stage", "stage_time_codes"]
+
+SIMILARITY_TOLERANCE = 1e-5
+"""Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
+
+
+def open_stage(stage_or_path):
+    """A ``Usd.Stage`` from a stage or a file path.
+
+    Raises:
+        ValueError: the file is missing or USD cannot open it (the message names the path).
+    """
+    from pxr import Sdf, Usd
+
+    if isinstance(stage_or_path, Usd.Stage):
+        return stage_or_path
+    try:
+        path = os.fsdecode(os.fspath(stage_or_path))
+    except TypeError:
+        raise ValueError(f"stage: expected a Usd.Stage or a file path, got {type(stage_or_path).__name__}") from None
+    if not os.path.isfile(path):
+        raise ValueError(f"cannot read {path}: no such file")
+    if not os.access(path, os.R_OK):
+        raise ValueError(f"cannot read {path}: permission denied")
+    try:
+        loaded = Sdf.Layer.Find(path)
+        if loaded is not None:
+            loaded.Reload()  # a layer still open from an earlier read: the file as it is now
+        stage = Usd.Stage.Open(path)
+    except Exception as exc:  # pxr.Tf.ErrorException
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"cannot read {path}: not a USD file USD can open ({first})") from None
+    if stage is None:
+        raise ValueError(f"cannot read {path}: not a USD file USD can open")
+    return stage
+
+
+def stage_time_codes(stage, frames=None) -> np.ndarray:
+    """The time codes to check.
+
+    Args:
+        stage: a ``Usd.Stage``.
+        frames: ``None`` (every integer time code of the stage's authored range; ``[0]`` when it
+            has none), a number, a sequence of numbers, or ``(start, end)`` / ``(start, end, step)``
+            given as a ``slice`` (``end`` included).
+
+    Returns:
+        ``(F,)`` float64 time codes, increasing.
+
+    Raises:
+        ValueError: an empty, non-finite or decreasing range, a step <= 0, or times outside the
+            stage's authored range.
+    """
+    has_range = stage.HasAuthoredTimeCodeRange()
+    lo, hi = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
+    if frames is None:
+        if not has_range:
+            return np.zeros(1)
+        return np.arange(lo, hi + 0.5, 1.0) if hi >= lo else np.array([lo])
+    if isinstance(frames, slice):
+        start = lo if frames.start is None else frames.start
+        end = hi if frames.stop is None else frames.stop
+        step = 1.0 if frames.step is None else frames.step
+        try:
+            start, end, step = float(start), float(end), float(step)
+        except (TypeError, ValueError):
+            raise ValueError(f"frames: expected numbers, got {frames!r}") from None
+        if not np.isfinite([start, end, step]).all() or step <= 0 or end < start:
+            raise ValueError(f"frames: need start <= end and step > 0, got {start:g}:{end:g}:{step:g}")
+        times = start + step * np.arange(int(np.floor((end - start) / step + 1e-9)) + 1)
+    else:
+        try:
+            times = np.atleast_1d(np.asarray(frames, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise ValueError(f"frames: expected numbers, got {frames!r}") from None
+        if times.ndim != 1 or times.size == 0 or not np.isfinite(times).all():
+            raise ValueError(f"frames: expected finite time codes, got {frames!r}")
+        if (np.diff(times) <= 0).any():
+            raise ValueError("frames: time codes must increase")
+    if has_range and (times[0] < lo - 1e-9 or times[-1] > hi + 1e-9):
+        raise ValueError(f"frames {times[0]:g}..{times[-1]:g} lie outside the stage's time range {lo:g}..{hi:g}")
+    return times
+
+
+@dataclass
+class _MeshData:
+    """One source of mesh data: a mesh prim, or a prototype's mesh shared by its instance proxies."""
+
+    path: str
+    points_attr: object
+    points: np.ndarray  # (n, 3) float64 at the first time code
+    triangles: np.ndarray  # (m, 3) int32
+    triangle_face: np.ndarray  # (m,) int32 USD face index of each triangle
+    deforming: bool  # points time-sampled
+    key: bytes = b""  # content hash, for sharing shapes
+
+    def points_at(self, time) -> np.ndarray:
+        if not self.deforming:
+            return self.points
+        p = np.asarray(self.points_attr.Get(time), dtype=np.float64).reshape(-1, 3)
+        if p.shape != self.points.shape:
+            raise ValueError(f"prim {self.path}: {len(p)} points at time {float(time.GetValue()):g}, "
+                             f"{len(self.points)} at the first time code (a changing vertex count is not supported)")
+        if not np.isfinite(p).all():
+            raise ValueError(f"prim {self.path}: non-finite points at time {float(time.GetValue()):g}")
+        return p
+
+
+@dataclass
+class _Instancer:
+    """A PointInstancer: its kept instances and the meshes of its prototypes."""
+
+    path: str
+    schema: object
+    instance_index: np.ndarray  # (I,) USD indices of the instances kept (mask at the first time code)
+    proto_index: np.ndarray  # (I,) prototype of each kept instance
+    slots: list = field(default_factory=list)  # (prototype, mesh data index, mesh prim, prototype root prim)
+    varying: bool = False
+
+
+def _fan(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, path: str, num_points: int):
+    """Fan triangulation of USD polygons, vectorised: ``(triangles (m, 3) int32, face (m,) int32)``."""
+    counts = np.asarray(counts, np.int64)
+    indices = np.asarray(indices, np.int64)
+    if counts.size and counts.min() < 3:
+        f = int(np.argmax(counts < 3))
+        raise ValueError(f"prim {path}: face {f} has {int(counts[f])} vertices (at least 3 needed)")
+    if counts.sum() != indices.size:
+        raise ValueError(f"prim {path}: faceVertexCounts sum to {int(counts.sum())}, "
+                         f"but faceVertexIndices has {indices.size} entries")
+    if indices.size and (indices.min() < 0 or indices.max() >= num_points):
+        k = int(np.argmax((indices < 0) | (indices >= num_points)))
+        raise ValueError(f"prim {path}: faceVertexIndices[{k}] = {int(indices[k])} is outside its {num_points} points")
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    keep = np.ones(counts.size, bool)
+    if holes.size:
+        holes = holes[(holes >= 0) & (holes < counts.size)]
+        keep[holes] = False
+    face = np.repeat(np.nonzero(keep)[0], counts[keep] - 2)
+    # k-th triangle of a face: (first, first + k + 1, first + k + 2)
+    first = start[face]
+    k = np.arange(face.size) - np.repeat(np.concatenate([[0], np.cumsum(counts[keep] - 2)[:-1]]), counts[keep] - 2)
+    tri = np.stack([indices[first], indices[first + k + 1], indices[first + k + 2]], axis=1)
+    return tri.astype(np.int32), face.astype(np.int32)
+
+
+def _similarity(linear: np.ndarray, tol: float = SIMILARITY_TOLERANCE):
+    """Splits ``(K, 3, 3)`` linear parts (row vectors) into ``scale * rotation`` where they are one.
+
+    Returns:
+        ``(scale (K,), rotation (K, 3, 3), ok (K,) bool)``; ``ok`` is False for a non-uniform
+        scale, a shear, a reflection or a (near) zero scale.
+    """
+    gram = linear @ linear.swapaxes(1, 2)
+    s2 = np.trace(gram, axis1=1, axis2=2) / 3.0
+    dev = np.abs(gram - s2[:, None, None] * np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(linear)
+    ok = (s2 > 1e-30) & (det > 0) & (dev <= tol * np.maximum(s2, 1e-300))
+    scale = np.sqrt(np.maximum(s2, 0.0))
+    rotation = linear / np.where(scale > 0, scale, 1.0)[:, None, None]
+    return scale, rotation, ok
+
+
+def _poses(matrix: np.ndarray, bake: np.ndarray):
+    """Poses and scales of world matrices relative to baked linear parts.
+
+    Args:
+        matrix: ``(K, 4, 4)`` world matrices (row vectors).
+        bake: ``(K, 3, 3)`` linear parts baked into the shapes (identity where nothing is baked).
+
+    Returns:
+        ``(poses (K, 7) float64 rows (p, q xyzw), scale (K,), ok (K,) bool)``: ``p_world =
+        transform_point(pose, scale * (p bake))`` where ``ok``.
+    """
+    rel = np.linalg.solve(bake, matrix[:, :3, :3])  # bake^-1 A: p A = (p bake) (bake^-1 A)
+    scale, rot, ok = _similarity(rel)
+    poses = np.empty((len(matrix), 7))
+    poses[:, :3] = matrix[:, 3, :3]
+    # Row-vector rotation R acts as R^T on column vectors (wp.transform_point).
+    rot = np.where(ok[:, None, None], rot, np.eye(3))
+    poses[:, 3:] = _matrix_to_quat(rot.swapaxes(1, 2)) if len(rot) else np.zeros((0, 4))
+    return poses, scale, ok
+
+
+class UsdMeshImport:
+    """A stage's meshes, read once, as a :class:`~warp_ccd.scene.Scene` that can be set to each time code.
+
+    Example::
+
+        imp = UsdMeshImport("anim.usd", times=stage_time_codes(stage))
+        pipe = CollisionPipeline(imp.scene)
+        for k in range(len(imp.times)):
+            imp.set_frame(k)
+            res = pipe.detect()
+            names = [imp.object_path[i] for i in res.object_pairs.ravel()]
+
+    Args:
+        stage_or_path: a ``Usd.Stage`` or the path of a USD file.
+        prims: prim paths (``"/World/Robot"``) or ``fnmatch`` patterns (``"/World/*/Wheel*"``):
+            meshes at or under a chosen prim are read. Default: the whole stage.
+        times: time codes the scene will be set to (default: the stage's start time code, or 0).
+        include_invisible: also read invisible prims.
+        include_purposes: also read prims of these purposes (``"guide"``, ``"proxy"``).
+        device: Warp device of the scene.
+        precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.Scene`).
+
+    Attributes:
+        stage: the ``Usd.Stage``.
+        times: ``(F,)`` float64 time codes.
+        scene: the :class:`~warp_ccd.scene.Scene`, at ``times[0]`` until :meth:`set_frame`.
+        object_path: ``N`` names: the mesh prim's path, or ``"<instancer>[<i>]<mesh path in the
+            prototype>"`` for a PointInstancer's instance ``i``.
+        object_prim: ``N`` mesh prim paths (the prototype's mesh for point instances).
+        object_deforming: ``(N,)`` bool, world vertices set each frame.
+        triangle_face: ``(T,)`` int32 USD face index of every shape triangle, indexed like
+            ``scene.shape_triangle`` (shape start + local triangle).
+        skipped: ``(path, reason)`` of the meshes left out (no faces, invisible, purpose).
+        seconds: wall time of ``read`` (opening, traversal, topology, transforms at every time
+            code) and ``build`` (the scene on its device, the first frame).
+
+    Raises:
+        ValueError: naming the file or prim: a missing or unreadable file, a prim path that does
+            not exist, patterns that match nothing, a stage without meshes, or a bad mesh.
+    """
+
+    def __init__(self, stage_or_path, *, prims=None, times=None, include_invisible: bool = False,
+                 include_purposes=(), device=None, precision: str = "float32"):
+        from pxr import Usd
+
+        self._start = time.perf_counter()
+        self.stage = open_stage(stage_or_path)
+        if times is None:
+            times = stage_time_codes(self.stage)[:1]
+        self.times = np.atleast_1d(np.asarray(times, np.float64))
+        if self.times.ndim != 1 or self.times.size == 0 or not np.isfinite(self.times).all():
+            raise ValueError(f"times: expected finite time codes, got {times!r}")
+        self._codes = [Usd.TimeCode(float(t)) for t in self.times]
+        purposes = {"default", "render"} | set(include_purposes)
+        bad = set(include_purposes) - {"guide", "proxy", "render", "default"}
+        if bad:
+            raise ValueError(f"include_purposes: unknown purpose {sorted(bad)[0]!r} (use 'guide', 'proxy')")
+        self.skipped: list[tuple[str, str]] = []
+        self._meshes: list[_MeshData] = []
+        self._mesh_by_source: dict[str, int] = {}
+        self._instancers: list[_Instancer] = []
+        self._varying_xform: dict[str, bool] = {}
+        mesh_prims = self._traverse(prims, include_invisible, purposes)
+        self._build(mesh_prims, device, precision)
+
+    # ------------------------------------------------------------------ traversal
+    def _roots(self, prims):
+        stage = self.stage
+        if prims is None:
+            return [stage.GetPseudoRoot()], None
+        if isinstance(prims, (str, bytes)) or not hasattr(prims, "__iter__"):
+            prims = [prims]
+        paths, patterns = [], []
+        for p in prims:
+            p = str(p)
+            (patterns if any(c in p for c in "*?[") else paths).append(p)
+        roots = []
+        for p in paths:
+            prim = stage.GetPrimAtPath(p) if p.startswith("/") else None
+            if prim is None or not prim.IsValid():
+                raise ValueError(f"prims: no prim at {p!r} in the stage")
+            roots.append(prim)
+        if patterns:
+            roots.append(stage.GetPseudoRoot())
+        return roots, patterns or None
+
+    def _traverse(self, prims, include_invisible: bool, purposes: set) -> list:
+        """Walks the chosen subtrees once; returns the mesh prims, records the PointInstancers."""
+        from pxr import Usd, UsdGeom
+
+        roots, patterns = self._roots(prims)
+        t0 = self._codes[0]
+        predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+        found, seen = [], set()
+        for root in roots:
+            if root.IsA(UsdGeom.Imageable) and not root.IsPseudoRoot():
+                img = UsdGeom.Imageable(root)
+                if img.ComputePurpose() not in purposes or (
+                        not include_invisible and img.ComputeVisibility(t0) == UsdGeom.Tokens.invisible):
+                    raise ValueError(f"prims: {root.GetPath()} is invisible or of purpose {img.ComputePurpose()}")
+            it = iter(Usd.PrimRange(root, predicate))
+            chosen = None  # with patterns: the depth of the matched ancestor, while inside its subtree
+            for prim in it:
+                path = prim.GetPath()
+                depth = path.pathElementCount
+                if patterns is not None:
+                    if chosen is not None and depth <= chosen:
+                        chosen = None
+                    if chosen is None and any(fnmatch.fnmatchcase(str(path), pat) for pat in patterns):
+                        chosen = depth
+                if prim.IsA(UsdGeom.Imageable):
+                    img = UsdGeom.Imageable(prim)
+                    purpose = img.GetPurposeAttr().Get() if img.GetPurposeAttr().HasAuthoredValue() else "default"
+                    if purpose not in purposes:
+                        self.skipped.append((str(path), f"purpose {purpose}"))
+                        it.PruneChildren()
+                        continue
+                    if not include_invisible and img.GetVisibilityAttr().Get(t0) == UsdGeom.Tokens.invisible:
+                        self.skipped.append((str(path), "invisible"))
+                        it.PruneChildren()
+                        continue
+                selected = patterns is None or chosen is not None
+                if prim.IsA(UsdGeom.PointInstancer):
+                    it.PruneChildren()  # prototypes are drawn through the instancer only
+                    if selected and str(path) not in seen:
+                        seen.add(str(path))
+                        self._add_instancer(prim)
+                    continue
+                if selected and prim.IsA(UsdGeom.Mesh) and str(path) not in seen:
+                    seen.add(str(path))
+                    found.append(prim)
+        if patterns and not found and not self._instancers:
+            raise ValueError(f"prims: no mesh matches {', '.join(patterns)}")
+        return found
+
+    def _mesh_data(self, prim) -> int:
+        """Index of the mesh data of ``prim`` (read once per prim, or per prototype for instance proxies)."""
+        from pxr import UsdGeom
+
+        source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
+        key = str(source.GetPath())
+        k = self._mesh_by_source.get(key)
+        if k is not None:
+            return k
+        name = str(prim.GetPath())
+        mesh = UsdGeom.Mesh(source)
+        t0 = self._codes[0]
+        for attr in (mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()):
+            if attr.ValueMightBeTimeVarying():
+                raise ValueError(f"prim {name}: animated topology ({attr.GetName()} is time-sampled) is not supported")
+        points_attr = mesh.GetPointsAttr()
+        raw = points_attr.Get(t0)
+        points = np.zeros((0, 3)) if raw is None else np.asarray(raw, dtype=np.float64).reshape(-1, 3)
+        counts = mesh.GetFaceVertexCountsAttr().Get(t0)
+        indices = mesh.GetFaceVertexIndicesAttr().Get(t0)
+        holes = mesh.GetHoleIndicesAttr().Get(t0)
+        counts = np.zeros(0, np.int64) if counts is None else np.asarray(counts)
+        indices = np.zeros(0, np.int64) if indices is None else np.asarray(indices)
+        holes = np.zeros(0, np.int64) if holes is None else np.asarray(holes, np.int64)
+        if not np.isfinite(points).all():
+            v = int(np.argmin(np.isfinite(points).all(axis=1)))
+            raise ValueError(f"prim {name}: point {v} is not finite")
+        tri, face = _fan(counts, indices, holes, name, len(points))
+        deforming = points_attr.ValueMightBeTimeVarying()
+        digest = hashlib.blake2b(points.astype(np.float64).tobytes(), digest_size=16)
+        digest.update(tri.tobytes())
+        data = _MeshData(name, points_attr, points, tri, face, deforming, digest.digest())
+        self._meshes.append(data)
+        self._mesh_by_source[key] = len(self._meshes) - 1
+        return len(self._meshes) - 1
+
+    def _add_instancer(self, prim) -> None:
+        from pxr import Usd, UsdGeom
+
+        name = str(prim.GetPath())
+        inst = UsdGeom.PointInstancer(prim)
+        t0 = self._codes[0]
+        indices_attr = inst.GetProtoIndicesAttr()
+        proto_idx = indices_attr.Get(t0)
+        proto_idx = np.zeros(0, np.int64) if proto_idx is None else np.asarray(proto_idx, np.int64)
+        if indices_attr.ValueMightBeTimeVarying():
+            for code in self._codes[1:]:
+                if not np.array_equal(np.asarray(indices_attr.Get(code), np.int64), proto_idx):
+                    raise ValueError(f"prim {name}: protoIndices change at time {code.GetValue():g} (instances "
+                                     "that change prototype or number are not supported)")
+        targets = inst.GetPrototypesRel().GetForwardedTargets()
+        if proto_idx.size and (proto_idx.min() < 0 or proto_idx.max() >= len(targets)):
+            raise ValueError(f"prim {name}: protoIndices refer to prototype {int(proto_idx.max())}, "
+                             f"but it has {len(targets)} prototypes")
+        mask = inst.ComputeMaskAtTime(t0)
+        keep = np.arange(proto_idx.size) if not mask else np.nonzero(np.asarray(mask, bool))[0]
+        record = _Instancer(name, inst, keep, proto_idx[keep])
+        predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+        for proto, target in enumerate(targets):
+            root = self.stage.GetPrimAtPath(target)
+            if not root.IsValid():
+                raise ValueError(f"prim {name}: prototype {target} does not exist")
+            for p in Usd.PrimRange(root, predicate):
+                if p.IsA(UsdGeom.Mesh):
+                    record.slots.append((proto, self._mesh_data(p), p, root))
+                    record.varying |= self._world_varies(p, stop=root.GetParent())
+        record.varying |= self._world_varies(prim) or any(
+            prim.GetAttribute(a).ValueMightBeTimeVarying()
+            for a in ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
+                      "accelerations"))
+        self._instancers.append(record)
+
+    def _world_varies(self, prim, stop=None) -> bool:
+        """Whether ``prim``'s transform (relative to ``stop``, or the world) may change over time."""
+        from pxr import UsdGeom
+
+        p = prim
+        while p.IsValid() and not p.IsPseudoRoot() and (stop is None or p != stop):
+            key = str(p.GetPath())
+            v = self._varying_xform.get(key)
+            if v is None:
+                v = p.IsA(UsdGeom.Xformable) and UsdGeom.Xformable(p).TransformMightBeTimeVarying()
+                self._varying_xform[key] = v
+            if v:
+                return True
+            p = p.GetParent()
+        return False
+
+    # ------------------------------------------------------------------ objects and transforms
+    def _build(self, mesh_prims: list, device, precision: str) -> None:
+        # Objects in traversal order: mesh prims, then each instancer's instances, prototype mesh by mesh.
+        obj_mesh, obj_path, obj_prim, obj_varying, obj_instancer, obj_instance, obj_handle = [], [], [], [], [], [], []
+        self._prims = []
+        for prim in mesh_prims:
+            k = self._mesh_data(prim)
+            if len(self._meshes[k].triangles) == 0:
+                self.skipped.append((str(prim.GetPath()), "no faces"))
+                continue
+            path = str(prim.GetPath())
+            obj_mesh.append([k])
+            obj_path.append([path])
+            obj_prim.append([path])
+            obj_varying.append([self._world_varies(prim)])
+            obj_instancer.append([-1])
+            obj_instance.append([-1])
+            obj_handle.append([len(self._prims)])
+            self._prims.append(prim)
+        for j, rec in enumerate(self._instancers):
+            for slot, (proto, k, p, root) in enumerate(rec.slots):
+                if len(self._meshes[k].triangles) == 0:
+                    self.skipped.append((str(p.GetPath()), "no faces"))
+                    continue
+                which = rec.instance_index[rec.proto_index == proto]
+                suffix = str(p.GetPath())[len(str(root.GetParent().GetPath()).rstrip("/")):]
+                obj_mesh.append(np.full(which.size, k))
+                obj_path.append([f"{rec.path}[{i}]{suffix}" for i in which.tolist()])
+                obj_prim.append([str(p.GetPath())] * which.size)
+                obj_varying.append(np.full(which.size, rec.varying))
+                obj_instancer.append(np.full(which.size, j))
+                obj_instance.append(which)
+                obj_handle.append(np.full(which.size, slot))
+        obj_path = [x for part in obj_path for x in part]
+        obj_prim = [x for part in obj_prim for x in part]
+        n = len(obj_path)
+        if n == 0:
+            raise ValueError("the stage has no meshes with faces" + (" under the chosen prims" if mesh_prims or
+                                                                      self._instancers else ""))
+
+        def flat(parts, dtype):
+            return np.concatenate([np.asarray(x, dtype) for x in parts])
+
+        obj_mesh = flat(obj_mesh, np.int64)
+        obj_varying = flat(obj_varying, bool)
+        self._obj_instancer = flat(obj_instancer, np.int64)
+        self._obj_instance = flat(obj_instance, np.int64)
+        self._obj_handle = flat(obj_handle, np.int64)
+
+        # World matrices at every time code: static objects once, the others at each time code.
+        first = self._matrices(self._codes[0], np.arange(n))
+        finite = np.isfinite(first).all(axis=(1, 2))
+        if not finite.all():
+            raise ValueError(f"prim {obj_path[int(np.argmin(finite))]}: its world transform is not finite")
+        varying = np.nonzero(obj_varying)[0]
+        lin0 = first[:, :3, :3]
+        _, _, similar0 = _similarity(lin0)
+        singular = np.abs(np.linalg.det(lin0)) <= 1e-30
+        bake = np.where((similar0 | singular)[:, None, None], np.eye(3), lin0)  # baked at the first time code
+        deforming = np.array([self._meshes[k].deforming for k in obj_mesh.tolist()], bool)
+        poses0, scale0, ok0 = _poses(first, bake)
+        deforming |= ~ok0
+        fdtype = np.float64 if precision == "float64" else np.float32
+        var_poses = np.empty((len(self._codes), varying.size, 7), fdtype)
+        var_scale = np.empty((len(self._codes), varying.size), np.float32)
+        var_ok = np.ones(varying.size, bool)
+        for f, code in enumerate(self._codes):
+            m = first[varying] if f == 0 else self._matrices(code, varying)
+            finite = np.isfinite(m).all(axis=(1, 2))
+            if not finite.all():
+                raise ValueError(f"prim {obj_path[int(varying[np.argmin(finite)])]}: its world transform is not "
+                                 f"finite at time {code.GetValue():g}")
+            var_poses[f], var_scale[f], ok = _poses(m, bake[varying])
+            var_ok &= ok
+        deforming[varying[~var_ok]] = True
+
+        # Order: static rigid, animated rigid, deforming.
+        is_var = np.zeros(n, bool)
+        is_var[varying] = True
+        group = np.where(deforming, 2, np.where(is_var, 1, 0))
+        order = np.argsort(group, kind="stable")
+        self._num_static = int((group == 0).sum())
+        self._num_rigid = self._num_static + int((group == 1).sum())
+        var_pos = np.full(n, -1, np.int64)
+        var_pos[varying] = np.arange(varying.size)
+        anim = var_pos[order[self._num_static:self._num_rigid]]
+        self._anim_poses = var_poses[:, anim]
+        self._anim_scale = var_scale[:, anim]
+        self._scale_varies = bool(anim.size and np.ptp(self._anim_scale, axis=0).max() > 0)
+        del var_poses, var_scale
+        defo = order[self._num_rigid:]
+        self._def_mesh = obj_mesh[defo]
+        self._def_matrix = first[defo]  # world matrices of the deforming objects, re-read where they vary
+        self._def_varying = np.nonzero(is_var[defo])[0]
+        self._def_varying_objects = defo[self._def_varying]
+
+        self.object_path = [obj_path[i] for i in order]
+        self.object_prim = [obj_prim[i] for i in order]
+        self.object_deforming = deforming[order]
+        self.object_instancer = [self._instancers[j].path if j >= 0 else None for j in self._obj_instancer[order]]
+        self.object_instance = self._obj_instance[order]
+        self._order = order
+
+        # Shapes: rigid objects share one per (mesh content, baked linear part); each deforming object has its own.
+        canonical: dict[bytes, int] = {}
+        same = np.array([canonical.setdefault(m.key, k) for k, m in enumerate(self._meshes)], np.int64)
+        o_mesh = obj_mesh[order]
+        o_def = deforming[order]
+        o_baked = ~similar0[order] & ~o_def
+        key = np.zeros((n, 11))
+        key[:, 0] = np.where(o_def, np.arange(n), -1)
+        key[:, 1] = same[o_mesh]
+        key[:, 2:] = np.where(o_baked[:, None], bake[order].reshape(n, 9), 0.0)
+        _, first_use, shape_of = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        by_use = np.argsort(first_use)  # shapes numbered in order of first use
+        rank = np.empty_like(by_use)
+        rank[by_use] = np.arange(by_use.size)
+        shape_of = rank[shape_of.reshape(-1)]
+        shape_vertices, shape_triangles, shape_faces = [], [], []
+        for pos in first_use[by_use].tolist():
+            i = int(order[pos])
+            data = self._meshes[int(obj_mesh[i])]
+            if o_def[pos]:
+                verts = data.points @ first[i, :3, :3] + first[i, 3, :3]  # world, at the first time code
+            else:
+                verts = data.points @ bake[i] if o_baked[pos] else data.points
+            shape_vertices.append(verts)
+            shape_triangles.append(data.triangles)
+            shape_faces.append(data.triangle_face)
+        vcount = np.array([len(v) for v in shape_vertices], np.int64)
+        tcount = np.array([len(t) for t in shape_triangles], np.int64)
+        with np.errstate(over="ignore"):
+            vertices = np.concatenate(shape_vertices).astype(fdtype)
+        if not np.isfinite(vertices).all():
+            raise ValueError("points overflow float32 once transformed (use precision='float64')")
+        packed = MeshSet(vertices, np.concatenate(shape_triangles).astype(np.int32),
+                         np.concatenate([[0], np.cumsum(vcount)]), np.concatenate([[0], np.cumsum(tcount)]))
+        self.triangle_face = np.concatenate(shape_faces).astype(np.int32)
+
+        poses = poses0[order].copy()
+        scale = scale0[order].copy()
+        defo_slice = slice(self._num_rigid, n)
+        poses[defo_slice] = np.array([0, 0, 0, 0, 0, 0, 1.0])
+        scale[defo_slice] = 1.0
+        self.seconds = {"read": time.perf_counter() - self._start}
+        start = time.perf_counter()
+        self.scene = Scene(packed, shape_of, instance_scale=scale, poses=poses,
+                           deforming=bool(self._num_rigid < n), device=device, precision=precision)
+        self.scene.usd = self
+        self.frame = -1
+        self.set_frame(0)
+        self.seconds["build"] = time.perf_counter() - start
+
+    def _matrices(self, code, objects: np.ndarray) -> np.ndarray:
+        """``(K, 4, 4)`` world matrices (row vectors) of ``objects`` (indices in traversal order) at ``code``."""
+        from pxr import UsdGeom
+
+        out = np.empty((objects.size, 4, 4))
+        cache = UsdGeom.XformCache(code)
+        which = self._obj_instancer[objects]
+        rows = np.nonzero(which < 0)[0]
+        if rows.size:
+            prims = self._prims
+            out[rows] = np.array([cache.GetLocalToWorldTransform(prims[h])
+                                  for h in self._obj_handle[objects[rows]].tolist()], np.float64).reshape(-1, 4, 4)
+        for j in np.unique(which[which >= 0]).tolist():
+            rec = self._instancers[j]
+            rows = np.nonzero(which == j)[0]
+            xforms = rec.schema.ComputeInstanceTransformsAtTime(
+                code, code, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)
+            xforms = np.asarray(xforms, np.float64).reshape(-1, 4, 4)
+            if xforms.shape[0] <= int(rec.instance_index.max(initial=-1)):
+                raise ValueError(f"prim {rec.path}: {xforms.shape[0]} instance transforms at time "
+                                 f"{code.GetValue():g}, fewer than its instances")
+            world = np.asarray(cache.GetLocalToWorldTransform(rec.schema.GetPrim()), np.float64)
+            # Each prototype mesh's transform relative to its prototype root (whose own transform
+            # the instance transforms include), once per mesh.
+            rel = np.array([cache.ComputeRelativeTransform(p, root)[0] for _, _, p, root in rec.slots],
+                           np.float64).reshape(-1, 4, 4)
+            out[rows] = rel[self._obj_handle[objects[rows]]] @ xforms[self._obj_instance[objects[rows]]] @ world
+        return out
+
+    # ------------------------------------------------------------------ frames
+    def set_frame(self, frame: int) -> None:
+        """Moves the scene to ``times[frame]``: poses and scales of animated rigid objects, world
+        vertices of every object (a kernel), and the deforming objects' vertices from the host.
+
+        Raises:
+            ValueError: a bad frame index, or a deforming mesh whose points change in number or
+                are not finite at that time (naming the prim).
+        """
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < len(self.times):
+            raise ValueError(f"set_frame: expected a frame index in [0, {len(self.times)}), got {frame!r}")
+        scene = self.scene
+        a, b = self._num_static, self._num_rigid
+        if b > a and (frame != self.frame or self.frame < 0):
+            dtype = np.float64 if scene.precision == "float64" else np.float32
+            scene.instance_pose[a:b].assign(self._anim_poses[frame].astype(dtype))
+            if self._scale_varies:
+                scene.instance_scale[a:b].assign(self._anim_scale[frame].astype(np.float32))
+                scene.instance_scale_np[a:b] = self._anim_scale[frame]
+        scene.pose_world_vertices()
+        if b < scene.num_objects:
+            code = self._codes[frame]
+            matrix = self._def_matrix
+            if self._def_varying.size:
+                matrix = matrix.copy()
+                matrix[self._def_varying] = self._matrices(code, self._def_varying_objects)
+            read: dict[int, np.ndarray] = {}
+            parts = []
+            for d, k in enumerate(self._def_mesh.tolist()):
+                p = read.get(k)
+                if p is None:
+                    p = read[k] = self._meshes[k].points_at(code)
+                parts.append(p @ matrix[d, :3, :3] + matrix[d, 3, :3])
+            world = np.concatenate(parts)
+            start = int(scene.instance_vertex_start_np[b])
+            with np.errstate(over="ignore"):
+                world = world.astype(np.float64 if scene.precision == "float64" else np.float32)
+            if not np.isfinite(world).all():
+                raise ValueError("deforming points overflow float32 (use precision='float64')")
+            scene.world_vertex[start:].assign(world)
+        self.frame = int(frame)
+
+    def faces(self, objects: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        """USD face indices of local triangles ``triangles`` of objects ``objects`` (same shapes, int32)."""
+        s = self.scene.instance_shape_np[objects]
+        return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
