@@ -88,6 +88,8 @@ __all__ = [
     "NARROW_METHODS",
     "NarrowPhase",
     "TOLERANCE",
+    "crossing_depth",
+    "pair_crossing_depth",
     "tri_tri_batch_kernel",
     "tri_tri_edge_face",
     "tri_tri_moller",
@@ -926,11 +928,84 @@ def tri_tri_segment_batch_kernel(
     segment[k, 1] = q
 
 
+@wp.func
+def _lesser_side(n: Any, origin: Any, x0: Any, x1: Any, x2: Any, eps: Any):
+    """How far triangle ``x`` reaches to the lesser side of the plane through ``origin`` of unit
+    normal ``n``: ``min(max d, max -d)`` over its vertices' signed distances ``d``, zero when
+    that is within ``eps`` (the triangle only touches the plane)."""
+    r0 = wp.dot(n, x0 - origin)
+    r1 = wp.dot(n, x1 - origin)
+    r2 = wp.dot(n, x2 - origin)
+    d = wp.min(wp.max(wp.max(r0, r1), r2), -wp.min(wp.min(r0, r1), r2))
+    if d <= eps:
+        return type(eps)(0.0)
+    return d
+
+
+@wp.func
+def crossing_depth(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: Any):
+    """How deep two intersecting triangles cross: of each triangle, how far it reaches to the
+    lesser side of the other's plane; the smaller of the two (a degenerate triangle, without a
+    plane, leaves the other's). Zero when one only touches the other's plane within the
+    tolerance ``tol_rel * L`` (:func:`tri_tri_moller`): resting contact (face on face, an edge
+    or a vertex on a face) has depth 0; a vertex poking ``h`` through a face has depth ``h``.
+    Scene units, the vertices' precision."""
+    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centre_pair(v0, v1, v2, u0, u1, u2, tol_rel)
+    zero = type(eps)(0.0)
+    if degenerate_a and degenerate_b:
+        return zero
+    if degenerate_b:
+        return _lesser_side(na, a0, b0, b1, b2, eps)
+    if degenerate_a:
+        return _lesser_side(nb, b0, a0, a1, a2, eps)
+    return wp.min(_lesser_side(nb, b0, a0, a1, a2, eps), _lesser_side(na, a0, b0, b1, b2, eps))
+
+
+@wp.kernel
+def _crossing_depth_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    pair: wp.array[wp.vec4i],
+    tol_rel: wp.float64,
+    # Outputs
+    depth: wp.array[wp.float64],
+):
+    """One thread per triangle pair ``(obj_a, tri_a, obj_b, tri_b)``: :func:`crossing_depth`."""
+    k = wp.tid()
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, pair[k])
+    depth[k] = wp.float64(crossing_depth(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)))
+
+
+def pair_crossing_depth(scene, pairs: wp.array, tolerance: float = TOLERANCE, out: wp.array | None = None) -> wp.array:
+    """:func:`crossing_depth` of triangle pairs of a scene, on its device.
+
+    Args:
+        scene: the :class:`~warp_ccd.scene.Scene` (its world vertices as they are now).
+        pairs: ``(M,)`` ``wp.vec4i`` rows ``(obj_a, tri_a, obj_b, tri_b)`` on the scene's device
+            (a result's ``device_triangle_pairs``).
+        tolerance: relative tolerance of the triangle test.
+        out: ``(>= M,)`` float64 array to write to (default: a new one).
+
+    Returns:
+        ``(M,)`` float64 depths, scene units (a view of ``out`` when given).
+    """
+    m = int(pairs.shape[0])
+    if m == 0:
+        return wp.zeros(0, dtype=wp.float64, device=scene.device)
+    if out is None or out.shape[0] < m:
+        out = wp.zeros(m, dtype=wp.float64, device=scene.device)
+    wp.launch(_CROSSING_DEPTH[scene.precision], dim=m,
+              inputs=[scene.topology, scene.world_vertex, pairs, float(tolerance)], outputs=[out],
+              device=scene.device)
+    return out[:m]
+
+
 # Both precisions, declared up front: the module compiles once, for float32 and float64 together.
 # The kernels take the tolerance in float64 and round it to the vertices' precision.
 _NARROW_MOLLER, _NARROW_TOUCH, _NARROW_EDGE_FACE, _CONTAINMENT = (
     precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v]})
     for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_edge_face_kernel, _containment_kernel))
+_CROSSING_DEPTH = precision_overloads(_crossing_depth_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _SEGMENT = precision_overloads(_segment_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
                                                                   "segment": wp.array2d[v]})
 for _precision in PRECISIONS:
