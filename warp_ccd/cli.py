@@ -5,6 +5,10 @@ Subcommands:
 * ``demo``: a seeded random scene of polyhedra in motion, collision detection every frame, the
   animation written to USD (colliding objects in colour), optionally a preview image or GIF, and
   a summary of what was found and how long each stage took.
+* ``check``: every interpenetration in a USD animation, frame by frame (:mod:`warp_ccd.check`): a
+  summary table, optionally a JSON report, a USD overlay and a picture of the worst frame. Exit
+  status 0 when nothing penetrates, 1 when something does, 2 when the input or the arguments
+  are bad (nothing is written then), so that it can gate a pipeline.
 * ``bench``: the benchmarks of :mod:`warp_ccd.bench`; every argument after ``bench`` goes there.
 
 Bad arguments end with one line on stderr and a non-zero exit status, never a traceback.
@@ -47,10 +51,38 @@ def _count(minimum: int):
     return parse
 
 
+def _depth(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+def _frames(text: str | None):
+    """``START:END[:STEP]`` (either end may be empty) or one time code, as :func:`check_usd` takes it."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        values = [float(p) if p.strip() else None for p in parts]
+    except ValueError:
+        raise ValueError(f"--frames: expected START:END[:STEP] or a time code, got {text!r}") from None
+    if len(parts) == 1:
+        if values[0] is None:
+            raise ValueError("--frames: empty")
+        return [values[0]]
+    if len(parts) > 3:
+        raise ValueError(f"--frames: expected START:END[:STEP], got {text!r}")
+    return slice(*values)
+
+
 def _build_parser() -> OneLineParser:
     parser = OneLineParser(prog=PROG,
                            description="Collision detection among many moving triangle meshes (NVIDIA Warp).")
-    sub = parser.add_subparsers(dest="command", metavar="{demo,bench}", parser_class=OneLineParser)
+    sub = parser.add_subparsers(dest="command", metavar="{demo,check,bench}", parser_class=OneLineParser)
     sub.required = True
 
     demo = sub.add_parser(
@@ -70,6 +102,37 @@ def _build_parser() -> OneLineParser:
     demo.add_argument("--seed", type=_count(0), default=0, help="random seed of the scene (default: %(default)s)")
     demo.add_argument("--aabb", action="store_true", help="also write each object's bounding box as a wireframe")
     demo.add_argument("--segments", action="store_true", help="also write the intersection segments as line markers")
+
+    check = sub.add_parser(
+        "check",
+        help="find every interpenetration in a USD animation, frame by frame (exit 1 if any)",
+        description="Read a USD stage's meshes, detect the prim pairs whose surfaces pass through each other at "
+        "every frame, print a summary, optionally write a JSON report, a USD overlay and a picture. "
+        "Exit status: 0 nothing penetrates, 1 something does, 2 bad arguments or input.",
+    )
+    check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
+    check.add_argument("--frames", default=None, metavar="START:END[:STEP]",
+                       help="time codes to check, END included (default: the stage's time range)")
+    check.add_argument("--prims", nargs="+", default=None, metavar="PATH",
+                       help="prim paths or fnmatch patterns ('/World/Robot', '/World/*/Wheel*'); default: all")
+    check.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
+    check.add_argument("--precision", choices=("float32", "float64"), default="float32",
+                       help="vertices, poses and the exact test (default: %(default)s)")
+    check.add_argument("--min-depth", type=_depth, default=0.0, metavar="D",
+                       help="a triangle pair penetrates when it crosses deeper than D scene units; resting "
+                       "contact has depth 0 (default: %(default)s)")
+    check.add_argument("--count-touching", action="store_true",
+                       help="report touching (resting) contact as collisions too")
+    check.add_argument("--report", default=None, metavar="REPORT.json", help="write the JSON report here")
+    check.add_argument("--usd-out", default=None, metavar="OVERLAY.usd",
+                       help="write a layer over IN.usd with the penetrating prims in colour per frame")
+    check.add_argument("--segments", action="store_true",
+                       help="keep the intersection segments: in the report, and as curves in the overlay")
+    check.add_argument("--preview", default=None, metavar="PICTURE.png", help="a picture of the worst frame (.png)")
+    check.add_argument("--include-invisible", action="store_true", help="also check invisible prims")
+    check.add_argument("--include-purpose", action="append", choices=("guide", "proxy"), default=[],
+                       help="also check prims of this purpose (repeatable)")
+    check.add_argument("--top", type=_count(1), default=10, help="prim pairs in the summary table (default: 10)")
 
     sub.add_parser("bench", help="benchmarks (arguments after 'bench' go to warp_ccd.bench)", add_help=False)
     return parser
@@ -174,6 +237,68 @@ def _run_demo(args) -> int:
     return EXIT_OK
 
 
+def _run_check(args) -> int:
+    from .cli_common import EXIT_USAGE as EXIT_BAD_INPUT
+
+    def fail(message: str) -> CliError:
+        return CliError(f"{PROG} check: error: {message}", EXIT_BAD_INPUT)
+
+    # Every destination is checked before the stage is read; nothing is written on an error.
+    try:
+        if args.report is not None:
+            from .output import check_output_path
+
+            check_output_path(args.report, (".json",), "report")
+        if args.usd_out is not None:
+            from .usd import validate_stage_path
+
+            validate_stage_path(args.usd_out)
+        if args.preview is not None:
+            from .preview import validate_preview_path
+
+            if validate_preview_path(args.preview)[1] != ".png":
+                raise ValueError(f"cannot write {args.preview}: the preview of a check is one picture (use .png)")
+        frames = _frames(args.frames)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+    try:
+        import pxr  # noqa: F401
+    except ImportError:
+        raise fail("usd-core is not installed (pip install usd-core)") from None
+    quiet_warp()
+    from .check import check_usd, write_overlay
+
+    try:
+        device = resolve_device(args.device)
+        report = check_usd(args.stage, frames=frames, prims=args.prims, device=device, precision=args.precision,
+                           min_depth=args.min_depth, count_touching=args.count_touching, segments=args.segments,
+                           include_invisible=args.include_invisible, include_purposes=tuple(args.include_purpose),
+                           progress=True)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+    print(report.summary(top=args.top))
+    try:
+        if args.report is not None:
+            print(f"  report : {report.write_json(args.report)}")
+        if args.usd_out is not None:
+            print(f"  overlay: {write_overlay(report, args.usd_out)}")
+        if args.preview is not None:
+            import numpy as np
+
+            from .preview import PreviewRenderer, save_preview
+
+            worst = report.worst_frame
+            imp = report.source
+            imp.set_frame(worst)
+            colliding = np.zeros(len(report.object_path), bool)
+            colliding[report.frames[worst].triangle_pairs[:, [0, 2]].ravel()] = True
+            picture = PreviewRenderer(imp.scene, 640, 480).render(colliding)
+            print(f"  preview: {save_preview([picture], args.preview)} (time {report.frames[worst].time:g})")
+    except ValueError as exc:
+        raise CliError(f"{PROG} check: error: {exc}", EXIT_BAD_INPUT) from None
+    return EXIT_ERROR if report.penetrating else EXIT_OK
+
+
 def _run_bench(argv: list[str]) -> int:
     try:
         bench = importlib.import_module("warp_ccd.bench")
@@ -216,6 +341,8 @@ def main(argv: list[str] | None = None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_OK
         if args.command == "demo":
             return _run_demo(args)
+        if args.command == "check":
+            return _run_check(args)
         raise CliError(f"{PROG}: error: unknown command {args.command!r}")
     except CliError as exc:
         print(str(exc), file=sys.stderr)

@@ -1,0 +1,416 @@
+"""Checking a USD animation for interpenetration, frame by frame (``warp-ccd check``).
+
+:func:`check_usd` reads a stage once (:class:`~warp_ccd.usd_import.UsdMeshImport`), runs the
+collision pipeline at every time code asked for, and returns a :class:`CheckReport`: per frame,
+the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross.
+
+**Touching is not penetrating.** Objects resting on each other touch every frame, and the exact
+test reports their triangle pairs (triangles are closed sets). Every reported pair gets a
+*crossing depth* (:func:`~warp_ccd.narrow_phase.crossing_depth`): of each triangle, how far it
+reaches to the lesser side of the other's plane, the smaller of the two. It is 0 when a face,
+an edge or a vertex rests on the other triangle (within the test's tolerance, relative to the
+triangles' size), and ``h`` for a vertex or an edge poking ``h`` through a face. A pair
+penetrates when its depth exceeds ``min_depth`` (scene units, default 0: any crossing beyond the
+tolerance); pairs at or below it are counted as touching, not reported as collisions, unless
+``count_touching`` asks for them. The depth is local to the two triangles: for large triangles
+crossing near an edge it can exceed how far the objects overlap, never fall below what a vertex
+pokes through.
+
+The overlay (:func:`write_overlay`) is a new layer whose sublayer is the checked stage: the
+colliding mesh prims get a time-sampled ``primvars:displayColor`` (red while they penetrate,
+their own constant colour or grey otherwise); instance proxies are coloured through their
+instanceable ancestor, PointInstancer instances through the instancer's per-instance
+``displayColor`` (``vertex`` interpolation); with segments, the intersection segments of every
+frame are one ``BasisCurves`` prim.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .narrow_phase import TOLERANCE, pair_crossing_depth
+from .output import PendingFile, check_output_path
+
+__all__ = ["CheckReport", "FrameContacts", "check_usd", "write_overlay"]
+
+COLOR_PENETRATING = (0.95, 0.22, 0.08)
+"""displayColor of a prim while it penetrates another."""
+COLOR_CLEAR = (0.62, 0.62, 0.62)
+"""displayColor of a coloured prim in frames where it penetrates nothing (when it had no constant colour)."""
+COLOR_SEGMENT = (1.0, 0.9, 0.1)
+"""displayColor of the intersection segments."""
+
+
+@dataclass
+class FrameContacts:
+    """What one time code found.
+
+    Attributes:
+        time: the time code.
+        triangle_pairs: ``(M, 4)`` int32 rows ``(obj_a, face_a, obj_b, face_b)`` of penetrating
+            (or, with ``count_touching``, all) triangle pairs, USD face indices, sorted by
+            ``(obj_a, obj_b, face_a, face_b)`` and unique (two triangles of one polygon meeting one
+            face count once).
+        depth: ``(M,)`` float64, the deepest crossing of each row, scene units.
+        segments: ``(M, 2, 3)`` float64 intersection segments of the rows (the first triangle
+            pair of each), or None.
+        num_touching: face pairs that only touch (depth <= ``min_depth``) and are not reported.
+    """
+
+    time: float
+    triangle_pairs: np.ndarray
+    depth: np.ndarray
+    segments: np.ndarray | None = None
+    num_touching: int = 0
+
+    @property
+    def object_pairs(self) -> np.ndarray:
+        """``(K, 2)`` int32 object pairs ``(a, b)``, ``a < b``, sorted."""
+        if len(self.triangle_pairs) == 0:
+            return np.zeros((0, 2), np.int32)
+        return np.unique(self.triangle_pairs[:, [0, 2]], axis=0).astype(np.int32)
+
+
+@dataclass
+class CheckReport:
+    """The result of :func:`check_usd`.
+
+    Attributes:
+        stage: the stage's file path (or its in-memory identifier).
+        object_path: ``N`` object names (prim paths; ``instancer[i]/...`` for point instances).
+        frames: one :class:`FrameContacts` per time code checked, in order.
+        min_depth: the depth a triangle pair must exceed to penetrate.
+        count_touching: touching pairs were reported as collisions too.
+        device: where the pipeline ran.
+        seconds: wall time of ``read`` (opening, traversal, topology, transforms at every time
+            code), ``build`` (scene, trees, pipeline), ``set`` (moving the scene to each frame:
+            poses, deforming points read and copied), ``detect`` (the pipeline's frames) and
+            ``classify`` (depths, USD faces, the report's rows).
+        skipped: ``(path, reason)`` of the meshes left out.
+        source: the :class:`~warp_ccd.usd_import.UsdMeshImport` (its scene is at the last frame).
+    """
+
+    stage: str
+    object_path: list
+    frames: list = field(default_factory=list)
+    min_depth: float = 0.0
+    count_touching: bool = False
+    device: str = ""
+    seconds: dict = field(default_factory=dict)
+    skipped: list = field(default_factory=list)
+    source: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def penetrating(self) -> bool:
+        """Whether any frame has a penetrating pair (the command's exit status 1)."""
+        return any(len(f.triangle_pairs) for f in self.frames)
+
+    @property
+    def worst_frame(self) -> int:
+        """Index of the frame with the most penetrating triangle pairs (the first of equals; 0 if none)."""
+        counts = [len(f.triangle_pairs) for f in self.frames]
+        return int(np.argmax(counts)) if counts else 0
+
+    def pair_summary(self) -> list[dict]:
+        """Per prim pair that penetrates in some frame: ``a``, ``b`` (names), ``frames`` (how many),
+        ``first`` and ``last`` time codes, ``max_triangle_pairs`` in one frame and ``max_depth``;
+        most frames first."""
+        stats: dict[tuple[int, int], dict] = {}
+        for f in self.frames:
+            if not len(f.triangle_pairs):
+                continue
+            keys, inverse, counts = np.unique(f.triangle_pairs[:, [0, 2]], axis=0, return_inverse=True,
+                                              return_counts=True)
+            deepest = np.zeros(len(keys))
+            np.maximum.at(deepest, inverse.reshape(-1), f.depth)
+            for (a, b), c, d in zip(keys.tolist(), counts.tolist(), deepest.tolist()):
+                s = stats.setdefault((a, b), {"a": self.object_path[a], "b": self.object_path[b], "frames": 0,
+                                              "first": f.time, "last": f.time, "max_triangle_pairs": 0,
+                                              "max_depth": 0.0})
+                s["frames"] += 1
+                s["last"] = f.time
+                s["max_triangle_pairs"] = max(s["max_triangle_pairs"], c)
+                s["max_depth"] = max(s["max_depth"], d)
+        return sorted(stats.values(), key=lambda s: (-s["frames"], s["first"], s["a"], s["b"]))
+
+    def to_json(self) -> dict:
+        """The report as JSON-ready data: prims by path, faces by their USD face index."""
+        frames = []
+        for f in self.frames:
+            pairs = []
+            rows = f.triangle_pairs
+            if len(rows):
+                keys, first = np.unique(rows[:, [0, 2]], axis=0, return_index=True)
+                ends = list(first[1:]) + [len(rows)]
+                for (a, b), s, e in zip(keys.tolist(), first.tolist(), ends):
+                    entry = {"a": self.object_path[a], "b": self.object_path[b],
+                             "faces": rows[s:e][:, [1, 3]].tolist(),
+                             "max_depth": float(f.depth[s:e].max())}
+                    if f.segments is not None:
+                        entry["segments"] = np.where(np.isfinite(f.segments[s:e]), f.segments[s:e], None).tolist()
+                    pairs.append(entry)
+            frames.append({"time": f.time, "triangle_pairs": int(len(rows)), "touching_pairs": int(f.num_touching),
+                           "pairs": pairs})
+        with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
+        return {
+            "stage": self.stage,
+            "penetrating": self.penetrating,
+            "min_depth": self.min_depth,
+            "count_touching": self.count_touching,
+            "device": self.device,
+            "times": [f.time for f in self.frames],
+            "frames_with_contacts": with_contacts,
+            "objects": len(self.object_path),
+            "skipped": [{"prim": p, "reason": r} for p, r in self.skipped],
+            "pairs": self.pair_summary(),
+            "frames": frames,
+            "seconds": self.seconds,
+        }
+
+    def write_json(self, path) -> str:
+        """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place."""
+        full, _ = check_output_path(path, (".json",), "report")
+        pending = PendingFile(full)
+        try:
+            with open(pending.temp_path, "w") as fh:
+                json.dump(self.to_json(), fh, indent=1)
+        except BaseException:
+            pending.discard()
+            raise
+        return pending.commit()
+
+    def summary(self, top: int = 10) -> str:
+        """A few lines for a terminal: frames with contacts, the prim pairs that collide most, times."""
+        n = len(self.frames)
+        hit = [f for f in self.frames if len(f.triangle_pairs)]
+        per_frame = np.array([len(f.triangle_pairs) for f in self.frames])
+        what = "penetrating" if not self.count_touching else "intersecting (touching included)"
+        lines = [f"{self.stage}: {len(self.object_path)} objects, {n} frames on {self.device}",
+                 f"  frames with {what} pairs: {len(hit)} of {n}"
+                 + (f" ({hit[0].time:g} .. {hit[-1].time:g})" if hit else ""),
+                 f"  triangle pairs / frame   : mean {per_frame.mean():.1f}, max {per_frame.max(initial=0)}"
+                 + f"  (touching only, not counted: {sum(f.num_touching for f in self.frames)})"]
+        pairs = self.pair_summary()
+        if pairs:
+            wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
+            wb = min(max(len(p["b"]) for p in pairs[:top]), 60)
+            spans = [f"{p['first']:g}..{p['last']:g}" for p in pairs[:top]]
+            ws = max(11, max(len(x) for x in spans))
+            lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  {'first..last':<{ws}}  max pairs  max depth")
+            for p, span in zip(pairs[:top], spans):
+                lines.append(f"  {p['a']:<{wa}}  {p['b']:<{wb}}  {p['frames']:6d}  {span:<{ws}}  "
+                             f"{p['max_triangle_pairs']:9d}  {p['max_depth']:.3g}")
+            if len(pairs) > top:
+                lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
+        s = self.seconds
+        if s:
+            per = s.get("detect", 0.0) / max(n, 1) * 1e3
+            lines.append(f"  seconds: read {s.get('read', 0):.2f}, build {s.get('build', 0):.2f}, "
+                         f"set frames {s.get('set', 0):.2f}, detect {s.get('detect', 0):.2f} ({per:.2f} ms/frame), "
+                         f"classify {s.get('classify', 0):.2f}")
+        return "\n".join(lines)
+
+
+def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
+                    time_code: float) -> FrameContacts:
+    """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
+    penetrating ones kept, the others counted."""
+    rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
+    seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
+    faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
+                      imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
+    if len(faces):
+        order = np.lexsort((-depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))  # (a, b, fa, fb), deepest
+        faces, depth = faces[order], depth[order]
+        first = np.ones(len(faces), bool)
+        first[1:] = (faces[1:] != faces[:-1]).any(axis=1)
+        faces, depth = faces[first], depth[first]
+        seg = seg[order][first] if seg is not None else None
+    keep = np.ones(len(faces), bool) if count_touching else depth > min_depth
+    return FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
+                         seg[keep] if seg is not None else None, int((~keep).sum()))
+
+
+def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision: str = "float32",
+              min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
+              include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
+              progress: bool = False) -> CheckReport:
+    """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
+
+    Args:
+        stage_or_path: a ``Usd.Stage`` or a USD file path.
+        frames: time codes (see :func:`~warp_ccd.usd_import.stage_time_codes`; default: every
+            integer time code of the stage's range).
+        prims: prim paths or patterns to check (default: the whole stage).
+        device: Warp device (default: Warp's preferred device).
+        precision: ``"float32"`` or ``"float64"``.
+        min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
+        count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
+        segments: keep the intersection segments (for the report and the overlay).
+        include_invisible, include_purposes: also check invisible prims, guides or proxies.
+        tolerance: relative tolerance of the triangle test.
+        progress: show a progress bar on stderr.
+
+    Returns:
+        The :class:`CheckReport`.
+
+    Raises:
+        ValueError: naming the file or prim: see :class:`~warp_ccd.usd_import.UsdMeshImport`.
+    """
+    import warp as wp
+    from tqdm import tqdm
+
+    from .pipeline import CollisionPipeline
+    from .usd_import import UsdMeshImport, open_stage, stage_time_codes
+
+    if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
+            or not np.isfinite(min_depth) or min_depth < 0:
+        raise ValueError(f"min_depth must be a finite number >= 0, got {min_depth!r}")
+    t = time.perf_counter()
+    stage = open_stage(stage_or_path)
+    times = stage_time_codes(stage, frames)
+    imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
+                        include_purposes=include_purposes, device=device, precision=precision)
+    seconds = dict(imp.seconds)
+    t = time.perf_counter()
+    scene = imp.scene
+    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
+    seconds["build"] += time.perf_counter() - t
+    seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
+    name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
+    report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
+                         count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped))
+    bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not progress or None, leave=False)
+    for k in bar:
+        t = time.perf_counter()
+        imp.set_frame(k)
+        t1 = time.perf_counter()
+        res = pipe.detect()
+        t_detect = time.perf_counter()
+        pairs = res.device_triangle_pairs
+        depth = pair_crossing_depth(scene, pairs, tolerance).numpy()
+        contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k])
+        t2 = time.perf_counter()
+        seconds["set"] += t1 - t
+        seconds["detect"] += t_detect - t1
+        seconds["classify"] += t2 - t_detect
+        report.frames.append(contacts)
+        bar.set_postfix(pairs=len(contacts.triangle_pairs), refresh=False)
+    bar.close()
+    wp.synchronize_device(scene.device)
+    report.seconds = {k: round(v, 4) for k, v in seconds.items()}
+    report.source = imp
+    return report
+
+
+def write_overlay(report: CheckReport, out_path) -> str:
+    """Writes a USD layer over the checked stage: penetrating prims in colour per frame, and the
+    intersection segments (when the check kept them) as curves.
+
+    The layer's only sublayer is the checked stage's file (a relative path when they share a
+    folder), so it opens as the animation with the overlay on top. Written to a temporary file
+    and moved into place.
+
+    Args:
+        report: a :class:`CheckReport` of a stage read from a file.
+        out_path: ``.usd``, ``.usdc`` or ``.usda``.
+
+    Returns:
+        The absolute path written.
+
+    Raises:
+        ValueError: the checked stage was not a file, or the destination cannot be written.
+    """
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
+    from .usd import validate_stage_path
+
+    full, ext = validate_stage_path(out_path)
+    imp = report.source
+    source = imp.stage.GetRootLayer().realPath
+    if not source:
+        raise ValueError("overlay: the checked stage is not a file (save it first)")
+    pending = PendingFile(full)
+    try:
+        layer = Sdf.Layer.CreateAnonymous(ext)
+        layer.subLayerPaths.append(source)
+        stage = Usd.Stage.Open(layer)
+        src = imp.stage
+        stage.SetStartTimeCode(src.GetStartTimeCode())
+        stage.SetEndTimeCode(src.GetEndTimeCode())
+        stage.SetTimeCodesPerSecond(src.GetTimeCodesPerSecond())
+        stage.SetFramesPerSecond(src.GetFramesPerSecond())
+        n = len(report.object_path)
+        hit = np.zeros((len(report.frames), n), bool)
+        for k, f in enumerate(report.frames):
+            hit[k, f.triangle_pairs[:, [0, 2]].ravel()] = True
+        red = Gf.Vec3f(*COLOR_PENETRATING)
+        times = [f.time for f in report.frames]
+        with Sdf.ChangeBlock():
+            # Prims (instance proxies through their instanceable ancestor), one colour per frame.
+            targets: dict[str, np.ndarray] = {}
+            for i in np.nonzero(hit.any(axis=0))[0].tolist():
+                if imp.object_instancer[i] is not None:
+                    continue
+                prim = src.GetPrimAtPath(imp.object_path[i])
+                while prim.IsInstanceProxy():
+                    prim = prim.GetParent()
+                key = str(prim.GetPath())
+                targets[key] = targets.get(key, np.zeros(len(times), bool)) | hit[:, i]
+            for path, flags in targets.items():
+                prim = stage.GetPrimAtPath(path)
+                primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                                  UsdGeom.Tokens.constant)
+                clear = Gf.Vec3f(*COLOR_CLEAR)
+                own = UsdGeom.PrimvarsAPI(src.GetPrimAtPath(path)).GetPrimvar("displayColor")
+                if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
+                        and len(own.Get()) == 1:
+                    clear = own.Get()[0]
+                for tc, f in zip(times, flags.tolist()):
+                    primvar.Set(Vt.Vec3fArray([red if f else clear]), tc)
+            # PointInstancer instances: the instancer's per-instance colour.
+            instancer = np.array(imp.object_instancer, dtype=object)
+            for path in sorted({p for p in imp.object_instancer if p is not None}):
+                rows = np.nonzero(instancer == path)[0]
+                if not hit[:, rows].any():
+                    continue
+                schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
+                size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
+                prim = stage.GetPrimAtPath(path)
+                primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                                  UsdGeom.Tokens.vertex)
+                for k, tc in enumerate(times):
+                    colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
+                    colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
+                    primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
+        # Defined outside the change block: a new prim needs the stage recomposed.
+        curves = None
+        if any(f.segments is not None for f in report.frames):
+            curves = UsdGeom.BasisCurves.Define(stage, "/WarpCcdCheck/Segments")
+            curves.CreateTypeAttr(UsdGeom.Tokens.linear)
+            curves.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*COLOR_SEGMENT)]))
+            lo, hi = imp.scene.world_vertex.numpy().min(axis=0), imp.scene.world_vertex.numpy().max(axis=0)
+            curves.CreateWidthsAttr(Vt.FloatArray([float(np.max(hi - lo)) * 2e-3 or 1e-3]))
+            curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+            counts, points = curves.CreateCurveVertexCountsAttr(), curves.CreatePointsAttr()
+            for f in report.frames:
+                seg = f.segments if f.segments is not None else np.zeros((0, 2, 3))
+                seg = seg[np.isfinite(seg).all(axis=(1, 2))].astype(np.float32)
+                counts.Set(Vt.IntArray.FromNumpy(np.full(len(seg), 2, np.int32)), f.time)
+                points.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(seg.reshape(-1, 3))), f.time)
+        del stage, curves  # closed before the sublayer path changes (no recomposition against the wrong folder)
+        rel = os.path.relpath(source, os.path.dirname(full))
+        if not rel.startswith(".."):  # beside the overlay, or below it: a relative path that moves with both
+            layer.subLayerPaths[0] = rel
+        args = {"format": "usdc"} if ext == ".usd" else {}
+        if not layer.Export(pending.temp_path, args=args):
+            raise ValueError(f"cannot write {full}: USD export failed")
+    except BaseException:
+        pending.discard()
+        raise
+    return pending.commit()
