@@ -1,6 +1,7 @@
 """Every example runs with one frame (and few objects), in process on each device and as a script."""
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -101,3 +102,22 @@ def test_example_script_stage_path_none(tmp_path):
                       "--stage-path", "None", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_example_usd_check(tmp_path, device, capsys):
+    pytest.importorskip("pxr")
+    module = load_example("example_usd_check")
+    stage, report = tmp_path / "animation.usda", tmp_path / "report.json"
+    status = module.main(["--device", device, "--stage-path", str(stage), "--num-frames", "8",
+                          "--report", str(report)])
+    out = capsys.readouterr().out
+    assert status == 1  # the arm folds into the crate, the wheels roll 1-5 cm deep in the floor
+    pairs = {(p["a"], p["b"]) for p in json.loads(report.read_text())["pairs"]}
+    assert ("/World/Floor", "/World/WheelL/Tyre") in pairs and ("/World/Crate", "/World/Arm/Upper/Lower/Link") in pairs
+    assert ("/World/Floor", "/World/Crate") not in pairs  # resting contact: touching, not penetrating
+    assert "/World/WheelR/Tyre" in out
+    # Shallow crossings forgiven: the wheels (at most 5 cm deep) are gone, the arm in the crate stays.
+    status = module.main(["--device", device, "--stage-path", str(stage), "--num-frames", "8", "--min-depth", "0.06",
+                          "--report", str(report)])
+    pairs = {(p["a"], p["b"]) for p in json.loads(report.read_text())["pairs"]}
+    assert status == 1 and all("Wheel" not in a + b for a, b in pairs) and pairs

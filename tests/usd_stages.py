@@ -1,0 +1,219 @@
+"""USD stages for the tests, built with ``pxr``, and their world meshes computed independently.
+
+:func:`mixed_stage` holds one of everything ``Scene.from_usd`` reads: rigid prims moved by
+time-sampled transforms under nested (scaled) parents, a non-uniform scale, a deforming mesh,
+a PointInstancer with two prototypes, instanceable references of one prototype, polygons of 4 to
+8 sides with a hole, a resting box that only touches the floor, and prims that must be skipped
+(a guide, an invisible one). :func:`world_polygon_meshes` computes every object's world
+triangles at a time code with plain per-prim loops and USD's own transforms, for the oracles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def prism(sides: int, radius: float = 1.0, height: float = 1.0):
+    """A closed prism: two ``sides``-gons and ``sides`` quads. Returns ``(points (2s, 3), counts, indices)``."""
+    a = 2 * np.pi * np.arange(sides) / sides
+    ring = np.stack([radius * np.cos(a), np.zeros(sides), radius * np.sin(a)], axis=1)
+    points = np.concatenate([ring, ring + [0, height, 0]])
+    counts = [sides, sides] + [4] * sides
+    indices = list(range(sides - 1, -1, -1)) + list(range(sides, 2 * sides))
+    for i in range(sides):
+        j = (i + 1) % sides
+        indices += [i, j, sides + j, sides + i]
+    return points, counts, indices
+
+
+def grid(n: int, size: float):
+    """A flat ``n x n`` quad grid in the y = 0 plane, centred. Returns ``(points, counts, indices)``."""
+    x = np.linspace(-size / 2, size / 2, n + 1)
+    gx, gz = np.meshgrid(x, x, indexing="ij")
+    points = np.stack([gx.ravel(), np.zeros(gx.size), gz.ravel()], axis=1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], axis=-1).reshape(-1, 4)
+    return points, [4] * len(quads), quads.ravel().tolist()
+
+
+def define_mesh(stage, path: str, points, counts, indices, holes=None):
+    from pxr import UsdGeom, Vt
+
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(points, np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray([int(c) for c in counts]))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([int(i) for i in indices]))
+    if holes is not None:
+        mesh.CreateHoleIndicesAttr(Vt.IntArray(list(holes)))
+    return mesh
+
+
+def mixed_stage(path=None, num_frames: int = 24):
+    """The stage described in the module docstring, time codes ``0 .. num_frames - 1``.
+
+    Returns:
+        The ``Usd.Stage`` (saved to ``path`` when given).
+    """
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(num_frames - 1)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    frames = range(num_frames)
+
+    define_mesh(stage, "/World/Floor", *grid(6, 12.0))
+    box = define_mesh(stage, "/World/Resting", *prism(4, radius=0.7, height=1.0))  # on the floor: touches only
+    UsdGeom.Xformable(box).AddTranslateOp().Set(Gf.Vec3d(-4.0, 0.0, -4.0))
+
+    # Two rigid movers under a scaled, rotated parent: an octagonal prism sweeping along x through
+    # a hexagonal prism spinning in place.
+    movers = UsdGeom.Xform.Define(stage, "/World/Movers")
+    movers.AddTranslateOp().Set(Gf.Vec3d(0.0, 2.0, 0.0))
+    movers.AddRotateYOp().Set(30.0)
+    movers.AddScaleOp().Set(Gf.Vec3f(1.5, 1.5, 1.5))
+    a = UsdGeom.Xform.Define(stage, "/World/Movers/A")
+    ta = a.AddTranslateOp()
+    ra = a.AddOrientOp()
+    for f in frames:
+        ta.Set(Gf.Vec3d(-3.0 + 6.0 * f / max(num_frames - 1, 1), 0.1, 0.05), f)
+        q = Gf.Rotation(Gf.Vec3d(0.3, 1.0, 0.2), 10.0 * f).GetQuat()
+        ra.Set(Gf.Quatf(q), f)
+    define_mesh(stage, "/World/Movers/A/Geom", *prism(8, radius=0.5, height=0.8))
+    b = UsdGeom.Xform.Define(stage, "/World/Movers/B")
+    rb = b.AddRotateXYZOp()
+    for f in frames:
+        rb.Set(Gf.Vec3f(5.0 * f, 12.0 * f, 0.0), f)
+    define_mesh(stage, "/World/Movers/B/Geom", *prism(6, radius=0.6, height=0.7), holes=[2])
+
+    # A non-uniform scale (baked into a shape of its own), crossing the floor.
+    stretched = define_mesh(stage, "/World/Stretched", *prism(5, radius=0.5, height=1.0))
+    st = UsdGeom.Xformable(stretched)
+    tr = st.AddTranslateOp()
+    for f in frames:
+        tr.Set(Gf.Vec3d(4.0, -0.6 + 0.05 * f, 4.0), f)
+    st.AddScaleOp().Set(Gf.Vec3f(2.0, 1.0, 0.5))
+
+    # A deforming mesh: a heptagonal prism whose top breathes, near the instancer's row.
+    blob_points, blob_counts, blob_indices = prism(7, radius=0.6, height=0.8)
+    blob = define_mesh(stage, "/World/Blob", blob_points, blob_counts, blob_indices)
+    UsdGeom.Xformable(blob).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.5, 4.0))
+    pts = blob.GetPointsAttr()
+    for f in frames:
+        p = blob_points.copy()
+        p[7:, 0] *= 1.0 + 1.2 * f / max(num_frames - 1, 1)
+        pts.Set(Vt.Vec3fArray.FromNumpy(p.astype(np.float32)), f)
+
+    # A PointInstancer: six instances of two prototypes in a row along x, sliding towards the blob.
+    inst = UsdGeom.PointInstancer.Define(stage, "/World/Inst")
+    UsdGeom.Scope.Define(stage, "/World/Inst/Protos")
+    cube = UsdGeom.Xform.Define(stage, "/World/Inst/Protos/Cube")
+    cube.AddScaleOp().Set(Gf.Vec3f(0.5, 0.5, 0.5))  # the prototype root's own transform counts
+    define_mesh(stage, "/World/Inst/Protos/Cube/Geom", *prism(4, radius=1.0, height=1.0))
+    define_mesh(stage, "/World/Inst/Protos/Tet", [[0, 0, 0], [0.8, 0, 0], [0, 0.8, 0], [0, 0, 0.8]],
+                [3, 3, 3, 3], [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
+    inst.CreatePrototypesRel().SetTargets([Sdf.Path("/World/Inst/Protos/Cube"), Sdf.Path("/World/Inst/Protos/Tet")])
+    inst.CreateProtoIndicesAttr(Vt.IntArray([0, 1, 0, 1, 0, 1]))
+    pos = inst.CreatePositionsAttr()
+    orient = inst.CreateOrientationsAttr()
+    orient.Set(Vt.QuathArray([Gf.Quath(1, 0, 0, 0)] * 6))
+    for f in frames:
+        x = -3.0 + 1.2 * np.arange(6)
+        z = 5.5 - 1.5 * f / max(num_frames - 1, 1) + 0.0 * x
+        pos.Set(Vt.Vec3fArray.FromNumpy(np.stack([x, np.full(6, 0.6), z], axis=1).astype(np.float32)), f)
+
+    # Instanceable references of one prototype (two prisms apart): two spinning copies that overlap each other.
+    proto = UsdGeom.Xform.Define(stage, "/Prototypes/Pair")
+    stage.GetPrimAtPath("/Prototypes").SetSpecifier(Sdf.SpecifierClass)
+    define_mesh(stage, "/Prototypes/Pair/Left", *prism(4, radius=0.4, height=0.6))
+    left = UsdGeom.Xformable(stage.GetPrimAtPath("/Prototypes/Pair/Left"))
+    left.AddTranslateOp().Set(Gf.Vec3d(-1.0, 0.0, 0.0))
+    define_mesh(stage, "/Prototypes/Pair/Right", *prism(5, radius=0.4, height=0.6))
+    del proto
+    for name, x in (("RefA", -5.0), ("RefB", -4.5)):
+        ref = UsdGeom.Xform.Define(stage, f"/World/{name}")
+        ref.GetPrim().GetReferences().AddInternalReference("/Prototypes/Pair")
+        ref.GetPrim().SetInstanceable(True)
+        ref.AddTranslateOp().Set(Gf.Vec3d(x, 3.0, 2.0))
+        spin = ref.AddRotateYOp()
+        for f in frames:
+            spin.Set(7.0 * f * (1 if name == "RefA" else -1), f)
+
+    # Skipped: a guide and an invisible mesh, both right through the floor.
+    guide = define_mesh(stage, "/World/Guide", *prism(4, radius=1.0, height=2.0))
+    guide.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    UsdGeom.Xformable(guide).AddTranslateOp().Set(Gf.Vec3d(2.0, -1.0, -2.0))
+    hidden = define_mesh(stage, "/World/Hidden", *prism(4, radius=1.0, height=2.0))
+    hidden.CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    UsdGeom.Xformable(hidden).AddTranslateOp().Set(Gf.Vec3d(-2.0, -1.0, 2.0))
+    if path is not None:
+        stage.GetRootLayer().Save()
+    return stage
+
+
+def _fan(counts, indices, holes):
+    tris, faces = [], []
+    k = 0
+    for f, c in enumerate(counts):
+        poly = indices[k:k + c]
+        k += c
+        if f in holes:
+            continue
+        for j in range(1, c - 1):
+            tris.append((poly[0], poly[j], poly[j + 1]))
+            faces.append(f)
+    return np.array(tris, np.int32).reshape(-1, 3), np.array(faces, np.int32)
+
+
+def world_polygon_meshes(stage, time) -> dict:
+    """Every object's world triangles at ``time``, computed prim by prim with plain loops.
+
+    Returns:
+        ``{object path: (world vertices (n, 3) float64, triangles (m, 3) int32, USD face of each triangle)}``,
+        named as :class:`warp_ccd.usd_import.UsdMeshImport` names its objects. Guides, invisible
+        prims and a PointInstancer's prototypes (drawn through the instancer only) are left out.
+    """
+    from pxr import Usd, UsdGeom
+
+    code = Usd.TimeCode(time)
+    cache = UsdGeom.XformCache(code)
+    out = {}
+
+    def read(prim):
+        mesh = UsdGeom.Mesh(prim)
+        points = np.asarray(mesh.GetPointsAttr().Get(code), np.float64)
+        holes = set(mesh.GetHoleIndicesAttr().Get(code) or [])
+        tri, face = _fan(list(mesh.GetFaceVertexCountsAttr().Get(code)),
+                         list(mesh.GetFaceVertexIndicesAttr().Get(code)), holes)
+        return points, tri, face
+
+    it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+    for prim in it:
+        if prim.IsA(UsdGeom.Imageable):
+            img = UsdGeom.Imageable(prim)
+            if img.ComputePurpose() in ("guide", "proxy") or img.ComputeVisibility(code) == UsdGeom.Tokens.invisible:
+                it.PruneChildren()
+                continue
+        if prim.IsA(UsdGeom.PointInstancer):
+            it.PruneChildren()
+            inst = UsdGeom.PointInstancer(prim)
+            xf = inst.ComputeInstanceTransformsAtTime(code, code)
+            world = np.asarray(cache.GetLocalToWorldTransform(prim))
+            protos = inst.GetPrototypesRel().GetTargets()
+            for i, p_idx in enumerate(inst.GetProtoIndicesAttr().Get(code)):
+                root = stage.GetPrimAtPath(protos[p_idx])
+                for p in Usd.PrimRange(root):
+                    if p.IsA(UsdGeom.Mesh):
+                        points, tri, face = read(p)
+                        rel = np.asarray(cache.ComputeRelativeTransform(p, root)[0])
+                        m = rel @ np.asarray(xf[i]) @ world
+                        name = f"{prim.GetPath()}[{i}]{str(p.GetPath())[len(str(root.GetParent().GetPath())):]}"
+                        out[name] = (points @ m[:3, :3] + m[3, :3], tri, face)
+            continue
+        if prim.IsA(UsdGeom.Mesh):
+            points, tri, face = read(prim)
+            m = np.asarray(cache.GetLocalToWorldTransform(prim))
+            out[str(prim.GetPath())] = (points @ m[:3, :3] + m[3, :3], tri, face)
+    return out
