@@ -4,10 +4,11 @@
 # verdict on every device costs the narrow phase, then the benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
 # 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes, the tree builds (and
 # one-shot collide() against python-fcl), and where a frame's host time goes (split at the launch
-# and the wait; the host's own speed right after waits of 0.05-50 ms).
+# and the wait; the host's own speed right after waits of 0.05-50 ms), and `warp-ccd check` on USD animations of
+# 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, broad, build, host
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, broad, build, host, usd
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -23,15 +24,17 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests profile narrow scaling spheres broad build host}
+parts=${*:-tests profile narrow scaling spheres broad build host usd}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
     profiled="100"; hosted="300"; waits="0.05 5"; builds="100x20 10x80 1x1280"; small="32"; rebuild="2x320"
+    usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
     builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="16"; rebuild="27x5120"
+    usd="--frames 240 --rigid 10000 --deforming 100 --fcl-every 10"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -70,8 +73,11 @@ for part in $parts; do
             --out "$out/host_breakdown_$tag.json"
         step python3 bench/host_after_wait.py --device "$device" --waits $waits \
             --out "$out/host_after_wait_$tag.json" ;;
+    usd)
+        step python3 bench/bench_usd_check.py --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
     *)
-        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, broad, build, host)" >&2; status=2 ;;
+        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, broad, build, host, usd)" >&2
+        status=2 ;;
     esac
 done
 exit $status
