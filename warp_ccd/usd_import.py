@@ -186,10 +186,13 @@ def _fan(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, path: str, 
     if holes.size:
         holes = holes[(holes >= 0) & (holes < counts.size)]
         keep[holes] = False
-    face = np.repeat(np.nonzero(keep)[0], counts[keep] - 2)
+    per_face = counts[keep] - 2
+    face = np.repeat(np.nonzero(keep)[0], per_face)
+    if face.size == 0:
+        return np.zeros((0, 3), np.int32), np.zeros(0, np.int32)
     # k-th triangle of a face: (first, first + k + 1, first + k + 2)
     first = start[face]
-    k = np.arange(face.size) - np.repeat(np.concatenate([[0], np.cumsum(counts[keep] - 2)[:-1]]), counts[keep] - 2)
+    k = np.arange(face.size) - np.repeat(np.cumsum(per_face) - per_face, per_face)
     tri = np.stack([indices[first], indices[first + k + 1], indices[first + k + 2]], axis=1)
     return tri.astype(np.int32), face.astype(np.int32)
 
@@ -294,6 +297,7 @@ class UsdMeshImport:
         self._mesh_by_source: dict[str, int] = {}
         self._instancers: list[_Instancer] = []
         self._varying_xform: dict[str, bool] = {}
+        self._prim_args = None if prims is None else ([prims] if isinstance(prims, str) else list(prims))
         mesh_prims = self._traverse(prims, include_invisible, purposes)
         self._build(mesh_prims, device, precision)
 
@@ -492,8 +496,9 @@ class UsdMeshImport:
         obj_prim = [x for part in obj_prim for x in part]
         n = len(obj_path)
         if n == 0:
-            raise ValueError("the stage has no meshes with faces" + (" under the chosen prims" if mesh_prims or
-                                                                      self._instancers else ""))
+            layer = self.stage.GetRootLayer()
+            where = f" under {', '.join(map(str, self._prim_args))}" if self._prim_args else ""
+            raise ValueError(f"{layer.realPath or layer.identifier}: no meshes with faces{where}")
 
         def flat(parts, dtype):
             return np.concatenate([np.asarray(x, dtype) for x in parts])
