@@ -48,11 +48,12 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 0) -> None:
-    """The rigid stage (see the module docstring), written with ``Sdf`` in one change block."""
+def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 0, device=None) -> None:
+    """The rigid stage (see the module docstring), written with ``Sdf`` in one change block; the
+    motion computed on ``device``."""
     from pxr import Gf, Sdf, Vt
 
-    scene = Scene.random(num_objects, seed=seed, device="cpu")
+    scene = Scene.random(num_objects, seed=seed, device=device)
     poses = np.empty((num_frames, num_objects, 7))
     for f in range(num_frames):
         poses[f] = scene.instance_pose.numpy()
@@ -207,14 +208,17 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as folder:
         # Compile and load every kernel once, outside the timed runs.
         warm = os.path.join(folder, "warm.usdc")
-        write_rigid_stage(warm, 20, 2)
+        write_rigid_stage(warm, 20, 2, device=device)
         check_usd(warm, device=device)
         for kind, count in (("rigid", args.rigid), ("deforming", args.deforming)):
             if count <= 0:
                 continue
             path = os.path.join(folder, f"{kind}.usdc")
             t = time.perf_counter()
-            (write_rigid_stage if kind == "rigid" else write_deforming_stage)(path, count, args.frames)
+            if kind == "rigid":
+                write_rigid_stage(path, count, args.frames, device=device)
+            else:
+                write_deforming_stage(path, count, args.frames)
             write_s = time.perf_counter() - t
             row = run_case(kind, path, device, args.frames, args.fcl_every)
             row["write_s"] = write_s
