@@ -887,3 +887,30 @@ def test_random_nested_transforms_match_collide(device, first, second):
     assert report.frames[0].object_pairs.tolist() == res.object_pairs.tolist()
     assert report.penetrating == (res.num_triangle_pairs > 0)
     event("colliding" if res.num_triangle_pairs else "apart")
+
+
+def test_transforms_read_by_worker_processes_match(mixed_file, device):
+    """Worker processes (each opening the file, a share of the time codes) give the same poses, and
+    the same world vertices at every frame, as reading in this process; a transform that is not
+    finite at some time code is still named."""
+    times = stage_time_codes(Usd.Stage.Open(str(mixed_file)))
+    serial = UsdMeshImport(mixed_file, times=times, device=device, workers=0)
+    pooled = UsdMeshImport(mixed_file, times=times, device=device, workers=2)
+    assert pooled.object_path == serial.object_path
+    np.testing.assert_array_equal(pooled.object_deforming, serial.object_deforming)
+    for k in (0, 11, len(times) - 1):
+        serial.set_frame(k)
+        pooled.set_frame(k)
+        np.testing.assert_array_equal(pooled.scene.world_vertex.numpy(), serial.scene.world_vertex.numpy())
+
+
+def test_worker_processes_name_a_transform_that_is_not_finite(tmp_path):
+    path = tmp_path / "nan.usda"
+    stage = new_stage(path, end=3)
+    mesh = define_mesh(stage, "/World/Box", *prism(4))
+    op = UsdGeom.Xformable(mesh).AddTranslateOp()
+    for f in range(4):
+        op.Set(Gf.Vec3d(float("nan") if f == 2 else 0.0, 0.0, 0.0), f)
+    stage.GetRootLayer().Save()
+    with pytest.raises(ValueError, match="/World/Box: its world transform is not finite at time 2"):
+        UsdMeshImport(path, times=[0, 1, 2, 3], workers=2)

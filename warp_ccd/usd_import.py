@@ -27,7 +27,8 @@ per object its world transform at every time code asked for:
   object is rigid: only its pose (and scale) changes, and the scene's kernel places its vertices.
 
 Cost: the stage is traversed once. Per time code, one ``UsdGeom.XformCache`` lookup per object
-whose world transform is time-varying, one ``ComputeInstanceTransformsAtTime`` per animated
+whose world transform is time-varying (10-20 us each; spread over worker processes, each
+opening the file, from :data:`PARALLEL_LOOKUPS` lookups on), one ``ComputeInstanceTransformsAtTime`` per animated
 PointInstancer, and one ``points`` read per time-sampled mesh; static transforms and points are
 read once. Poses of every time code are read and decomposed up front (numpy over the objects, no
 per-object Python beyond the lookups), which is where an animated transform that does not stay a
@@ -40,6 +41,10 @@ from __future__ import annotations
 import fnmatch
 import hashlib
 import os
+import pickle
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 
@@ -52,6 +57,54 @@ __all__ = ["UsdMeshImport", "open_stage", "stage_time_codes"]
 
 SIMILARITY_TOLERANCE = 1e-5
 """Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
+
+PARALLEL_LOOKUPS = 200_000
+"""Transform lookups (animated prims times time codes) from which a file's transforms are read by
+worker processes, each opening the file and reading a share of the time codes."""
+
+
+def _run_pose_workers(tasks: list) -> list:
+    """Runs :func:`_pose_worker` on each task in a process of its own (``python -m
+    warp_ccd.usd_import TASK OUT``: nothing of the caller's ``__main__`` is imported again)."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
+        procs = []
+        for i, task in enumerate(tasks):
+            src, dst = os.path.join(folder, f"task{i}.pkl"), os.path.join(folder, f"out{i}.pkl")
+            with open(src, "wb") as fh:
+                pickle.dump(task, fh)
+            procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd_import", src, dst], env=env,
+                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True), dst))
+        results = []
+        for proc, dst in procs:
+            _, err = proc.communicate()
+            if proc.returncode != 0:
+                last = err.strip().splitlines()[-1] if err.strip() else f"exit status {proc.returncode}"
+                raise ValueError(f"reading transforms in a worker process failed: {last}")
+            with open(dst, "rb") as fh:
+                results.append(pickle.load(fh))
+    return results
+
+
+def _pose_worker(task):
+    """Worker process: opens ``path`` and decomposes the world transforms of ``prim_paths`` at
+    ``times`` relative to ``bake``. Returns ``(poses (F, P, 7), scale (F, P), ok (P,), finite (F, P))``."""
+    path, prim_paths, times, bake = task
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(path)
+    prims = [stage.GetPrimAtPath(p) for p in prim_paths]
+    poses = np.empty((len(times), len(prims), 7))
+    scale = np.empty((len(times), len(prims)))
+    finite = np.empty((len(times), len(prims)), bool)
+    ok = np.ones(len(prims), bool)
+    for f, t in enumerate(times):
+        cache = UsdGeom.XformCache(Usd.TimeCode(float(t)))
+        m = np.array([cache.GetLocalToWorldTransform(p) for p in prims], np.float64).reshape(-1, 4, 4)
+        finite[f] = np.isfinite(m).all(axis=(1, 2))
+        poses[f], scale[f], good = _poses(np.where(finite[f][:, None, None], m, np.eye(4)), bake)
+        ok &= good
+    return poses, scale, ok, finite
 
 
 def open_stage(stage_or_path):
@@ -256,6 +309,10 @@ class UsdMeshImport:
         include_purposes: also read prims of these purposes (``"guide"``, ``"proxy"``).
         device: Warp device of the scene.
         precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.Scene`).
+        workers: processes that read the transforms of animated prims of a stage saved in a file
+            (each opens the file and takes a share of the time codes). Default: the CPU count
+            (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` lookups, else none; 0 or 1:
+            none. A stage with unsaved edits is always read in this process.
 
     Attributes:
         stage: the ``Usd.Stage``.
@@ -277,7 +334,7 @@ class UsdMeshImport:
     """
 
     def __init__(self, stage_or_path, *, prims=None, times=None, include_invisible: bool = False,
-                 include_purposes=(), device=None, precision: str = "float32"):
+                 include_purposes=(), device=None, precision: str = "float32", workers: int | None = None):
         from pxr import Usd
 
         self._start = time.perf_counter()
@@ -297,6 +354,7 @@ class UsdMeshImport:
         self._mesh_by_source: dict[str, int] = {}
         self._instancers: list[_Instancer] = []
         self._varying_xform: dict[str, bool] = {}
+        self._workers = workers
         self._prim_args = None if prims is None else ([prims] if isinstance(prims, str) else list(prims))
         mesh_prims = self._traverse(prims, include_invisible, purposes)
         self._build(mesh_prims, device, precision)
@@ -526,14 +584,21 @@ class UsdMeshImport:
         var_poses = np.empty((len(self._codes), varying.size, 7), fdtype)
         var_scale = np.empty((len(self._codes), varying.size), np.float32)
         var_ok = np.ones(varying.size, bool)
+        by_prim = self._obj_instancer[varying] < 0
+        pooled = self._pooled_poses(varying[by_prim], bake[varying[by_prim]], obj_path)
+        rest = varying[~by_prim] if pooled is not None else varying
         for f, code in enumerate(self._codes):
-            m = first[varying] if f == 0 else self._matrices(code, varying)
+            m = first[rest] if f == 0 else self._matrices(code, rest)
             finite = np.isfinite(m).all(axis=(1, 2))
             if not finite.all():
-                raise ValueError(f"prim {obj_path[int(varying[np.argmin(finite)])]}: its world transform is not "
+                raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
                                  f"finite at time {code.GetValue():g}")
-            var_poses[f], var_scale[f], ok = _poses(m, bake[varying])
-            var_ok &= ok
+            cols = ~by_prim if pooled is not None else slice(None)
+            var_poses[f, cols], var_scale[f, cols], ok = _poses(m, bake[rest])
+            var_ok[cols] &= ok
+        if pooled is not None:
+            var_poses[:, by_prim], var_scale[:, by_prim], ok = pooled
+            var_ok[by_prim] &= ok
         deforming[varying[~var_ok]] = True
 
         # Order: static rigid, animated rigid, deforming.
@@ -613,6 +678,31 @@ class UsdMeshImport:
         self.set_frame(0)
         self.seconds["build"] = time.perf_counter() - start
 
+    def _pooled_poses(self, objects: np.ndarray, bake: np.ndarray, obj_path: list):
+        """Poses, scales and similarity flags of prim ``objects`` at every time code, read by worker
+        processes; None when this stage is read in this process (see ``workers``)."""
+        layer = self.stage.GetRootLayer()
+        lookups = objects.size * len(self._codes)
+        workers = self._workers
+        if workers is None:
+            workers = min(os.cpu_count() or 1, 16) if lookups >= PARALLEL_LOOKUPS else 0
+        workers = min(workers, len(self._codes))
+        clean = layer.realPath and not any(x.dirty for x in self.stage.GetUsedLayers()) \
+            and self.stage.GetSessionLayer().empty
+        if workers <= 1 or not objects.size or not clean:
+            return None
+        paths = [str(self._prims[h].GetPath()) for h in self._obj_handle[objects].tolist()]
+        chunks = [c for c in np.array_split(np.arange(len(self._codes)), workers) if c.size]
+        tasks = [(layer.realPath, paths, self.times[c], bake) for c in chunks]
+        parts = _run_pose_workers(tasks)
+        finite = np.concatenate([p[3] for p in parts])
+        if not finite.all():
+            f, k = np.unravel_index(int(np.argmin(finite)), finite.shape)
+            raise ValueError(f"prim {obj_path[int(objects[k])]}: its world transform is not finite at time "
+                             f"{self.times[f]:g}")
+        ok = np.logical_and.reduce([p[2] for p in parts])
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), ok
+
     def _matrices(self, code, objects: np.ndarray) -> np.ndarray:
         """``(K, 4, 4)`` world matrices (row vectors) of ``objects`` (indices in traversal order) at ``code``."""
         from pxr import UsdGeom
@@ -688,3 +778,10 @@ class UsdMeshImport:
         """USD face indices of local triangles ``triangles`` of objects ``objects`` (same shapes, int32)."""
         s = self.scene.instance_shape_np[objects]
         return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
+
+
+if __name__ == "__main__":  # a worker of _run_pose_workers: python -m warp_ccd.usd_import TASK OUT
+    with open(sys.argv[1], "rb") as _task:
+        _result = _pose_worker(pickle.load(_task))
+    with open(sys.argv[2], "wb") as _out:
+        pickle.dump(_result, _out)
