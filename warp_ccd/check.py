@@ -225,7 +225,9 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
     faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
                       imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
     if len(faces):
-        order = np.lexsort((-depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))  # (a, b, fa, fb), deepest
+        # By (a, b, fa, fb), deepest first, then by triangles: the same row (and segment) on every
+        # device, whatever order the device's hits came in.
+        order = np.lexsort((rows[:, 3], rows[:, 1], -depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))
         faces, depth = faces[order], depth[order]
         first = np.ones(len(faces), bool)
         first[1:] = (faces[1:] != faces[:-1]).any(axis=1)
