@@ -101,8 +101,7 @@ def _pose_worker(task):
     for f, t in enumerate(times):
         cache = UsdGeom.XformCache(Usd.TimeCode(float(t)))
         m = np.array([cache.GetLocalToWorldTransform(p) for p in prims], np.float64).reshape(-1, 4, 4)
-        finite[f] = np.isfinite(m).all(axis=(1, 2))
-        poses[f], scale[f], good = _poses(np.where(finite[f][:, None, None], m, np.eye(4)), bake)
+        finite[f], poses[f], scale[f], good = _finite_poses(m, bake)
         ok &= good
     return poses, scale, ok, finite
 
@@ -288,6 +287,13 @@ def _poses(matrix: np.ndarray, bake: np.ndarray):
     return poses, scale, ok
 
 
+def _finite_poses(matrix: np.ndarray, bake: np.ndarray):
+    """:func:`_poses` of the finite ``matrix`` rows (identity in place of the others): ``(finite (K,)
+    bool, poses, scale, ok)``; the caller names a prim whose transform is not finite."""
+    finite = np.isfinite(matrix).all(axis=(1, 2))
+    return (finite, *_poses(np.where(finite[:, None, None], matrix, np.eye(4)), bake))
+
+
 class UsdMeshImport:
     """A stage's meshes, read once, as a :class:`~warp_ccd.scene.Scene` that can be set to each time code.
 
@@ -318,6 +324,7 @@ class UsdMeshImport:
         stage: the ``Usd.Stage``.
         times: ``(F,)`` float64 time codes.
         scene: the :class:`~warp_ccd.scene.Scene`, at ``times[0]`` until :meth:`set_frame`.
+        frame: index of the time code the scene was last set to.
         object_path: ``N`` names: the mesh prim's path, or ``"<instancer>[<i>]<mesh path in the
             prototype>"`` for a PointInstancer's instance ``i``.
         object_prim: ``N`` mesh prim paths (the prototype's mesh for point instances).
@@ -587,14 +594,13 @@ class UsdMeshImport:
         by_prim = self._obj_instancer[varying] < 0
         pooled = self._pooled_poses(varying[by_prim], bake[varying[by_prim]], obj_path)
         rest = varying[~by_prim] if pooled is not None else varying
+        cols = ~by_prim if pooled is not None else slice(None)
         for f, code in enumerate(self._codes):
-            m = first[rest] if f == 0 else self._matrices(code, rest)
-            finite = np.isfinite(m).all(axis=(1, 2))
+            finite, var_poses[f, cols], var_scale[f, cols], ok = _finite_poses(
+                first[rest] if f == 0 else self._matrices(code, rest), bake[rest])
             if not finite.all():
                 raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
                                  f"finite at time {code.GetValue():g}")
-            cols = ~by_prim if pooled is not None else slice(None)
-            var_poses[f, cols], var_scale[f, cols], ok = _poses(m, bake[rest])
             var_ok[cols] &= ok
         if pooled is not None:
             var_poses[:, by_prim], var_scale[:, by_prim], ok = pooled
@@ -626,7 +632,6 @@ class UsdMeshImport:
         self.object_deforming = deforming[order]
         self.object_instancer = [self._instancers[j].path if j >= 0 else None for j in self._obj_instancer[order]]
         self.object_instance = self._obj_instance[order]
-        self._order = order
 
         # Shapes: rigid objects share one per (mesh content, baked linear part); each deforming object has its own.
         canonical: dict[bytes, int] = {}
@@ -674,7 +679,6 @@ class UsdMeshImport:
         self.scene = Scene(packed, shape_of, instance_scale=scale, poses=poses,
                            deforming=bool(self._num_rigid < n), device=device, precision=precision)
         self.scene.usd = self
-        self.frame = -1
         self.set_frame(0)
         self.seconds["build"] = time.perf_counter() - start
 
@@ -745,7 +749,7 @@ class UsdMeshImport:
             raise ValueError(f"set_frame: expected a frame index in [0, {len(self.times)}), got {frame!r}")
         scene = self.scene
         a, b = self._num_static, self._num_rigid
-        if b > a and (frame != self.frame or self.frame < 0):
+        if b > a:
             dtype = np.float64 if scene.precision == "float64" else np.float32
             scene.instance_pose[a:b].assign(self._anim_poses[frame].astype(dtype))
             if self._scale_varies:
