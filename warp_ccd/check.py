@@ -35,15 +35,14 @@ import numpy as np
 
 from .narrow_phase import TOLERANCE, pair_crossing_depth
 from .output import PendingFile, check_output_path
+from .usd import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 
 __all__ = ["CheckReport", "FrameContacts", "check_usd", "write_overlay"]
 
-COLOR_PENETRATING = (0.95, 0.22, 0.08)
-"""displayColor of a prim while it penetrates another."""
-COLOR_CLEAR = (0.62, 0.62, 0.62)
+COLOR_PENETRATING = COLOR_COLLIDING
+"""displayColor of a prim while it penetrates another (the animation writer's colliding colour)."""
+COLOR_CLEAR = COLOR_FREE
 """displayColor of a coloured prim in frames where it penetrates nothing (when it had no constant colour)."""
-COLOR_SEGMENT = (1.0, 0.9, 0.1)
-"""displayColor of the intersection segments."""
 
 
 @dataclass
@@ -276,9 +275,11 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
     times = stage_time_codes(stage, frames)
+    opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
                         include_purposes=include_purposes, device=device, precision=precision)
     seconds = dict(imp.seconds)
+    seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
     scene = imp.scene
     pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
@@ -329,8 +330,6 @@ def write_overlay(report: CheckReport, out_path) -> str:
         ValueError: the checked stage was not a file, or the destination cannot be written.
     """
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
-
-    from .usd import validate_stage_path
 
     full, ext = validate_stage_path(out_path)
     imp = report.source
@@ -396,15 +395,15 @@ def write_overlay(report: CheckReport, out_path) -> str:
             curves = UsdGeom.BasisCurves.Define(stage, "/WarpCcdCheck/Segments")
             curves.CreateTypeAttr(UsdGeom.Tokens.linear)
             curves.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*COLOR_SEGMENT)]))
-            lo, hi = imp.scene.world_vertex.numpy().min(axis=0), imp.scene.world_vertex.numpy().max(axis=0)
+            world = imp.scene.world_vertex.numpy()
+            lo, hi = world.min(axis=0), world.max(axis=0)
             curves.CreateWidthsAttr(Vt.FloatArray([float(np.max(hi - lo)) * 2e-3 or 1e-3]))
             curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
             counts, points = curves.CreateCurveVertexCountsAttr(), curves.CreatePointsAttr()
             for f in report.frames:
-                seg = f.segments if f.segments is not None else np.zeros((0, 2, 3))
-                seg = seg[np.isfinite(seg).all(axis=(1, 2))].astype(np.float32)
-                counts.Set(Vt.IntArray.FromNumpy(np.full(len(seg), 2, np.int32)), f.time)
-                points.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(seg.reshape(-1, 3))), f.time)
+                ends = segment_points(f.segments if f.segments is not None else np.zeros((0, 2, 3)))
+                counts.Set(Vt.IntArray.FromNumpy(np.full(len(ends) // 2, 2, np.int32)), f.time)
+                points.Set(Vt.Vec3fArray.FromNumpy(ends), f.time)
         del stage, curves  # closed before the sublayer path changes (no recomposition against the wrong folder)
         rel = os.path.relpath(source, os.path.dirname(full))
         if not rel.startswith(".."):  # beside the overlay, or below it: a relative path that moves with both

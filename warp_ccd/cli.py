@@ -238,10 +238,8 @@ def _run_demo(args) -> int:
 
 
 def _run_check(args) -> int:
-    from .cli_common import EXIT_USAGE as EXIT_BAD_INPUT
-
-    def fail(message: str) -> CliError:
-        return CliError(f"{PROG} check: error: {message}", EXIT_BAD_INPUT)
+    def fail(message: str) -> CliError:  # bad arguments or input: exit 2 (1 means "penetrates")
+        return CliError(f"{PROG} check: error: {message}", EXIT_USAGE)
 
     # Every destination is checked before the stage is read; nothing is written on an error.
     try:
@@ -295,7 +293,7 @@ def _run_check(args) -> int:
             picture = PreviewRenderer(imp.scene, 640, 480).render(colliding)
             print(f"  preview: {save_preview([picture], args.preview)} (time {report.frames[worst].time:g})")
     except ValueError as exc:
-        raise CliError(f"{PROG} check: error: {exc}", EXIT_BAD_INPUT) from None
+        raise fail(str(exc)) from None
     return EXIT_ERROR if report.penetrating else EXIT_OK
 
 

@@ -48,8 +48,10 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 __all__ = [
     "COLOR_COLLIDING",
     "COLOR_FREE",
+    "COLOR_SEGMENT",
     "STAGE_EXTENSIONS",
     "UsdAnimationWriter",
+    "segment_points",
     "validate_stage_path",
 ]
 
@@ -89,6 +91,13 @@ def validate_stage_path(path) -> tuple[str, str]:
             exist or no file can be created in it; ``path`` is a folder or a read-only file.
     """
     return check_output_path(path, STAGE_EXTENSIONS, "USD")
+
+
+def segment_points(segments) -> np.ndarray:
+    """End points of the finite ones of ``(M, 2, 3)`` intersection segments (coplanar contacts have
+    none: NaN), as ``(2K, 3)`` float32 rows for a linear ``BasisCurves`` of two points a curve."""
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 2, 3)
+    return np.ascontiguousarray(seg[np.isfinite(seg).all(axis=(1, 2))].astype(np.float32).reshape(-1, 3))
 
 
 def _vec3f_array(a: np.ndarray):
@@ -395,11 +404,9 @@ class UsdAnimationWriter:
         seg = getattr(result, "segments", None)
         if seg is None:
             raise ValueError("add_frame: segments=True needs results of a CollisionPipeline(..., segments=True)")
-        seg = np.asarray(seg, dtype=np.float64).reshape(-1, 2, 3)
-        seg = seg[np.isfinite(seg).all(axis=(1, 2))].astype(np.float32)  # coplanar contacts have none
-        points = seg.reshape(-1, 3)
-        self._segment_counts.Set(Vt.IntArray.FromNumpy(np.full(len(seg), 2, np.int32)), time)
-        self._segment_points.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points)), time)
+        points = segment_points(seg)
+        self._segment_counts.Set(Vt.IntArray.FromNumpy(np.full(len(points) // 2, 2, np.int32)), time)
+        self._segment_points.Set(Vt.Vec3fArray.FromNumpy(points), time)
         if len(points):
             self._segment_extent.Set(_extent(points.min(axis=0), points.max(axis=0)), time)
         else:
