@@ -65,27 +65,35 @@ def test_build_identical_triangles():
 
 
 def refit_contains(scene, bvh):
-    """Every node box contains its children's boxes and its triangles."""
+    """Every node box contains its children's boxes and its triangles, in its object's box space
+    (a rigid object's shape's vertices, a deforming object's world vertices); every object box
+    contains the object's world vertices."""
     wv = scene.world_vertex.numpy()
+    sv = scene.shape_vertex.numpy()
     lo = bvh.tree.node_lower.numpy()
     hi = bvh.tree.node_upper.numpy()
     start = bvh.tree.instance_node_start.numpy()
+    deforming = scene.instance_deforming_np
     for i in range(scene.num_objects):
-        tr = bvh.shape_tree(scene.instance_shape_np[i])
+        s = scene.instance_shape_np[i]
+        tr = bvh.shape_tree(s)
         base = start[i]
-        tri = scene.shape_meshes[scene.instance_shape_np[i]][1]
-        vs = wv[scene.instance_vertex_start_np[i] :]
+        tri = scene.shape_meshes[s][1]
+        vs = wv[scene.instance_vertex_start_np[i]:] if deforming[i] else sv[scene.shape_vertex_start_np[s]:]
         for node in range(tr.num_nodes):
             left, right = tr.node_child[node]
             if left >= 0:
                 for c in (left, right):
                     assert (lo[base + node] <= lo[base + c]).all() and (hi[base + c] <= hi[base + node]).all()
             else:
-                s, c = tr.node_triangle[node]
-                p = vs[tri[tr.tri_order[s : s + c]].ravel()]
+                s0, c0 = tr.node_triangle[node]
+                p = vs[tri[tr.tri_order[s0 : s0 + c0]].ravel()]
                 assert (lo[base + node] <= p.min(0)).all() and (p.max(0) <= hi[base + node]).all()
-    # roots are the object boxes
-    assert np.array_equal(lo[start[:-1]], bvh.lower.numpy())
+        mine = wv[scene.instance_vertex_start_np[i]:scene.instance_vertex_start_np[i + 1]]
+        assert (bvh.lower.numpy()[i] <= mine.min(0)).all() and (mine.max(0) <= bvh.upper.numpy()[i]).all()
+    # a deforming object's root is its object box
+    own = np.nonzero(deforming)[0]
+    assert np.array_equal(lo[start[own]], bvh.lower.numpy()[own])
 
 
 def mixed_scene(device, n=40, seed=0):
@@ -133,8 +141,10 @@ def test_mixed_scene_matches_oracles(device, seed):
 
 @pytest.mark.parametrize(
     "options", [dict(), dict(leaf_size=2), dict(leaf_size=4), dict(candidate_capacity=1), dict(pair_capacity=1),
-                dict(cut_depth=0), dict(cut_depth=1), dict(cut_depth=6), dict(cut_depth=2, leaf_size=3)],
-    ids=["leaf1", "leaf2", "leaf4", "capacity1", "pairs1", "cut0", "cut1", "cut6", "cut2leaf3"])
+                dict(cut_depth=0), dict(cut_depth=1), dict(cut_depth=6), dict(cut_depth=2, leaf_size=3),
+                dict(separating_axes=6), dict(object_bounds="tree"), dict(object_bounds="vertices")],
+    ids=["leaf1", "leaf2", "leaf4", "capacity1", "pairs1", "cut0", "cut1", "cut6", "cut2leaf3", "axes6",
+         "bounds_tree", "bounds_vertices"])
 def test_options_same_result(device, options):
     """The traversal finds exactly the candidates that survive the reference's all triangle pairs."""
     scene = mixed_scene(device, n=30, seed=4)
@@ -182,17 +192,26 @@ def test_deforming_twisting_sphere(device):
     assert hits >= 2
 
 
+def deforming_copy(scene, mask=True):
+    """The scene's objects where they are now, as a scene whose objects in ``mask`` deform."""
+    return wc.Scene.from_meshes(scene.world_meshes(), deforming=True, device=scene.device) if mask is True else \
+        wc.Scene([m for m in scene.world_meshes()], np.arange(scene.num_objects), deforming=mask,
+                 device=scene.device)
+
+
 def test_refit_paths_agree(device):
     """Leaves then inner nodes (small trees) and level by level give the same boxes."""
     from warp_ccd.bvh import SceneBVH
 
-    scene = mixed_scene(device, n=25, seed=6)
-    scene.advance(0.3)
+    rigid = mixed_scene(device, n=25, seed=6)
+    rigid.advance(0.3)
+    scene = deforming_copy(rigid)
     per_level = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=0)
     per_instance = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=10**9)
     mixed = SceneBVH(scene, margin_rel=1e-5)
-    assert per_level.small_instance.shape[0] == 0 and per_instance.small_instance.shape[0] == 25
-    assert 0 < mixed.small_instance.shape[0] < 25
+    assert per_level.refit_plan.small_instance.shape[0] == 0
+    assert per_instance.refit_plan.small_instance.shape[0] == 25
+    assert 0 < mixed.refit_plan.small_instance.shape[0] < 25
     for bvh in (per_level, per_instance, mixed):
         bvh.refit(scene)
     ref = per_level.tree.node_lower.numpy(), per_level.tree.node_upper.numpy(), per_level.lower.numpy()
@@ -201,3 +220,92 @@ def test_refit_paths_agree(device):
         assert np.array_equal(bvh.tree.node_upper.numpy(), ref[1])
         assert np.array_equal(bvh.lower.numpy(), ref[2])
     refit_contains(scene, mixed)
+
+
+def test_rigid_trees_are_shared_and_never_refit(device):
+    """Rigid objects keep one tree per shape, in shape space: its boxes do not change as they move."""
+    scene = mixed_scene(device, n=30, seed=7)
+    pipe = wc.CollisionPipeline(scene)
+    shapes = np.unique(scene.instance_shape_np)
+    assert pipe.boxes.num_node_slots == sum(pipe.boxes.shape_tree(s).num_nodes for s in shapes)
+    before = pipe.boxes.tree.node_lower.numpy().copy(), pipe.boxes.tree.node_upper.numpy().copy()
+    for _ in range(2):
+        scene.advance(0.3)
+        pipe.detect()
+        refit_contains(scene, pipe.boxes)
+    assert np.array_equal(pipe.boxes.tree.node_lower.numpy(), before[0])
+    assert np.array_equal(pipe.boxes.tree.node_upper.numpy(), before[1])
+
+
+@pytest.mark.parametrize("object_bounds", ["auto", "tree", "vertices"])
+def test_object_bounds_hold_their_objects(device, object_bounds):
+    """Every way of finding a rigid object's box gives one that holds its world vertices; the
+    vertices' way is the plain box of the vertices (padded by the tolerance)."""
+    scene = mixed_scene(device, n=20, seed=8)
+    scene.advance(0.2)
+    pipe = wc.CollisionPipeline(scene, object_bounds=object_bounds)
+    pipe.detect()
+    refit_contains(scene, pipe.boxes)
+    if object_bounds == "vertices":
+        ref = wc.CollisionPipeline(scene, mid_phase="all_pairs")
+        ref.detect()
+        assert np.array_equal(pipe.boxes.lower.numpy(), ref.boxes.lower.numpy())
+        assert np.array_equal(pipe.boxes.upper.numpy(), ref.boxes.upper.numpy())
+
+
+def test_rigid_and_deforming_objects_share_one_traversal(device):
+    """A scene of rigid objects and deforming ones (every other object): the traversal maps boxes
+    between shape spaces and the world, and finds what the reference finds, frame after frame."""
+    rigid = mixed_scene(device, n=30, seed=9)
+    rigid.advance(0.5)
+    mask = np.arange(30) % 2 == 1
+    scene = deforming_copy(rigid, mask)
+    pipe = wc.CollisionPipeline(scene)
+    assert pipe.boxes.rigid_instance.shape[0] == 15
+    world = scene.world_vertex.numpy()
+    start = scene.instance_vertex_start_np
+    moved = 0
+    for k in range(3):
+        v = world.copy()
+        for i in np.nonzero(mask)[0]:  # the deforming ones swell and drift
+            part = v[start[i]:start[i + 1]]
+            c = part.mean(0)
+            v[start[i]:start[i + 1]] = c + (part - c) * (1.0 + 0.15 * k) + np.float32([0.1 * k, 0, 0])
+        scene.set_world_vertices(v)
+        res = pipe.detect()
+        ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
+        assert np.array_equal(res.triangle_pairs, ref.triangle_pairs)  # all triangle pairs, same exact test
+        moved += ref.num_triangle_pairs > 0
+    assert moved >= 2
+
+
+def test_poses_whose_quaternions_are_not_unit(device):
+    """Poses are accepted with quaternions up to 1e-3 from unit length; world vertices are then
+    rotated and scaled by them as Warp's transform_point does, and the traversal maps boxes by
+    that very map."""
+    scene = mixed_scene(device, n=30, seed=10)
+    scene.advance(0.4)
+    poses = scene.instance_pose.numpy().astype(np.float64)
+    poses[:, 3:] *= 1.0 + 9e-4 * np.cos(np.arange(30))[:, None]
+    moved = wc.Scene(scene.shapes, scene.instance_shape_np, instance_scale=scene.instance_scale_np, poses=poses,
+                     device=device)
+    got = wc.CollisionPipeline(moved).detect()
+    ref = wc.CollisionPipeline(moved, mid_phase="all_pairs").detect()
+    assert ref.num_triangle_pairs > 0
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_poses_far_from_the_origin(device, precision):
+    """Rigid objects placed 3e4 from the origin: their world vertices carry the rounding of the
+    pose, which the traversal's paddings bound; it finds what the reference (world boxes) finds."""
+    scene = mixed_scene(device, n=30, seed=11)
+    scene.advance(0.4)
+    poses = scene.instance_pose.numpy().astype(np.float64)
+    poses[:, :3] += [3e4, -2e4, 1e4]
+    moved = wc.Scene(scene.shapes, scene.instance_shape_np, instance_scale=scene.instance_scale_np, poses=poses,
+                     device=device, precision=precision)
+    got = wc.CollisionPipeline(moved).detect()
+    ref = wc.CollisionPipeline(moved, mid_phase="all_pairs").detect()
+    assert ref.num_triangle_pairs > 0
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)

@@ -6,7 +6,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bvh_build import TreeBuild, TreeSizes, build_tree
+from warp_ccd.bvh_build import CUT_DEPTH_MAX, CUT_TRIANGLES, TreeBuild, TreeSizes, build_tree
 from warp_ccd.shapes import validate_mesh, validate_meshes
 
 
@@ -45,7 +45,9 @@ def assert_same_trees(b: TreeBuild, meshes, leaf_size: int, cut_depth: int) -> N
                               want.inner_node)
         for deep in (0, 1):
             cut = cut_node[b.layout_cut_start[2 * layout + deep]:b.layout_cut_start[2 * layout + deep + 1]]
-            assert np.array_equal(cut, want.cut(cut_depth + deep)), (s, deep)
+            depth = max(cut_depth, min(int(np.ceil(np.log2(max(len(t) / CUT_TRIANGLES, 1)))), CUT_DEPTH_MAX))
+            assert b.layout_cut_depth[layout] == depth
+            assert np.array_equal(cut, want.cut(depth + deep)), (s, deep)
 
 
 @pytest.mark.parametrize("leaf_size", [1, 2, 3, 7])
@@ -130,7 +132,7 @@ def test_rebuild_sorts_the_moved_vertices(device):
     before = pipe.detect().triangle_pairs
     layout = pipe.boxes.build.node_child.numpy().copy()
     pipe.boxes.rebuild(scene)
-    assert np.array_equal(pipe.boxes.shape_tree(0).tri_order, build_tree(moved, t).tri_order)
+    assert np.array_equal(pipe.boxes.shape_tree(0).tri_order, build_tree(moved, t, pipe.boxes.leaf_size).tri_order)
     assert np.array_equal(pipe.boxes.build.node_child.numpy(), layout)
     after = pipe.detect().triangle_pairs
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect().triangle_pairs

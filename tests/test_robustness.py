@@ -101,13 +101,19 @@ def test_arrays_on_another_device_are_rejected():
     if not cuda:
         pytest.skip("needs a CUDA device beside the host")
     scene = wc.Scene.random(5, seed=0, device=cuda[0])
+    deforming = wc.Scene.from_meshes(scene.world_meshes(), deforming=True, device=cuda[0])
     with pytest.raises(ValueError, match="scene on"):
-        scene.set_world_vertices(wp.zeros(scene.num_world_vertices, dtype=wp.vec3, device="cpu"))
+        deforming.set_world_vertices(wp.zeros(scene.num_world_vertices, dtype=wp.vec3, device="cpu"))
     with pytest.raises(ValueError, match="scene on"):
         scene.set_poses(wp.zeros(scene.num_objects, dtype=wp.transform, device="cpu"))
 
 
 def test_set_world_vertices_validation():
+    rigid = wc.Scene.from_meshes([wc.shape("cube")])
+    with pytest.raises(ValueError, match="objects are rigid, placed by their poses"):
+        rigid.set_world_vertices(np.zeros((8, 3)))
+    with pytest.raises(ValueError, match=r"deforming: expected a bool or \(1,\) bools"):
+        wc.Scene([wc.shape("cube")], [0], deforming=[True, False])
     scene = wc.Scene.from_meshes([wc.shape("cube")], deforming=True)
     with pytest.raises(ValueError, match=r"expected shape \(8, 3\)"):
         scene.set_world_vertices(np.zeros((7, 3)))

@@ -1,4 +1,5 @@
-"""Bounding-volume trees: built once per shape (median split), refit per instance every frame.
+"""Bounding-volume trees: built once per shape (median split); rigid objects use their shape's tree
+as it is, deforming objects refit their own every frame.
 
 Build (kernels, all shapes at once: :mod:`warp_ccd.bvh_build`): the root holds all triangles;
 each node with more than ``leaf_size`` triangles is split at the median of its triangles'
@@ -16,19 +17,29 @@ is one shape's tree on the host):
 * ``node_triangle`` ``(start, count)``: the node's triangles are ``tri_order[start:start + count]``
   (every subtree is one contiguous range).
 
-Refit (device, every frame): per instance, node bounds ``node_lower`` / ``node_upper`` at
-``instance_node_start[i] + node``. Leaf boxes come from the world vertices of their triangles,
-padded by the narrow phase's tolerance times their longest edge; inner boxes are the union of
-their children. Instances of small trees (up to 255 nodes: polyhedra, 80-triangle spheres) are
-refit in two launches: one thread per leaf of every such instance, then one thread per inner node
-(the union of the leaf boxes of its subtree, which the leaf order makes a contiguous run of
-:attr:`TreeView.leaf_node`): no thread walks a whole tree, so a few hundred objects still fill
-the GPU in a few microseconds. Bigger trees one launch
-per level, deepest first, one thread per (instance, node), so a few big meshes still spread over
-the whole device.
-The root's box is the object's AABB: no separate bounds pass. Deforming meshes need nothing else:
-the caller writes world vertices, refit does the rest; :meth:`SceneBVH.rebuild` re-sorts their
-triangles into the same layout when the refit boxes have loosened.
+Node boxes (float32, ``node_lower`` / ``node_upper``) live in one array of *slots*, in the frame
+of the object's *box space*:
+
+* **rigid objects** share their shape's boxes, in shape space (the shape's own vertices, before
+  scale and pose), computed once when the trees are built and never refit. The traversal
+  (:mod:`warp_ccd.mid_phase`) tests one object's boxes against the other's under the pair's
+  relative transform, as FCL does; the broad phase's object box is the union of the shape's cut
+  boxes (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
+  vertices (one thread an object either way; by default the vertices of objects of up to 256,
+  whose cuts are few big boxes, and the cut of bigger ones, whose cuts are many small ones).
+* **deforming objects** (``scene.instance_deforming_np``) have boxes of their own, in world space,
+  refit every frame from their world vertices: instances of small trees (up to 255 nodes:
+  polyhedra, 80-triangle spheres) in two launches, one thread per leaf of every such instance,
+  then one thread per inner node (the union of the leaf boxes of its subtree, a contiguous run of
+  :attr:`TreeView.leaf_node`); bigger trees one launch per level, deepest first, one thread per
+  (instance, node). The root's box is the object's box.
+
+Leaf boxes are padded by the narrow phase's tolerance times their triangle's longest edge (in
+their own space: the padding scales with the object), so that the trees never reject a pair the
+narrow phase accepts. A rigid object's world vertices are computed from its pose in floating
+point, so every box under a pose is also padded by a bound on that rounding
+(:data:`WORLD_ERROR_ULPS`). :meth:`SceneBVH.rebuild` re-sorts the triangles of the deforming
+meshes' shapes from their world vertices when the refit boxes have loosened.
 """
 
 
@@ -37,9 +48,9 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .aabb import BOX_EMPTY, box_lower32, box_upper32
+from .aabb import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from .buffers import upper_bound
-from .bvh_build import ShapeTree, TreeBuild, packed_upload
+from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, TreeSizes, packed_upload
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
@@ -49,21 +60,32 @@ LEAF_SIZE_MAX = 256
 """Most triangles per leaf: a traversal thread emits up to 16 leaf pairs of ``leaf_size**2``
 rows at once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
 
-__all__ = ["SceneBVH", "TreeView"]
+OBJECT_BOUNDS = {"auto": 256, "tree": -1, "vertices": 2**31 - 1}
+"""How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
+vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 256."""
+
+WORLD_ERROR_ULPS = 128.0
+"""Bound on the rounding of a world vertex computed from its pose (``pose * (scale * p)``: a
+quaternion rotation and a translation) and of a box put under a pose, in units in the last place
+of ``|t| + scale * r`` (``t`` the translation, ``r`` the shape's radius): each output is a sum of
+about ten rounded terms of at most that size; 128 leaves a wide margin."""
+
+__all__ = ["LEAF_SIZE_MAX", "OBJECT_BOUNDS", "WORLD_ERROR_ULPS", "SceneBVH", "TreeView"]
 
 
 @wp.struct
 class TreeView:
     """What the refit and traversal kernels need: layouts shared by the shapes of one triangle count,
-    triangle order per shape, bounds per instance.
+    triangle order per shape, box slots per object.
 
     Shape ``s`` has layout ``l = shape_layout[s]`` (a tree's layout depends on its triangle count
     alone, :mod:`warp_ccd.bvh_build`): its nodes are ``layout_node_start[l] + local id``, its
     leaves (local ids) ``leaf_node[layout_leaf_start[l]:layout_leaf_start[l + 1]]`` and its two
     cuts (subtrees that partition the leaves, :meth:`~warp_ccd.bvh_build.ShapeTree.cut`), at the
-    scene's ``cut_depth`` and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
+    layout's cut depth and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
     layout_cut_start[2 l + deep + 1]]``; its triangle order starts at ``shape_tri_order_start[s]``;
-    the bounds of instance ``i`` are ``node_lower/upper[instance_node_start[i] + local id]``.
+    the boxes of object ``i`` (its box space: its shape's for a rigid object, the world for a
+    deforming one) are ``node_lower/upper[instance_node_start[i] + local id]``.
     """
 
     shape_layout: wp.array[wp.int32]
@@ -231,128 +253,294 @@ _REFIT_LEVEL, _REFIT_SMALL_LEAF = (
     for k in (_refit_level_kernel, _refit_small_leaf_kernel))
 
 
-class SceneBVH:
-    """Trees of all shapes of a scene, and per-instance node bounds refit every frame.
+@wp.func
+def abs_matrix(m: Any):
+    """Entry-wise absolute value of a 3x3 matrix (the extent of a box under a linear map is
+    ``abs_matrix(m) * half``)."""
+    return type(m)(wp.abs(m[0, 0]), wp.abs(m[0, 1]), wp.abs(m[0, 2]),
+                   wp.abs(m[1, 0]), wp.abs(m[1, 1]), wp.abs(m[1, 2]),
+                   wp.abs(m[2, 0]), wp.abs(m[2, 1]), wp.abs(m[2, 2]))
+
+
+@wp.func
+def box_radius(lo: wp.vec3, hi: wp.vec3) -> float:
+    """Distance from the origin of a box's farthest corner, or more (a bound on its points' norms)."""
+    return wp.length(wp.max(wp.abs(lo), wp.abs(hi)))
+
+
+@wp.kernel
+def _rigid_bounds_kernel(
+    tree: TreeView,
+    rigid_instance: wp.array[wp.int32],
+    instance_shape: wp.array[wp.int32],
+    instance_pose: wp.array[Any],
+    instance_scale: wp.array[wp.float32],
+    world_vertex: wp.array[Any],
+    instance_vertex_start: wp.array[wp.int32],
+    vertices_max: int,
+    margin_rel: Any,
+    world_eps: Any,
+    # Outputs
+    instance_lower: wp.array[wp.vec3],
+    instance_upper: wp.array[wp.vec3],
+):
+    """One thread per rigid object: the box of its world vertices (padded by ``margin_rel`` times
+    its diagonal) when it has at most ``vertices_max``; else the union of its shape's cut boxes
+    under its scale and pose (each box's centre moved, its half extent through the rotation's
+    absolute values), padded by the rounding bound ``world_eps * (|t| + scale * r)``
+    (:data:`WORLD_ERROR_ULPS`). Float32 corners, rounded outward."""
+    i = rigid_instance[wp.tid()]
+    v0 = instance_vertex_start[i]
+    v1 = instance_vertex_start[i + 1]
+    if v1 - v0 <= vertices_max:
+        lo, hi = vertex_bounds(world_vertex, v0, v1)
+        pad = margin_rel * wp.length(hi - lo)
+        m = type(lo)(pad, pad, pad)
+        instance_lower[i] = box_lower32(lo - m)
+        instance_upper[i] = box_upper32(hi + m)
+        return
+    pose = instance_pose[i]
+    t = wp.transform_get_translation(pose)
+    rot = wp.quat_to_matrix(wp.transform_get_rotation(pose))
+    rot_abs = abs_matrix(rot)
+    half = type(world_eps)(0.5)
+    s = type(world_eps)(instance_scale[i])
+    layout = tree.shape_layout[instance_shape[i]]
+    base = tree.instance_node_start[i]
+    lo = type(t)(type(world_eps)(BOX_EMPTY))
+    hi = -lo
+    for k in range(tree.layout_cut_start[2 * layout], tree.layout_cut_start[2 * layout + 1]):
+        slot = base + tree.cut_node[k]
+        nlo = type(t)(tree.node_lower[slot])
+        nhi = type(t)(tree.node_upper[slot])
+        c = rot * ((nlo + nhi) * (half * s)) + t
+        h = rot_abs * ((nhi - nlo) * (half * s))
+        lo = wp.min(lo, c - h)
+        hi = wp.max(hi, c + h)
+    r = type(world_eps)(box_radius(tree.node_lower[base], tree.node_upper[base]))
+    at = wp.abs(t)
+    pad = world_eps * (wp.max(wp.max(at[0], at[1]), at[2]) + s * r)
+    p = type(t)(pad, pad, pad)
+    instance_lower[i] = box_lower32(lo - p)
+    instance_upper[i] = box_upper32(hi + p)
+
+
+_RIGID_BOUNDS = precision_overloads(_rigid_bounds_kernel, lambda s, v, q, t: {
+    "instance_pose": wp.array[t], "world_vertex": wp.array[v], "margin_rel": s, "world_eps": s})
+
+
+class _RefitPlan:
+    """The refit of the trees of some objects (the deforming ones each frame; the shapes once, as
+    objects of their own), as launches prepared on the host.
 
     Args:
-        scene: the :class:`~warp_ccd.scene.Scene`.
-        leaf_size: largest number of triangles per leaf.
-        margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
-            tolerance, so that tree culling never rejects a pair the narrow phase accepts).
-        instance_refit_max_nodes: instances of shapes with at most this many nodes are refit in
-            two launches, leaves then inner nodes (an inner node reads all its leaves); bigger trees
-            are refit level by level, one thread per node.
-        cut_depth: level of each tree's cut (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`, at most ``2**cut_depth``
-            subtrees), where the traversal starts its descents; the trees also keep the cut one
-            level deeper, for frames with little work (:class:`~warp_ccd.mid_phase.MidPhaseBVH`).
-        small_subtree: largest subtree one thread of the build finishes alone (default: see
-            :class:`~warp_ccd.bvh_build.TreeBuild`).
-
-    Attributes:
-        lower, upper: ``(N,)`` object AABBs (the roots), written by :meth:`refit`.
-        tree: the :class:`TreeView` struct for kernels.
-        build: the :class:`~warp_ccd.bvh_build.TreeBuild` that made the trees (device arrays).
+        instances: ``(K,)`` ids of the objects to refit.
+        instance_shape: ``(N,)`` shape of every object of the topology the launches take.
+        sizes: per-shape :class:`~warp_ccd.bvh_build.TreeSizes`.
+        build: the :class:`~warp_ccd.bvh_build.TreeBuild` (inner-node lists).
+        small_max_nodes: trees of at most this many nodes are refit leaves-then-inner-nodes, the
+            others level by level.
+        device: Warp device.
     """
 
-    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
-                 cut_depth: int = 3, small_subtree: int | None = None):
-        if not 1 <= leaf_size <= LEAF_SIZE_MAX:
-            raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
-        if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
-            raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
-        self.device = scene.device
-        self.margin_rel = float(margin_rel)
-        self.leaf_size = int(leaf_size)
-        self.cut_depth = int(cut_depth)
-        d = self.device
-        build = TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np, leaf_size=leaf_size,
-                          cut_depth=cut_depth, small=small_subtree, device=d)
+    def __init__(self, instances: np.ndarray, instance_shape: np.ndarray, sizes: TreeSizes, build: TreeBuild,
+                 small_max_nodes: int, device):
+        self.device = device
         self.build = build
-        build.layout()
-        build.order(scene.shape_vertex, scene.shape_vertex_start)
-        sizes = build.sizes
-        num_shapes = scene.num_shapes
-        n = scene.num_objects
-        nodes = sizes.num_nodes
-        inst_nodes = nodes[scene.instance_shape_np] if n else np.zeros(0, np.int64)
-        inode = np.concatenate([[0], np.cumsum(inst_nodes)])
-        if inode[-1] >= 2**31:
-            raise ValueError(f"scene too large for the BVH: {inode[-1]} tree nodes (limit 2**31 - 1)")
-        self.num_node_slots = int(inode[-1])
-        self.max_depth = int(sizes.num_levels.max()) if num_shapes else 0
-        # Where each shape's first instance's world vertices start, which a rebuild reads (-1: no
-        # instance, the shape's own vertices).
-        first = np.full(num_shapes, n, np.int64)
-        np.minimum.at(first, scene.instance_shape_np, np.arange(n))
-        world_start = np.full(num_shapes, -1, np.int64)
-        has = first < n
-        world_start[has] = scene.instance_vertex_start_np[first[has]]
-        self._shape_world_start = wp.array(world_start.astype(np.int32), dtype=wp.int32, device=d)
-
-        # Instances of small trees: a thread per leaf, then per inner node. The others grouped by
-        # shape, and per level the work blocks of each shape.
-        small = nodes <= instance_refit_max_nodes
-        is_small = small[scene.instance_shape_np] if n else np.zeros(0, bool)
-        small_instance = np.nonzero(is_small)[0].astype(np.int32)
-        self.small_instance = wp.array(small_instance, dtype=wp.int32, device=d)
-        leaves = sizes.num_leaves
-        inner = sizes.num_inner
-        small_shape = scene.instance_shape_np[small_instance]
-        small_leaf_end = np.cumsum(leaves[small_shape])
-        small_inner_end = np.cumsum(inner[small_shape])
+        instances = np.asarray(instances, np.int64)
+        shape = instance_shape[instances]
+        num_shapes = len(sizes.m)
+        small = sizes.num_nodes <= small_max_nodes
+        is_small = small[shape]
+        self.small_instance = wp.array(instances[is_small].astype(np.int32), dtype=wp.int32, device=device)
+        small_shape = shape[is_small]
+        small_leaf_end = np.cumsum(sizes.num_leaves[small_shape])
+        small_inner_end = np.cumsum(sizes.num_inner[small_shape])
         self.num_small_leaves = int(small_leaf_end[-1]) if len(small_leaf_end) else 0
         self.num_small_inner = int(small_inner_end[-1]) if len(small_inner_end) else 0
         if max(self.num_small_leaves, self.num_small_inner) >= 2**31:
             raise ValueError("scene too large for the BVH refit (2**31 tree nodes of small shapes)")
-        self.small_leaf_end = wp.array(small_leaf_end.astype(np.int32), dtype=wp.int32, device=d)
-        self.small_inner_end = wp.array(small_inner_end.astype(np.int32), dtype=wp.int32, device=d)
-        self.inner_node = build.inner_node
-        order = np.argsort(scene.instance_shape_np, kind="stable").astype(np.int32)
-        per_shape = np.bincount(scene.instance_shape_np, minlength=num_shapes) if n else np.zeros(num_shapes, np.int64)
-        per_shape = np.where(small, 0, per_shape)  # small shapes own no level work
-        order = order[~is_small[order]] if n else order
-        self.shape_instance = wp.array(order, dtype=wp.int32, device=d)
-        self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32), device=d)
+        self.small_leaf_end = wp.array(small_leaf_end.astype(np.int32), dtype=wp.int32, device=device)
+        self.small_inner_end = wp.array(small_inner_end.astype(np.int32), dtype=wp.int32, device=device)
+        # The others grouped by shape, and per level the work blocks of each shape.
+        big = instances[~is_small]
+        order = big[np.argsort(shape[~is_small], kind="stable")].astype(np.int32)
+        per_shape = np.bincount(shape[~is_small], minlength=num_shapes).astype(np.int64)
+        self.shape_instance = wp.array(order, dtype=wp.int32, device=device)
+        self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32),
+                                             device=device)
+        depth = int(sizes.num_levels[per_shape > 0].max()) if per_shape.any() else 0
         level_items, level_arrays = [], []
-        for level in range(self.max_depth if per_shape.any() else 0):
+        for level in range(depth):
             level_first, count = sizes.level(level)
             block = np.concatenate([[0], np.cumsum(count * per_shape)])
             if block[-1] >= 2**31:
                 raise ValueError("scene too large for the BVH refit (2**31 work items on one level)")
             level_items.append(int(block[-1]))
             level_arrays += [block, level_first, np.maximum(count, 1)]
-        views = packed_upload(level_arrays, d) if level_arrays else []  # one copy for all levels
+        views = packed_upload(level_arrays, device) if level_arrays else []  # one copy for all levels
         # (items, block_start, level_first, level_count) per level
         self.levels = [(items, *views[3 * k: 3 * k + 3]) for k, items in enumerate(level_items)]
 
-        tv = TreeView()
-        tv.shape_layout = build.shape_layout_device
-        tv.layout_node_start = build.layout_node_start_device
-        tv.shape_tri_order_start = scene.shape_triangle_start
-        tv.node_child = build.node_child
-        tv.node_triangle = build.node_triangle
-        tv.node_leaf = build.node_leaf
-        tv.leaf_node = build.leaf_node
-        tv.layout_leaf_start = build.layout_leaf_start_device
-        tv.layout_cut_start = build.layout_cut_start_device
-        tv.cut_node = build.cut_node
-        tv.tri_order = build.tri_order
-        tv.instance_node_start = wp.array(inode.astype(np.int32), dtype=wp.int32, device=d)
-        tv.node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
-        tv.node_upper = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
-        self.tree = tv
+    def launch(self, topology: MeshTopology, vertices: wp.array, tree: TreeView, margin, precision: str,
+               lower: wp.array, upper: wp.array) -> None:
+        """Refits the boxes of the plan's objects from ``vertices`` (``topology``'s), small trees
+        first, then the others deepest level first; roots also into ``lower`` / ``upper``."""
+        d = self.device
+        if self.num_small_leaves:
+            wp.launch(_REFIT_SMALL_LEAF[precision], dim=self.num_small_leaves,
+                      inputs=[topology, vertices, tree, self.small_instance, self.small_leaf_end, margin],
+                      outputs=[lower, upper], device=d)
+        if self.num_small_inner:
+            wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
+                      inputs=[tree, topology.instance_shape, self.small_instance, self.small_inner_end,
+                              self.build.layout_inner_start_device, self.build.inner_node],
+                      outputs=[lower, upper], device=d)
+        for items, block, first, count in reversed(self.levels):
+            if items:
+                wp.launch(_REFIT_LEVEL[precision], dim=items,
+                          inputs=[topology, vertices, tree, block, first, count, self.shape_instance,
+                                  self.shape_instance_start, margin],
+                          outputs=[lower, upper], device=d)
+
+
+class SceneBVH:
+    """Trees of all shapes of a scene: shape-space boxes for rigid objects, per-object boxes refit
+    every frame for deforming ones, and every object's box for the broad phase.
+
+    Args:
+        scene: the :class:`~warp_ccd.scene.Scene`.
+        leaf_size: largest number of triangles per leaf.
+        margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
+            tolerance, so that tree culling never rejects a pair the narrow phase accepts).
+        instance_refit_max_nodes: deforming objects of shapes with at most this many nodes are refit
+            in two launches, leaves then inner nodes (an inner node reads all its leaves); bigger
+            trees level by level, one thread per node.
+        cut_depth: least level of each tree's cut (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`),
+            where the traversal starts its work items; big trees cut deeper, so that a cut's
+            subtrees hold about ``cut_triangles`` triangles at most
+            (:meth:`~warp_ccd.bvh_build.TreeSizes.cut_depth`). The trees also keep the cut one level
+            deeper, for frames with little work (:class:`~warp_ccd.mid_phase.MidPhaseBVH`).
+        cut_triangles: see ``cut_depth`` (:data:`~warp_ccd.bvh_build.CUT_TRIANGLES`).
+        object_bounds: a rigid object's box for the broad phase, one thread an object:
+            ``"vertices"`` the box of its world vertices (tight; a thread reads them all);
+            ``"tree"`` the union of its shape's cut boxes under its pose (a few boxes; loose where
+            the cut's boxes are big, in small trees); ``"auto"`` (default) the vertices of objects
+            of up to 256 vertices, the tree of bigger ones (:data:`OBJECT_BOUNDS`).
+        small_subtree: largest subtree one thread of the build finishes alone (default: see
+            :class:`~warp_ccd.bvh_build.TreeBuild`).
+
+    Attributes:
+        lower, upper: ``(N,)`` object AABBs (float32, world), written by :meth:`refit`.
+        tree: the :class:`TreeView` struct for kernels.
+        build: the :class:`~warp_ccd.bvh_build.TreeBuild` that made the trees (device arrays).
+        instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
+        num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
+    """
+
+    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
+                 cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str = "auto",
+                 small_subtree: int | None = None):
+        if not 1 <= leaf_size <= LEAF_SIZE_MAX:
+            raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
+        if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
+            raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
+        if object_bounds not in OBJECT_BOUNDS:
+            raise ValueError(f"object_bounds must be one of {tuple(OBJECT_BOUNDS)}, got {object_bounds!r}")
+        self.device = scene.device
+        self.margin_rel = float(margin_rel)
+        self.leaf_size = int(leaf_size)
+        self.cut_depth = int(cut_depth)
+        self.object_bounds = object_bounds
+        d = self.device
+        build = TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np, leaf_size=leaf_size,
+                          cut_depth=cut_depth, cut_triangles=cut_triangles, small=small_subtree, device=d)
+        self.build = build
+        build.layout()
+        build.order(scene.shape_vertex, scene.shape_vertex_start)
+        sizes = build.sizes
+        num_shapes = scene.num_shapes
+        n = scene.num_objects
+        inst_shape = scene.instance_shape_np
+        deforming = scene.instance_deforming_np
+        nodes = sizes.num_nodes
+        # Slots: the shapes of rigid objects first (shape space), then each deforming object's.
+        has_rigid = np.zeros(num_shapes, bool)
+        has_rigid[inst_shape[~deforming]] = True
+        shape_slot = np.concatenate([[0], np.cumsum(np.where(has_rigid, nodes, 0))])
+        own = np.where(deforming, nodes[inst_shape] if n else 0, 0)
+        own_slot = shape_slot[-1] + np.concatenate([[0], np.cumsum(own)])
+        if own_slot[-1] >= 2**31:
+            raise ValueError(f"scene too large for the BVH: {own_slot[-1]} tree node boxes (limit 2**31 - 1)")
+        self.num_node_slots = int(own_slot[-1])
+        inode = np.where(deforming, own_slot[:-1], shape_slot[inst_shape] if n else 0)
+        self.max_depth = int(sizes.num_levels.max()) if num_shapes else 0
+        # Where each shape's first deforming object's world vertices start, which a rebuild reads
+        # (-1: none, the shape's own vertices).
+        first = np.full(num_shapes, n, np.int64)
+        np.minimum.at(first, inst_shape[deforming], np.nonzero(deforming)[0])
+        world_start = np.full(num_shapes, -1, np.int64)
+        has = first < n
+        world_start[has] = scene.instance_vertex_start_np[first[has]]
+        self._shape_world_start = wp.array(world_start.astype(np.int32), dtype=wp.int32, device=d)
+
+        self.rigid_instance = wp.array(np.nonzero(~deforming)[0].astype(np.int32), dtype=wp.int32, device=d)
+        self.instance_deforming = wp.array(deforming.astype(np.int32), dtype=wp.int32, device=d)
+        self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, sizes, build, instance_refit_max_nodes, d)
+        self._shape_plan = _RefitPlan(np.nonzero(has_rigid)[0], np.arange(num_shapes), sizes, build,
+                                      instance_refit_max_nodes, d)
+
+        def view(node_start):
+            tv = TreeView()
+            tv.shape_layout = build.shape_layout_device
+            tv.layout_node_start = build.layout_node_start_device
+            tv.shape_tri_order_start = scene.shape_triangle_start
+            tv.node_child = build.node_child
+            tv.node_triangle = build.node_triangle
+            tv.node_leaf = build.node_leaf
+            tv.leaf_node = build.leaf_node
+            tv.layout_leaf_start = build.layout_leaf_start_device
+            tv.layout_cut_start = build.layout_cut_start_device
+            tv.cut_node = build.cut_node
+            tv.tri_order = build.tri_order
+            tv.instance_node_start = wp.array(node_start.astype(np.int32), dtype=wp.int32, device=d)
+            tv.node_lower = self._node_lower
+            tv.node_upper = self._node_upper
+            return tv
+
+        self._node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
+        self._node_upper = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
+        self.tree = view(np.append(inode, self.num_node_slots))
+        self._shape_tree = view(shape_slot)  # the shapes as objects of their own (their boxes' slots)
+        self._shape_topology = MeshTopology()
+        for name in ("shape_triangle", "shape_triangle_start"):
+            setattr(self._shape_topology, name, getattr(scene, name))
+        self._shape_topology.instance_shape = wp.array(np.arange(num_shapes, dtype=np.int32), device=d)
+        self._shape_topology.instance_vertex_start = scene.shape_vertex_start
+        self._shape_topology.instance_triangle_start = scene.shape_triangle_start
+        self._shape_lower = wp.zeros(num_shapes, dtype=wp.vec3, device=d)
+        self._shape_upper = wp.zeros(num_shapes, dtype=wp.vec3, device=d)
         self.lower = wp.zeros(n, dtype=wp.vec3, device=d)
         self.upper = wp.zeros(n, dtype=wp.vec3, device=d)
+        self._refit_shapes(scene)
+
+    def _refit_shapes(self, scene) -> None:
+        """The shape-space boxes of the shapes of rigid objects, from the shapes' own vertices."""
+        self._shape_plan.launch(self._shape_topology, scene.shape_vertex, self._shape_tree,
+                                scene.scalar_type(self.margin_rel), scene.precision, self._shape_lower,
+                                self._shape_upper)
 
     def shape_tree(self, s: int) -> ShapeTree:
         """Shape ``s``'s tree as host arrays (reads the device; for tests and inspection)."""
         return self.build.shape_tree(s)
 
     def rebuild(self, scene) -> None:
-        """Rebuilds every shape's triangle order from the world vertices of its first instance (for
-        deforming meshes whose refit trees have loosened); the layout, and so every array and
-        captured graph, stays. Enqueues kernels only; the next :meth:`refit` sets the boxes."""
+        """Rebuilds the triangle order of every shape of a deforming object from that object's world
+        vertices (for deforming meshes whose refit trees have loosened; a shape shared with rigid
+        objects gets its shape-space boxes again); the layout, and so every array and captured
+        graph, stays. Enqueues kernels only; the next :meth:`refit` sets the deforming boxes."""
         self.build.order(scene.shape_vertex, scene.shape_vertex_start, scene.world_vertex, self._shape_world_start)
+        self._refit_shapes(scene)
 
     @property
     def counters(self) -> list:
@@ -360,27 +548,15 @@ class SceneBVH:
         return []
 
     def refit(self, scene) -> None:
-        """Refits all node bounds (and the object boxes) from ``scene.world_vertex``: small trees
-        in one launch, the others deepest level first."""
+        """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
+        roots are their object boxes), then the rigid objects' boxes (see ``object_bounds``)."""
         margin = scene.scalar_type(self.margin_rel)
-        if self.num_small_leaves:
-            wp.launch(_REFIT_SMALL_LEAF[scene.precision], dim=self.num_small_leaves,
-                      inputs=[scene.topology, scene.world_vertex, self.tree, self.small_instance, self.small_leaf_end,
-                              margin],
+        self.refit_plan.launch(scene.topology, scene.world_vertex, self.tree, margin, scene.precision, self.lower,
+                               self.upper)
+        if self.rigid_instance.shape[0]:
+            eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
+            wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_instance.shape[0],
+                      inputs=[self.tree, self.rigid_instance, scene.instance_shape, scene.instance_pose,
+                              scene.instance_scale, scene.world_vertex, scene.instance_vertex_start,
+                              OBJECT_BOUNDS[self.object_bounds], margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
                       outputs=[self.lower, self.upper], device=self.device)
-        if self.num_small_inner:
-            wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
-                      inputs=[self.tree, scene.instance_shape, self.small_instance, self.small_inner_end,
-                              self.build.layout_inner_start_device, self.inner_node],
-                      outputs=[self.lower, self.upper], device=self.device)
-        for items, block, first, count in reversed(self.levels):
-            if items == 0:
-                continue
-            wp.launch(
-                _REFIT_LEVEL[scene.precision],
-                dim=items,
-                inputs=[scene.topology, scene.world_vertex, self.tree, block, first, count, self.shape_instance,
-                        self.shape_instance_start, margin],
-                outputs=[self.lower, self.upper],
-                device=self.device,
-            )

@@ -36,7 +36,8 @@ Layout, per shape, nodes in breadth-first order (level ``d`` starts at ``2**d - 
 * ``leaf_node`` the leaves in the order of their triangles, ``node_leaf`` ``(first, count)``: a
   node's subtree holds the leaves ``leaf_node[first:first + count]``; ``inner_node`` the inner
   nodes in id order;
-* cuts: the nodes at a depth and the leaves above it (subtrees that partition the leaves).
+* cuts: the nodes at a depth and the leaves above it (subtrees that partition the leaves), two per
+  layout (``layout_cut_depth`` and one level deeper), deeper in big trees (:meth:`TreeSizes.cut_depth`).
 """
 
 from typing import Any
@@ -50,7 +51,8 @@ from .precision import precision_overloads
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild", "TreeSizes", "build_tree", "centroid_keys",
+__all__ = ["CUT_DEPTH_MAX", "CUT_TRIANGLES", "INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild",
+           "TreeSizes", "build_tree", "centroid_keys",
            "packed_upload"]
 
 SMALL_SUBTREE = 8
@@ -60,6 +62,14 @@ CPU, where Warp runs a kernel on one thread, each shape is finished whole (its l
 A thread's work on its own block of the lists is uncoalesced: on an H100, 10^5 shapes of 80
 triangles built in 12.9 ms from subtrees of 8, 15.1 ms of 16, 26 ms of 32, 34 ms from whole shapes
 sorted by insertion."""
+
+CUT_TRIANGLES = 64
+"""A tree's cut (where the traversal's work items start) lies deep enough that its subtrees hold at
+most about this many triangles (:meth:`TreeSizes.cut_depth`): a pair of big meshes is then many
+short items, not a few long ones."""
+
+CUT_DEPTH_MAX = 8
+"""Deepest cut chosen by size (at most 256 subtrees a tree, 65,536 work items a pair of trees)."""
 
 INSERTION_SORT_MAX = 64
 """Shapes of at most this many triangles sort their lists by insertion in :func:`_finish_kernel`;
@@ -116,9 +126,18 @@ class TreeSizes:
         count = np.where(d <= self.q, np.int64(1) << min(d, 62), np.where(d == self.q + 1, 2 * self.split, 0))
         return first, count
 
-    def cut_size(self, depth: int) -> np.ndarray:
-        """Nodes in the cut at ``depth`` of every shape: ``2**depth``, or all leaves below."""
-        return np.where(depth <= self.q, np.int64(1) << min(depth, 62), self.num_leaves)
+    def cut_size(self, depth) -> np.ndarray:
+        """Nodes in the cut at ``depth`` (one level, or ``(S,)`` levels) of every shape: ``2**depth``,
+        or all leaves below."""
+        depth = np.asarray(depth, np.int64)
+        return np.where(depth <= self.q, np.int64(1) << np.minimum(depth, 62), self.num_leaves)
+
+    def cut_depth(self, depth: int, cut_triangles: int) -> np.ndarray:
+        """``(S,)`` level of each tree's cut: at least ``depth``, deeper in a big tree until its cut's
+        subtrees hold at most about ``cut_triangles`` triangles, but no deeper than
+        :data:`CUT_DEPTH_MAX` (when ``depth`` is not deeper still)."""
+        need = _bit_length((self.m - 1) // max(int(cut_triangles), 1))  # ceil(log2(m / cut_triangles))
+        return np.maximum(np.int64(depth), np.minimum(need, CUT_DEPTH_MAX))
 
 
 def _distinct(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +159,8 @@ def packed_upload(arrays: list, device) -> list:
     lengths = [len(a) for a in arrays]
     block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
     ends = np.cumsum(lengths)
-    return [block[int(e - k):int(e)] for e, k in zip(ends, lengths)]
+    return [block[int(e - k):int(e)] if k else wp.empty(0, dtype=wp.int32, device=device)
+            for e, k in zip(ends, lengths)]
 
 
 # ---------------------------------------------------------------------------------------------- reference
@@ -318,8 +338,8 @@ def _layout_kernel(
     layout_leaf_start: wp.array[wp.int32],
     layout_inner_start: wp.array[wp.int32],
     layout_cut_start: wp.array[wp.int32],
+    layout_cut_depth: wp.array[wp.int32],
     leaf_size: int,
-    cut_depth: int,
     # Outputs
     node_child: wp.array[wp.vec2i],
     node_parent: wp.array[wp.int32],
@@ -331,7 +351,7 @@ def _layout_kernel(
 ):
     """One thread per node of every layout (one per triangle count ``layout_triangles[l]``): its
     range, children, parent, leaf range; leaves and inner nodes write themselves into their lists,
-    and cut members into the layout's two cuts (at ``cut_depth`` and one level deeper)."""
+    and cut members into the layout's two cuts (at ``layout_cut_depth[l]`` and one level deeper)."""
     t = wp.tid()
     s = upper_bound(layout_node_start, 0, layout_node_start.shape[0], t) - 1
     k = t - layout_node_start[s]
@@ -413,7 +433,7 @@ def _layout_kernel(
     else:
         inner_node[layout_inner_start[s] + (1 << q) - 1 + before - j] = k
     for deep in range(2):
-        cd = cut_depth + deep
+        cd = layout_cut_depth[s] + deep
         base = layout_cut_start[2 * s + deep]
         if cd <= q:
             if depth == cd:
@@ -700,7 +720,9 @@ class TreeBuild:
         shape_triangle_start: ``(S + 1,)`` int numpy offsets of each shape's triangles (each shape
             has at least one).
         leaf_size: most triangles per leaf.
-        cut_depth: level of the first of the two cuts each layout keeps (see :class:`ShapeTree`).
+        cut_depth: least level of the first of the two cuts each layout keeps (see
+            :class:`ShapeTree`); big trees cut deeper (:meth:`TreeSizes.cut_depth`).
+        cut_triangles: most triangles, about, of a cut's subtree in a big tree (:data:`CUT_TRIANGLES`).
         small: largest subtree one thread finishes (default :data:`SMALL_SUBTREE` on CUDA, whole
             shapes on the CPU; at least ``2 * leaf_size``).
         presort: radix-sort the lists before the splits (default: when some shape has more than
@@ -717,7 +739,8 @@ class TreeBuild:
     """
 
     def __init__(self, shape_triangle, shape_triangle_start, *, leaf_size: int = 1, cut_depth: int = 3,
-                 small: int | None = None, presort: bool | None = None, device=None):
+                 cut_triangles: int = CUT_TRIANGLES, small: int | None = None, presort: bool | None = None,
+                 device=None):
         self.device = wp.get_device(device)
         d = self.device
         tstart = np.asarray(shape_triangle_start, np.int64)
@@ -745,7 +768,9 @@ class TreeBuild:
             raise ValueError(f"scene too large for the tree build: {self.layout_node_start[-1]} tree nodes")
         self.layout_leaf_start = offsets(sizes.num_leaves)
         self.layout_inner_start = offsets(sizes.num_inner)
-        cuts = np.stack([sizes.cut_size(self.cut_depth), sizes.cut_size(self.cut_depth + 1)], axis=1).reshape(-1)
+        self.layout_cut_depth = sizes.cut_depth(self.cut_depth, cut_triangles)
+        cuts = np.stack([sizes.cut_size(self.layout_cut_depth), sizes.cut_size(self.layout_cut_depth + 1)],
+                        axis=1).reshape(-1)
         self.layout_cut_start = offsets(cuts)
         # Levels split over all shapes at once: until the nodes hold at most `small` triangles.
         self.global_levels = _bit_length((layout_m + self.small - 1) // self.small - 1)[self.shape_layout]
@@ -758,9 +783,9 @@ class TreeBuild:
         # Every small per-shape and per-layout array in one upload (one copy, not ten).
         (self._tstart, self._global_levels, self._subtree_end, self._layout_m, self.shape_layout_device,
          self.layout_node_start_device, self.layout_leaf_start_device, self.layout_inner_start_device,
-         self.layout_cut_start_device) = packed_upload(
+         self.layout_cut_start_device, self._layout_cut_depth) = packed_upload(
             [tstart, self.global_levels, subtree_end, layout_m, self.shape_layout, self.layout_node_start,
-             self.layout_leaf_start, self.layout_inner_start, self.layout_cut_start], d)
+             self.layout_leaf_start, self.layout_inner_start, self.layout_cut_start, self.layout_cut_depth], d)
         self._no_world = wp.full(len(m), -1, dtype=wp.int32, device=d)
         k = int(self.layout_node_start[-1])
         n = self.num_triangles
@@ -797,8 +822,8 @@ class TreeBuild:
             return
         wp.launch(_layout_kernel, dim=k,
                   inputs=[self._layout_m, self.layout_node_start_device, self.layout_leaf_start_device,
-                          self.layout_inner_start_device, self.layout_cut_start_device, self.leaf_size,
-                          self.cut_depth],
+                          self.layout_inner_start_device, self.layout_cut_start_device, self._layout_cut_depth,
+                          self.leaf_size],
                   outputs=[self.node_child, self.node_parent, self.node_triangle, self.node_leaf, self.leaf_node,
                            self.inner_node, self.cut_node],
                   device=self.device)

@@ -3,25 +3,32 @@
 Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 :class:`~warp_ccd.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
 
-* :class:`MidPhaseBVH` (default): traversal of the two objects' trees (:mod:`warp_ccd.bvh`)
-  from a front of node pairs: every leaf of the object with fewer leaves against every subtree
-  of the other's cut (its nodes at level ``cut_depth``, and the leaves above; at most 8 subtrees
-  by default). One work item per such (leaf, subtree) pair; each descends its subtree, depth
-  first with a short stack, and gathers the leaves whose boxes overlap its own: their triangle
-  pairs are the candidates. That is the set a simultaneous descent of both trees
-  finds (an inner box is the union of its children's, so two leaf boxes overlap only where all
-  their ancestors' do), with the first tree opened to its leaves and the second to its cut at
-  once: no thread walks a big pair alone, the longest descent is a subtree's (not a whole
-  tree's: at 1,000 polyhedra the slowest of the root-first items visited 71 nodes), and a frame
-  of a hundred object pairs still fills the GPU. Testing the cut's boxes costs what a descent
-  from the root spends above it (about two tests per level). A first kernel writes each pair's
-  :class:`FrontPair` (its sides' starts in the tree arrays) and item count; work items are laid
-  out by a scan of those counts (``wp.utils.array_scan``); a fixed grid of threads takes them
-  in rounds, one item per thread per round (the launch size does not depend on the frame, so
-  the frame can be a CUDA graph), and each round a block reserves the rows of all its items with
-  one atomic add (:func:`~warp_ccd.buffers.block_reserve`). A light frame, one whose items would
-  fit the grid once even if twice as many (judged by the last frame's, which the traversal
-  records on the device), starts one level below the cut: twice the items, shorter descents.
+* :class:`MidPhaseBVH` (default): a simultaneous descent of the two objects' trees
+  (:mod:`warp_ccd.bvh`), split into work items over the cuts of both trees: every subtree of
+  ``a``'s cut against every subtree of ``b``'s (a cut: the nodes at a tree's cut depth and the
+  leaves above it; at most 8 subtrees in a tree of up to 128 triangles, more in bigger trees, whose
+  subtrees hold at most about 64 triangles). Each item descends its two subtrees depth first with a
+  short stack of node pairs, opening the node of more triangles, and gathers the leaf pairs whose
+  boxes overlap: their triangle pairs are the candidates. An item whose two subtrees' boxes do not
+  overlap costs one test, so an object pair whose boxes overlap but whose trees do not costs its
+  items' first tests and nothing more; and no thread walks a big pair alone.
+
+  The boxes are tested in ``a``'s box space (:mod:`warp_ccd.bvh`: a rigid object's shape space, a
+  deforming object's world): ``b``'s box under the pair's relative transform, the box around it
+  (three axes, ``a``'s), and with ``separating_axes=6`` also ``a``'s box in ``b``'s space (``b``'s
+  three axes): a separating-axis test of the two oriented boxes on six of their fifteen axes. The
+  relative transforms come from the poses in float64, once per pair (:func:`_tree_pair`), with a
+  padding that bounds every rounding on the way, so a test never rejects what the world vertices
+  would put in contact; a deforming object's frame is the identity.
+
+  A first kernel writes each pair's :class:`TreePair` (its trees' starts and its transforms) and
+  item count; work items are laid out by a scan of those counts (``wp.utils.array_scan``); a
+  fixed grid of threads takes them in rounds, one item per thread per round (the launch size does
+  not depend on the frame, so the frame can be a CUDA graph), and each round a block reserves the
+  rows of all its items with one atomic add (:func:`~warp_ccd.buffers.block_reserve`). A light
+  frame, one whose items would fit the grid once even if four times as many (judged by the last
+  frame's, which the traversal records on the device), starts both trees one level below their
+  cuts: four times the items, shorter descents.
 * :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
   ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
   finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
@@ -29,9 +36,11 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
 import warp as wp
 
-from .aabb import boxes_overlap
 from .buffers import (
     BLOCK_DIM,
     ITEM_LIST_SIZE,
@@ -42,51 +51,58 @@ from .buffers import (
     used_count,
     vec_items,
 )
-from .bvh import SceneBVH, TreeView
+from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius
+from .precision import precision_overloads
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["MidPhaseAllPairs", "MidPhaseBVH"]
+__all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
 
-STACK_SIZE = 32
-"""Traversal stack entries per thread: a depth-first descent of a tree of depth ``D`` needs
-``D + 1``; a median-split tree of fewer than 2**31 triangles has at most 32 levels."""
+STACK_SIZE = 64
+"""Node pairs on a descent's stack: a step pops one pair and pushes at most two, each a level
+deeper on one side, so two trees of depths ``Da``, ``Db`` need ``Da + Db + 1``."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
 THREADS_PER_SM = 512
-"""Threads of the traversal per streaming multiprocessor on CUDA: the kernel takes 96 registers a
-thread, so an H100 SM keeps two blocks of 256 resident; 512 is one wave (1,024 was two, the second
-mostly blocks that find no item: 0.035 against 0.038 ms at 10^4 objects, the same at 10^3 and 10^5)."""
+"""Threads of the traversal per streaming multiprocessor on CUDA: an H100 SM keeps two blocks of
+256 resident at the kernel's register count; 512 is one wave (1,024 was two, the second mostly
+blocks that find no item)."""
+
+TEST_ERROR_ULPS = 32.0
+"""Bound on the rounding of one box test in float32 (centres, half extents, the transform applied),
+in units in the last place of the boxes' and the translation's sizes."""
+
+SEPARATING_AXES = (3, 6)
+"""Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
 
 assert THREADS_PER_SM % BLOCK_DIM == 0
 
 
 @wp.struct
-class FrontPair:
-    """What the traversal needs of one object pair, laid out once per pair by
-    :func:`_front_count_kernel` so that a work item reads it in one step (not through the pair, its
-    shapes, then their starts: four dependent reads). The front object is the one opened to its
-    leaves; ``a < b`` are the pair's objects as the rows name them."""
+class TreePair:
+    """What the traversal needs of one object pair, written once per pair by
+    :func:`_pair_count_kernel` so that a work item reads it in one step: the trees' starts, and
+    the maps between the two objects' box spaces with their paddings."""
 
     a: int
     b: int
-    front: int  # 0: a is the front object, 1: b
-    num_leaves: int  # of the front object's tree
-    num_cut: int  # subtrees of the other's cut
-    leaf_start: int  # the front shape's leaves in TreeView.leaf_node
-    cut_start: int  # the other shape's cut in TreeView.cut_node
-    front_node_start: int  # global node id of the front shape's local node 0 (in its layout)
-    other_node_start: int
-    front_slot_start: int  # the front instance's node boxes in TreeView.node_lower/upper
-    other_slot_start: int
-    front_tri_start: int  # the front shape's triangle order in TreeView.tri_order
-    other_tri_start: int
-
-
-@wp.func
-def _num_leaves(tree: TreeView, layout: int) -> int:
-    return tree.layout_leaf_start[layout + 1] - tree.layout_leaf_start[layout]
+    num_cut_a: int  # subtrees of each side's cut
+    num_cut_b: int
+    cut_a_start: int  # in TreeView.cut_node
+    cut_b_start: int
+    node_a_start: int  # global node id of local node 0 (in the shape's layout)
+    node_b_start: int
+    slot_a_start: int  # the object's node boxes in TreeView.node_lower/upper
+    slot_b_start: int
+    tri_a_start: int  # the shape's triangle order in TreeView.tri_order
+    tri_b_start: int
+    b_to_a: wp.mat33  # x_a = b_to_a * x_b + b_to_a_shift (box spaces)
+    b_to_a_shift: wp.vec3
+    a_to_b: wp.mat33
+    a_to_b_shift: wp.vec3
+    pad_a: float  # added to every half extent of a test in a's space (rounding bound)
+    pad_b: float
 
 
 @wp.func
@@ -102,71 +118,128 @@ def _num_cut(tree: TreeView, layout: int, deep: int) -> int:
 
 @wp.func
 def _deep_cut(load: wp.array[wp.int64], num_threads: int) -> int:
-    """1 when this frame's traversal starts one level below the cut: when the last frame's items,
-    at most doubled by that level (``2**(d + 1)`` subtrees against ``2**d``), fit in one round of
-    the grid; else 0. ``load``: the last frame's items and whether it went deep (a frame run again
+    """1 when this frame's traversal starts one level below the cuts: when the last frame's items,
+    at most quadrupled by that level (each side's cut at most doubles), fit in one round of the
+    grid; else 0. ``load``: the last frame's items and whether it went deep (a frame run again
     after a buffer grew judges by its first, cut-short run: at worst one heavy frame goes deep)."""
     room = wp.int64(num_threads)
     if load[1] == wp.int64(0):
-        room = room / wp.int64(2)
+        room = room / wp.int64(4)
     if load[0] <= room:
         return 1
     return 0
 
 
 @wp.func
-def _front_pair(tree: TreeView, instance_shape: wp.array[wp.int32], a: int, b: int, deep: int) -> FrontPair:
-    """The :class:`FrontPair` of objects ``a < b``: ``a`` opens to its leaves unless ``b`` has fewer;
-    the other starts from its cut, or one level deeper (``deep``)."""
-    sa = instance_shape[a]
-    sb = instance_shape[b]
-    r = FrontPair()
+def _frame(pose: Any, scale: wp.float32, deforming: int):
+    """``(rotation, translation, scale)`` of an object's box space in the world, in float64: the
+    linear map that ``wp.transform_point`` applies with the pose's quaternion (whatever its norm),
+    or the identity for a deforming object (its boxes are in the world)."""
+    q = wp.transform_get_rotation(pose)
+    p = wp.transform_get_translation(pose)
+    rot = wp.quat_to_matrix(wp.quatd(wp.float64(q[0]), wp.float64(q[1]), wp.float64(q[2]), wp.float64(q[3])))
+    t = wp.vec3d(wp.float64(p[0]), wp.float64(p[1]), wp.float64(p[2]))
+    s = wp.float64(scale)
+    if deforming != 0:
+        rot = wp.identity(n=3, dtype=wp.float64)
+        t = wp.vec3d(0.0)
+        s = wp.float64(1.0)
+    return rot, t, s
+
+
+@wp.func
+def _norm_inf(m: wp.mat33d) -> wp.float64:
+    """Largest row sum of absolute values (the max-norm's operator norm)."""
+    r = abs_matrix(m) * wp.vec3d(1.0)
+    return wp.max(wp.max(r[0], r[1]), r[2])
+
+
+@wp.func
+def _max_abs(v: wp.vec3d) -> wp.float64:
+    return wp.max(wp.max(wp.abs(v[0]), wp.abs(v[1])), wp.abs(v[2]))
+
+
+@wp.func
+def _map_between(rot_a: wp.mat33d, t_a: wp.vec3d, s_a: wp.float64, rot_b: wp.mat33d, t_b: wp.vec3d,
+                 s_b: wp.float64, r_a: wp.float64, r_b: wp.float64, err: wp.float64):
+    """The map from ``b``'s box space to ``a``'s (float32 matrix and shift) and the padding of a
+    test in ``a``'s space: the float32 test's rounding on boxes of radii ``r_a``, ``r_b`` and the
+    world vertices' rounding ``err`` (both objects', world units) brought into ``a``'s space."""
+    inv_a = wp.inverse(rot_a)
+    m = inv_a * rot_b * (s_b / s_a)
+    shift = inv_a * (t_b - t_a) / s_a
+    ulp = wp.float64(TEST_ERROR_ULPS) * wp.float64(1.1920929e-07)
+    pad = ulp * (_max_abs(shift) + r_a + _norm_inf(m) * r_b) + err * _norm_inf(inv_a) / s_a
+    return wp.mat33(m), wp.vec3(shift), wp.float32(pad) * wp.float32(1.001)
+
+
+@wp.func
+def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose: wp.array[Any],
+               instance_scale: wp.array[wp.float32], instance_deforming: wp.array[wp.int32], world_eps: float,
+               a: int, b: int, deep: int) -> TreePair:
+    """The :class:`TreePair` of objects ``a < b``, both trees starting from their cut, or one level
+    deeper (``deep``)."""
+    la = tree.shape_layout[instance_shape[a]]
+    lb = tree.shape_layout[instance_shape[b]]
+    r = TreePair()
     r.a = a
     r.b = b
-    r.front = 0
-    s_front = sa
-    s_other = sb
-    front_obj = a
-    other_obj = b
-    if _num_leaves(tree, tree.shape_layout[sb]) < _num_leaves(tree, tree.shape_layout[sa]):
-        r.front = 1
-        s_front = sb
-        s_other = sa
-        front_obj = b
-        other_obj = a
-    l_front = tree.shape_layout[s_front]
-    l_other = tree.shape_layout[s_other]
-    r.num_leaves = _num_leaves(tree, l_front)
-    r.num_cut = _num_cut(tree, l_other, deep)
-    r.leaf_start = tree.layout_leaf_start[l_front]
-    r.cut_start = _cut_start(tree, l_other, deep)
-    r.front_node_start = tree.layout_node_start[l_front]
-    r.other_node_start = tree.layout_node_start[l_other]
-    r.front_slot_start = tree.instance_node_start[front_obj]
-    r.other_slot_start = tree.instance_node_start[other_obj]
-    r.front_tri_start = tree.shape_tri_order_start[s_front]
-    r.other_tri_start = tree.shape_tri_order_start[s_other]
+    r.num_cut_a = _num_cut(tree, la, deep)
+    r.num_cut_b = _num_cut(tree, lb, deep)
+    r.cut_a_start = _cut_start(tree, la, deep)
+    r.cut_b_start = _cut_start(tree, lb, deep)
+    r.node_a_start = tree.layout_node_start[la]
+    r.node_b_start = tree.layout_node_start[lb]
+    r.slot_a_start = tree.instance_node_start[a]
+    r.slot_b_start = tree.instance_node_start[b]
+    r.tri_a_start = tree.shape_tri_order_start[instance_shape[a]]
+    r.tri_b_start = tree.shape_tri_order_start[instance_shape[b]]
+    def_a = instance_deforming[a]
+    def_b = instance_deforming[b]
+    rot_a, t_a, s_a = _frame(instance_pose[a], instance_scale[a], def_a)
+    rot_b, t_b, s_b = _frame(instance_pose[b], instance_scale[b], def_b)
+    r_a = wp.float64(box_radius(tree.node_lower[r.slot_a_start], tree.node_upper[r.slot_a_start]))
+    r_b = wp.float64(box_radius(tree.node_lower[r.slot_b_start], tree.node_upper[r.slot_b_start]))
+    # The world vertices' rounding (a rigid object's, from its pose; a deforming one's are given).
+    err = wp.float64(0.0)
+    eps = wp.float64(world_eps)
+    if def_a == 0:
+        err += eps * (_max_abs(t_a) + s_a * _norm_inf(rot_a) * r_a)
+    if def_b == 0:
+        err += eps * (_max_abs(t_b) + s_b * _norm_inf(rot_b) * r_b)
+    m, shift, pad = _map_between(rot_a, t_a, s_a, rot_b, t_b, s_b, r_a, r_b, err)
+    r.b_to_a = m
+    r.b_to_a_shift = shift
+    r.pad_a = pad
+    m, shift, pad = _map_between(rot_b, t_b, s_b, rot_a, t_a, s_a, r_b, r_a, err)
+    r.a_to_b = m
+    r.a_to_b_shift = shift
+    r.pad_b = pad
     return r
 
 
 @wp.kernel
-def _front_count_kernel(
+def _pair_count_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
+    instance_pose: wp.array[Any],
+    instance_scale: wp.array[wp.float32],
+    instance_deforming: wp.array[wp.int32],
+    world_eps: float,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     load: wp.array[wp.int64],
     num_threads: int,
     # Outputs
-    front_pair: wp.array[FrontPair],
+    tree_pair: wp.array[TreePair],
     pair_items: wp.array[wp.int64],
     cut_level: wp.array[wp.int32],
 ):
-    """One thread per pair slot: the pair's :class:`FrontPair` and work items (leaves of the front
-    object times the cut of the other), 0 items past the counter; every pair starts from the cut,
-    or one level below it when the last frame's ``load`` was light (:func:`_deep_cut`, the choice
-    also written to ``cut_level``)."""
+    """One thread per pair slot: the pair's :class:`TreePair` and work items (``a``'s cut times
+    ``b``'s), 0 items past the counter; every pair starts from the cuts, or one level below them
+    when the last frame's ``load`` was light (:func:`_deep_cut`, the choice also written to
+    ``cut_level``)."""
     k = wp.tid()
     deep = _deep_cut(load, num_threads)
     if k == 0:
@@ -175,117 +248,152 @@ def _front_count_kernel(
         pair_items[k] = wp.int64(0)
         return
     p = pair[k]
-    r = _front_pair(tree, instance_shape, p[0], p[1], deep)
-    front_pair[k] = r
-    pair_items[k] = wp.int64(r.num_leaves) * wp.int64(r.num_cut)
+    r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps, p[0], p[1],
+                   deep)
+    tree_pair[k] = r
+    pair_items[k] = wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b)
+
+
+_PAIR_COUNT = precision_overloads(_pair_count_kernel, lambda s, v, q, t: {"instance_pose": wp.array[t]})
 
 
 @wp.func
-def _leaf_pair_rows(tree: TreeView, front_node: int, other_node: int) -> int:
-    """Candidate rows of two leaves (shape-global node ids): the product of their triangle counts."""
-    return tree.node_triangle[front_node][1] * tree.node_triangle[other_node][1]
+def _boxes_overlap_mapped(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3, r: TreePair, axes: int) -> bool:
+    """Whether box ``a`` (``a``'s space) and box ``b`` (``b``'s space) may overlap: no separating
+    axis among ``a``'s three (and ``b``'s three when ``axes`` is 6), each test padded."""
+    ca = (lo_a + hi_a) * 0.5
+    ha = (hi_a - lo_a) * 0.5
+    cb = (lo_b + hi_b) * 0.5
+    hb = (hi_b - lo_b) * 0.5
+    d = r.b_to_a * cb + r.b_to_a_shift - ca
+    e = ha + abs_matrix(r.b_to_a) * hb
+    if wp.abs(d[0]) > e[0] + r.pad_a or wp.abs(d[1]) > e[1] + r.pad_a or wp.abs(d[2]) > e[2] + r.pad_a:
+        return False
+    if axes == 6:
+        d = r.a_to_b * ca + r.a_to_b_shift - cb
+        e = hb + abs_matrix(r.a_to_b) * ha
+        if wp.abs(d[0]) > e[0] + r.pad_b or wp.abs(d[1]) > e[1] + r.pad_b or wp.abs(d[2]) > e[2] + r.pad_b:
+            return False
+    return True
 
 
 @wp.func
-def _leaf_rows(tree: TreeView, front_node: int, found: vec_items, num_found: int) -> int:
-    """Candidate rows of the front leaf ``front_node`` with the ``num_found`` leaves ``found``."""
+def _leaf_pair_rows(tree: TreeView, node_a: int, node_b: int) -> int:
+    """Candidate rows of two leaves (global node ids): the product of their triangle counts."""
+    return tree.node_triangle[node_a][1] * tree.node_triangle[node_b][1]
+
+
+@wp.func
+def _found_rows(tree: TreeView, found_a: vec_items, found_b: vec_items, num_found: int) -> int:
+    """Candidate rows of the ``num_found`` leaf pairs ``(found_a[m], found_b[m])``."""
     rows = int(0)
     for m in range(num_found):
-        rows += tree.node_triangle[found[m]][1]
-    return rows * tree.node_triangle[front_node][1]
+        rows += _leaf_pair_rows(tree, found_a[m], found_b[m])
+    return rows
 
 
 @wp.func
 def _write_rows(
     tree: TreeView,
-    r: FrontPair,
-    front_node: int,
-    other_node: int,
+    r: TreePair,
+    node_a: int,
+    node_b: int,
     slot: wp.int64,
     candidate: wp.array[wp.vec4i],
     candidate_capacity: int,
 ) -> wp.int64:
-    """Writes the triangle pairs of the front leaf and one leaf of the other object (shape-global
-    node ids) from ``slot`` on (rows keep ``a`` first); returns the next slot."""
-    rf = tree.node_triangle[front_node]
-    ro = tree.node_triangle[other_node]
-    for i in range(rf[0], rf[0] + rf[1]):
-        tri_f = tree.tri_order[r.front_tri_start + i]
-        for j in range(ro[0], ro[0] + ro[1]):
+    """Writes the triangle pairs of leaves ``node_a`` (of ``a``) and ``node_b`` (of ``b``, global
+    node ids) from ``slot`` on; returns the next slot."""
+    ra = tree.node_triangle[node_a]
+    rb = tree.node_triangle[node_b]
+    for i in range(ra[0], ra[0] + ra[1]):
+        tri_a = tree.tri_order[r.tri_a_start + i]
+        for j in range(rb[0], rb[0] + rb[1]):
             if slot < wp.int64(candidate_capacity):
-                tri_o = tree.tri_order[r.other_tri_start + j]
-                if r.front == 0:
-                    candidate[int(slot)] = wp.vec4i(r.a, tri_f, r.b, tri_o)
-                else:
-                    candidate[int(slot)] = wp.vec4i(r.a, tri_o, r.b, tri_f)
+                candidate[int(slot)] = wp.vec4i(r.a, tri_a, r.b, tree.tri_order[r.tri_b_start + j])
             slot += wp.int64(1)
     return slot
 
 
 @wp.func
-def _leaf_vs_subtree(
+def _descend(
     tree: TreeView,
-    r: FrontPair,
-    leaf: int,
-    sub: int,
+    r: TreePair,
+    sub_a: int,
+    sub_b: int,
+    axes: int,
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
 ):
-    """Leaf ``leaf`` (shape-local) of the pair's front object against the subtree of node ``sub``
-    of the other object's tree, depth first: the overlapping leaves (shape-global ids), the first
-    :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows of any more
-    emitted at once (one atomic add each). A node's children are read with its box, before its
-    test: one dependent read a node, not two."""
-    front_node = r.front_node_start + leaf
-    lo = tree.node_lower[r.front_slot_start + leaf]
-    hi = tree.node_upper[r.front_slot_start + leaf]
-    found = vec_items()
+    """Subtree ``sub_a`` of ``a`` against subtree ``sub_b`` of ``b`` (local ids), depth first over
+    node pairs, opening the node of more triangles: the leaf pairs whose boxes overlap (global
+    ids), the first :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows
+    of any more emitted at once (one atomic add each)."""
+    found_a = vec_items()
+    found_b = vec_items()
     num_found = int(0)
-    stack = vec_stack()
-    stack[0] = sub
+    stack_a = vec_stack()
+    stack_b = vec_stack()
+    stack_a[0] = sub_a
+    stack_b[0] = sub_b
     top = int(1)
     while top > 0:
         top -= 1
-        node = stack[top]
-        slot = r.other_slot_start + node
-        child = tree.node_child[r.other_node_start + node]
-        if boxes_overlap(lo, hi, tree.node_lower[slot], tree.node_upper[slot]):
-            if child[0] < 0:
+        na = stack_a[top]
+        nb = stack_b[top]
+        slot_a = r.slot_a_start + na
+        slot_b = r.slot_b_start + nb
+        if _boxes_overlap_mapped(tree.node_lower[slot_a], tree.node_upper[slot_a], tree.node_lower[slot_b],
+                                 tree.node_upper[slot_b], r, axes):
+            ga = r.node_a_start + na
+            gb = r.node_b_start + nb
+            ca = tree.node_child[ga]
+            cb = tree.node_child[gb]
+            if ca[0] < 0 and cb[0] < 0:
                 if num_found < ITEM_LIST_SIZE:
-                    found[num_found] = r.other_node_start + node
+                    found_a[num_found] = ga
+                    found_b[num_found] = gb
                     num_found += 1
                 else:
-                    other_node = r.other_node_start + node
-                    first = wp.atomic_add(candidate_count, 0, wp.int64(_leaf_pair_rows(tree, front_node, other_node)))
-                    _write_rows(tree, r, front_node, other_node, first, candidate, candidate_capacity)
-            else:
-                stack[top] = child[1]
-                stack[top + 1] = child[0]
+                    first = wp.atomic_add(candidate_count, 0, wp.int64(_leaf_pair_rows(tree, ga, gb)))
+                    _write_rows(tree, r, ga, gb, first, candidate, candidate_capacity)
+            elif cb[0] < 0 or (ca[0] >= 0 and tree.node_triangle[ga][1] >= tree.node_triangle[gb][1]):
+                stack_a[top] = ca[1]
+                stack_b[top] = nb
+                stack_a[top + 1] = ca[0]
+                stack_b[top + 1] = nb
                 top += 2
-    return found, num_found
+            else:
+                stack_a[top] = na
+                stack_b[top] = cb[1]
+                stack_a[top + 1] = na
+                stack_b[top + 1] = cb[0]
+                top += 2
+    return found_a, found_b, num_found
 
 
 @wp.kernel
-def _front_traverse_kernel(
+def _traverse_kernel(
     tree: TreeView,
-    front_pair: wp.array[FrontPair],
+    tree_pair: wp.array[TreePair],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     pair_item_end: wp.array[wp.int64],
     num_blocks: int,
     candidate_capacity: int,
     cut_level: wp.array[wp.int32],
+    axes: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
     load: wp.array[wp.int64],
 ):
     """``num_blocks`` blocks of threads take the work items (inclusive scan ``pair_item_end`` of the
-    pairs' item counts) in rounds, one item per thread per round; item ``w`` of pair ``k`` is leaf
-    ``w / C`` (in leaf order) of the pair's front object against cut subtree ``w % C`` of the
-    other's ``C``. Each round, a block reserves all its threads' rows with one atomic add. The
-    first thread records the frame's ``load`` (items, deep cut or not) for the next frame's choice."""
+    pairs' item counts) in rounds, one item per thread per round; item ``w`` of pair ``k`` is
+    subtree ``w / Cb`` of ``a``'s cut against subtree ``w % Cb`` of ``b``'s ``Cb``. Each round, a
+    block reserves all its threads' rows with one atomic add. The first thread records the frame's
+    ``load`` (items, deep cut or not) for the next frame's choice."""
     block, lane = wp.tid()
     width = wp.block_dim()
     num_threads = wp.int64(num_blocks * width)
@@ -305,50 +413,51 @@ def _front_traverse_kernel(
     k = int(0)
     item = t
     for _round in range(int(rounds)):
-        found = vec_items()
+        found_a = vec_items()
+        found_b = vec_items()
         num_found = int(0)
-        r = FrontPair()
-        front_node = int(0)
+        r = TreePair()
         if item < total:
             k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
-            r = front_pair[k]
-            w = item - (pair_item_end[k] - wp.int64(r.num_leaves) * wp.int64(r.num_cut))
-            leaf_index = int(0)
-            cut_index = int(0)
-            if w < wp.int64(2147483647):  # 32-bit division where it fits (nearly always)
-                leaf_index = int(w) / r.num_cut
-                cut_index = int(w) - leaf_index * r.num_cut
-            else:
-                leaf_index = int(w / wp.int64(r.num_cut))
-                cut_index = int(w - wp.int64(leaf_index) * wp.int64(r.num_cut))
-            leaf = tree.leaf_node[r.leaf_start + leaf_index]
-            front_node = r.front_node_start + leaf
-            found, num_found = _leaf_vs_subtree(tree, r, leaf, tree.cut_node[r.cut_start + cut_index], candidate,
-                                                candidate_count, candidate_capacity)
-        slot = block_reserve(candidate_count, int(lane), _leaf_rows(tree, front_node, found, num_found))
+            r = tree_pair[k]
+            w = item - (pair_item_end[k] - wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b))
+            i = int(w) / r.num_cut_b  # below 2**16 subtrees a side: 32 bits suffice
+            j = int(w) - i * r.num_cut_b
+            found_a, found_b, num_found = _descend(tree, r, tree.cut_node[r.cut_a_start + i],
+                                                   tree.cut_node[r.cut_b_start + j], axes, candidate,
+                                                   candidate_count, candidate_capacity)
+        slot = block_reserve(candidate_count, int(lane), _found_rows(tree, found_a, found_b, num_found))
         for m in range(num_found):
-            slot = _write_rows(tree, r, front_node, found[m], slot, candidate, candidate_capacity)
+            slot = _write_rows(tree, r, found_a[m], found_b[m], slot, candidate, candidate_capacity)
         item += num_threads
 
 
 class MidPhaseBVH:
-    """Tree traversal over the broad phase's object pairs, from the front of leaves (see module docs).
+    """Tree-vs-tree traversal over the broad phase's object pairs, in work items over the two trees'
+    cuts (see module docs).
 
     Args:
         bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
+        separating_axes: 3 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space;
+            6 also ``a``'s in ``b``'s (fewer candidates, more arithmetic a test).
         device: Warp device.
 
     Attributes:
         candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
+        separating_axes: as above (read at each launch: a captured frame keeps the value it was
+            captured with).
         num_blocks, block_dim: the traversal kernel's grid (on the CPU one block, of one thread
             that takes every item in turn unless ``wp.config.enable_cpu_blocks`` is set).
     """
 
-    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, device=None):
+    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, separating_axes: int = 3, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
-        if bvh.max_depth + 1 > STACK_SIZE:
+        if separating_axes not in SEPARATING_AXES:
+            raise ValueError(f"separating_axes must be one of {SEPARATING_AXES}, got {separating_axes!r}")
+        self.separating_axes = separating_axes
+        if 2 * bvh.max_depth + 1 > STACK_SIZE:
             raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.block_dim = block_dim_for(self.device)
@@ -378,16 +487,18 @@ class MidPhaseBVH:
         if self._items is None or self._items.shape[0] != pairs.capacity:  # scratch follows the pair capacity
             self._items = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._item_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
-            self._front_pair = wp.zeros(pairs.capacity, dtype=FrontPair, device=d)
+            self._tree_pair = wp.zeros(pairs.capacity, dtype=TreePair, device=d)
         tree = self.bvh.tree
-        wp.launch(_front_count_kernel, dim=pairs.capacity,
-                  inputs=[tree, scene.instance_shape, pairs.data, pairs.count, pairs.capacity, self._load,
-                          self.num_blocks * self.block_dim],
-                  outputs=[self._front_pair, self._items, self._cut_level], device=d)
+        eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
+        wp.launch(_PAIR_COUNT[scene.precision], dim=pairs.capacity,
+                  inputs=[tree, scene.instance_shape, scene.instance_pose, scene.instance_scale,
+                          self.bvh.instance_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
+                          pairs.capacity, self._load, self.num_blocks * self.block_dim],
+                  outputs=[self._tree_pair, self._items, self._cut_level], device=d)
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
-        wp.launch_tiled(_front_traverse_kernel, dim=[self.num_blocks],
-                        inputs=[tree, self._front_pair, pairs.count, pairs.capacity, self._item_end,
-                                self.num_blocks, self.candidates.capacity, self._cut_level],
+        wp.launch_tiled(_traverse_kernel, dim=[self.num_blocks],
+                        inputs=[tree, self._tree_pair, pairs.count, pairs.capacity, self._item_end,
+                                self.num_blocks, self.candidates.capacity, self._cut_level, self.separating_axes],
                         outputs=[self.candidates.data, self.candidates.count, self._load],
                         block_dim=self.block_dim, device=d)
 

@@ -697,13 +697,10 @@ def winding_number(mesh: MeshTopology, world_vertex: wp.array[Any], instance: in
 
 
 @wp.func
-def _box_inside(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.vec3) -> bool:
-    """Box a lies within box b."""
-    return (
-        lo_b[0] <= lo_a[0] and hi_a[0] <= hi_b[0]
-        and lo_b[1] <= lo_a[1] and hi_a[1] <= hi_b[1]
-        and lo_b[2] <= lo_a[2] and hi_a[2] <= hi_b[2]
-    )
+def _point_in_box(p: wp.vec3, lo: wp.vec3, hi: wp.vec3) -> bool:
+    """Point ``p`` lies in the closed box (a box of the broad phase: rounded outward, so a float64
+    point rounded to float32 stays in it)."""
+    return lo[0] <= p[0] and p[0] <= hi[0] and lo[1] <= p[1] and p[1] <= hi[1] and lo[2] <= p[2] and p[2] <= hi[2]
 
 
 @wp.func
@@ -875,7 +872,8 @@ def _containment_kernel(
     contained: wp.array[wp.vec2i],
     contained_count: wp.array[wp.int64],
 ):
-    """One thread per object pair whose boxes nest: is the inner object's first vertex inside
+    """One thread per object pair, each way round: is the inner object's first vertex inside the
+    outer object's box (a box may be loose: a rigid object's comes from its tree) and then inside
     the outer object (winding number above 1/2)? Writes ``(inner, outer)``."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
@@ -884,8 +882,8 @@ def _containment_kernel(
     for side in range(2):
         inner = p[side]
         outer = p[1 - side]
-        if _box_inside(instance_lower[inner], instance_upper[inner], instance_lower[outer], instance_upper[outer]):
-            point = world_vertex[mesh.instance_vertex_start[inner]]
+        point = world_vertex[mesh.instance_vertex_start[inner]]
+        if _point_in_box(wp.vec3(point), instance_lower[outer], instance_upper[outer]):
             m = mesh.instance_triangle_start[outer + 1] - mesh.instance_triangle_start[outer]
             if winding_number(mesh, world_vertex, outer, m, point) > type(point[0])(0.5):
                 slot = reserve_slot(contained_count, contained_capacity)
@@ -1026,7 +1024,7 @@ class NarrowPhase:
         capacity: initial capacity of the hit buffer (it grows).
         segments: also compute each hit's intersection segment (:attr:`segment`).
         containment: also find objects wholly inside another (:attr:`contained`), from the
-            object pairs whose boxes nest.
+            object pairs where one holds the other's first vertex in its box.
         device: Warp device.
 
     Attributes:

@@ -30,6 +30,11 @@ from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
+DEFORMING_LEAF_SIZE = 4
+"""Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
+a quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair
+(measured in ``bench/bench_deforming.py``). Rigid scenes refit nothing and keep leaves of one."""
+
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
 with the all-pairs mid phase)."""
@@ -193,14 +198,21 @@ class CollisionPipeline:
             launched eagerly).
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
             False launches every kernel from Python (the CPU always does). Both give the same results.
-        leaf_size: triangles per tree leaf (``bvh`` mid phase).
-        cut_depth: tree level where the traversal's descents start (``bvh`` mid phase; see
-            :mod:`warp_ccd.mid_phase`): more, shorter work items as it grows; 0 descends from the roots.
-            A frame whose work fits the GPU's threads once starts one level deeper.
+        leaf_size: triangles per tree leaf (``bvh`` mid phase; default 1, or
+            :data:`DEFORMING_LEAF_SIZE` in a scene with deforming objects).
+        cut_depth: least tree level where the traversal's work items start (``bvh`` mid phase; see
+            :mod:`warp_ccd.mid_phase`): more, shorter items as it grows; 0 descends from the roots of
+            small trees (big trees cut deeper, :class:`~warp_ccd.bvh.SceneBVH`). A frame whose work
+            fits the GPU's threads once starts one level deeper.
+        separating_axes: the traversal's box test (``bvh`` mid phase): 3 (default), the box around
+            one object's box in the other's space; 6, both ways round (see :mod:`warp_ccd.mid_phase`).
+        object_bounds: a rigid object's box for the broad phase (``bvh`` mid phase): ``"auto"``
+            (default), ``"vertices"`` or ``"tree"`` (see :class:`~warp_ccd.bvh.SceneBVH`).
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
-            for object pairs whose boxes nest), in :attr:`CollisionResult.containment_pairs`.
+            for object pairs where one object's box holds the other's vertex), in
+            :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
         rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
             vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
@@ -209,7 +221,7 @@ class CollisionPipeline:
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
-            scene's :class:`~warp_ccd.bvh.SceneBVH` (node boxes too) with the ``bvh`` mid phase,
+            scene's :class:`~warp_ccd.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid phase,
             else an :class:`~warp_ccd.aabb.InstanceBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
         counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
@@ -228,8 +240,10 @@ class CollisionPipeline:
         tolerance: float = TOLERANCE,
         timings: bool = False,
         graph: bool | None = None,
-        leaf_size: int = 1,
+        leaf_size: int | None = None,
         cut_depth: int = 3,
+        separating_axes: int = 3,
+        object_bounds: str = "auto",
         segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
@@ -239,6 +253,8 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        if leaf_size is None:
+            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else 1
         for name, value, minimum, maximum in (("leaf_size", leaf_size, 1, LEAF_SIZE_MAX),
                                               ("pair_capacity", pair_capacity, 1, None),
                                               ("candidate_capacity", candidate_capacity, 1, None),
@@ -270,8 +286,10 @@ class CollisionPipeline:
         self.broad = make_broad_phase(broad_phase, device=d)
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
         if mid_phase == "bvh":
-            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth)
-            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n), device=d)
+            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth,
+                                  object_bounds=object_bounds)
+            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
+                                   separating_axes=separating_axes, device=d)
         else:
             self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)

@@ -190,7 +190,10 @@ class Scene:
         instance_scale: ``(N,)`` uniform scale of each object (default 1).
         poses: ``(N, 7)`` rows ``(px, py, pz, qx, qy, qz, qw)`` (default identity).
         motion: optional :class:`EllipseMotion`; then :meth:`advance` moves the objects.
-        deforming: when True the caller writes world vertices (:meth:`set_world_vertices`).
+        deforming: True when the caller writes every object's world vertices
+            (:meth:`set_world_vertices`), False (default) when poses place them all, or an ``(N,)``
+            bool mask of the objects whose vertices the caller writes (the others stay rigid: their
+            trees are never refit, see :mod:`warp_ccd.bvh`).
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` (default) or ``"float64"``: type of shape vertices, poses and
             world vertices, and of the exact triangle test. Object and node boxes stay float32,
@@ -211,7 +214,7 @@ class Scene:
         instance_scale=None,
         poses=None,
         motion: EllipseMotion | None = None,
-        deforming: bool = False,
+        deforming=False,
         device=None,
         precision: str = "float32",
     ):
@@ -238,7 +241,12 @@ class Scene:
         n = inst.size
         self.num_objects = n
         self.num_shapes = num_shapes
-        self.deforming = bool(deforming)
+        mask = np.asarray(deforming)
+        if mask.dtype != bool or mask.shape not in ((), (n,)):
+            raise ValueError(f"deforming: expected a bool or ({n},) bools, got {mask.dtype} {mask.shape}")
+        self.instance_deforming_np = np.broadcast_to(mask, (n,)).copy()
+        """``(N,)`` bool: the objects whose world vertices the caller writes."""
+        self.deforming = bool(self.instance_deforming_np.any()) or (mask.ndim == 0 and bool(mask))
         self.motion = motion
         if motion is not None and motion.num_objects != n:
             raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
@@ -306,7 +314,7 @@ class Scene:
         cls,
         num_objects: int,
         seed: int = 0,
-        shapes: Sequence[str] = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron"),
+        shapes: Sequence = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron"),
         density: float = 0.04,
         size_range: tuple[float, float] = (0.5, 1.5),
         device=None,
@@ -322,7 +330,9 @@ class Scene:
         Args:
             num_objects: ``N >= 0``.
             seed: random seed (same seed, same scene).
-            shapes: shape names (see :func:`warp_ccd.shapes.shape`), chosen uniformly.
+            shapes: shape names (see :func:`warp_ccd.shapes.shape`) or ``(vertices, triangles)``
+                meshes, chosen uniformly; each is scaled to the object's radius (a mesh as given,
+                so give meshes of radius about 1).
             density: volume fraction of bounding spheres, in ``(0, 1)``.
             size_range: ``(min, max)`` radius in scene units.
             device: Warp device.
@@ -342,7 +352,7 @@ class Scene:
             raise ValueError(f"size_range must be 0 < min <= max, got {size_range!r}")
         if len(shapes) == 0:
             raise ValueError("shapes: at least one shape name is needed")
-        meshes = [_named_shape(s) for s in shapes]
+        meshes = [_named_shape(s) if isinstance(s, str) else s for s in shapes]
         rng = np.random.default_rng(seed)
         n = int(num_objects)
         inst = rng.integers(0, len(meshes), size=n)
@@ -524,11 +534,15 @@ class Scene:
         self.update_world_vertices()
 
     def set_world_vertices(self, vertices) -> None:
-        """Writes world vertices ``(V, 3)`` of all objects, concatenated (deforming meshes).
+        """Writes world vertices ``(V, 3)`` of all objects, concatenated (deforming meshes; a rigid
+        object's must be where its pose puts it, as :meth:`pose_world_vertices` computes).
 
         Accepts a numpy array (validated: shape and finiteness) or a ``wp.array`` of the scene's
         vector type (``wp.vec3``, or ``wp.vec3d`` at float64) on this device (copied as is).
         """
+        if not self.deforming:
+            raise ValueError("set_world_vertices: this scene's objects are rigid, placed by their poses "
+                             "(set_transforms, set_poses); build it with deforming=True to write world vertices")
         if isinstance(vertices, wp.array):
             vec3 = self.vec3_type
             if vertices.dtype != vec3 or vertices.shape != (self.num_world_vertices,):

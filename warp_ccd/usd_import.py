@@ -677,7 +677,7 @@ class UsdMeshImport:
         self.seconds = {"read": time.perf_counter() - self._start}
         start = time.perf_counter()
         self.scene = Scene(packed, shape_of, instance_scale=scale, poses=poses,
-                           deforming=bool(self._num_rigid < n), device=device, precision=precision)
+                           deforming=np.arange(n) >= self._num_rigid, device=device, precision=precision)
         self.scene.usd = self
         self.set_frame(0)
         self.seconds["build"] = time.perf_counter() - start

@@ -1,0 +1,114 @@
+"""Benchmark: the traversal's box test (3 or 6 separating axes) and the rigid objects' boxes for
+the broad phase (from world vertices, from the tree, or by size), on the scaling scenes.
+
+For each scene (``--cases`` of ``TRIANGLESxN``, a ``--triangles`` spec of the scaling benchmark and
+an object count) and each combination of ``separating_axes`` and ``object_bounds``
+(:class:`~warp_ccd.pipeline.CollisionPipeline` options), after ``--warmup`` frames: ``--frames``
+frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
+a synchronisation before and after (``frame``), then as many timed stage by stage
+(``timings=True``: ``refit``, ``broad``, ``mid``, ``narrow``, each synchronised), min and median;
+and the counts of the last frame: broad-phase pairs, candidate triangle pairs, triangle pairs (the
+same for every combination: checked).
+
+    PYTHONPATH=. python bench/bench_box_tests.py --device cuda:0 --cases poly:1000000 80:100000 \\
+        --out bench/results/box_tests_cuda0.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
+from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.pipeline import STAGES, CollisionPipeline
+from warp_ccd.scene import Scene
+
+DT = 1.0 / 60.0
+AXES = (3, 6)
+BOUNDS = ("auto", "vertices", "tree")
+
+
+def _case(text: str) -> tuple[str, int]:
+    spec, _, count = text.partition(":")
+    try:
+        parse_triangles(spec)
+        n = int(float(count))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected TRIANGLES:N, e.g. poly:1e5 ({exc})") from None
+    return spec, n
+
+
+def _stats(values: list) -> dict:
+    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
+
+
+def run(spec: str, n: int, args, device) -> list[dict]:
+    """Rows of one scene: every option combination, frames then stages."""
+    _, shapes = parse_triangles(spec)
+    rows, pairs_seen = [], None
+    for axes, bounds in itertools.product(AXES, BOUNDS):
+        scene = Scene.random(n, seed=args.seed, device=device, **({} if shapes is None else {"shapes": shapes}))
+        options = dict(separating_axes=axes, object_bounds=bounds)
+        pipe = CollisionPipeline(scene, **options)
+        frames = []
+        for k in range(args.warmup + args.frames):
+            wp.synchronize_device(device)
+            start = time.perf_counter()
+            res = pipe.detect(advance=DT)
+            wp.synchronize_device(device)
+            if k >= args.warmup:
+                frames.append((time.perf_counter() - start) * 1e3)
+        counts = {"broad_pairs": res.num_broad_pairs, "candidates": res.num_candidates,
+                  "triangle_pairs": res.num_triangle_pairs}
+        pairs = res.triangle_pairs
+        if pairs_seen is None:
+            pairs_seen = pairs
+        elif not np.array_equal(pairs, pairs_seen):
+            raise SystemExit(f"{spec}:{n} axes={axes} bounds={bounds}: other triangle pairs than the first combination")
+        base = {"triangles": spec, "n_objects": n, "separating_axes": axes, "object_bounds": bounds, **counts}
+        rows.append({**base, "stage": "frame", **_stats(frames)})
+        timed = CollisionPipeline(scene, timings=True, **options)
+        stages = {s: [] for s in (*STAGES, "total")}
+        for k in range(args.warmup + args.frames):
+            scene.advance(0.0)  # same poses: the frame above's scene, timed stage by stage
+            t = timed.detect().timings
+            if k >= args.warmup:
+                for s in stages:
+                    stages[s].append(t[s])
+        rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  frame {rows[-len(stages) - 1]['ms_median']:8.3f} ms"
+              f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
+              f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--cases", type=_case, nargs="+", default=[("poly", 1000), ("80", 1000)],
+                        help="TRIANGLES:N scenes (default: %(default)s)")
+    parser.add_argument("--frames", type=int, default=10)
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="JSON file")
+    args = parser.parse_args(argv)
+    quiet_warp()
+    device = resolve_device(args.device)
+    rows = []
+    document = {**environment(device), "config": {**vars(args), "cases": [f"{s}:{n}" for s, n in args.cases]},
+                "rows": rows}
+    for spec, n in args.cases:
+        rows += run(spec, n, args, device)
+        if args.out:
+            write_json(args.out, document)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
