@@ -15,8 +15,9 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 
   The boxes are tested in ``a``'s box space (:mod:`warp_ccd.bvh`: a rigid object's shape space, a
   deforming object's world): ``b``'s box under the pair's relative transform, the box around it
-  (three axes, ``a``'s), and with ``separating_axes=6`` also ``a``'s box in ``b``'s space (``b``'s
-  three axes): a separating-axis test of the two oriented boxes on six of their fifteen axes. The
+  (three axes, ``a``'s), then ``a``'s box in ``b``'s space (``b``'s three axes): a separating-axis
+  test of the two oriented boxes on six of their fifteen axes (``separating_axes=3``: the first
+  three alone). The
   relative transforms come from the poses in float64, once per pair (:func:`_tree_pair`), with a
   padding that bounds every rounding on the way, so a test never rejects what the world vertices
   would put in contact; a deforming object's frame is the identity.
@@ -58,9 +59,13 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
 
-STACK_SIZE = 64
+STACK_SIZE = 48
 """Node pairs on a descent's stack: a step pops one pair and pushes at most two, each a level
-deeper on one side, so two trees of depths ``Da``, ``Db`` need ``Da + Db + 1``."""
+deeper on one side, so subtrees of depths ``Da``, ``Db`` below the cuts need ``Da + Db + 1``."""
+
+STEPS_PER_ROUND = 32
+"""Node-pair steps a traversal thread takes between two of its block's reservations of rows (a
+round ends at a barrier: fewer steps, more barriers; more, longer waits of full lists)."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
@@ -233,10 +238,12 @@ def _pair_count_kernel(
     num_threads: int,
     # Outputs
     tree_pair: wp.array[TreePair],
+    pair_rows: wp.array[wp.vec4i],
     pair_items: wp.array[wp.int64],
     cut_level: wp.array[wp.int32],
 ):
-    """One thread per pair slot: the pair's :class:`TreePair` and work items (``a``'s cut times
+    """One thread per pair slot: the pair's :class:`TreePair`, what its rows name (``(a, b, a's
+    triangle order start, b's)``, read again when rows are written) and work items (``a``'s cut times
     ``b``'s), 0 items past the counter; every pair starts from the cuts, or one level below them
     when the last frame's ``load`` was light (:func:`_deep_cut`, the choice also written to
     ``cut_level``)."""
@@ -251,6 +258,7 @@ def _pair_count_kernel(
     r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps, p[0], p[1],
                    deep)
     tree_pair[k] = r
+    pair_rows[k] = wp.vec4i(r.a, r.b, r.tri_a_start, r.tri_b_start)
     pair_items[k] = wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b)
 
 
@@ -284,18 +292,9 @@ def _leaf_pair_rows(tree: TreeView, node_a: int, node_b: int) -> int:
 
 
 @wp.func
-def _found_rows(tree: TreeView, found_a: vec_items, found_b: vec_items, num_found: int) -> int:
-    """Candidate rows of the ``num_found`` leaf pairs ``(found_a[m], found_b[m])``."""
-    rows = int(0)
-    for m in range(num_found):
-        rows += _leaf_pair_rows(tree, found_a[m], found_b[m])
-    return rows
-
-
-@wp.func
 def _write_rows(
     tree: TreeView,
-    r: TreePair,
+    rows: wp.vec4i,
     node_a: int,
     node_b: int,
     slot: wp.int64,
@@ -303,80 +302,30 @@ def _write_rows(
     candidate_capacity: int,
 ) -> wp.int64:
     """Writes the triangle pairs of leaves ``node_a`` (of ``a``) and ``node_b`` (of ``b``, global
-    node ids) from ``slot`` on; returns the next slot."""
+    node ids) from ``slot`` on; ``rows`` is the pair's ``(a, b, a's triangle order start, b's)``;
+    returns the next slot."""
     ra = tree.node_triangle[node_a]
     rb = tree.node_triangle[node_b]
     for i in range(ra[0], ra[0] + ra[1]):
-        tri_a = tree.tri_order[r.tri_a_start + i]
+        tri_a = tree.tri_order[rows[2] + i]
         for j in range(rb[0], rb[0] + rb[1]):
             if slot < wp.int64(candidate_capacity):
-                candidate[int(slot)] = wp.vec4i(r.a, tri_a, r.b, tree.tri_order[r.tri_b_start + j])
+                candidate[int(slot)] = wp.vec4i(rows[0], tri_a, rows[1], tree.tri_order[rows[3] + j])
             slot += wp.int64(1)
     return slot
 
 
 @wp.func
-def _descend(
-    tree: TreeView,
-    r: TreePair,
-    sub_a: int,
-    sub_b: int,
-    axes: int,
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    candidate_capacity: int,
-):
-    """Subtree ``sub_a`` of ``a`` against subtree ``sub_b`` of ``b`` (local ids), depth first over
-    node pairs, opening the node of more triangles: the leaf pairs whose boxes overlap (global
-    ids), the first :data:`~warp_ccd.buffers.ITEM_LIST_SIZE` returned with their number, the rows
-    of any more emitted at once (one atomic add each)."""
-    found_a = vec_items()
-    found_b = vec_items()
-    num_found = int(0)
-    stack_a = vec_stack()
-    stack_b = vec_stack()
-    stack_a[0] = sub_a
-    stack_b[0] = sub_b
-    top = int(1)
-    while top > 0:
-        top -= 1
-        na = stack_a[top]
-        nb = stack_b[top]
-        slot_a = r.slot_a_start + na
-        slot_b = r.slot_b_start + nb
-        if _boxes_overlap_mapped(tree.node_lower[slot_a], tree.node_upper[slot_a], tree.node_lower[slot_b],
-                                 tree.node_upper[slot_b], r, axes):
-            ga = r.node_a_start + na
-            gb = r.node_b_start + nb
-            ca = tree.node_child[ga]
-            cb = tree.node_child[gb]
-            if ca[0] < 0 and cb[0] < 0:
-                if num_found < ITEM_LIST_SIZE:
-                    found_a[num_found] = ga
-                    found_b[num_found] = gb
-                    num_found += 1
-                else:
-                    first = wp.atomic_add(candidate_count, 0, wp.int64(_leaf_pair_rows(tree, ga, gb)))
-                    _write_rows(tree, r, ga, gb, first, candidate, candidate_capacity)
-            elif cb[0] < 0 or (ca[0] >= 0 and tree.node_triangle[ga][1] >= tree.node_triangle[gb][1]):
-                stack_a[top] = ca[1]
-                stack_b[top] = nb
-                stack_a[top + 1] = ca[0]
-                stack_b[top + 1] = nb
-                top += 2
-            else:
-                stack_a[top] = na
-                stack_b[top] = cb[1]
-                stack_a[top + 1] = na
-                stack_b[top + 1] = cb[0]
-                top += 2
-    return found_a, found_b, num_found
+def _block_any(flag: int) -> int:
+    """Cooperative: 1 when ``flag`` is 1 in some thread of the block (the same in every thread)."""
+    return wp.tile_extract(wp.tile_max(wp.tile(flag)), 0)
 
 
 @wp.kernel
 def _traverse_kernel(
     tree: TreeView,
     tree_pair: wp.array[TreePair],
+    pair_rows: wp.array[wp.vec4i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
     pair_item_end: wp.array[wp.int64],
@@ -390,10 +339,15 @@ def _traverse_kernel(
     load: wp.array[wp.int64],
 ):
     """``num_blocks`` blocks of threads take the work items (inclusive scan ``pair_item_end`` of the
-    pairs' item counts) in rounds, one item per thread per round; item ``w`` of pair ``k`` is
-    subtree ``w / Cb`` of ``a``'s cut against subtree ``w % Cb`` of ``b``'s ``Cb``. Each round, a
-    block reserves all its threads' rows with one atomic add. The first thread records the frame's
-    ``load`` (items, deep cut or not) for the next frame's choice."""
+    pairs' item counts), thread ``t`` items ``t``, ``t + T``, ... (``T`` threads); item ``w`` of
+    pair ``k`` is subtree ``w / Cb`` of ``a``'s cut against subtree ``w % Cb`` of ``b``'s ``Cb``.
+
+    A thread works in steps, one node pair a step (pop, test both boxes, push two pairs or record a
+    leaf pair), and takes its next item as soon as its stack is empty, so a thread whose item
+    ends early does not wait for the long ones. Every :data:`STEPS_PER_ROUND` steps its block
+    reserves all its threads' rows with one atomic add and writes them; a thread whose list of
+    leaf pairs is full waits for that. The block stops when none of its threads has work left.
+    The first thread records the frame's ``load`` (items, deep cut or not) for the next frame."""
     block, lane = wp.tid()
     width = wp.block_dim()
     num_threads = wp.int64(num_blocks * width)
@@ -406,30 +360,76 @@ def _traverse_kernel(
         load[0] = total
         load[1] = wp.int64(cut_level[0])
     if num_pairs == 0:
-        return  # the whole grid returns: no block is left waiting in block_reserve
+        return  # the whole grid returns: no block is left waiting in a cooperative call
     if wp.int64(block * width) >= total:
         return  # the whole block: its items, t + r * num_threads, are all past the last
-    rounds = (total + num_threads - wp.int64(1)) / num_threads  # the same in every thread
     k = int(0)
-    item = t
-    for _round in range(int(rounds)):
-        found_a = vec_items()
-        found_b = vec_items()
-        num_found = int(0)
-        r = TreePair()
-        if item < total:
-            k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
-            r = tree_pair[k]
-            w = item - (pair_item_end[k] - wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b))
-            i = int(w) / r.num_cut_b  # below 2**16 subtrees a side: 32 bits suffice
-            j = int(w) - i * r.num_cut_b
-            found_a, found_b, num_found = _descend(tree, r, tree.cut_node[r.cut_a_start + i],
-                                                   tree.cut_node[r.cut_b_start + j], axes, candidate,
-                                                   candidate_count, candidate_capacity)
-        slot = block_reserve(candidate_count, int(lane), _found_rows(tree, found_a, found_b, num_found))
+    item = t - num_threads  # the first fetch makes it t
+    more = int(1)  # items may be left for this thread
+    r = TreePair()
+    stack_a = vec_stack()
+    stack_b = vec_stack()
+    top = int(0)
+    found_k = vec_items()
+    found_a = vec_items()
+    found_b = vec_items()
+    num_found = int(0)
+    busy = int(1)
+    while busy == 1:
+        for _step in range(STEPS_PER_ROUND):
+            if top == 0 and more == 1:
+                item += num_threads
+                if item < total:
+                    k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
+                    r = tree_pair[k]
+                    w = int(item - (pair_item_end[k] - wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b)))
+                    i = w / r.num_cut_b  # below 2**16 subtrees a side: 32 bits suffice
+                    stack_a[0] = tree.cut_node[r.cut_a_start + i]
+                    stack_b[0] = tree.cut_node[r.cut_b_start + w - i * r.num_cut_b]
+                    top = 1
+                else:
+                    more = 0
+            if top > 0 and num_found < ITEM_LIST_SIZE:
+                top -= 1
+                na = stack_a[top]
+                nb = stack_b[top]
+                slot_a = r.slot_a_start + na
+                slot_b = r.slot_b_start + nb
+                if _boxes_overlap_mapped(tree.node_lower[slot_a], tree.node_upper[slot_a], tree.node_lower[slot_b],
+                                         tree.node_upper[slot_b], r, axes):
+                    ga = r.node_a_start + na
+                    gb = r.node_b_start + nb
+                    ca = tree.node_child[ga]
+                    cb = tree.node_child[gb]
+                    if ca[0] < 0 and cb[0] < 0:
+                        found_k[num_found] = k
+                        found_a[num_found] = ga
+                        found_b[num_found] = gb
+                        num_found += 1
+                    elif cb[0] < 0 or (ca[0] >= 0 and tree.node_triangle[ga][1] >= tree.node_triangle[gb][1]):
+                        stack_a[top] = ca[1]
+                        stack_b[top] = nb
+                        stack_a[top + 1] = ca[0]
+                        stack_b[top + 1] = nb
+                        top += 2
+                    else:
+                        stack_a[top] = na
+                        stack_b[top] = cb[1]
+                        stack_a[top + 1] = na
+                        stack_b[top + 1] = cb[0]
+                        top += 2
+        rows = int(0)
         for m in range(num_found):
-            slot = _write_rows(tree, r, found_a[m], found_b[m], slot, candidate, candidate_capacity)
-        item += num_threads
+            rows += _leaf_pair_rows(tree, found_a[m], found_b[m])
+        slot = block_reserve(candidate_count, int(lane), rows)
+        for m in range(num_found):
+            slot = _write_rows(tree, pair_rows[found_k[m]], found_a[m], found_b[m], slot, candidate,
+                               candidate_capacity)
+        num_found = 0
+        mine = int(0)
+        if top > 0 or (more == 1 and item + num_threads < total):
+            mine = 1
+        busy = _block_any(mine)
 
 
 class MidPhaseBVH:
@@ -439,8 +439,9 @@ class MidPhaseBVH:
     Args:
         bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
-        separating_axes: 3 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space;
-            6 also ``a``'s in ``b``'s (fewer candidates, more arithmetic a test).
+        separating_axes: 6 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space
+            and ``a``'s in ``b``'s; 3 the first alone (more candidates, less arithmetic a test: on
+            the H100 the frame was 6-12% slower with 3, ``bench/results/box_tests_cuda0.json``).
         device: Warp device.
 
     Attributes:
@@ -451,14 +452,15 @@ class MidPhaseBVH:
             that takes every item in turn unless ``wp.config.enable_cpu_blocks`` is set).
     """
 
-    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, separating_axes: int = 3, device=None):
+    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, separating_axes: int = 6, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
             raise ValueError(f"separating_axes must be one of {SEPARATING_AXES}, got {separating_axes!r}")
         self.separating_axes = separating_axes
-        if 2 * bvh.max_depth + 1 > STACK_SIZE:
-            raise ValueError(f"trees of depth {bvh.max_depth} need a traversal stack above {STACK_SIZE}")
+        if 2 * bvh.max_depth_below_cut + 1 > STACK_SIZE:
+            raise ValueError(f"subtrees of depth {bvh.max_depth_below_cut} below the cuts need a traversal stack "
+                             f"above {STACK_SIZE}")
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.block_dim = block_dim_for(self.device)
         self.num_blocks = self.device.sm_count * THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
@@ -488,16 +490,17 @@ class MidPhaseBVH:
             self._items = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._item_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._tree_pair = wp.zeros(pairs.capacity, dtype=TreePair, device=d)
+            self._pair_rows = wp.zeros(pairs.capacity, dtype=wp.vec4i, device=d)
         tree = self.bvh.tree
         eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
         wp.launch(_PAIR_COUNT[scene.precision], dim=pairs.capacity,
                   inputs=[tree, scene.instance_shape, scene.instance_pose, scene.instance_scale,
                           self.bvh.instance_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
                           pairs.capacity, self._load, self.num_blocks * self.block_dim],
-                  outputs=[self._tree_pair, self._items, self._cut_level], device=d)
+                  outputs=[self._tree_pair, self._pair_rows, self._items, self._cut_level], device=d)
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
         wp.launch_tiled(_traverse_kernel, dim=[self.num_blocks],
-                        inputs=[tree, self._tree_pair, pairs.count, pairs.capacity, self._item_end,
+                        inputs=[tree, self._tree_pair, self._pair_rows, pairs.count, pairs.capacity, self._item_end,
                                 self.num_blocks, self.candidates.capacity, self._cut_level, self.separating_axes],
                         outputs=[self.candidates.data, self.candidates.count, self._load],
                         block_dim=self.block_dim, device=d)

@@ -204,8 +204,9 @@ class CollisionPipeline:
             :mod:`warp_ccd.mid_phase`): more, shorter items as it grows; 0 descends from the roots of
             small trees (big trees cut deeper, :class:`~warp_ccd.bvh.SceneBVH`). A frame whose work
             fits the GPU's threads once starts one level deeper.
-        separating_axes: the traversal's box test (``bvh`` mid phase): 3 (default), the box around
-            one object's box in the other's space; 6, both ways round (see :mod:`warp_ccd.mid_phase`).
+        separating_axes: the traversal's box test (``bvh`` mid phase): 6 (default), the box around
+            one object's box in the other's space, both ways round; 3, one way (see
+            :mod:`warp_ccd.mid_phase`).
         object_bounds: a rigid object's box for the broad phase (``bvh`` mid phase): ``"auto"``
             (default), ``"vertices"`` or ``"tree"`` (see :class:`~warp_ccd.bvh.SceneBVH`).
         segments: also compute the intersection segment of each triangle pair
@@ -242,7 +243,7 @@ class CollisionPipeline:
         graph: bool | None = None,
         leaf_size: int | None = None,
         cut_depth: int = 3,
-        separating_axes: int = 3,
+        separating_axes: int = 6,
         object_bounds: str = "auto",
         segments: bool = False,
         containment: bool = False,
