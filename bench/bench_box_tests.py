@@ -1,9 +1,12 @@
-"""Benchmark: the traversal's box test (3 or 6 separating axes) and the rigid objects' boxes for
-the broad phase (from world vertices, from the tree, or by size), on the scaling scenes.
+"""Benchmark: the traversal's options on the scaling scenes: its box test (3 or 6 separating axes),
+the rigid objects' boxes for the broad phase (from world vertices, from the tree, or by size), the
+leaf size and the traversal's steps per round.
 
-For each scene (``--cases`` of ``TRIANGLESxN``, a ``--triangles`` spec of the scaling benchmark and
-an object count) and each combination of ``separating_axes`` and ``object_bounds``
-(:class:`~warp_ccd.pipeline.CollisionPipeline` options), after ``--warmup`` frames: ``--frames``
+For each scene (``--cases`` of ``TRIANGLES:N``, a ``--triangles`` spec of the scaling benchmark and
+an object count) and each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and ``--steps``
+(:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``, ``object_bounds``,
+``leaf_size``, and :attr:`~warp_ccd.mid_phase.MidPhaseBVH.steps_per_round`), after ``--warmup``
+frames: ``--frames``
 frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
 a synchronisation before and after (``frame``), then as many timed stage by stage
 (``timings=True``: ``refit``, ``broad``, ``mid``, ``narrow``, each synchronised), min and median;
@@ -30,8 +33,6 @@ from warp_ccd.pipeline import STAGES, CollisionPipeline
 from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
-AXES = (3, 6)
-BOUNDS = ("auto", "vertices", "tree")
 
 
 def _case(text: str) -> tuple[str, int]:
@@ -52,10 +53,11 @@ def run(spec: str, n: int, args, device) -> list[dict]:
     """Rows of one scene: every option combination, frames then stages."""
     _, shapes = parse_triangles(spec)
     rows, pairs_seen = [], None
-    for axes, bounds in itertools.product(AXES, BOUNDS):
+    for axes, bounds, leaf, steps in itertools.product(args.axes, args.bounds, args.leaf_sizes, args.steps):
         scene = Scene.random(n, seed=args.seed, device=device, **({} if shapes is None else {"shapes": shapes}))
-        options = dict(separating_axes=axes, object_bounds=bounds)
+        options = dict(separating_axes=axes, object_bounds=bounds, leaf_size=leaf)
         pipe = CollisionPipeline(scene, **options)
+        pipe.mid.steps_per_round = steps
         frames = []
         for k in range(args.warmup + args.frames):
             wp.synchronize_device(device)
@@ -70,10 +72,11 @@ def run(spec: str, n: int, args, device) -> list[dict]:
         if pairs_seen is None:
             pairs_seen = pairs
         elif not np.array_equal(pairs, pairs_seen):
-            raise SystemExit(f"{spec}:{n} axes={axes} bounds={bounds}: other triangle pairs than the first combination")
-        base = {"triangles": spec, "n_objects": n, "separating_axes": axes, "object_bounds": bounds, **counts}
+            raise SystemExit(f"{spec}:{n} {options} steps={steps}: other triangle pairs than the first combination")
+        base = {"triangles": spec, "n_objects": n, **options, "steps_per_round": steps, **counts}
         rows.append({**base, "stage": "frame", **_stats(frames)})
         timed = CollisionPipeline(scene, timings=True, **options)
+        timed.mid.steps_per_round = steps
         stages = {s: [] for s in (*STAGES, "total")}
         for k in range(args.warmup + args.frames):
             scene.advance(0.0)  # same poses: the frame above's scene, timed stage by stage
@@ -82,7 +85,7 @@ def run(spec: str, n: int, args, device) -> list[dict]:
                 for s in stages:
                     stages[s].append(t[s])
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
-        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  frame {rows[-len(stages) - 1]['ms_median']:8.3f} ms"
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf}  steps {steps:>3}  frame {rows[-len(stages) - 1]['ms_median']:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
     return rows
@@ -93,6 +96,11 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default=None)
     parser.add_argument("--cases", type=_case, nargs="+", default=[("poly", 1000), ("80", 1000)],
                         help="TRIANGLES:N scenes (default: %(default)s)")
+    parser.add_argument("--axes", type=int, nargs="+", default=[3, 6], choices=[3, 6])
+    parser.add_argument("--bounds", nargs="+", default=["auto", "vertices", "tree"],
+                        choices=["auto", "vertices", "tree"])
+    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1])
+    parser.add_argument("--steps", type=int, nargs="+", default=[32], help="traversal steps per round")
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)

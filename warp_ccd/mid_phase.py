@@ -64,8 +64,9 @@ STACK_SIZE = 48
 deeper on one side, so subtrees of depths ``Da``, ``Db`` below the cuts need ``Da + Db + 1``."""
 
 STEPS_PER_ROUND = 32
-"""Node-pair steps a traversal thread takes between two of its block's reservations of rows (a
-round ends at a barrier: fewer steps, more barriers; more, longer waits of full lists)."""
+"""Default node-pair steps a traversal thread takes between two of its block's reservations of rows
+(:attr:`MidPhaseBVH.steps_per_round`; a round ends at a barrier: fewer steps, more barriers; more,
+longer waits of full lists)."""
 
 vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
@@ -103,8 +104,10 @@ class TreePair:
     tri_a_start: int  # the shape's triangle order in TreeView.tri_order
     tri_b_start: int
     b_to_a: wp.mat33  # x_a = b_to_a * x_b + b_to_a_shift (box spaces)
+    b_to_a_abs: wp.mat33  # its entries' absolute values (a box's half extent goes through them)
     b_to_a_shift: wp.vec3
     a_to_b: wp.mat33
+    a_to_b_abs: wp.mat33
     a_to_b_shift: wp.vec3
     pad_a: float  # added to every half extent of a test in a's space (rounding bound)
     pad_b: float
@@ -214,10 +217,12 @@ def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose
         err += eps * (_max_abs(t_b) + s_b * _norm_inf(rot_b) * r_b)
     m, shift, pad = _map_between(rot_a, t_a, s_a, rot_b, t_b, s_b, r_a, r_b, err)
     r.b_to_a = m
+    r.b_to_a_abs = abs_matrix(m)
     r.b_to_a_shift = shift
     r.pad_a = pad
     m, shift, pad = _map_between(rot_b, t_b, s_b, rot_a, t_a, s_a, r_b, r_a, err)
     r.a_to_b = m
+    r.a_to_b_abs = abs_matrix(m)
     r.a_to_b_shift = shift
     r.pad_b = pad
     return r
@@ -274,12 +279,12 @@ def _boxes_overlap_mapped(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.
     cb = (lo_b + hi_b) * 0.5
     hb = (hi_b - lo_b) * 0.5
     d = r.b_to_a * cb + r.b_to_a_shift - ca
-    e = ha + abs_matrix(r.b_to_a) * hb
+    e = ha + r.b_to_a_abs * hb
     if wp.abs(d[0]) > e[0] + r.pad_a or wp.abs(d[1]) > e[1] + r.pad_a or wp.abs(d[2]) > e[2] + r.pad_a:
         return False
     if axes == 6:
         d = r.a_to_b * ca + r.a_to_b_shift - cb
-        e = hb + abs_matrix(r.a_to_b) * ha
+        e = hb + r.a_to_b_abs * ha
         if wp.abs(d[0]) > e[0] + r.pad_b or wp.abs(d[1]) > e[1] + r.pad_b or wp.abs(d[2]) > e[2] + r.pad_b:
             return False
     return True
@@ -333,6 +338,7 @@ def _traverse_kernel(
     candidate_capacity: int,
     cut_level: wp.array[wp.int32],
     axes: int,
+    steps_per_round: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
@@ -344,7 +350,7 @@ def _traverse_kernel(
 
     A thread works in steps, one node pair a step (pop, test both boxes, push two pairs or record a
     leaf pair), and takes its next item as soon as its stack is empty, so a thread whose item
-    ends early does not wait for the long ones. Every :data:`STEPS_PER_ROUND` steps its block
+    ends early does not wait for the long ones. Every ``steps_per_round`` steps its block
     reserves all its threads' rows with one atomic add and writes them; a thread whose list of
     leaf pairs is full waits for that. The block stops when none of its threads has work left.
     The first thread records the frame's ``load`` (items, deep cut or not) for the next frame."""
@@ -376,7 +382,7 @@ def _traverse_kernel(
     num_found = int(0)
     busy = int(1)
     while busy == 1:
-        for _step in range(STEPS_PER_ROUND):
+        for _step in range(steps_per_round):
             if top == 0 and more == 1:
                 item += num_threads
                 if item < total:
@@ -448,6 +454,7 @@ class MidPhaseBVH:
         candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
         separating_axes: as above (read at each launch: a captured frame keeps the value it was
             captured with).
+        steps_per_round: node-pair steps between two reservations of rows (:data:`STEPS_PER_ROUND`).
         num_blocks, block_dim: the traversal kernel's grid (on the CPU one block, of one thread
             that takes every item in turn unless ``wp.config.enable_cpu_blocks`` is set).
     """
@@ -458,6 +465,7 @@ class MidPhaseBVH:
         if separating_axes not in SEPARATING_AXES:
             raise ValueError(f"separating_axes must be one of {SEPARATING_AXES}, got {separating_axes!r}")
         self.separating_axes = separating_axes
+        self.steps_per_round = STEPS_PER_ROUND
         if 2 * bvh.max_depth_below_cut + 1 > STACK_SIZE:
             raise ValueError(f"subtrees of depth {bvh.max_depth_below_cut} below the cuts need a traversal stack "
                              f"above {STACK_SIZE}")
@@ -501,7 +509,8 @@ class MidPhaseBVH:
         wp.utils.array_scan(self._items, self._item_end, inclusive=True)
         wp.launch_tiled(_traverse_kernel, dim=[self.num_blocks],
                         inputs=[tree, self._tree_pair, self._pair_rows, pairs.count, pairs.capacity, self._item_end,
-                                self.num_blocks, self.candidates.capacity, self._cut_level, self.separating_axes],
+                                self.num_blocks, self.candidates.capacity, self._cut_level, self.separating_axes,
+                                self.steps_per_round],
                         outputs=[self.candidates.data, self.candidates.count, self._load],
                         block_dim=self.block_dim, device=d)
 
