@@ -86,7 +86,8 @@ def run(spec: str, n: int, args, device) -> list[dict]:
                     stages[s].append(t[s])
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
-        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf}  steps {steps:>3}  frame {frame_ms:8.3f} ms"
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf}  steps {steps:>3}"
+              f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
     return rows
