@@ -30,10 +30,16 @@ from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
+RIGID_LEAF_SIZE = 2
+"""Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 7.6 / 3.8 /
+4.3 ms at 10^6 polyhedra / 10^5 80-triangle / 10^4 1,280-triangle objects with leaves of 2,
+against 8.8 / 4.0 / 5.0 with leaves of 1 and 8.5 / 4.4 / 4.0 with 4 (``bench/bench_box_tests.py``,
+``bench/results/box_tests_sweep_cuda0.json``): half the node pairs to test, twice the candidates."""
+
 DEFORMING_LEAF_SIZE = 4
 """Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
 a quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair
-(measured in ``bench/bench_deforming.py``). Rigid scenes refit nothing and keep leaves of one."""
+(``bench/bench_deforming.py``)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
@@ -198,7 +204,7 @@ class CollisionPipeline:
             launched eagerly).
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
             False launches every kernel from Python (the CPU always does). Both give the same results.
-        leaf_size: triangles per tree leaf (``bvh`` mid phase; default 1, or
+        leaf_size: triangles per tree leaf (``bvh`` mid phase; default :data:`RIGID_LEAF_SIZE`, or
             :data:`DEFORMING_LEAF_SIZE` in a scene with deforming objects).
         cut_depth: least tree level where the traversal's work items start (``bvh`` mid phase; see
             :mod:`warp_ccd.mid_phase`): more, shorter items as it grows; 0 descends from the roots of
@@ -255,7 +261,7 @@ class CollisionPipeline:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         if leaf_size is None:
-            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else 1
+            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else RIGID_LEAF_SIZE
         for name, value, minimum, maximum in (("leaf_size", leaf_size, 1, LEAF_SIZE_MAX),
                                               ("pair_capacity", pair_capacity, 1, None),
                                               ("candidate_capacity", candidate_capacity, 1, None),
