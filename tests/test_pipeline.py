@@ -55,8 +55,8 @@ def test_pipeline_options_agree(device, options):
 
 @pytest.mark.parametrize("cut_depth", [0, 3])
 def test_traversal_cut_levels(device, cut_depth):
-    """A frame starts its descents at the cut, or one level deeper when the last frame's items (at
-    most doubled by that level) fit one round of the grid; both find the same pairs."""
+    """A frame starts its descents at the cuts, or one level deeper when the last frame's items (at
+    most quadrupled by that level) fit one round of the grid; both find the same pairs."""
     scene = wc.Scene.random(80, seed=2, shapes=("cube", "icosphere2", "dodecahedron"), density=0.2, device=device)
     scene.advance(0.3)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
@@ -65,7 +65,7 @@ def test_traversal_cut_levels(device, cut_depth):
     threads = mid.num_blocks * mid.block_dim
     pipe.detect()  # sizes the buffers (both levels find the same candidates), so no frame below runs twice
     items, candidates = {}, {}
-    for last_items, last_deep, deep in ((0, 0, 1), (threads // 2, 0, 1), (threads // 2 + 1, 0, 0), (threads, 1, 1),
+    for last_items, last_deep, deep in ((0, 0, 1), (threads // 4, 0, 1), (threads // 4 + 1, 0, 0), (threads, 1, 1),
                                         (threads + 1, 1, 0), (2**62, 0, 0)):
         mid._load.assign(np.array([last_items, last_deep], np.int64))
         got = pipe.detect()

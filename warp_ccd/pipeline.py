@@ -441,8 +441,10 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
-    # 16 + 8 bytes a triangle, for this call only), where a persistent pipeline starts lean and grows.
+    # one candidate a triangle per triangle of a leaf, 16 bytes each, and 8 bytes of hits a triangle,
+    # for this call only), where a persistent pipeline starts lean and grows.
     n, tris = scene.num_objects, scene.num_triangles
-    options.setdefault("candidate_capacity", max(1024, 16 * n, tris))
+    leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
+    options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
     return CollisionPipeline(scene, **options).detect()
