@@ -86,7 +86,7 @@ def run(spec: str, n: int, args, device) -> list[dict]:
                     stages[s].append(t[s])
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
-        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf}  steps {steps:>3}"
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  steps {steps:>3}"
               f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
@@ -101,7 +101,8 @@ def main(argv=None) -> int:
     parser.add_argument("--axes", type=int, nargs="+", default=[3, 6], choices=[3, 6])
     parser.add_argument("--bounds", nargs="+", default=["auto", "vertices", "tree"],
                         choices=["auto", "vertices", "tree"])
-    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1])
+    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[None],
+                        help="leaf sizes (default: the pipeline's own)")
     parser.add_argument("--steps", type=int, nargs="+", default=[32], help="traversal steps per round")
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--warmup", type=int, default=3)

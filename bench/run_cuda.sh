@@ -2,13 +2,16 @@
 # Everything to check and measure on a CUDA machine, in parts that each fit one run of a few
 # minutes: the test suite, one frame profiled activity by activity (and as a graph), what one
 # verdict on every device costs the narrow phase, then the benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
-# 1,280-triangle objects up to 1e5, the broad phase alone up to 1e7 boxes, the tree builds (and
+# and meshes of the sizes of real assets (120 to 12,640 triangles) up to 1e4, 1,280-triangle objects up to 1e5,
+# the traversal's options (box test, object boxes, leaf size), deforming meshes refit every frame (1,280
+# triangles, up to 1e4), the broad phase alone up to 1e7 boxes, the tree builds (and
 # one-shot collide() against python-fcl), and where a frame's host time goes (split at the launch
 # and the wait; the host's own speed right after waits of 0.05-50 ms), and `warp-ccd check` on USD animations of
 # 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, broad, build, host, usd
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, boxes, deforming,
+#                                          # broad, build, host, usd
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -24,17 +27,19 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests profile narrow scaling spheres broad build host usd}
+parts=${*:-tests profile narrow scaling spheres boxes deforming broad build host usd}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
     profiled="100"; hosted="300"; waits="0.05 5"; builds="100x20 10x80 1x1280"; small="32"; rebuild="2x320"
     usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
+    mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
     builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="16"; rebuild="27x5120"
     usd="--frames 240 --rigid 10000 --deforming 100 --fcl-every 10"
+    mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -58,7 +63,15 @@ for part in $parts; do
             --out "$out/narrow_phase_$tag.json" ;;
     scaling)
         step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles poly 80 --frames $frames \
-            --warmup 3 --out "$out/scaling_$tag.json" --plot "$out/scaling_$tag.png" ;;
+            --warmup 3 --out "$out/scaling_$tag.json" --plot "$out/scaling_$tag.png"
+        step python3 -m warp_ccd.bench --device "$device" --objects $mixed --triangles mixed --frames $frames \
+            --warmup 3 --peers builtin,fcl --out "$out/scaling_mixed_$tag.json" --plot "$out/scaling_mixed_$tag.png" ;;
+    boxes)
+        step python3 bench/bench_box_tests.py --device "$device" --cases $boxcases --frames $((frames / 2)) \
+            --out "$out/box_tests_$tag.json" ;;
+    deforming)
+        step python3 bench/bench_deforming.py --device "$device" --objects $deforming --level $level \
+            --frames $((frames / 2)) --out "$out/deforming_$tag.json" ;;
     spheres)
         step python3 -m warp_ccd.bench --device "$device" --objects $spheres --triangles 1280 --frames $frames \
             --warmup 3 --peers builtin,fcl --out "$out/scaling1280_$tag.json" --plot "$out/scaling1280_$tag.png" ;;
@@ -76,7 +89,8 @@ for part in $parts; do
     usd)
         step python3 bench/bench_usd_check.py --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
     *)
-        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, broad, build, host, usd)" >&2
+        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
+            "host, usd)" >&2
         status=2 ;;
     esac
 done

@@ -125,6 +125,20 @@ def test_parse_triangles():
         bench.parse_triangles("100")
 
 
+def test_mixed_meshes_are_valid_and_of_real_sizes(device):
+    """The ``mixed`` scene's meshes: radius 1, indices in range, 120 to 12,640 triangles, each the
+    same arrays at every call, and a scene of them runs."""
+    label, meshes = bench.parse_triangles("mixed")
+    assert label == "mixed" and meshes is bench.parse_triangles("mixed")[1]
+    counts = sorted(len(t) for _, t in meshes)
+    assert counts[0] == 120 and counts[-1] == 12640 and len(counts) == 7
+    for v, t in meshes:
+        wc.shapes.validate_mesh(v, t)
+        assert abs(np.linalg.norm(v, axis=1).max() - 1.0) < 1e-6
+    scene = wc.Scene.random(8, seed=1, shapes=meshes, device=device)
+    assert scene.num_shapes == 7 and wc.CollisionPipeline(scene).detect().num_objects == 8
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_builtin_peer_agrees_with_pipeline(device, mode):
     if mode not in bench.device_modes(device):
@@ -228,6 +242,20 @@ def test_bench_scripts_run(device, tmp_path, capsys):
     rows = json.loads(out.read_text())["rows"]
     assert [r["variant"] for r in rows] == ["plain", "again"]
     assert all(0 <= r["min"]["host"] <= r["median"]["host"] and r["median"]["wait"] >= 0 for r in rows)
+    boxes = load_script("bench_box_tests")
+    out = tmp_path / "boxes.json"
+    assert boxes.main(["--device", device, "--cases", "poly:60", "--axes", "3", "6", "--bounds", "auto", "tree",
+                       "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert {(r["separating_axes"], r["object_bounds"]) for r in rows} == {(3, "auto"), (3, "tree"), (6, "auto"),
+                                                                          (6, "tree")}
+    deforming = load_script("bench_deforming")
+    out = tmp_path / "deforming.json"
+    assert deforming.main(["--device", device, "--objects", "12", "--level", "1", "--leaf-sizes", "1", "4",
+                           "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert {r["method"] for r in rows} == {"warp_ccd", "warp_builtin"}
+    assert all(r["same_object_pairs"] for r in rows if r["method"] == "warp_builtin")
     capsys.readouterr()
 
 

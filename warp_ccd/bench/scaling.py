@@ -431,7 +431,8 @@ def measure_pipeline_memory(scene: Scene, frames: int = 2) -> dict:
 
 def parse_triangles(spec: str) -> tuple[str, tuple | None]:
     """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
-    or ``"icosphereL"`` -> icosphere level L.
+    or ``"icosphereL"`` -> icosphere level L; ``"mixed"`` -> meshes of the sizes of real assets, 120
+    to 12,640 triangles (:mod:`warp_ccd.bench.meshes`).
 
     Returns:
         ``(label, shapes)``: ``shapes`` for :meth:`Scene.random` (None: its default polyhedra).
@@ -442,6 +443,10 @@ def parse_triangles(spec: str) -> tuple[str, tuple | None]:
     text = str(spec).strip().lower()
     if text == "poly":
         return "poly", None
+    if text == "mixed":
+        from .meshes import real_mesh_set
+
+        return "mixed", real_mesh_set()
     if text.startswith("icosphere") and text[len("icosphere"):].isdigit():
         level = int(text[len("icosphere"):])
         return str(20 * 4**level), (f"icosphere{level}",)
@@ -451,7 +456,8 @@ def parse_triangles(spec: str) -> tuple[str, tuple | None]:
             if 20 * 4**level == count:
                 return text, (f"icosphere{level}",)
     known = ", ".join(str(20 * 4**k) for k in range(6))
-    raise ValueError(f"--triangles: {spec!r} is neither 'poly' nor an icosphere's triangle count ({known}, ...)")
+    raise ValueError(f"--triangles: {spec!r} is neither 'poly', 'mixed' nor an icosphere's triangle count "
+                     f"({known}, ...)")
 
 
 @dataclass
@@ -897,7 +903,8 @@ def build_parser(prog: str = "warp-ccd bench") -> argparse.ArgumentParser:
     parser.add_argument("--objects", type=_count, nargs="+", default=[100, 1000, 3000, 10000],
                         help="object counts N; 1e5 is accepted (default: %(default)s)")
     parser.add_argument("--triangles", type=_triangles, nargs="+", default=["poly", "80"],
-                        help="triangles per object: 'poly' (the five polyhedra, 4 to 36 triangles) or an icosphere's "
+                        help="triangles per object: 'poly' (the five polyhedra, 4 to 36 triangles), 'mixed' "
+                        "(meshes of the sizes of real assets, 120 to 12,640 triangles) or an icosphere's "
                         "count 20*4**L (80: icosphere1, 1280: icosphere3) (default: %(default)s)")
     parser.add_argument("--frames", type=_positive, default=10, help="timed frames per case (default: %(default)s)")
     parser.add_argument("--warmup", type=_non_negative, default=2,

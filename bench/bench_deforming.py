@@ -1,0 +1,186 @@
+"""Benchmark: deforming meshes, whose trees are refit every frame, against Warp's built-in pipeline.
+
+Scene: ``N`` icospheres (``--level``, 1,280 triangles at level 3) placed as ``Scene.random`` places
+them, as a deforming scene (each object its own mesh). Every frame one kernel moves every world
+vertex on the device from its rest position: each object breathes (scale ``1 + 0.1 sin``), wobbles
+(a shear growing with height) and drifts on a small circle, so pairs come and go.
+
+For each ``--leaf-sizes`` value, after ``--warmup`` frames, ``--frames`` frames of:
+
+* ``frame``: the move, then ``detect()`` (on CUDA a captured graph), wall-clock with a
+  synchronisation before and after;
+* the stages of ``detect()`` with ``timings=True`` (``refit``, ``broad``, ``mid``, ``narrow``,
+  ``total``; each synchronised);
+* ``refit_kernels``: the refit alone (the deforming objects' trees and the object boxes), as a
+  captured graph on CUDA (eagerly on the CPU), wall-clock;
+
+and Warp's built-in pipeline (:class:`~warp_ccd.bench.peers.WarpMeshPipeline`: one ``wp.Mesh``
+refit over all world vertices, a query per triangle, ``wp.intersect_tri_tri``), its frame
+(``detect``: the faster of eager and graph) and its refit alone (``refit``). The last frame's
+object pairs of both are compared (reported, as the scaling benchmark's checks do; near-touching
+pairs may differ, :mod:`warp_ccd.bench.compare`).
+
+    PYTHONPATH=. python bench/bench_deforming.py --device cuda:0 --objects 1000 10000 \\
+        --out bench/results/deforming_cuda0.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
+import warp_ccd as wc
+from warp_ccd.bench.peers import WarpMeshPipeline
+from warp_ccd.bench.scaling import DevicePeerMethod, environment, write_json
+from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.pipeline import STAGES
+
+DT = 1.0 / 60.0
+
+
+@wp.kernel
+def _deform_kernel(
+    rest: wp.array[wp.vec3],
+    vertex_instance: wp.array[wp.int32],
+    centre: wp.array[wp.vec3],
+    phase: wp.array[wp.float32],
+    t: float,
+    # Outputs
+    world_vertex: wp.array[wp.vec3],
+):
+    """One thread per vertex: breathing, a wobble and a drift of its object about its centre."""
+    v = wp.tid()
+    i = vertex_instance[v]
+    c = centre[i]
+    p = rest[v] - c
+    ph = phase[i]
+    s = 1.0 + 0.1 * wp.sin(3.0 * t + ph)
+    shear = 0.15 * wp.sin(2.0 * t + ph)
+    drift = wp.vec3(0.3 * wp.cos(t + ph), 0.3 * wp.sin(t + ph), 0.0)
+    world_vertex[v] = c + drift + wp.vec3(p[0] * s + shear * p[2], p[1] * s, p[2] * s)
+
+
+def deforming_scene(n: int, level: int, seed: int, device) -> tuple:
+    """``(scene, mover)``: the deforming scene and ``mover(t)``, which enqueues the move to time ``t``."""
+    rigid = wc.Scene.random(n, seed=seed, shapes=(f"icosphere{level}",), device=device)
+    rigid.advance(DT)
+    world = rigid.world_vertex.numpy()
+    _, tri = wc.icosphere(level)
+    per = len(world) // max(n, 1)
+    meshes = [(world[k * per:(k + 1) * per], tri) for k in range(n)]
+    scene = wc.Scene(meshes, np.arange(n), deforming=True, device=device)
+    rest = wp.clone(scene.world_vertex)
+    centre = wp.array(world.reshape(n, per, 3).mean(axis=1) if n else np.zeros((0, 3)), dtype=wp.vec3,
+                      device=device)
+    phase = wp.array(np.random.default_rng(seed).uniform(0, 2 * np.pi, n).astype(np.float32), device=device)
+
+    def mover(t: float) -> None:
+        wp.launch(_deform_kernel, dim=scene.num_world_vertices,
+                  inputs=[rest, scene.vertex_instance, centre, phase, float(t)], outputs=[scene.world_vertex],
+                  device=device)
+
+    return scene, mover
+
+
+def _stats(values) -> dict:
+    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
+
+
+def _timed(fn, device) -> float:
+    wp.synchronize_device(device)
+    start = time.perf_counter()
+    fn()
+    wp.synchronize_device(device)
+    return (time.perf_counter() - start) * 1e3
+
+
+def run(n: int, args, device) -> list[dict]:
+    """Rows for one object count: ours at each leaf size, then the built-in peer."""
+    scene, mover = deforming_scene(n, args.level, args.seed, device)
+    rows = []
+    clock = [0.0]
+
+    def move():
+        clock[0] += DT
+        mover(clock[0])
+
+    truth = None
+    for leaf in args.leaf_sizes:
+        pipe = wc.CollisionPipeline(scene, leaf_size=leaf)
+        timed = wc.CollisionPipeline(scene, leaf_size=leaf, timings=True)
+        frames, stages, refits = [], {s: [] for s in (*STAGES, "total")}, []
+        refit_graph = None
+        if device.is_cuda:
+            with wp.ScopedCapture(device=device) as capture:
+                pipe.boxes.refit(scene)
+            refit_graph = capture.graph
+        for k in range(args.warmup + args.frames):
+            ms = _timed(lambda: (move(), pipe.detect()), device)
+            res = pipe.detect()  # the same vertices again: a result to keep (the timed one is its twin)
+            t = timed.detect().timings
+            r = _timed((lambda: wp.capture_launch(refit_graph)) if refit_graph else (lambda: pipe.boxes.refit(scene)),
+                       device)
+            if k >= args.warmup:
+                frames.append(ms)
+                refits.append(r)
+                for s in stages:
+                    stages[s].append(t[s])
+        counts = {"object_pairs": len(res.object_pairs), "triangle_pairs": res.num_triangle_pairs,
+                  "candidates": res.num_candidates}
+        truth = res.object_pairs if truth is None else truth
+        base = {"method": "warp_ccd", "n_objects": n, "leaf_size": leaf, **counts}
+        rows.append({**base, "stage": "frame", **_stats(frames)})
+        rows.append({**base, "stage": "refit_kernels", **_stats(refits)})
+        rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
+        print(f"{n:>8,} leaf {leaf}: frame {np.median(frames):8.3f} ms, refit {np.median(refits):7.3f} ms (graph), "
+              + ", ".join(f"{s} {np.median(v):.3f}" for s, v in stages.items())
+              + f"; {counts['object_pairs']} object pairs, {counts['candidates']:,} candidates", flush=True)
+    peer = WarpMeshPipeline(scene)
+    method = DevicePeerMethod(peer, device)
+    detect, refit = [], []
+    for k in range(args.warmup + args.frames):
+        t = method.run()
+        r = _timed(peer.refit, device)
+        if k >= args.warmup:
+            detect.append(min(v for key, v in t.items() if key.startswith("detect")))
+            refit.append(r)
+    pairs = method.triangle_pairs()
+    peer_objects = np.unique(pairs[:, [0, 2]], axis=0) if len(pairs) else np.zeros((0, 2), np.int32)
+    same = {tuple(p) for p in peer_objects.tolist()} == {tuple(p) for p in truth.tolist()}
+    base = {"method": "warp_builtin", "n_objects": n, "leaf_size": None, "object_pairs": len(peer_objects),
+            "triangle_pairs": len(pairs), "candidates": None, "same_object_pairs": same}
+    rows.append({**base, "stage": "detect", **_stats(detect)})
+    rows.append({**base, "stage": "refit", **_stats(refit)})
+    print(f"{n:>8,} built-in: detect {np.median(detect):8.3f} ms, refit {np.median(refit):7.3f} ms (eager); "
+          f"{len(peer_objects)} object pairs ({'the same' if same else 'NOT the same'} as warp_ccd's)", flush=True)
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--objects", type=lambda x: int(float(x)), nargs="+", default=[1000, 10000])
+    parser.add_argument("--level", type=int, default=3, help="icosphere level (3: 1,280 triangles)")
+    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--frames", type=int, default=10)
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="JSON file")
+    args = parser.parse_args(argv)
+    quiet_warp()
+    device = resolve_device(args.device)
+    rows = []
+    document = {**environment(device), "config": vars(args), "rows": rows}
+    for n in args.objects:
+        rows += run(n, args, device)
+        if args.out:
+            write_json(args.out, document)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
