@@ -65,7 +65,7 @@ for part in $parts; do
         step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles poly 80 --frames $frames \
             --warmup 3 --out "$out/scaling_$tag.json" --plot "$out/scaling_$tag.png"
         step python3 -m warp_ccd.bench --device "$device" --objects $mixed --triangles mixed --frames $frames \
-            --warmup 3 --peers builtin,fcl --out "$out/scaling_mixed_$tag.json" --plot "$out/scaling_mixed_$tag.png" ;;
+            --warmup 3 --peers builtin --out "$out/scaling_mixed_$tag.json" --plot "$out/scaling_mixed_$tag.png" ;;
     boxes)
         step python3 bench/bench_box_tests.py --device "$device" --cases $boxcases --frames $((frames / 2)) \
             --out "$out/box_tests_$tag.json" ;;

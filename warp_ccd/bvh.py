@@ -25,7 +25,7 @@ of the object's *box space*:
   (:mod:`warp_ccd.mid_phase`) tests one object's boxes against the other's under the pair's
   relative transform, as FCL does; the broad phase's object box is the union of the shape's cut
   boxes (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
-  vertices (one thread an object either way; by default the vertices of objects of up to 2,048,
+  vertices (one thread an object either way; by default the vertices of objects of up to 1,024,
   whose cuts are fewer, bigger boxes, and the cut of bigger ones, whose cuts are many small ones).
 * **deforming objects** (``scene.instance_deforming_np``) have boxes of their own, in world space,
   refit every frame from their world vertices: instances of small trees (up to 255 nodes:
@@ -60,11 +60,13 @@ LEAF_SIZE_MAX = 256
 """Most triangles per leaf: a traversal thread emits up to 16 leaf pairs of ``leaf_size**2``
 rows at once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
 
-OBJECT_BOUNDS = {"auto": 2048, "tree": -1, "vertices": 2**31 - 1}
+OBJECT_BOUNDS = {"auto": 1024, "tree": -1, "vertices": 2**31 - 1}
 """How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
-vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 2,048 (on the
-H100 the vertices' boxes of 10^4 icospheres of 642 vertices took 0.18 ms against 0.06 for the
-cuts' of 32 boxes, and the looser boxes cost the traversal 1.1 ms more)."""
+vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 1,024. On the
+H100 (``bench/results/box_tests_cuda0.json``) the vertices' boxes of 10^4 icospheres of 642
+vertices took 0.18 ms against 0.06 for the cuts' of 32 boxes, whose looser boxes cost the
+traversal 1.1 ms more; but for 1,000 objects of up to 6,480 vertices the vertices took 0.96 ms
+against 0.16, for a frame 0.7 ms slower."""
 
 WORLD_ERROR_ULPS = 128.0
 """Bound on the rounding of a world vertex computed from its pose (``pose * (scale * p)``: a
@@ -428,7 +430,7 @@ class SceneBVH:
             ``"vertices"`` the box of its world vertices (tight; a thread reads them all);
             ``"tree"`` the union of its shape's cut boxes under its pose (a few boxes; loose where
             the cut's boxes are big, in small trees); ``"auto"`` (default) the vertices of objects
-            of up to 2,048 vertices, the tree of bigger ones (:data:`OBJECT_BOUNDS`).
+            of up to 1,024 vertices, the tree of bigger ones (:data:`OBJECT_BOUNDS`).
         small_subtree: largest subtree one thread of the build finishes alone (default: see
             :class:`~warp_ccd.bvh_build.TreeBuild`).
 
