@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 import numpy as np
 import warp as wp
@@ -36,6 +35,7 @@ import warp as wp
 import warp_ccd as wc
 from warp_ccd.bench.peers import WarpMeshPipeline
 from warp_ccd.bench.scaling import DevicePeerMethod, environment, write_json
+from warp_ccd.bench.timing import synced_ms
 from warp_ccd.cli_common import quiet_warp, resolve_device
 from warp_ccd.pipeline import STAGES
 
@@ -90,14 +90,6 @@ def _stats(values) -> dict:
     return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
-def _timed(fn, device) -> float:
-    wp.synchronize_device(device)
-    start = time.perf_counter()
-    fn()
-    wp.synchronize_device(device)
-    return (time.perf_counter() - start) * 1e3
-
-
 def run(n: int, args, device) -> list[dict]:
     """Rows for one object count: ours at each leaf size, then the built-in peer."""
     scene, mover = deforming_scene(n, args.level, args.seed, device)
@@ -118,11 +110,11 @@ def run(n: int, args, device) -> list[dict]:
                 pipe.boxes.refit(scene)
             refit_graph = capture.graph
         for k in range(args.warmup + args.frames):
-            ms = _timed(lambda: (move(), pipe.detect()), device)
+            ms = synced_ms(lambda: (move(), pipe.detect()), device)
             res = pipe.detect()  # the same vertices again: a result to keep (the timed one is its twin)
             t = timed.detect().timings
-            r = _timed((lambda: wp.capture_launch(refit_graph)) if refit_graph else (lambda: pipe.boxes.refit(scene)),
-                       device)
+            refit = (lambda: wp.capture_launch(refit_graph)) if refit_graph else (lambda: pipe.boxes.refit(scene))
+            r = synced_ms(refit, device)
             if k >= args.warmup:
                 frames.append(ms)
                 refits.append(r)
@@ -143,7 +135,7 @@ def run(n: int, args, device) -> list[dict]:
     detect, refit = [], []
     for k in range(args.warmup + args.frames):
         t = method.run()
-        r = _timed(peer.refit, device)
+        r = synced_ms(peer.refit, device)
         if k >= args.warmup:
             detect.append(min(v for key, v in t.items() if key.startswith("detect")))
             refit.append(r)
