@@ -193,10 +193,9 @@ def test_deforming_twisting_sphere(device):
 
 
 def deforming_copy(scene, mask=True):
-    """The scene's objects where they are now, as a scene whose objects in ``mask`` deform."""
-    return wc.Scene.from_meshes(scene.world_meshes(), deforming=True, device=scene.device) if mask is True else \
-        wc.Scene([m for m in scene.world_meshes()], np.arange(scene.num_objects), deforming=mask,
-                 device=scene.device)
+    """The scene's objects where they are now, one shape each, as a scene whose objects in ``mask``
+    deform (all of them by default)."""
+    return wc.Scene(scene.world_meshes(), np.arange(scene.num_objects), deforming=mask, device=scene.device)
 
 
 def test_refit_paths_agree(device):

@@ -20,7 +20,7 @@ from warp_ccd.usd_import import UsdMeshImport, stage_time_codes
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
-from usd_stages import define_mesh, grid, mixed_stage, prism, world_polygon_meshes  # noqa: E402
+from usd_stages import define_mesh, fan, grid, mixed_stage, prism, world_polygon_meshes  # noqa: E402
 
 from oracles import triangle_pairs_fcl  # noqa: E402
 
@@ -68,20 +68,6 @@ def box(lo=(0.0, 0.0, 0.0), hi=(1.0, 1.0, 1.0)):
               [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]]
     quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [0, 4, 7, 3], [1, 2, 6, 5]]
     return points, [4] * 6, [i for q in quads for i in q]
-
-
-def fan(counts, indices, holes=()):
-    """Fan triangles and their faces, plain loops (as the USD import is documented to fan)."""
-    tris, faces, k = [], [], 0
-    for f, c in enumerate(counts):
-        poly = list(indices[k:k + c])
-        k += c
-        if f in holes:
-            continue
-        for j in range(1, c - 1):
-            tris.append((poly[0], poly[j], poly[j + 1]))
-            faces.append(f)
-    return np.array(tris, np.int32).reshape(-1, 3), np.array(faces, np.int32)
 
 
 def path_pairs(names, pairs):

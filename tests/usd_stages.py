@@ -153,11 +153,16 @@ def mixed_stage(path=None, num_frames: int = 24):
     return stage
 
 
-def _fan(counts, indices, holes):
-    tris, faces = [], []
-    k = 0
+def fan(counts, indices, holes=()):
+    """Fan triangles of USD polygons and the face of each, plain loops (as the USD import is
+    documented to fan: ``n - 2`` triangles a face from its first vertex, faces in ``holes`` left out).
+
+    Returns:
+        ``(triangles (m, 3) int32, faces (m,) int32)``.
+    """
+    tris, faces, k = [], [], 0
     for f, c in enumerate(counts):
-        poly = indices[k:k + c]
+        poly = list(indices[k:k + c])
         k += c
         if f in holes:
             continue
@@ -185,8 +190,8 @@ def world_polygon_meshes(stage, time) -> dict:
         mesh = UsdGeom.Mesh(prim)
         points = np.asarray(mesh.GetPointsAttr().Get(code), np.float64)
         holes = set(mesh.GetHoleIndicesAttr().Get(code) or [])
-        tri, face = _fan(list(mesh.GetFaceVertexCountsAttr().Get(code)),
-                         list(mesh.GetFaceVertexIndicesAttr().Get(code)), holes)
+        tri, face = fan(list(mesh.GetFaceVertexCountsAttr().Get(code)),
+                        list(mesh.GetFaceVertexIndicesAttr().Get(code)), holes)
         return points, tri, face
 
     it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))

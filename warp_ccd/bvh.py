@@ -478,7 +478,6 @@ class SceneBVH:
             raise ValueError(f"scene too large for the BVH: {own_slot[-1]} tree node boxes (limit 2**31 - 1)")
         self.num_node_slots = int(own_slot[-1])
         inode = np.where(deforming, own_slot[:-1], shape_slot[inst_shape] if n else 0)
-        self.max_depth = int(sizes.num_levels.max()) if num_shapes else 0
         below = sizes.num_levels - 1 - build.layout_cut_depth[build.shape_layout]
         self.max_depth_below_cut = int(np.maximum(below, 0).max()) if num_shapes else 0
         # Where each shape's first deforming object's world vertices start, which a rebuild reads
