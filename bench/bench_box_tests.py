@@ -1,12 +1,12 @@
 """Benchmark: the traversal's options on the scaling scenes: its box test (3 or 6 separating axes),
 the rigid objects' boxes for the broad phase (from world vertices, from the tree, or by size), the
-leaf size and the traversal's steps per round.
+leaf size and the traversal's threads per multiprocessor.
 
 For each scene (``--cases`` of ``TRIANGLES:N``, a ``--triangles`` spec of the scaling benchmark and
-an object count) and each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and ``--steps``
-(:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``, ``object_bounds``,
-``leaf_size``, and :attr:`~warp_ccd.mid_phase.MidPhaseBVH.steps_per_round`), after ``--warmup``
-frames: ``--frames``
+an object count) and each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and
+``--threads-per-sm`` (:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``,
+``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd.mid_phase.MidPhaseBVH.num_blocks`
+on CUDA), after ``--warmup`` frames: ``--frames``
 frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
 a synchronisation before and after (``frame``), then as many timed stage by stage
 (``timings=True``: ``refit``, ``broad``, ``mid``, ``narrow``, each synchronised), min and median;
@@ -29,6 +29,7 @@ import warp as wp
 
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
 from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.mid_phase import EXPAND_THREADS_PER_SM
 from warp_ccd.pipeline import STAGES, CollisionPipeline
 from warp_ccd.scene import Scene
 
@@ -49,15 +50,22 @@ def _stats(values: list) -> dict:
     return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
+def _set_grid(pipe: CollisionPipeline, threads_per_sm: int) -> None:
+    """The expansion grid of ``threads_per_sm`` threads per multiprocessor (CUDA; the CPU keeps one block)."""
+    mid = pipe.mid
+    if mid.device.is_cuda:
+        mid.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim
+
+
 def run(spec: str, n: int, args, device) -> list[dict]:
     """Rows of one scene: every option combination, frames then stages."""
     _, shapes = parse_triangles(spec)
     rows, pairs_seen = [], None
-    for axes, bounds, leaf, steps in itertools.product(args.axes, args.bounds, args.leaf_sizes, args.steps):
+    for axes, bounds, leaf, threads in itertools.product(args.axes, args.bounds, args.leaf_sizes, args.threads_per_sm):
         scene = Scene.random(n, seed=args.seed, device=device, **({} if shapes is None else {"shapes": shapes}))
         options = dict(separating_axes=axes, object_bounds=bounds, leaf_size=leaf)
         pipe = CollisionPipeline(scene, **options)
-        pipe.mid.steps_per_round = steps
+        _set_grid(pipe, threads)
         frames = []
         for k in range(args.warmup + args.frames):
             wp.synchronize_device(device)
@@ -72,11 +80,11 @@ def run(spec: str, n: int, args, device) -> list[dict]:
         if pairs_seen is None:
             pairs_seen = pairs
         elif not np.array_equal(pairs, pairs_seen):
-            raise SystemExit(f"{spec}:{n} {options} steps={steps}: other triangle pairs than the first combination")
-        base = {"triangles": spec, "n_objects": n, **options, "steps_per_round": steps, **counts}
+            raise SystemExit(f"{spec}:{n} {options} threads={threads}: other triangle pairs than the first combination")
+        base = {"triangles": spec, "n_objects": n, **options, "threads_per_sm": threads, **counts}
         rows.append({**base, "stage": "frame", **_stats(frames)})
         timed = CollisionPipeline(scene, timings=True, **options)
-        timed.mid.steps_per_round = steps
+        _set_grid(timed, threads)
         stages = {s: [] for s in (*STAGES, "total")}
         for k in range(args.warmup + args.frames):
             scene.advance(0.0)  # same poses: the frame above's scene, timed stage by stage
@@ -86,7 +94,7 @@ def run(spec: str, n: int, args, device) -> list[dict]:
                     stages[s].append(t[s])
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
-        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  steps {steps:>3}"
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
               f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
@@ -103,7 +111,8 @@ def main(argv=None) -> int:
                         choices=["auto", "vertices", "tree"])
     parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[None],
                         help="leaf sizes (default: the pipeline's own)")
-    parser.add_argument("--steps", type=int, nargs="+", default=[32], help="traversal steps per round")
+    parser.add_argument("--threads-per-sm", type=int, nargs="+", default=[EXPAND_THREADS_PER_SM],
+                        help="threads per multiprocessor of each expansion launch (CUDA; default: %(default)s)")
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)

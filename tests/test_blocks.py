@@ -65,14 +65,16 @@ def test_sap_in_blocks(device, blocks):
     assert np.array_equal(got, box_pairs_numpy(lo, hi))
 
 
-@pytest.mark.parametrize("cut_depth", [0, 3])
-def test_traversal_in_blocks(device, blocks, cut_depth):
-    """Candidates reserved per block and round: from the roots (whole trees: more overlapping
-    leaves per item than a thread holds) and from the cut, with a candidate buffer of capacity 1."""
+@pytest.mark.parametrize("front_capacity", [1, None])
+def test_traversal_in_blocks(device, blocks, front_capacity):
+    """Front entries and candidates reserved per block and round, with a candidate buffer (and a
+    front) of capacity 1."""
     scene = wc.Scene.random(30, seed=4, shapes=("cube", "icosphere3", "icosphere4"), density=0.08, device=device)
     scene.advance(0.4)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
-    pipe = wc.CollisionPipeline(scene, cut_depth=cut_depth, candidate_capacity=1)
+    pipe = wc.CollisionPipeline(scene, candidate_capacity=1)
+    if front_capacity is not None:
+        pipe.mid.front._allocate(front_capacity)
     assert pipe.mid.block_dim == BLOCK_DIM
     got = pipe.detect()
     assert ref.num_triangle_pairs > 0

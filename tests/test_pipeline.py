@@ -53,32 +53,29 @@ def test_pipeline_options_agree(device, options):
     assert np.array_equal(got.colliding, ref.colliding)
 
 
-@pytest.mark.parametrize("cut_depth", [0, 3])
-def test_traversal_cut_levels(device, cut_depth):
-    """A frame starts its descents at the cuts, or one level deeper when the last frame's items (at
-    most quadrupled by that level) fit one round of the grid; both find the same pairs."""
+@pytest.mark.parametrize("front_capacity", [1, None])
+def test_traversal_front(device, front_capacity):
+    """The descent level by level: trees of different depths end together at leaves (the last
+    level's front is empty), the front's counter holds its largest level, and a front of capacity 1
+    grows until the frame fits; the pairs are those of every triangle pair."""
     scene = wc.Scene.random(80, seed=2, shapes=("cube", "icosphere2", "dodecahedron"), density=0.2, device=device)
     scene.advance(0.3)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
-    pipe = wc.CollisionPipeline(scene, cut_depth=cut_depth)
+    pipe = wc.CollisionPipeline(scene)
     mid = pipe.mid
-    threads = mid.num_blocks * mid.block_dim
-    pipe.detect()  # sizes the buffers (both levels find the same candidates), so no frame below runs twice
-    items, candidates = {}, {}
-    for last_items, last_deep, deep in ((0, 0, 1), (threads // 4, 0, 1), (threads // 4 + 1, 0, 0), (threads, 1, 1),
-                                        (threads + 1, 1, 0), (2**62, 0, 0)):
-        mid._load.assign(np.array([last_items, last_deep], np.int64))
-        got = pipe.detect()
-        assert got.num_broad_pairs > 0
-        assert mid._cut_level.numpy()[0] == deep
-        assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
-        assert np.array_equal(mid._load.numpy(), [mid._item_end.numpy()[got.num_broad_pairs - 1], deep])
-        items[deep] = mid._load.numpy()[0]
-        rows = sorted(map(tuple, mid.candidates.data.numpy()[: got.num_candidates].tolist()))
-        assert candidates.setdefault(deep, rows) == rows
+    if front_capacity is not None:
+        mid.front._allocate(front_capacity)
+    got = pipe.detect()
     assert ref.num_triangle_pairs > 0
-    assert items[1] > items[0]  # the deeper cut has more subtrees
-    assert candidates[0] == candidates[1]  # and finds the same triangle pairs
+    assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
+    assert mid.num_levels == pipe.boxes.num_levels - 1 == 8  # icosphere2: 320 triangles, 160 leaves of 2
+    levels = mid._level_count.numpy()
+    assert levels[-1] == 0 and levels[1:-1].min() > 0
+    assert mid.front.last_count == levels.max() <= mid.front.capacity
+    if front_capacity is not None:
+        assert got.runs >= 2  # the front grew (a frame overflowing at one level counts less below it)
+    again = pipe.detect()
+    assert again.runs == 1 and np.array_equal(again.triangle_pairs, ref.triangle_pairs)
 
 
 def test_timings(device):

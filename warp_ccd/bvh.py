@@ -421,10 +421,9 @@ class SceneBVH:
             in two launches, leaves then inner nodes (an inner node reads all its leaves); bigger
             trees level by level, one thread per node.
         cut_depth: least level of each tree's cut (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`),
-            where the traversal starts its work items; big trees cut deeper, so that a cut's
-            subtrees hold about ``cut_triangles`` triangles at most
-            (:meth:`~warp_ccd.bvh_build.TreeSizes.cut_depth`). The trees also keep the cut one level
-            deeper, for frames with little work (:class:`~warp_ccd.mid_phase.MidPhaseBVH`).
+            whose boxes under the pose make a big rigid object's box (``object_bounds``); big
+            trees cut deeper, so that a cut's subtrees hold about ``cut_triangles`` triangles at
+            most (:meth:`~warp_ccd.bvh_build.TreeSizes.cut_depth`).
         cut_triangles: see ``cut_depth`` (:data:`~warp_ccd.bvh_build.CUT_TRIANGLES`).
         object_bounds: a rigid object's box for the broad phase, one thread an object:
             ``"vertices"`` the box of its world vertices (tight; a thread reads them all);
@@ -440,6 +439,7 @@ class SceneBVH:
         build: the :class:`~warp_ccd.bvh_build.TreeBuild` that made the trees (device arrays).
         instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
+        num_levels: levels of the deepest tree (the root alone: 1).
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
@@ -478,8 +478,7 @@ class SceneBVH:
             raise ValueError(f"scene too large for the BVH: {own_slot[-1]} tree node boxes (limit 2**31 - 1)")
         self.num_node_slots = int(own_slot[-1])
         inode = np.where(deforming, own_slot[:-1], shape_slot[inst_shape] if n else 0)
-        below = sizes.num_levels - 1 - build.layout_cut_depth[build.shape_layout]
-        self.max_depth_below_cut = int(np.maximum(below, 0).max()) if num_shapes else 0
+        self.num_levels = int(sizes.num_levels.max()) if num_shapes else 1
         # Where each shape's first deforming object's world vertices start, which a rebuild reads
         # (-1: none, the shape's own vertices).
         first = np.full(num_shapes, n, np.int64)

@@ -44,13 +44,11 @@ import warp as wp
 
 from .buffers import (
     BLOCK_DIM,
-    ITEM_LIST_SIZE,
     GrowableBuffer,
     block_dim_for,
     block_reserve,
     upper_bound,
     used_count,
-    vec_items,
 )
 from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius
 from .precision import precision_overloads
@@ -59,21 +57,9 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
 
-STACK_SIZE = 48
-"""Node pairs on a descent's stack: a step pops one pair and pushes at most two, each a level
-deeper on one side, so subtrees of depths ``Da``, ``Db`` below the cuts need ``Da + Db + 1``."""
-
-STEPS_PER_ROUND = 32
-"""Default node-pair steps a traversal thread takes between two of its block's reservations of rows
-(:attr:`MidPhaseBVH.steps_per_round`; a round ends at a barrier: fewer steps, more barriers; more,
-longer waits of full lists)."""
-
-vec_stack = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
-
-THREADS_PER_SM = 512
-"""Threads of the traversal per streaming multiprocessor on CUDA: an H100 SM keeps two blocks of
-256 resident at the kernel's register count; 512 is one wave (1,024 was two, the second mostly
-blocks that find no item)."""
+EXPAND_THREADS_PER_SM = 2048
+"""Threads of each expansion launch per streaming multiprocessor on CUDA (a fixed grid, so that the
+frame can be a CUDA graph; its threads stride over the level's node pairs)."""
 
 TEST_ERROR_ULPS = 32.0
 """Bound on the rounding of one box test in float32 (centres, half extents, the transform applied),
@@ -82,7 +68,7 @@ in units in the last place of the boxes' and the translation's sizes."""
 SEPARATING_AXES = (3, 6)
 """Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
 
-assert THREADS_PER_SM % BLOCK_DIM == 0
+assert EXPAND_THREADS_PER_SM % BLOCK_DIM == 0
 
 
 @wp.struct
@@ -93,10 +79,6 @@ class TreePair:
 
     a: int
     b: int
-    num_cut_a: int  # subtrees of each side's cut
-    num_cut_b: int
-    cut_a_start: int  # in TreeView.cut_node
-    cut_b_start: int
     node_a_start: int  # global node id of local node 0 (in the shape's layout)
     node_b_start: int
     slot_a_start: int  # the object's node boxes in TreeView.node_lower/upper
@@ -111,31 +93,6 @@ class TreePair:
     a_to_b_shift: wp.vec3
     pad_a: float  # added to every half extent of a test in a's space (rounding bound)
     pad_b: float
-
-
-@wp.func
-def _cut_start(tree: TreeView, layout: int, deep: int) -> int:
-    """Where the layout's cut (``deep`` 0) or its cut one level deeper (1) starts in ``cut_node``."""
-    return tree.layout_cut_start[2 * layout + deep]
-
-
-@wp.func
-def _num_cut(tree: TreeView, layout: int, deep: int) -> int:
-    return _cut_start(tree, layout, deep + 1) - _cut_start(tree, layout, deep)
-
-
-@wp.func
-def _deep_cut(load: wp.array[wp.int64], num_threads: int) -> int:
-    """1 when this frame's traversal starts one level below the cuts: when the last frame's items,
-    at most quadrupled by that level (each side's cut at most doubles), fit in one round of the
-    grid; else 0. ``load``: the last frame's items and whether it went deep (a frame run again
-    after a buffer grew judges by its first, cut-short run: at worst one heavy frame goes deep)."""
-    room = wp.int64(num_threads)
-    if load[1] == wp.int64(0):
-        room = room / wp.int64(4)
-    if load[0] <= room:
-        return 1
-    return 0
 
 
 @wp.func
@@ -184,18 +141,13 @@ def _map_between(rot_a: wp.mat33d, t_a: wp.vec3d, s_a: wp.float64, rot_b: wp.mat
 @wp.func
 def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose: wp.array[Any],
                instance_scale: wp.array[wp.float32], instance_deforming: wp.array[wp.int32], world_eps: float,
-               a: int, b: int, deep: int) -> TreePair:
-    """The :class:`TreePair` of objects ``a < b``, both trees starting from their cut, or one level
-    deeper (``deep``)."""
+               a: int, b: int) -> TreePair:
+    """The :class:`TreePair` of objects ``a < b``."""
     la = tree.shape_layout[instance_shape[a]]
     lb = tree.shape_layout[instance_shape[b]]
     r = TreePair()
     r.a = a
     r.b = b
-    r.num_cut_a = _num_cut(tree, la, deep)
-    r.num_cut_b = _num_cut(tree, lb, deep)
-    r.cut_a_start = _cut_start(tree, la, deep)
-    r.cut_b_start = _cut_start(tree, lb, deep)
     r.node_a_start = tree.layout_node_start[la]
     r.node_b_start = tree.layout_node_start[lb]
     r.slot_a_start = tree.instance_node_start[a]
@@ -229,7 +181,7 @@ def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose
 
 
 @wp.kernel
-def _pair_count_kernel(
+def _pair_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
     instance_pose: wp.array[Any],
@@ -239,35 +191,27 @@ def _pair_count_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
-    load: wp.array[wp.int64],
-    num_threads: int,
     # Outputs
     tree_pair: wp.array[TreePair],
     pair_rows: wp.array[wp.vec4i],
-    pair_items: wp.array[wp.int64],
-    cut_level: wp.array[wp.int32],
+    level_count: wp.array[wp.int64],
 ):
-    """One thread per pair slot: the pair's :class:`TreePair`, what its rows name (``(a, b, a's
-    triangle order start, b's)``, read again when rows are written) and work items (``a``'s cut times
-    ``b``'s), 0 items past the counter; every pair starts from the cuts, or one level below them
-    when the last frame's ``load`` was light (:func:`_deep_cut`, the choice also written to
-    ``cut_level``)."""
+    """One thread per stored pair: the pair's :class:`TreePair` and what its rows name (``(a, b,
+    a's triangle order start, b's)``, read again when rows are written); thread 0 also zeroes the
+    front's counts of the levels below the roots (``level_count[1:]``)."""
     k = wp.tid()
-    deep = _deep_cut(load, num_threads)
     if k == 0:
-        cut_level[0] = deep
+        for i in range(1, level_count.shape[0]):
+            level_count[i] = wp.int64(0)
     if k >= used_count(pair_count, pair_capacity):
-        pair_items[k] = wp.int64(0)
         return
     p = pair[k]
-    r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps, p[0], p[1],
-                   deep)
+    r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps, p[0], p[1])
     tree_pair[k] = r
     pair_rows[k] = wp.vec4i(r.a, r.b, r.tri_a_start, r.tri_b_start)
-    pair_items[k] = wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b)
 
 
-_PAIR_COUNT = precision_overloads(_pair_count_kernel, lambda s, v, q, t: {"instance_pose": wp.array[t]})
+_PAIR = precision_overloads(_pair_kernel, lambda s, v, q, t: {"instance_pose": wp.array[t]})
 
 
 @wp.func
@@ -321,167 +265,170 @@ def _write_rows(
 
 
 @wp.func
-def _block_any(flag: int) -> int:
-    """Cooperative: 1 when ``flag`` is 1 in some thread of the block (the same in every thread)."""
-    return wp.tile_extract(wp.tile_max(wp.tile(flag)), 0)
+def _is_leaf(tree: TreeView, node: int) -> bool:
+    """Whether ``node`` (global id) is a leaf."""
+    return tree.node_child[node][0] < 0
+
+
+@wp.func
+def _overlap(tree: TreeView, r: TreePair, na: int, nb: int, axes: int) -> bool:
+    """Whether node ``na`` of ``a``'s tree and ``nb`` of ``b``'s (local ids) may overlap."""
+    slot_a = r.slot_a_start + na
+    slot_b = r.slot_b_start + nb
+    return _boxes_overlap_mapped(tree.node_lower[slot_a], tree.node_upper[slot_a], tree.node_lower[slot_b],
+                                 tree.node_upper[slot_b], r, axes)
 
 
 @wp.kernel
-def _traverse_kernel(
+def _expand_kernel(
     tree: TreeView,
     tree_pair: wp.array[TreePair],
     pair_rows: wp.array[wp.vec4i],
-    pair_count: wp.array[wp.int64],
-    pair_capacity: int,
-    pair_item_end: wp.array[wp.int64],
+    front_in: wp.array[wp.vec3i],
+    front_in_count: wp.array[wp.int64],
+    front_in_capacity: int,
+    roots: int,
     num_blocks: int,
+    front_capacity: int,
     candidate_capacity: int,
-    cut_level: wp.array[wp.int32],
     axes: int,
-    steps_per_round: int,
     # Outputs
+    front_out: wp.array[wp.vec3i],
+    front_out_count: wp.array[wp.int64],
+    front_peak: wp.array[wp.int64],
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
-    load: wp.array[wp.int64],
 ):
-    """``num_blocks`` blocks of threads take the work items (inclusive scan ``pair_item_end`` of the
-    pairs' item counts), thread ``t`` items ``t``, ``t + T``, ... (``T`` threads); item ``w`` of
-    pair ``k`` is subtree ``w / Cb`` of ``a``'s cut against subtree ``w % Cb`` of ``b``'s ``Cb``.
+    """One level of the simultaneous descent: each node pair ``(k, na, nb)`` of ``front_in`` (pair
+    ``k``'s nodes, local ids, boxes known to overlap) opens both nodes (a leaf stays itself) and
+    tests the two to four pairs of children; overlapping pairs of two leaves become candidate rows,
+    the others go to ``front_out``. With ``roots`` the entries are the pairs themselves (entry
+    ``k`` is ``(k, 0, 0)``, its roots not tested yet: tested first).
 
-    A thread works in steps, one node pair a step (pop, test both boxes, push two pairs or record a
-    leaf pair), and takes its next item as soon as its stack is empty, so a thread whose item
-    ends early does not wait for the long ones. Every ``steps_per_round`` steps its block
-    reserves all its threads' rows with one atomic add and writes them; a thread whose list of
-    leaf pairs is full waits for that. The block stops when none of its threads has work left.
-    The first thread records the frame's ``load`` (items, deep cut or not) for the next frame."""
+    ``num_blocks`` blocks stride over the entries; each round a block reserves its threads' front
+    slots and rows with one atomic add each (:func:`~warp_ccd.buffers.block_reserve`). The front's
+    counter (``front_peak``) keeps the largest level's count, against the front's capacity."""
     block, lane = wp.tid()
     width = wp.block_dim()
-    num_threads = wp.int64(num_blocks * width)
-    t = wp.int64(block * width + lane)
-    num_pairs = used_count(pair_count, pair_capacity)
-    total = wp.int64(0)
-    if num_pairs > 0:
-        total = pair_item_end[num_pairs - 1]
-    if t == wp.int64(0):
-        load[0] = total
-        load[1] = wp.int64(cut_level[0])
-    if num_pairs == 0:
-        return  # the whole grid returns: no block is left waiting in a cooperative call
-    if wp.int64(block * width) >= total:
-        return  # the whole block: its items, t + r * num_threads, are all past the last
-    k = int(0)
-    item = t - num_threads  # the first fetch makes it t
-    more = int(1)  # items may be left for this thread
-    r = TreePair()
-    stack_a = vec_stack()
-    stack_b = vec_stack()
-    top = int(0)
-    found_k = vec_items()
-    found_a = vec_items()
-    found_b = vec_items()
-    num_found = int(0)
-    busy = int(1)
-    while busy == 1:
-        for _step in range(steps_per_round):
-            if top == 0 and more == 1:
-                item += num_threads
-                if item < total:
-                    k = upper_bound(pair_item_end, k, num_pairs, item)  # items only move forward: so does k
-                    r = tree_pair[k]
-                    w = int(item - (pair_item_end[k] - wp.int64(r.num_cut_a) * wp.int64(r.num_cut_b)))
-                    i = w / r.num_cut_b  # below 2**16 subtrees a side: 32 bits suffice
-                    stack_a[0] = tree.cut_node[r.cut_a_start + i]
-                    stack_b[0] = tree.cut_node[r.cut_b_start + w - i * r.num_cut_b]
-                    top = 1
-                else:
-                    more = 0
-            if top > 0 and num_found < ITEM_LIST_SIZE:
-                top -= 1
-                na = stack_a[top]
-                nb = stack_b[top]
-                slot_a = r.slot_a_start + na
-                slot_b = r.slot_b_start + nb
-                if _boxes_overlap_mapped(tree.node_lower[slot_a], tree.node_upper[slot_a], tree.node_lower[slot_b],
-                                         tree.node_upper[slot_b], r, axes):
-                    ga = r.node_a_start + na
-                    gb = r.node_b_start + nb
-                    ca = tree.node_child[ga]
-                    cb = tree.node_child[gb]
-                    if ca[0] < 0 and cb[0] < 0:
-                        found_k[num_found] = k
-                        found_a[num_found] = ga
-                        found_b[num_found] = gb
-                        num_found += 1
-                    elif cb[0] < 0 or (ca[0] >= 0 and tree.node_triangle[ga][1] >= tree.node_triangle[gb][1]):
-                        stack_a[top] = ca[1]
-                        stack_b[top] = nb
-                        stack_a[top + 1] = ca[0]
-                        stack_b[top + 1] = nb
-                        top += 2
-                    else:
-                        stack_a[top] = na
-                        stack_b[top] = cb[1]
-                        stack_a[top + 1] = na
-                        stack_b[top + 1] = cb[0]
-                        top += 2
+    n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
+    base = block * width
+    while base < n:
+        e = base + lane
+        k = int(0)
+        num_push = int(0)
+        num_leaf = int(0)
+        push_a = wp.vec4i()
+        push_b = wp.vec4i()
+        leaf_a = wp.vec4i()  # global ids
+        leaf_b = wp.vec4i()
         rows = int(0)
-        for m in range(num_found):
-            rows += _leaf_pair_rows(tree, found_a[m], found_b[m])
-        slot = block_reserve(candidate_count, int(lane), rows)
-        for m in range(num_found):
-            slot = _write_rows(tree, pair_rows[found_k[m]], found_a[m], found_b[m], slot, candidate,
-                               candidate_capacity)
-        num_found = 0
-        mine = int(0)
-        if top > 0 or (more == 1 and item + num_threads < total):
-            mine = 1
-        busy = _block_any(mine)
+        if e < n:
+            na = int(0)
+            nb = int(0)
+            if roots != 0:
+                k = e
+            else:
+                f = front_in[e]
+                k = f[0]
+                na = f[1]
+                nb = f[2]
+            r = tree_pair[k]
+            ga = r.node_a_start + na
+            gb = r.node_b_start + nb
+            ca = tree.node_child[ga]
+            cb = tree.node_child[gb]
+            if roots == 0 or _overlap(tree, r, na, nb, axes):
+                if ca[0] < 0 and cb[0] < 0:
+                    leaf_a[0] = ga
+                    leaf_b[0] = gb
+                    num_leaf = 1
+                else:
+                    num_a = 2
+                    if ca[0] < 0:
+                        ca = wp.vec2i(na, na)
+                        num_a = 1
+                    num_b = 2
+                    if cb[0] < 0:
+                        cb = wp.vec2i(nb, nb)
+                        num_b = 1
+                    for i in range(num_a):
+                        xa = ca[i]
+                        leaf_xa = _is_leaf(tree, r.node_a_start + xa)
+                        for j in range(num_b):
+                            xb = cb[j]
+                            if _overlap(tree, r, xa, xb, axes):
+                                if leaf_xa and _is_leaf(tree, r.node_b_start + xb):
+                                    leaf_a[num_leaf] = r.node_a_start + xa
+                                    leaf_b[num_leaf] = r.node_b_start + xb
+                                    num_leaf += 1
+                                else:
+                                    push_a[num_push] = xa
+                                    push_b[num_push] = xb
+                                    num_push += 1
+            for m in range(num_leaf):
+                rows += _leaf_pair_rows(tree, leaf_a[m], leaf_b[m])
+        slot = block_reserve(front_out_count, lane, num_push)
+        if lane == width - 1:
+            wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
+        for m in range(num_push):
+            if slot + wp.int64(m) < wp.int64(front_capacity):
+                front_out[int(slot) + m] = wp.vec3i(k, push_a[m], push_b[m])
+        slot = block_reserve(candidate_count, lane, rows)
+        if num_leaf > 0:
+            row = pair_rows[k]
+            for m in range(num_leaf):
+                slot = _write_rows(tree, row, leaf_a[m], leaf_b[m], slot, candidate, candidate_capacity)
+        base += num_blocks * width
 
 
 class MidPhaseBVH:
-    """Tree-vs-tree traversal over the broad phase's object pairs, in work items over the two trees'
-    cuts (see module docs).
+    """Tree-vs-tree traversal over the broad phase's object pairs, level by level over the front of
+    overlapping node pairs (see module docs).
 
     Args:
         bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
+        front_capacity: initial capacity of each level's front of node pairs (it grows; default
+            four per object).
         separating_axes: 6 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space
-            and ``a``'s in ``b``'s; 3 the first alone (more candidates, less arithmetic a test: on
-            the H100 the frame was 6-12% slower with 3, ``bench/results/box_tests_cuda0.json``).
+            and ``a``'s in ``b``'s; 3 the first alone (more candidates, less arithmetic a test).
         device: Warp device.
 
     Attributes:
         candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
+        front: the :class:`~warp_ccd.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
+            b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
+            counter holds the largest level's count.
+        num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
         separating_axes: as above (read at each launch: a captured frame keeps the value it was
             captured with).
-        steps_per_round: node-pair steps between two reservations of rows (:data:`STEPS_PER_ROUND`).
-        num_blocks, block_dim: the traversal kernel's grid (on the CPU one block, of one thread
-            that takes every item in turn unless ``wp.config.enable_cpu_blocks`` is set).
+        num_blocks, block_dim: each expansion's grid (on the CPU one block, of one thread that takes
+            every node pair in turn unless ``wp.config.enable_cpu_blocks`` is set).
     """
 
-    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, separating_axes: int = 6, device=None):
+    def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
+                 separating_axes: int = 6, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
             raise ValueError(f"separating_axes must be one of {SEPARATING_AXES}, got {separating_axes!r}")
         self.separating_axes = separating_axes
-        self.steps_per_round = STEPS_PER_ROUND
-        if 2 * bvh.max_depth_below_cut + 1 > STACK_SIZE:
-            raise ValueError(f"subtrees of depth {bvh.max_depth_below_cut} below the cuts need a traversal stack "
-                             f"above {STACK_SIZE}")
+        self.num_levels = max(1, bvh.num_levels - 1)
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
+        self.front = GrowableBuffer(wp.vec3i, front_capacity or max(1024, 4 * bvh.lower.shape[0]), self.device,
+                                    "tree-pair front", factor=2)
         self.block_dim = block_dim_for(self.device)
-        self.num_blocks = self.device.sm_count * THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
-        # The last frame's items and cut level (:func:`_deep_cut`); it starts as a heavy frame.
-        self._load = wp.array([2**62, 0], dtype=wp.int64, device=self.device)
-        self._cut_level = wp.zeros(1, dtype=wp.int32, device=self.device)
-        self._items = None
+        self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
+        # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
+        self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
+        self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
+        self._pairs_capacity = -1
 
     @property
     def counters(self) -> list[GrowableBuffer]:
         """The buffers with counters that :meth:`launch` resets and writes, whose counters the caller
-        reads after it: the candidates."""
-        return [self.candidates]
+        reads after it: the front (its largest level), then the candidates."""
+        return [self.front, self.candidates]
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
@@ -489,30 +436,35 @@ class MidPhaseBVH:
         Args:
             scene: the scene whose trees :attr:`bvh` holds (refit for this frame).
             pairs: the broad phase's object pairs.
-            reset_counters: zero the candidates' counter first; False when the caller has.
+            reset_counters: zero the counters of :attr:`counters` first; False when the caller has.
         """
         d = self.device
         if reset_counters:
-            self.candidates.reset()
-        if self._items is None or self._items.shape[0] != pairs.capacity:  # scratch follows the pair capacity
-            self._items = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
-            self._item_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
+            for buffer in self.counters:
+                buffer.reset()
+        if self._pairs_capacity != pairs.capacity:  # scratch follows the pair capacity
+            self._pairs_capacity = pairs.capacity
             self._tree_pair = wp.zeros(pairs.capacity, dtype=TreePair, device=d)
             self._pair_rows = wp.zeros(pairs.capacity, dtype=wp.vec4i, device=d)
         tree = self.bvh.tree
         eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
-        wp.launch(_PAIR_COUNT[scene.precision], dim=pairs.capacity,
+        wp.launch(_PAIR[scene.precision], dim=pairs.capacity,
                   inputs=[tree, scene.instance_shape, scene.instance_pose, scene.instance_scale,
                           self.bvh.instance_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
-                          pairs.capacity, self._load, self.num_blocks * self.block_dim],
-                  outputs=[self._tree_pair, self._pair_rows, self._items, self._cut_level], device=d)
-        wp.utils.array_scan(self._items, self._item_end, inclusive=True)
-        wp.launch_tiled(_traverse_kernel, dim=[self.num_blocks],
-                        inputs=[tree, self._tree_pair, self._pair_rows, pairs.count, pairs.capacity, self._item_end,
-                                self.num_blocks, self.candidates.capacity, self._cut_level, self.separating_axes,
-                                self.steps_per_round],
-                        outputs=[self.candidates.data, self.candidates.count, self._load],
-                        block_dim=self.block_dim, device=d)
+                          pairs.capacity],
+                  outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
+        cap = self.front.capacity
+        halves = (self.front.data[:cap], self.front.data[cap:])
+        cand = self.candidates
+        for level in range(self.num_levels):
+            roots = level == 0
+            wp.launch_tiled(
+                _expand_kernel, dim=[self.num_blocks],
+                inputs=[tree, self._tree_pair, self._pair_rows, halves[(level + 1) % 2],
+                        pairs.count if roots else self._level_views[level], pairs.capacity if roots else cap,
+                        int(roots), self.num_blocks, cap, cand.capacity, self.separating_axes],
+                outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
+                block_dim=self.block_dim, device=d)
 
 
 @wp.kernel

@@ -206,10 +206,8 @@ class CollisionPipeline:
             False launches every kernel from Python (the CPU always does). Both give the same results.
         leaf_size: triangles per tree leaf (``bvh`` mid phase; default :data:`RIGID_LEAF_SIZE`, or
             :data:`DEFORMING_LEAF_SIZE` in a scene with deforming objects).
-        cut_depth: least tree level where the traversal's work items start (``bvh`` mid phase; see
-            :mod:`warp_ccd.mid_phase`): more, shorter items as it grows; 0 descends from the roots of
-            small trees (big trees cut deeper, :class:`~warp_ccd.bvh.SceneBVH`). A frame whose work
-            fits the GPU's threads once starts one level deeper.
+        cut_depth: least level of the tree cut whose boxes make a big rigid object's box for the
+            broad phase (``bvh`` mid phase; ``object_bounds``, :class:`~warp_ccd.bvh.SceneBVH`).
         separating_axes: the traversal's box test (``bvh`` mid phase): 6 (default), the box around
             one object's box in the other's space, both ways round; 3, one way (see
             :mod:`warp_ccd.mid_phase`).
@@ -221,6 +219,8 @@ class CollisionPipeline:
             for object pairs where one object's box holds the other's vertex), in
             :attr:`CollisionResult.containment_pairs`.
         pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
+        front_capacity: initial capacity of the traversal's front of node pairs (``bvh`` mid phase;
+            it grows; default four per object).
         rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
             vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
             <warp_ccd.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
@@ -256,6 +256,7 @@ class CollisionPipeline:
         pair_capacity: int | None = None,
         candidate_capacity: int | None = None,
         hit_capacity: int | None = None,
+        front_capacity: int | None = None,
         rebuild_every: int = 0,
     ):
         if not isinstance(scene, Scene):
@@ -265,7 +266,8 @@ class CollisionPipeline:
         for name, value, minimum, maximum in (("leaf_size", leaf_size, 1, LEAF_SIZE_MAX),
                                               ("pair_capacity", pair_capacity, 1, None),
                                               ("candidate_capacity", candidate_capacity, 1, None),
-                                              ("hit_capacity", hit_capacity, 1, None)):
+                                              ("hit_capacity", hit_capacity, 1, None),
+                                              ("front_capacity", front_capacity, 1, None)):
             if value is None and name != "leaf_size":
                 continue
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum \
@@ -296,7 +298,7 @@ class CollisionPipeline:
             self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth,
                                   object_bounds=object_bounds)
             self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
-                                   separating_axes=separating_axes, device=d)
+                                   front_capacity=front_capacity, separating_axes=separating_axes, device=d)
         else:
             self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
@@ -305,9 +307,13 @@ class CollisionPipeline:
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
         buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
-        # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
-        # mid phase's 2, the narrow phase's 3 (a shortfall upstream scales the estimates downstream).
-        flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
+        # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, then
+        # the mid phase's and the narrow phase's in their order (a shortfall upstream scales the
+        # estimates downstream).
+        flow = [1]
+        for k, stage in enumerate(stages):
+            for _ in stage.counters:
+                flow.append(0 if k < 2 else max(flow) + 1)
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
         self.rebuild_every = int(rebuild_every)
@@ -441,10 +447,12 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
-    # one candidate a triangle per triangle of a leaf, 16 bytes each, and 8 bytes of hits a triangle,
-    # for this call only), where a persistent pipeline starts lean and grows.
+    # one candidate a triangle per triangle of a leaf, 16 bytes each, a node pair of the front a
+    # triangle, 24 bytes, and 8 bytes of hits a triangle, for this call only), where a persistent
+    # pipeline starts lean and grows.
     n, tris = scene.num_objects, scene.num_triangles
     leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
     options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
+    options.setdefault("front_capacity", max(1024, 4 * n, tris))
     return CollisionPipeline(scene, **options).detect()
