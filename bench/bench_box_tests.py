@@ -10,8 +10,9 @@ on CUDA), after ``--warmup`` frames: ``--frames``
 frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
 a synchronisation before and after (``frame``), then as many timed stage by stage
 (``timings=True``: ``refit``, ``broad``, ``mid``, ``narrow``, each synchronised), min and median;
-and the counts of the last frame: broad-phase pairs, candidate triangle pairs, triangle pairs (the
-same for every combination: checked).
+and the counts of the last frame: broad-phase pairs, the traversal front's largest level, candidate
+triangle pairs, those the exact test sent to its touch step, triangle pairs (the same for every
+combination: checked).
 
     PYTHONPATH=. python bench/bench_box_tests.py --device cuda:0 --cases poly:1000000 80:100000 \\
         --out bench/results/box_tests_cuda0.json
@@ -74,7 +75,9 @@ def run(spec: str, n: int, args, device) -> list[dict]:
             wp.synchronize_device(device)
             if k >= args.warmup:
                 frames.append((time.perf_counter() - start) * 1e3)
-        counts = {"broad_pairs": res.num_broad_pairs, "candidates": res.num_candidates,
+        touch = pipe.narrow.touch
+        counts = {"broad_pairs": res.num_broad_pairs, "front_peak": pipe.mid.front.last_count,
+                  "candidates": res.num_candidates, "touch_tests": touch.last_count if touch else None,
                   "triangle_pairs": res.num_triangle_pairs}
         pairs = res.triangle_pairs
         if pairs_seen is None:
@@ -97,7 +100,8 @@ def run(spec: str, n: int, args, device) -> list[dict]:
         print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
               f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
-              f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}", flush=True)
+              f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}"
+              f"  touch tests {counts['touch_tests'] or 0:>10,}  hits {counts['triangle_pairs']:>10,}", flush=True)
     return rows
 
 

@@ -5,7 +5,8 @@ them, as a deforming scene (each object its own mesh). Every frame one kernel mo
 vertex on the device from its rest position: each object breathes (scale ``1 + 0.1 sin``), wobbles
 (a shear growing with height) and drifts on a small circle, so pairs come and go.
 
-For each ``--leaf-sizes`` value, after ``--warmup`` frames, ``--frames`` frames of:
+For each ``--leaf-sizes`` value, from the same start (the clock at 0), after ``--warmup`` frames,
+``--frames`` frames of:
 
 * ``frame``: the move, then ``detect()`` (on CUDA a captured graph), wall-clock with a
   synchronisation before and after;
@@ -16,9 +17,11 @@ For each ``--leaf-sizes`` value, after ``--warmup`` frames, ``--frames`` frames 
 
 and Warp's built-in pipeline (:class:`~warp_ccd.bench.peers.WarpMeshPipeline`: one ``wp.Mesh``
 refit over all world vertices, a query per triangle, ``wp.intersect_tri_tri``), its frame
-(``detect``: the faster of eager and graph) and its refit alone (``refit``). The last frame's
-object pairs of both are compared (reported, as the scaling benchmark's checks do; near-touching
-pairs may differ, :mod:`warp_ccd.bench.compare`).
+(``detect``: the faster of eager and graph) and its refit alone (``refit``). Every leaf size ends on
+the same vertices and must find the same triangle pairs there (else the run stops); the peer's
+triangle pairs on them are judged against ours as the scaling benchmark judges them
+(:func:`~warp_ccd.bench.compare.compare_triangle_pairs`: pairs near touching may differ, and every
+real difference is charged to the method an exact arbiter finds wrong).
 
     PYTHONPATH=. python bench/bench_deforming.py --device cuda:0 --objects 1000 10000 \\
         --out bench/results/deforming_cuda0.json
@@ -33,6 +36,7 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.bench.compare import compare_triangle_pairs
 from warp_ccd.bench.peers import WarpMeshPipeline
 from warp_ccd.bench.scaling import DevicePeerMethod, environment, write_json
 from warp_ccd.bench.timing import synced_ms
@@ -95,12 +99,14 @@ def run(n: int, args, device) -> list[dict]:
     scene, mover = deforming_scene(n, args.level, args.seed, device)
     rows = []
     clock = [0.0]
+    truth = None
 
     def move():
         clock[0] += DT
         mover(clock[0])
 
     for leaf in args.leaf_sizes:
+        clock[0] = 0.0  # every leaf size sees the same frames
         pipe = wc.CollisionPipeline(scene, leaf_size=leaf)
         timed = wc.CollisionPipeline(scene, leaf_size=leaf, timings=True)
         frames, stages, refits = [], {s: [] for s in (*STAGES, "total")}, []
@@ -122,7 +128,10 @@ def run(n: int, args, device) -> list[dict]:
                     stages[s].append(t[s])
         counts = {"object_pairs": len(res.object_pairs), "triangle_pairs": res.num_triangle_pairs,
                   "candidates": res.num_candidates}
-        truth = res.object_pairs  # the scene as the peer will see it: after the last leaf size's frames
+        if truth is None:
+            truth = res.triangle_pairs  # the last frame's vertices: the same for every leaf size, and the peer's
+        elif not np.array_equal(res.triangle_pairs, truth):
+            raise SystemExit(f"{n} objects, leaf {leaf}: other triangle pairs than leaf {args.leaf_sizes[0]}")
         base = {"method": "warp_ccd", "n_objects": n, "leaf_size": leaf, **counts}
         rows.append({**base, "stage": "frame", **_stats(frames)})
         rows.append({**base, "stage": "refit_kernels", **_stats(refits)})
@@ -140,14 +149,13 @@ def run(n: int, args, device) -> list[dict]:
             detect.append(min(v for key, v in t.items() if key.startswith("detect")))
             refit.append(r)
     pairs = method.triangle_pairs()
-    peer_objects = np.unique(pairs[:, [0, 2]], axis=0) if len(pairs) else np.zeros((0, 2), np.int32)
-    same = {tuple(p) for p in peer_objects.tolist()} == {tuple(p) for p in truth.tolist()}
-    base = {"method": "warp_builtin", "n_objects": n, "leaf_size": None, "object_pairs": len(peer_objects),
-            "triangle_pairs": len(pairs), "candidates": None, "same_object_pairs": same}
+    check = compare_triangle_pairs(scene, "warp_ccd", truth, "warp_builtin", pairs)
+    base = {"method": "warp_builtin", "n_objects": n, "leaf_size": None, "object_pairs": check.object_pairs[1],
+            "triangle_pairs": len(pairs), "candidates": None, "check": check.to_dict()}
     rows.append({**base, "stage": "detect", **_stats(detect)})
     rows.append({**base, "stage": "refit", **_stats(refit)})
     print(f"{n:>8,} built-in: detect {np.median(detect):8.3f} ms, refit {np.median(refit):7.3f} ms (eager); "
-          f"{len(peer_objects)} object pairs ({'the same' if same else 'NOT the same'} as warp_ccd's)", flush=True)
+          f"{check.summary()}", flush=True)
     return rows
 
 

@@ -36,7 +36,8 @@ def crowded_cubes(n=300, seed=0):
 def test_crowded_scene_every_pair(device, capacity):
     """300 cubes around one point: every one of the 44,850 pairs, from any initial capacity."""
     meshes, transforms = crowded_cubes()
-    caps = dict(pair_capacity=capacity, candidate_capacity=capacity, hit_capacity=capacity) if capacity else {}
+    caps = dict(pair_capacity=capacity, candidate_capacity=capacity, hit_capacity=capacity,
+                front_capacity=capacity) if capacity else {}
     res = wc.collide(meshes, transforms, device=device, **caps)
     assert len(res.object_pairs) == 300 * 299 // 2
     if capacity:

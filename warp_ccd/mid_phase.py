@@ -57,9 +57,11 @@ wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
 
-EXPAND_THREADS_PER_SM = 2048
-"""Threads of each expansion launch per streaming multiprocessor on CUDA (a fixed grid, so that the
-frame can be a CUDA graph; its threads stride over the level's node pairs)."""
+EXPAND_THREADS_PER_SM = 1024
+"""Most threads of an expansion launch per streaming multiprocessor on CUDA: the grid is fixed (so
+that the frame can be a CUDA graph), no bigger than one thread per slot of the level's input (a
+small scene launches few blocks), and its threads stride over the level's node pairs. On the H100
+1,024 and 2,048 gave the same frames within noise (``bench/results/box_tests_sweep_cuda0.json``)."""
 
 TEST_ERROR_ULPS = 32.0
 """Bound on the rounding of one box test in float32 (centres, half extents, the transform applied),
@@ -402,8 +404,10 @@ class MidPhaseBVH:
         num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
         separating_axes: as above (read at each launch: a captured frame keeps the value it was
             captured with).
-        num_blocks, block_dim: each expansion's grid (on the CPU one block, of one thread that takes
-            every node pair in turn unless ``wp.config.enable_cpu_blocks`` is set).
+        num_blocks, block_dim: the largest grid of an expansion, in blocks, and their size (on the
+            CPU one block, of one thread that takes every node pair in turn unless
+            ``wp.config.enable_cpu_blocks`` is set); a launch takes at most one thread per slot of
+            its input (the pairs' capacity, the front's).
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
@@ -458,11 +462,13 @@ class MidPhaseBVH:
         cand = self.candidates
         for level in range(self.num_levels):
             roots = level == 0
+            slots = pairs.capacity if roots else cap
+            blocks = min(self.num_blocks, (slots + self.block_dim - 1) // self.block_dim)
             wp.launch_tiled(
-                _expand_kernel, dim=[self.num_blocks],
+                _expand_kernel, dim=[blocks],
                 inputs=[tree, self._tree_pair, self._pair_rows, halves[(level + 1) % 2],
-                        pairs.count if roots else self._level_views[level], pairs.capacity if roots else cap,
-                        int(roots), self.num_blocks, cap, cand.capacity, self.separating_axes],
+                        pairs.count if roots else self._level_views[level], slots, int(roots), blocks, cap,
+                        cand.capacity, self.separating_axes],
                 outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
 

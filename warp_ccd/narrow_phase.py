@@ -315,10 +315,8 @@ def _unit_normal(x0: Any, x1: Any, x2: Any, tol_rel: Any):
 
 
 @wp.func
-def _centre_pair(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: Any):
-    """Shared set-up of both tests: vertices relative to the pair's centroid, unit normals
-    ``na``, ``nb`` (:func:`_unit_normal`), the tolerance ``eps``, and whether each triangle is
-    degenerate (then its normal is zero and unused)."""
+def _centre(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: Any):
+    """Vertices relative to the pair's centroid, and the tolerance ``eps``."""
     o = (v0 + v1 + v2 + u0 + u1 + u2) / type(tol_rel)(6.0)
     a0 = v0 - o
     a1 = v1 - o
@@ -327,6 +325,15 @@ def _centre_pair(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: 
     b1 = u1 - o
     b2 = u2 - o
     eps = tol_rel * wp.max(_max_edge(a0, a1, a2), _max_edge(b0, b1, b2))
+    return a0, a1, a2, b0, b1, b2, eps
+
+
+@wp.func
+def _centre_pair(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_rel: Any):
+    """Shared set-up of both tests: vertices relative to the pair's centroid, unit normals
+    ``na``, ``nb`` (:func:`_unit_normal`), the tolerance ``eps``, and whether each triangle is
+    degenerate (then its normal is zero and unused)."""
+    a0, a1, a2, b0, b1, b2, eps = _centre(v0, v1, v2, u0, u1, u2, tol_rel)
     na, degenerate_a = _unit_normal(v0, v1, v2, tol_rel)
     nb, degenerate_b = _unit_normal(u0, u1, u2, tol_rel)
     return a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b
@@ -798,11 +805,15 @@ def _narrow_touch_kernel(
     if u >= used_count(touch_count, touch_capacity):
         return
     c = touch[u]
-    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centred_row(mesh, world_vertex, c, tol_rel)
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    tol = type(v0[0])(tol_rel)
+    a0, a1, a2, b0, b1, b2, eps = _centre(v0, v1, v2, u0, u1, u2, tol)
     near = False
-    if e < 3:
+    if e < 3:  # only the face's normal (both triangles are not degenerate: step 1 to 3 decide those)
+        nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
         near = _edge_near_face(e, a0, a1, a2, b0, b1, b2, nb, eps)
     else:
+        na, degenerate_a = _unit_normal(v0, v1, v2, tol)
         near = _edge_near_face(e - 3, b0, b1, b2, a0, a1, a2, na, eps)
     if near and wp.atomic_add(touch_flag, u, 1) == 0:
         _append_hit(c, hit_capacity, hit, hit_count, object_colliding)

@@ -30,11 +30,13 @@ from .scene import Scene
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
-RIGID_LEAF_SIZE = 2
-"""Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 7.6 / 3.8 /
-4.3 ms at 10^6 polyhedra / 10^5 80-triangle / 10^4 1,280-triangle objects with leaves of 2,
-against 8.8 / 4.0 / 5.0 with leaves of 1 and 8.5 / 4.4 / 4.0 with 4 (``bench/bench_box_tests.py``,
-``bench/results/box_tests_sweep_cuda0.json``): half the node pairs to test, twice the candidates."""
+RIGID_LEAF_SIZE = 1
+"""Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 4.3 / 1.65 /
+1.03 / 0.44 ms at 10^6 polyhedra / 10^5 80-triangle / 10^4 1,280-triangle / 10^3 mixed objects
+with leaves of 1, against 5.5 / 2.3 / 1.39 / 0.48 with leaves of 2 and 7.7 / 3.4 / 1.93 / 0.57
+with 4 (``bench/bench_box_tests.py``, ``bench/results/box_tests_sweep_cuda0.json``): the level by
+level descent tests node pairs at memory speed, and a leaf pair's boxes are its triangles' boxes,
+so that fewer pairs reach the exact test (half as many as with leaves of 2)."""
 
 DEFORMING_LEAF_SIZE = 4
 """Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
@@ -307,13 +309,10 @@ class CollisionPipeline:
                                   containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
         buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
-        # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, then
-        # the mid phase's and the narrow phase's in their order (a shortfall upstream scales the
-        # estimates downstream).
-        flow = [1]
-        for k, stage in enumerate(stages):
-            for _ in stage.counters:
-                flow.append(0 if k < 2 else max(flow) + 1)
+        # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
+        # mid phase's 2 (its front's count tells little of its candidates'), the narrow phase's 3 (a
+        # shortfall upstream scales the estimates downstream).
+        flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
         self.rebuild_every = int(rebuild_every)
