@@ -1,0 +1,76 @@
+"""Registers, local memory (spills) and resident threads per multiprocessor of the frame's kernels
+on a CUDA device: what bounds the occupancy of each (``cuFuncGetAttribute`` on the loaded kernels).
+
+    PYTHONPATH=. python bench/kernel_resources.py --device cuda:0 --out bench/results/kernel_resources_cuda0.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import sys
+
+from warp_ccd import broad_phase, bvh, mid_phase, motion, narrow_phase, scene
+from warp_ccd.bench.scaling import environment, write_json
+from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.pipeline import CollisionPipeline
+
+# CUfunction_attribute values (CUDA driver API).
+_ATTRIBUTES = {"max_threads_per_block": 0, "shared_bytes": 1, "local_bytes": 3, "registers": 4}
+_REGISTERS_PER_SM = 65536
+_THREADS_PER_SM = 2048
+
+
+def _kernels() -> dict:
+    """The frame's kernels by name (float32 variants of those compiled for both precisions)."""
+    return {
+        "narrow moller": narrow_phase._NARROW_MOLLER["float32"],
+        "narrow touch": narrow_phase._NARROW_TOUCH["float32"],
+        "expand": mid_phase._expand_kernel,
+        "pair": mid_phase._PAIR["float32"],
+        "rigid bounds": bvh._RIGID_BOUNDS["float32"],
+        "sap sweep": broad_phase._sap_sweep_kernel,
+        "motion pose": motion._MOTION_POSE["float32"],
+        "world vertex": scene._WORLD_VERTEX["float32"],
+    }
+
+
+def attributes(kernel, device) -> dict:
+    """The kernel's attributes on ``device`` (loaded), and the threads per multiprocessor its
+    registers allow (blocks of 256)."""
+    cuda = ctypes.CDLL("libcuda.so.1")
+    fn = kernel.module.get_kernel_hooks(kernel, device).forward
+    out = {}
+    for name, code in _ATTRIBUTES.items():
+        value = ctypes.c_int()
+        cuda.cuFuncGetAttribute(ctypes.byref(value), code, ctypes.c_void_p(fn))
+        out[name] = value.value
+    per_block = 256 * ((out["registers"] + 7) // 8 * 8)
+    out["resident_threads_per_sm"] = min(_THREADS_PER_SM, 256 * (_REGISTERS_PER_SM // max(per_block, 1)))
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cuda:0")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+    quiet_warp()
+    device = resolve_device(args.device)
+    if not device.is_cuda:
+        raise SystemExit("kernel_resources: needs a CUDA device")
+    s = scene.Scene.random(200, seed=0, device=device)
+    CollisionPipeline(s, graph=False).detect(advance=0.01)  # loads every module of the frame
+    rows = []
+    for name, kernel in _kernels().items():
+        row = {"kernel": name, "key": kernel.key, **attributes(kernel, device)}
+        rows.append(row)
+        print(f"{name:<14} registers {row['registers']:>4}  local {row['local_bytes']:>5} B  "
+              f"threads/SM {row['resident_threads_per_sm']:>5}", flush=True)
+    if args.out:
+        write_json(args.out, {**environment(device), "rows": rows})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
