@@ -3,7 +3,8 @@ the rigid objects' boxes for the broad phase (from world vertices, from the tree
 leaf size and the traversal's threads per multiprocessor.
 
 For each scene (``--cases`` of ``TRIANGLES:N``, a ``--triangles`` spec of the scaling benchmark and
-an object count) and each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and
+an object count), for each ``--max-registers`` (the heavy kernels compiled with at most that many
+registers a thread), each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and
 ``--threads-per-sm`` (:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``,
 ``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd.mid_phase.MidPhaseBVH.num_blocks`
 on CUDA), after ``--warmup`` frames: ``--frames``
@@ -28,10 +29,12 @@ import time
 import numpy as np
 import warp as wp
 
+from warp_ccd import mid_phase, narrow_phase
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
 from warp_ccd.cli_common import quiet_warp, resolve_device
 from warp_ccd.mid_phase import EXPAND_THREADS_PER_SM
 from warp_ccd.pipeline import STAGES, CollisionPipeline
+from warp_ccd.precision import PRECISIONS
 from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
@@ -58,10 +61,35 @@ def _set_grid(pipe: CollisionPipeline, threads_per_sm: int) -> None:
         mid.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim
 
 
-def run(spec: str, n: int, args, device) -> list[dict]:
+def _heavy_kernels() -> list:
+    """The kernels whose register budget ``--max-registers`` sets: the exact test's two, the
+    traversal's expansion and its pair set-up (both precisions)."""
+    kernels = [mid_phase._expand_kernel]
+    for precision in PRECISIONS:
+        kernels += [narrow_phase._NARROW_MOLLER[precision], narrow_phase._NARROW_TOUCH[precision],
+                    mid_phase._PAIR[precision]]
+    return kernels
+
+
+_COMPILED_OPTIONS = {id(k): dict(k.options) for k in _heavy_kernels()}
+
+
+def _set_max_registers(registers: int) -> None:
+    """Compiles the heavy kernels with at most ``registers`` registers a thread (CUDA's
+    ``__maxnreg__``), or as the library declares them (0)."""
+    for kernel in _heavy_kernels():
+        kernel.options = dict(_COMPILED_OPTIONS[id(kernel)])
+        if registers:
+            kernel.options.pop("launch_bounds", None)
+            kernel.options["cuda_max_registers"] = registers
+        kernel.module.mark_modified()
+
+
+def run(spec: str, n: int, args, device, registers: int, pairs_by_case: dict) -> list[dict]:
     """Rows of one scene: every option combination, frames then stages."""
     _, shapes = parse_triangles(spec)
-    rows, pairs_seen = [], None
+    rows = []
+    pairs_seen = pairs_by_case.get((spec, n))
     for axes, bounds, leaf, threads in itertools.product(args.axes, args.bounds, args.leaf_sizes, args.threads_per_sm):
         scene = Scene.random(n, seed=args.seed, device=device, **({} if shapes is None else {"shapes": shapes}))
         options = dict(separating_axes=axes, object_bounds=bounds, leaf_size=leaf)
@@ -81,10 +109,11 @@ def run(spec: str, n: int, args, device) -> list[dict]:
                   "triangle_pairs": res.num_triangle_pairs}
         pairs = res.triangle_pairs
         if pairs_seen is None:
-            pairs_seen = pairs
+            pairs_seen = pairs_by_case[(spec, n)] = pairs
         elif not np.array_equal(pairs, pairs_seen):
             raise SystemExit(f"{spec}:{n} {options} threads={threads}: other triangle pairs than the first combination")
-        base = {"triangles": spec, "n_objects": n, **options, "threads_per_sm": threads, **counts}
+        base = {"triangles": spec, "n_objects": n, **options, "threads_per_sm": threads, "max_registers": registers,
+                **counts}
         rows.append({**base, "stage": "frame", **_stats(frames)})
         timed = CollisionPipeline(scene, timings=True, **options)
         _set_grid(timed, threads)
@@ -98,6 +127,7 @@ def run(spec: str, n: int, args, device) -> list[dict]:
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
         print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
+              f"  registers {registers or '-':>3}"
               f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}"
@@ -117,6 +147,9 @@ def main(argv=None) -> int:
                         help="leaf sizes (default: the pipeline's own)")
     parser.add_argument("--threads-per-sm", type=int, nargs="+", default=[EXPAND_THREADS_PER_SM],
                         help="threads per multiprocessor of each expansion launch (CUDA; default: %(default)s)")
+    parser.add_argument("--max-registers", type=int, nargs="+", default=[0],
+                        help="most registers a thread of the heavy kernels, 0: as declared (CUDA; default: "
+                             "%(default)s)")
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
@@ -127,10 +160,14 @@ def main(argv=None) -> int:
     rows = []
     document = {**environment(device), "config": {**vars(args), "cases": [f"{s}:{n}" for s, n in args.cases]},
                 "rows": rows}
-    for spec, n in args.cases:
-        rows += run(spec, n, args, device)
-        if args.out:
-            write_json(args.out, document)
+    pairs_by_case = {}
+    for registers in args.max_registers:
+        _set_max_registers(registers)
+        for spec, n in args.cases:
+            rows += run(spec, n, args, device, registers, pairs_by_case)
+            if args.out:
+                write_json(args.out, document)
+    _set_max_registers(0)
     return 0
 
 
