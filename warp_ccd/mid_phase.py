@@ -63,6 +63,10 @@ that the frame can be a CUDA graph), no bigger than one thread per slot of the l
 small scene launches few blocks), and its threads stride over the level's node pairs. On the H100
 1,024 and 2,048 gave the same frames within noise (``bench/results/box_tests_sweep_cuda0.json``)."""
 
+PAIR_MAX_REGISTERS = 128
+"""Most registers a thread of the pair set-up kernel on CUDA (148 as compiled freely, 256 threads a
+multiprocessor; capped with the exact test's kernels in ``bench/results/box_tests_registers_cuda0.json``)."""
+
 TEST_ERROR_ULPS = 32.0
 """Bound on the rounding of one box test in float32 (centres, half extents, the transform applied),
 in units in the last place of the boxes' and the translation's sizes."""
@@ -182,7 +186,7 @@ def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose
     return r
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=PAIR_MAX_REGISTERS)
 def _pair_kernel(
     tree: TreeView,
     instance_shape: wp.array[wp.int32],
@@ -281,6 +285,58 @@ def _overlap(tree: TreeView, r: TreePair, na: int, nb: int, axes: int) -> bool:
                                  tree.node_upper[slot_b], r, axes)
 
 
+CHILD_NONE = wp.constant(0)
+"""Kind of a child pair (:func:`_child_kind`): its boxes do not overlap."""
+CHILD_PUSH = wp.constant(1)
+"""Kind of a child pair: its boxes overlap and one node is not a leaf (to the next level's front)."""
+CHILD_LEAF = wp.constant(2)
+"""Kind of a child pair: two leaves whose boxes overlap (their triangle pairs are candidates)."""
+
+
+@wp.func
+def _child_kind(tree: TreeView, r: TreePair, xa: int, xb: int, axes: int) -> int:
+    """:data:`CHILD_NONE`, :data:`CHILD_PUSH` or :data:`CHILD_LEAF` for nodes ``xa``, ``xb`` (local ids)."""
+    if not _overlap(tree, r, xa, xb, axes):
+        return CHILD_NONE
+    if _is_leaf(tree, r.node_a_start + xa) and _is_leaf(tree, r.node_b_start + xb):
+        return CHILD_LEAF
+    return CHILD_PUSH
+
+
+@wp.func
+def _is_push(kind: int) -> int:
+    return wp.where(kind == CHILD_PUSH, 1, 0)
+
+
+@wp.func
+def _leaf_rows(tree: TreeView, r: TreePair, kind: int, xa: int, xb: int) -> int:
+    """Candidate rows of a child pair: its leaves' triangle pairs, or none."""
+    if kind != CHILD_LEAF:
+        return 0
+    return _leaf_pair_rows(tree, r.node_a_start + xa, r.node_b_start + xb)
+
+
+@wp.func
+def _push(front_out: wp.array[wp.vec3i], front_capacity: int, slot: wp.int64, kind: int, k: int, xa: int,
+          xb: int) -> wp.int64:
+    """Writes a child pair of kind :data:`CHILD_PUSH` of pair ``k`` into the front at ``slot``
+    (below the capacity); returns the next slot."""
+    if kind != CHILD_PUSH:
+        return slot
+    if slot < wp.int64(front_capacity):
+        front_out[int(slot)] = wp.vec3i(k, xa, xb)
+    return slot + wp.int64(1)
+
+
+@wp.func
+def _emit(tree: TreeView, row: wp.vec4i, r: TreePair, kind: int, xa: int, xb: int, slot: wp.int64,
+          candidate: wp.array[wp.vec4i], candidate_capacity: int) -> wp.int64:
+    """Writes the rows of a child pair of kind :data:`CHILD_LEAF` from ``slot``; returns the next slot."""
+    if kind != CHILD_LEAF:
+        return slot
+    return _write_rows(tree, row, r.node_a_start + xa, r.node_b_start + xb, slot, candidate, candidate_capacity)
+
+
 @wp.kernel
 def _expand_kernel(
     tree: TreeView,
@@ -317,13 +373,17 @@ def _expand_kernel(
     while base < n:
         e = base + lane
         k = int(0)
-        num_push = int(0)
-        num_leaf = int(0)
-        push_a = wp.vec4i()
-        push_b = wp.vec4i()
-        leaf_a = wp.vec4i()  # global ids
-        leaf_b = wp.vec4i()
-        rows = int(0)
+        r = TreePair()
+        # The (up to) four child pairs (xa0 | xa1) x (xb0 | xb1) and their kinds (_child_kind), in
+        # registers: no arrays indexed at run time (they would live in local memory).
+        xa0 = int(0)
+        xa1 = int(0)
+        xb0 = int(0)
+        xb1 = int(0)
+        k00 = int(0)
+        k01 = int(0)
+        k10 = int(0)
+        k11 = int(0)
         if e < n:
             na = int(0)
             nb = int(0)
@@ -335,51 +395,46 @@ def _expand_kernel(
                 na = f[1]
                 nb = f[2]
             r = tree_pair[k]
-            ga = r.node_a_start + na
-            gb = r.node_b_start + nb
-            ca = tree.node_child[ga]
-            cb = tree.node_child[gb]
+            ca = tree.node_child[r.node_a_start + na]
+            cb = tree.node_child[r.node_b_start + nb]
+            xa0 = na
+            xa1 = na
+            xb0 = nb
+            xb1 = nb
             if roots == 0 or _overlap(tree, r, na, nb, axes):
                 if ca[0] < 0 and cb[0] < 0:
-                    leaf_a[0] = ga
-                    leaf_b[0] = gb
-                    num_leaf = 1
+                    k00 = CHILD_LEAF  # two roots that are leaves
                 else:
-                    num_a = 2
-                    if ca[0] < 0:
-                        ca = wp.vec2i(na, na)
-                        num_a = 1
-                    num_b = 2
-                    if cb[0] < 0:
-                        cb = wp.vec2i(nb, nb)
-                        num_b = 1
-                    for i in range(num_a):
-                        xa = ca[i]
-                        leaf_xa = _is_leaf(tree, r.node_a_start + xa)
-                        for j in range(num_b):
-                            xb = cb[j]
-                            if _overlap(tree, r, xa, xb, axes):
-                                if leaf_xa and _is_leaf(tree, r.node_b_start + xb):
-                                    leaf_a[num_leaf] = r.node_a_start + xa
-                                    leaf_b[num_leaf] = r.node_b_start + xb
-                                    num_leaf += 1
-                                else:
-                                    push_a[num_push] = xa
-                                    push_b[num_push] = xb
-                                    num_push += 1
-            for m in range(num_leaf):
-                rows += _leaf_pair_rows(tree, leaf_a[m], leaf_b[m])
+                    if ca[0] >= 0:
+                        xa0 = ca[0]
+                        xa1 = ca[1]
+                    if cb[0] >= 0:
+                        xb0 = cb[0]
+                        xb1 = cb[1]
+                    k00 = _child_kind(tree, r, xa0, xb0, axes)
+                    if cb[0] >= 0:
+                        k01 = _child_kind(tree, r, xa0, xb1, axes)
+                    if ca[0] >= 0:
+                        k10 = _child_kind(tree, r, xa1, xb0, axes)
+                        if cb[0] >= 0:
+                            k11 = _child_kind(tree, r, xa1, xb1, axes)
+        num_push = _is_push(k00) + _is_push(k01) + _is_push(k10) + _is_push(k11)
+        rows = (_leaf_rows(tree, r, k00, xa0, xb0) + _leaf_rows(tree, r, k01, xa0, xb1)
+                + _leaf_rows(tree, r, k10, xa1, xb0) + _leaf_rows(tree, r, k11, xa1, xb1))
         slot = block_reserve(front_out_count, lane, num_push)
         if lane == width - 1:
             wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
-        for m in range(num_push):
-            if slot + wp.int64(m) < wp.int64(front_capacity):
-                front_out[int(slot) + m] = wp.vec3i(k, push_a[m], push_b[m])
+        slot = _push(front_out, front_capacity, slot, k00, k, xa0, xb0)
+        slot = _push(front_out, front_capacity, slot, k01, k, xa0, xb1)
+        slot = _push(front_out, front_capacity, slot, k10, k, xa1, xb0)
+        slot = _push(front_out, front_capacity, slot, k11, k, xa1, xb1)
         slot = block_reserve(candidate_count, lane, rows)
-        if num_leaf > 0:
+        if rows > 0:
             row = pair_rows[k]
-            for m in range(num_leaf):
-                slot = _write_rows(tree, row, leaf_a[m], leaf_b[m], slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k00, xa0, xb0, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k01, xa0, xb1, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k10, xa1, xb0, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k11, xa1, xb1, slot, candidate, candidate_capacity)
         base += num_blocks * width
 
 
@@ -419,7 +474,7 @@ class MidPhaseBVH:
         self.separating_axes = separating_axes
         self.num_levels = max(1, bvh.num_levels - 1)
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
-        self.front = GrowableBuffer(wp.vec3i, front_capacity or max(1024, 4 * bvh.lower.shape[0]), self.device,
+        self.front = GrowableBuffer(wp.vec3i, front_capacity or max(256, 4 * bvh.lower.shape[0]), self.device,
                                     "tree-pair front", factor=2)
         self.block_dim = block_dim_for(self.device)
         self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1

@@ -102,6 +102,13 @@ __all__ = [
 TOLERANCE = 1.0e-5
 """Default relative tolerance of the triangle tests (about 80 float32 units in the last place)."""
 
+MAX_REGISTERS = 128
+"""Most registers a thread of the two kernels of Möller's test on CUDA: as compiled freely they take
+255 (with spills) and 164, so that an H100 multiprocessor holds 256 of their threads; at 128 it
+holds 512 and the frame at 10^6 polyhedra / 10^5 80-triangle objects took 3.33 / 1.32 ms against
+4.36 / 1.66 (at 64, 4.22 / 1.79: spills; ``bench/bench_box_tests.py --max-registers``,
+``bench/results/box_tests_registers_cuda0.json``, ``bench/kernel_resources.py``)."""
+
 METHOD_MOLLER = wp.constant(0)
 """``method`` of :func:`tri_tri_test` and the kernels: Möller's test."""
 METHOD_EDGE_FACE = wp.constant(1)
@@ -743,7 +750,7 @@ def _append_hit(
     object_colliding[c[2]] = 1
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _narrow_moller_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
@@ -780,7 +787,7 @@ def _narrow_moller_kernel(
         _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _narrow_touch_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
