@@ -5,6 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.buffers import GrowableBuffer
 from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
 from warp_ccd.precision import precision_types
 
@@ -207,3 +208,28 @@ def test_tests_called_from_a_user_kernel(device):
               wp.array(tb, dtype=wp.vec3d, device=device)], outputs=[out], device=device)
     got = out.numpy().astype(bool)
     assert np.array_equal(got[:, 0], expect) and np.array_equal(got[:, 1], expect)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_narrow_phase_kernels_match_the_test(device, precision):
+    """The pipeline's three kernels of Möller's test (steps 1 to 3, the touch step, the rare pairs:
+    degenerate or coplanar) give the verdicts of the whole test, pair for pair, on the crafted
+    cases, swapped and far from the origin."""
+    ta, tb, expect = crafted()
+    far_a, far_b, _ = crafted(offset=(1e4, -1e4, 1e4))
+    ta, tb = np.concatenate([ta, tb, far_a]), np.concatenate([tb, ta, far_b])
+    tri = np.array([[0, 1, 2]], np.int32)
+    meshes = [(t, tri) for pair in zip(ta, tb) for t in pair]
+    scene = wc.Scene.from_meshes(meshes, device=device, precision=precision)
+    m = len(ta)
+    rows = np.stack([2 * np.arange(m), np.zeros(m), 2 * np.arange(m) + 1, np.zeros(m)], axis=1).astype(np.int32)
+    candidates = GrowableBuffer(wp.vec4i, m, device, "candidates")
+    candidates.data.assign(wp.array(rows, dtype=wp.vec4i, device=device))
+    candidates.count.fill_(m)
+    narrow = wc.NarrowPhase(scene.num_objects, device=device)
+    narrow.launch(scene, candidates)
+    hits = narrow.hits.numpy()
+    got = np.zeros(m, bool)
+    got[hits[:, 0] // 2] = True
+    assert np.array_equal(got, run_test(ta, tb, device, precision=precision))
+    assert narrow.rare.count.numpy()[0] > 0 and narrow.touch.count.numpy()[0] > 0

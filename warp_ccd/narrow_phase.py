@@ -57,8 +57,11 @@ candidate takes steps 1 to 3, and the pairs that do not cross go to a touch list
 (six edge-against-face tests) runs in a second kernel, six threads a pair. A warp of the first
 kernel then no longer waits for its slowest lane's six tests, the longest of the test's paths
 (at 1,000 polyhedra, 874 of 4,917 candidates reach step 4, in nearly every warp; steps 1 to 3
-alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The verdicts are those of
-:func:`tri_tri_moller`, bit for bit.
+alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The rare pairs, with a
+degenerate triangle or coplanar, go from the first kernel to a third that runs the whole test
+(:func:`tri_tri_moller`), so that the first holds only the common path in its registers (both
+capped at :data:`MAX_REGISTERS` on CUDA). The verdicts are those of :func:`tri_tri_moller`, bit
+for bit.
 
 Precision: every function takes ``wp.vec3`` or ``wp.vec3d`` vertices and computes in their
 precision (Warp generics: ``Any``-typed arguments, literals as ``type(eps)(0.5)``); the kernels'
@@ -568,6 +571,40 @@ def _degenerate_section(
 CONTACT_TOUCH_TEST = wp.constant(3)
 """Internal ``kind`` of :func:`_moller_crossing`: no crossing; whether the triangles touch is step
 4's to decide (:func:`_edges_meet`)."""
+CONTACT_COPLANAR_A = wp.constant(4)
+"""Internal ``kind`` of :func:`_moller_steps`: ``b`` lies in ``a``'s plane (within ``eps``)."""
+CONTACT_COPLANAR_B = wp.constant(5)
+"""Internal ``kind`` of :func:`_moller_steps`: ``a`` lies in ``b``'s plane (within ``eps``)."""
+
+
+@wp.func
+def _moller_steps(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any, na: Any, nb: Any, eps: Any):
+    """Steps 1 to 3 of Möller's test on a centred pair of triangles that are not degenerate:
+    ``(kind, p, q)`` as :func:`_moller_crossing`, except that a coplanar pair is only named
+    (:data:`CONTACT_COPLANAR_A` or :data:`CONTACT_COPLANAR_B`), not decided."""
+    zero_v = type(a0)()
+    # 1. Triangle b against the plane of a, then a against the plane of b.
+    rb0, rb1, rb2, db0, db1, db2 = _plane_distances(na, a0, b0, b1, b2, eps)
+    if _one_side(db0, db1, db2):
+        return CONTACT_NONE, zero_v, zero_v
+    ra0, ra1, ra2, da0, da1, da2 = _plane_distances(nb, b0, a0, a1, a2, eps)
+    if _one_side(da0, da1, da2):
+        return CONTACT_NONE, zero_v, zero_v
+    zero = type(eps)(0.0)
+    if db0 == zero and db1 == zero and db2 == zero:  # coplanar
+        return CONTACT_COPLANAR_A, zero_v, zero_v
+    if da0 == zero and da1 == zero and da2 == zero:
+        return CONTACT_COPLANAR_B, zero_v, zero_v
+    # 2. Where each triangle crosses the other's plane (a section of each, from the exact
+    # distances, when both truly straddle the other's plane), and 3. whether the two sections,
+    # on the common line, meet: the triangles cross.
+    if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
+        pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
+        pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
+        if _segments_within(pa, qa, pb, qb, eps):
+            p, q = _common_part(pa, qa, pb, qb)
+            return CONTACT_SEGMENT, p, q
+    return CONTACT_TOUCH_TEST, zero_v, zero_v
 
 
 @wp.func
@@ -583,28 +620,12 @@ def _moller_crossing(
     if degenerate_a or degenerate_b:
         hit, p, q = _degenerate_section(a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b)
         return wp.where(hit, CONTACT_SEGMENT, CONTACT_NONE), p, q
-    # 1. Triangle b against the plane of a, then a against the plane of b.
-    rb0, rb1, rb2, db0, db1, db2 = _plane_distances(na, a0, b0, b1, b2, eps)
-    if _one_side(db0, db1, db2):
-        return CONTACT_NONE, zero_v, zero_v
-    ra0, ra1, ra2, da0, da1, da2 = _plane_distances(nb, b0, a0, a1, a2, eps)
-    if _one_side(da0, da1, da2):
-        return CONTACT_NONE, zero_v, zero_v
-    zero = type(eps)(0.0)
-    if db0 == zero and db1 == zero and db2 == zero:  # coplanar
+    kind, p, q = _moller_steps(a0, a1, a2, b0, b1, b2, na, nb, eps)
+    if kind == CONTACT_COPLANAR_A:
         return wp.where(_coplanar_overlap(a0, a1, a2, b0, b1, b2, na, eps), CONTACT_AREA, CONTACT_NONE), zero_v, zero_v
-    if da0 == zero and da1 == zero and da2 == zero:
+    if kind == CONTACT_COPLANAR_B:
         return wp.where(_coplanar_overlap(b0, b1, b2, a0, a1, a2, nb, eps), CONTACT_AREA, CONTACT_NONE), zero_v, zero_v
-    # 2. Where each triangle crosses the other's plane (a section of each, from the exact
-    # distances, when both truly straddle the other's plane), and 3. whether the two sections,
-    # on the common line, meet: the triangles cross.
-    if not _one_side(ra0, ra1, ra2) and not _one_side(rb0, rb1, rb2):
-        pa, qa = _plane_section(a0, a1, a2, ra0, ra1, ra2)
-        pb, qb = _plane_section(b0, b1, b2, rb0, rb1, rb2)
-        if _segments_within(pa, qa, pb, qb, eps):
-            p, q = _common_part(pa, qa, pb, qb)
-            return CONTACT_SEGMENT, p, q
-    return CONTACT_TOUCH_TEST, zero_v, zero_v
+    return kind, p, q
 
 
 @wp.func
@@ -760,6 +781,7 @@ def _narrow_moller_kernel(
     tol_rel: wp.float64,
     hit_capacity: int,
     touch_capacity: int,
+    rare_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
     hit_count: wp.array[wp.int64],
@@ -767,23 +789,63 @@ def _narrow_moller_kernel(
     touch: wp.array[wp.vec4i],
     touch_count: wp.array[wp.int64],
     touch_flag: wp.array[wp.int32],
+    rare: wp.array[wp.vec4i],
+    rare_count: wp.array[wp.int64],
 ):
     """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: steps 1 to 3 of Möller's test
-    (:func:`_moller_crossing`); a crossing (or coplanar, or degenerate) contact is a hit, and a
-    pair that does not cross goes to the touch list (its flag cleared) for step 4
-    (:func:`_narrow_touch_kernel`)."""
+    (:func:`_moller_steps`); a crossing is a hit, a pair that does not cross goes to the touch
+    list (its flag cleared) for step 4 (:func:`_narrow_touch_kernel`), and a pair with a
+    degenerate triangle, or coplanar, to the rare list (:func:`_narrow_rare_kernel`): their code
+    stays out of this kernel, whose registers then hold the common path."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
-    a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b = _centred_row(mesh, world_vertex, c, tol_rel)
-    kind, p, q = _moller_crossing(a0, a1, a2, b0, b1, b2, na, nb, eps, degenerate_a, degenerate_b)
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    tol = type(v0[0])(tol_rel)
+    na, degenerate_a = _unit_normal(v0, v1, v2, tol)
+    nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
+    kind = CONTACT_NONE
+    is_rare = degenerate_a or degenerate_b
+    if not is_rare:
+        a0, a1, a2, b0, b1, b2, eps = _centre(v0, v1, v2, u0, u1, u2, tol)
+        kind, p, q = _moller_steps(a0, a1, a2, b0, b1, b2, na, nb, eps)
+        is_rare = kind == CONTACT_COPLANAR_A or kind == CONTACT_COPLANAR_B
     if kind == CONTACT_TOUCH_TEST:
         slot = reserve_slot(touch_count, touch_capacity)
         if slot >= 0:
             touch[slot] = c
             touch_flag[slot] = 0
+    elif is_rare:
+        slot = reserve_slot(rare_count, rare_capacity)
+        if slot >= 0:
+            rare[slot] = c
     elif kind != CONTACT_NONE:
+        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
+
+
+@wp.kernel
+def _narrow_rare_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    rare: wp.array[wp.vec4i],
+    rare_count: wp.array[wp.int64],
+    rare_capacity: int,
+    tol_rel: wp.float64,
+    hit_capacity: int,
+    # Outputs
+    hit: wp.array[wp.vec4i],
+    hit_count: wp.array[wp.int64],
+    object_colliding: wp.array[wp.int32],
+):
+    """One thread per row of the rare list (a degenerate triangle, or coplanar triangles): the
+    whole of Möller's test (:func:`tri_tri_moller`)."""
+    k = wp.tid()
+    if k >= used_count(rare_count, rare_capacity):
+        return
+    c = rare[k]
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    if tri_tri_moller(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)):
         _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
@@ -1018,9 +1080,10 @@ def pair_crossing_depth(scene, pairs: wp.array, tolerance: float = TOLERANCE, ou
 
 # Both precisions, declared up front: the module compiles once, for float32 and float64 together.
 # The kernels take the tolerance in float64 and round it to the vertices' precision.
-_NARROW_MOLLER, _NARROW_TOUCH, _NARROW_EDGE_FACE, _CONTAINMENT = (
+_NARROW_MOLLER, _NARROW_TOUCH, _NARROW_RARE, _NARROW_EDGE_FACE, _CONTAINMENT = (
     precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v]})
-    for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_edge_face_kernel, _containment_kernel))
+    for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_rare_kernel, _narrow_edge_face_kernel,
+              _containment_kernel))
 _CROSSING_DEPTH = precision_overloads(_crossing_depth_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _SEGMENT = precision_overloads(_segment_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
                                                                   "segment": wp.array2d[v]})
@@ -1051,6 +1114,9 @@ class NarrowPhase:
         touch: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
             candidates that do not cross and may touch (step 4, tested six threads a row by a
             second kernel; else None), with ``touch_flag``, ``(touch.capacity,)`` int32.
+        rare: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
+            candidates with a degenerate triangle or coplanar triangles (tested whole by a third
+            kernel; else None).
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
         segment: ``(hits.capacity, 2)`` end points (the scene's vector type) of each hit's
             segment (NaN for coplanar contacts), or None without ``segments``.
@@ -1070,6 +1136,8 @@ class NarrowPhase:
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
         self.touch = (GrowableBuffer(wp.vec4i, capacity, self.device, "candidates that may touch")
                       if method == "moller" else None)
+        self.rare = (GrowableBuffer(wp.vec4i, 64, self.device, "candidates degenerate or coplanar")
+                     if method == "moller" else None)
         self.touch_flag = None
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
         self.segments = bool(segments)
@@ -1081,7 +1149,7 @@ class NarrowPhase:
     def counters(self) -> list[GrowableBuffer]:
         """The buffers with counters that :meth:`launch` resets and writes; the caller reads
         their counters after it."""
-        return [b for b in (self.hits, self.touch, self.contained) if b is not None]
+        return [b for b in (self.hits, self.touch, self.rare, self.contained) if b is not None]
 
     def launch(self, scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
                object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
@@ -1115,11 +1183,16 @@ class NarrowPhase:
             touch = self.touch
             if self.touch_flag is None or self.touch_flag.shape[0] != touch.capacity:  # follows the capacity
                 self.touch_flag = wp.zeros(touch.capacity, dtype=wp.int32, device=d)
+            rare = self.rare
             wp.launch(_NARROW_MOLLER[scene.precision], dim=candidates.capacity,
                       inputs=[scene.topology, scene.world_vertex, candidates.data, candidates.count,
-                              candidates.capacity, tol, hits.capacity, touch.capacity],
+                              candidates.capacity, tol, hits.capacity, touch.capacity, rare.capacity],
                       outputs=[hits.data, hits.count, self.object_colliding, touch.data, touch.count,
-                               self.touch_flag], device=d)
+                               self.touch_flag, rare.data, rare.count], device=d)
+            wp.launch(_NARROW_RARE[scene.precision], dim=rare.capacity,
+                      inputs=[scene.topology, scene.world_vertex, rare.data, rare.count, rare.capacity, tol,
+                              hits.capacity],
+                      outputs=[hits.data, hits.count, self.object_colliding], device=d)
             wp.launch(_NARROW_TOUCH[scene.precision], dim=6 * touch.capacity,
                       inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity, tol,
                               hits.capacity],
