@@ -52,16 +52,17 @@ Semantics shared by both:
   device) decide a verdict; the winding number of the containment option uses ``atan2`` and may
   differ in its last bits, far from its decision at 1/2.
 
-Over candidate pairs (:class:`NarrowPhase`), Möller's test runs as two kernels: one thread per
-candidate takes steps 1 to 3, and the pairs that do not cross go to a touch list whose step 4
-(six edge-against-face tests) runs in a second kernel, six threads a pair. A warp of the first
-kernel then no longer waits for its slowest lane's six tests, the longest of the test's paths
-(at 1,000 polyhedra, 874 of 4,917 candidates reach step 4, in nearly every warp; steps 1 to 3
-alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The rare pairs, with a
-degenerate triangle or coplanar, go from the first kernel to a third that runs the whole test
-(:func:`tri_tri_moller`), so that the first holds only the common path in its registers (both
-capped at :data:`MAX_REGISTERS` on CUDA). The verdicts are those of :func:`tri_tri_moller`, bit
-for bit.
+Over candidate pairs (:class:`NarrowPhase`), Möller's test runs as three kernels. One thread per
+candidate takes steps 1 to 3, and the pairs that do not cross go to a touch list whose step 4 (six
+edge-against-face tests) runs in a second kernel, two threads a pair (the edges of one triangle
+against the other's face each; six threads, one test each, recomputed the pair's set-up six
+times). A warp of the first kernel then no longer waits for its slowest lane's six tests, the
+longest of the test's paths (at 1,000 polyhedra, 874 of 4,917 candidates reach step 4, in nearly
+every warp; steps 1 to 3 alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The
+rare pairs, with a degenerate triangle or coplanar, go from the first kernel to a third that runs
+the whole test (:func:`tri_tri_moller`), so that the first holds only the common path in its
+registers (capped at :data:`MAX_REGISTERS` on CUDA, as the second's). The verdicts are those of
+:func:`tri_tri_moller`, bit for bit.
 
 Precision: every function takes ``wp.vec3`` or ``wp.vec3d`` vertices and computes in their
 precision (Warp generics: ``Any``-typed arguments, literals as ``type(eps)(0.5)``); the kernels'
@@ -514,16 +515,6 @@ def _edges_near_face(x0: Any, x1: Any, x2: Any, f0: Any, f1: Any, f2: Any, nf: A
 
 
 @wp.func
-def _edge_near_face(i: int, x0: Any, x1: Any, x2: Any, f0: Any, f1: Any, f2: Any, nf: Any, eps: Any) -> bool:
-    """Edge ``i`` of triangle ``x`` within ``eps`` of triangle ``f`` (unit normal ``nf``): one of
-    the tests of :func:`_edges_near_face`, alone."""
-    m0, m1, m2 = _edge_normals(f0, f1, f2, nf)
-    p, q = _edge(x0, x1, x2, i)
-    hit, s0, s1 = _segment_triangle_section(p, q, f0, f1, f2, nf, m0, m1, m2, eps)
-    return hit
-
-
-@wp.func
 def _edges_meet(
     a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any, na: Any, nb: Any, eps: Any, face_a: bool, face_b: bool
 ):
@@ -864,13 +855,14 @@ def _narrow_touch_kernel(
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
-    """Step 4 of Möller's test, six threads per row ``u`` of the touch list: thread ``6 u + e``
-    tests edge ``e`` of triangle a against b's face (``e < 3``) or edge ``e - 3`` of b against
-    a's (:func:`_edge_near_face`). The pair touches when one of the six says so
-    (:func:`_edges_meet`); the first thread to find it (its flag) appends the row."""
+    """Step 4 of Möller's test, two threads per row ``u`` of the touch list: thread ``2 u`` tests
+    the edges of triangle a against b's face, ``2 u + 1`` those of b against a's
+    (:func:`_edges_near_face`; each thread computes the one normal and the edge normals of its
+    face once). The pair touches when one of the six edge tests says so (:func:`_edges_meet`);
+    the first thread to find it (its flag) appends the row."""
     t = wp.tid()
-    u = t / 6
-    e = t - 6 * u
+    u = t / 2
+    side = t - 2 * u
     if u >= used_count(touch_count, touch_capacity):
         return
     c = touch[u]
@@ -878,12 +870,12 @@ def _narrow_touch_kernel(
     tol = type(v0[0])(tol_rel)
     a0, a1, a2, b0, b1, b2, eps = _centre(v0, v1, v2, u0, u1, u2, tol)
     near = False
-    if e < 3:  # only the face's normal (both triangles are not degenerate: step 1 to 3 decide those)
+    if side == 0:  # only the face's normal (both triangles are not degenerate: step 1 to 3 decide those)
         nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
-        near = _edge_near_face(e, a0, a1, a2, b0, b1, b2, nb, eps)
+        near, p, q = _edges_near_face(a0, a1, a2, b0, b1, b2, nb, eps)
     else:
         na, degenerate_a = _unit_normal(v0, v1, v2, tol)
-        near = _edge_near_face(e - 3, b0, b1, b2, a0, a1, a2, na, eps)
+        near, p, q = _edges_near_face(b0, b1, b2, a0, a1, a2, na, eps)
     if near and wp.atomic_add(touch_flag, u, 1) == 0:
         _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
@@ -1112,7 +1104,7 @@ class NarrowPhase:
         hits: :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec4i`` rows
             ``(obj_a, tri_a, obj_b, tri_b)``.
         touch: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
-            candidates that do not cross and may touch (step 4, tested six threads a row by a
+            candidates that do not cross and may touch (step 4, tested two threads a row by a
             second kernel; else None), with ``touch_flag``, ``(touch.capacity,)`` int32.
         rare: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
             candidates with a degenerate triangle or coplanar triangles (tested whole by a third
@@ -1193,7 +1185,7 @@ class NarrowPhase:
                       inputs=[scene.topology, scene.world_vertex, rare.data, rare.count, rare.capacity, tol,
                               hits.capacity],
                       outputs=[hits.data, hits.count, self.object_colliding], device=d)
-            wp.launch(_NARROW_TOUCH[scene.precision], dim=6 * touch.capacity,
+            wp.launch(_NARROW_TOUCH[scene.precision], dim=2 * touch.capacity,
                       inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity, tol,
                               hits.capacity],
                       outputs=[self.touch_flag, hits.data, hits.count, self.object_colliding], device=d)
