@@ -10,7 +10,7 @@
 # 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, profile, narrow, scaling, spheres, boxes, deforming,
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, profile, narrow, scaling, spheres, boxes, deforming,
 #                                          # broad, build, host, usd
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
@@ -27,7 +27,7 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests profile narrow scaling spheres boxes deforming broad build host usd}
+parts=${*:-tests resources profile narrow scaling spheres boxes deforming broad build host usd}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
@@ -55,6 +55,8 @@ for part in $parts; do
         WARP_CCD_TEST_DEVICES=${TEST_DEVICES:-$device} step python3 -m pytest -q -ra $tests -p no:cacheprovider \
             >> "$log" 2>&1
         tail -n 15 "$log" ;;
+    resources)
+        step python3 bench/kernel_resources.py --device "$device" --out "$out/kernel_resources_$tag.json" ;;
     profile)
         step python3 bench/profile_frame.py --device "$device" --objects $profiled --frames $((frames * 5)) \
             --out "$out/profile_$tag.json" ;;
@@ -89,7 +91,7 @@ for part in $parts; do
     usd)
         step python3 bench/bench_usd_check.py --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
     *)
-        echo "run_cuda.sh: unknown part $part (tests, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
+        echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
             "host, usd)" >&2
         status=2 ;;
     esac
