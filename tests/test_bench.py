@@ -251,11 +251,13 @@ def test_bench_scripts_run(device, tmp_path, capsys):
                                                                           (6, "tree")}
     deforming = load_script("bench_deforming")
     out = tmp_path / "deforming.json"
-    assert deforming.main(["--device", device, "--objects", "12", "--level", "1", "--leaf-sizes", "1", "4",
+    assert deforming.main(["--device", device, "--objects", "40", "--level", "1", "--leaf-sizes", "1", "4",
                            "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
     rows = json.loads(out.read_text())["rows"]
     assert {r["method"] for r in rows} == {"warp_ccd", "warp_builtin"}
-    assert all(r["same_object_pairs"] for r in rows if r["method"] == "warp_builtin")
+    assert len({r["triangle_pairs"] for r in rows if r["method"] == "warp_ccd"}) == 1  # every leaf size alike
+    assert max(r["triangle_pairs"] for r in rows) > 0
+    assert all(r["check"]["ok"] and r["check"]["peer_ok"] for r in rows if r["method"] == "warp_builtin")
     capsys.readouterr()
 
 
