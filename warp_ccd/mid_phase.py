@@ -92,10 +92,8 @@ class TreePair:
     tri_a_start: int  # the shape's triangle order in TreeView.tri_order
     tri_b_start: int
     b_to_a: wp.mat33  # x_a = b_to_a * x_b + b_to_a_shift (box spaces)
-    b_to_a_abs: wp.mat33  # its entries' absolute values (a box's half extent goes through them)
     b_to_a_shift: wp.vec3
     a_to_b: wp.mat33
-    a_to_b_abs: wp.mat33
     a_to_b_shift: wp.vec3
     pad_a: float  # added to every half extent of a test in a's space (rounding bound)
     pad_b: float
@@ -175,12 +173,10 @@ def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose
         err += eps * (_max_abs(t_b) + s_b * _norm_inf(rot_b) * r_b)
     m, shift, pad = _map_between(rot_a, t_a, s_a, rot_b, t_b, s_b, r_a, r_b, err)
     r.b_to_a = m
-    r.b_to_a_abs = abs_matrix(m)
     r.b_to_a_shift = shift
     r.pad_a = pad
     m, shift, pad = _map_between(rot_b, t_b, s_b, rot_a, t_a, s_a, r_b, r_a, err)
     r.a_to_b = m
-    r.a_to_b_abs = abs_matrix(m)
     r.a_to_b_shift = shift
     r.pad_b = pad
     return r
@@ -229,12 +225,12 @@ def _boxes_overlap_mapped(lo_a: wp.vec3, hi_a: wp.vec3, lo_b: wp.vec3, hi_b: wp.
     cb = (lo_b + hi_b) * 0.5
     hb = (hi_b - lo_b) * 0.5
     d = r.b_to_a * cb + r.b_to_a_shift - ca
-    e = ha + r.b_to_a_abs * hb
+    e = ha + abs_matrix(r.b_to_a) * hb  # a box's half extent goes through the entries' absolute values
     if wp.abs(d[0]) > e[0] + r.pad_a or wp.abs(d[1]) > e[1] + r.pad_a or wp.abs(d[2]) > e[2] + r.pad_a:
         return False
     if axes == 6:
         d = r.a_to_b * ca + r.a_to_b_shift - cb
-        e = hb + r.a_to_b_abs * ha
+        e = hb + abs_matrix(r.a_to_b) * ha
         if wp.abs(d[0]) > e[0] + r.pad_b or wp.abs(d[1]) > e[1] + r.pad_b or wp.abs(d[2]) > e[2] + r.pad_b:
             return False
     return True

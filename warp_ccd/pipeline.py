@@ -295,7 +295,9 @@ class CollisionPipeline:
         self.timings = bool(timings)
         self.graph = mode == "graph"
         self.broad = make_broad_phase(broad_phase, device=d)
-        self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, 4 * n), d, "broad-phase pairs")
+        # One pair slot an object to start with (the scaling scenes hold 0.01-0.13 pairs an object; a
+        # crowded frame grows it once): the mid phase keeps a TreePair of 136 bytes a slot beside it.
+        self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, n), d, "broad-phase pairs")
         if mid_phase == "bvh":
             self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth,
                                   object_bounds=object_bounds)
