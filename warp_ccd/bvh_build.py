@@ -64,12 +64,12 @@ triangles built in 12.9 ms from subtrees of 8, 15.1 ms of 16, 26 ms of 32, 34 ms
 sorted by insertion."""
 
 CUT_TRIANGLES = 64
-"""A tree's cut (where the traversal's work items start) lies deep enough that its subtrees hold at
-most about this many triangles (:meth:`TreeSizes.cut_depth`): a pair of big meshes is then many
-short items, not a few long ones."""
+"""A tree's cut (whose boxes under the pose make a big rigid object's box for the broad phase) lies
+deep enough that its subtrees hold at most about this many triangles (:meth:`TreeSizes.cut_depth`):
+many small boxes, nearly as tight as the vertices."""
 
 CUT_DEPTH_MAX = 8
-"""Deepest cut chosen by size (at most 256 subtrees a tree, 65,536 work items a pair of trees)."""
+"""Deepest cut chosen by size (at most 256 subtrees a tree)."""
 
 INSERTION_SORT_MAX = 64
 """Shapes of at most this many triangles sort their lists by insertion in :func:`_finish_kernel`;

@@ -4,32 +4,27 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
 :class:`~warp_ccd.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
 
 * :class:`MidPhaseBVH` (default): a simultaneous descent of the two objects' trees
-  (:mod:`warp_ccd.bvh`), split into work items over the cuts of both trees: every subtree of
-  ``a``'s cut against every subtree of ``b``'s (a cut: the nodes at a tree's cut depth and the
-  leaves above it; at most 8 subtrees in a tree of up to 128 triangles, more in bigger trees, whose
-  subtrees hold at most about 64 triangles). Each item descends its two subtrees depth first with a
-  short stack of node pairs, opening the node of more triangles, and gathers the leaf pairs whose
-  boxes overlap: their triangle pairs are the candidates. An item whose two subtrees' boxes do not
-  overlap costs one test, so an object pair whose boxes overlap but whose trees do not costs its
-  items' first tests and nothing more; and no thread walks a big pair alone.
+  (:mod:`warp_ccd.bvh`), level by level for every object pair at once: a first kernel writes each
+  pair's :class:`TreePair` (its trees' starts, the maps between the two box spaces and their
+  paddings), then each level is one launch over the *front*, the node pairs whose boxes overlap:
+  each opens both nodes (a leaf stays itself) and tests the two to four pairs of children; pairs
+  of two leaves whose boxes overlap write their triangle pairs as candidates, the other
+  overlapping pairs go to the next level's front. Level 0 is the object pairs' roots. The deepest
+  tree's levels bound the launches, so a frame is a fixed sequence of kernels (a CUDA graph);
+  each launch is a fixed grid whose threads stride over the level's node pairs (its count on the
+  device), and each round a block reserves its front slots and its rows with one atomic add each
+  (:func:`~warp_ccd.buffers.block_reserve`). Every node pair is one short step, all of a level's
+  independent, so no thread walks a big pair alone, and an object pair whose boxes overlap but
+  whose trees do not costs a few tests at level 0. The front is a buffer with a capacity and a
+  counter (its largest level's count), grown as any other.
 
   The boxes are tested in ``a``'s box space (:mod:`warp_ccd.bvh`: a rigid object's shape space, a
   deforming object's world): ``b``'s box under the pair's relative transform, the box around it
   (three axes, ``a``'s), then ``a``'s box in ``b``'s space (``b``'s three axes): a separating-axis
   test of the two oriented boxes on six of their fifteen axes (``separating_axes=3``: the first
-  three alone). The
-  relative transforms come from the poses in float64, once per pair (:func:`_tree_pair`), with a
-  padding that bounds every rounding on the way, so a test never rejects what the world vertices
-  would put in contact; a deforming object's frame is the identity.
-
-  A first kernel writes each pair's :class:`TreePair` (its trees' starts and its transforms) and
-  item count; work items are laid out by a scan of those counts (``wp.utils.array_scan``); a
-  fixed grid of threads takes them in rounds, one item per thread per round (the launch size does
-  not depend on the frame, so the frame can be a CUDA graph), and each round a block reserves the
-  rows of all its items with one atomic add (:func:`~warp_ccd.buffers.block_reserve`). A light
-  frame, one whose items would fit the grid once even if four times as many (judged by the last
-  frame's, which the traversal records on the device), starts both trees one level below their
-  cuts: four times the items, shorter descents.
+  three alone). The relative transforms come from the poses in float64, once per pair
+  (:func:`_tree_pair`), with a padding that bounds every rounding on the way, so a test never
+  rejects what the world vertices would put in contact; a deforming object's frame is the identity.
 * :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
   ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
   finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
