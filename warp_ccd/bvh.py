@@ -57,8 +57,8 @@ from .scene import MeshTopology, mesh_triangle
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 LEAF_SIZE_MAX = 256
-"""Most triangles per leaf: a traversal thread emits up to 16 leaf pairs of ``leaf_size**2``
-rows at once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
+"""Most triangles per leaf: a traversal thread emits up to 4 leaf pairs of ``leaf_size**2`` rows at
+once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
 
 OBJECT_BOUNDS = {"auto": 1024, "tree": -1, "vertices": 2**31 - 1}
 """How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
