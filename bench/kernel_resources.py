@@ -27,6 +27,7 @@ def _kernels() -> dict:
         "narrow moller": narrow_phase._NARROW_MOLLER["float32"],
         "narrow touch": narrow_phase._NARROW_TOUCH["float32"],
         "expand": mid_phase._expand_kernel,
+        "walk": mid_phase._WALK["float32"],
         "pair": mid_phase._PAIR["float32"],
         "rigid bounds": bvh._RIGID_BOUNDS["float32"],
         "sap sweep": broad_phase._sap_sweep_kernel,
@@ -35,11 +36,15 @@ def _kernels() -> dict:
     }
 
 
-def attributes(kernel, device) -> dict:
-    """The kernel's attributes on ``device`` (loaded), and the threads per multiprocessor its
-    registers allow (blocks of 256)."""
+BLOCK_DIMS = {"walk": mid_phase.WALK_BLOCK_DIM}
+"""Block size a kernel is launched with, where not 256 (its module is compiled for it)."""
+
+
+def attributes(kernel, device, block_dim: int = 256) -> dict:
+    """The kernel's attributes on ``device`` as compiled for blocks of ``block_dim``, and the
+    threads per multiprocessor its registers allow (blocks of 256)."""
     cuda = ctypes.CDLL("libcuda.so.1")
-    fn = kernel.module.get_kernel_hooks(kernel, device).forward
+    fn = kernel.module.load(device, block_dim).get_kernel_hooks(kernel).forward
     out = {}
     for name, code in _ATTRIBUTES.items():
         value = ctypes.c_int()
@@ -63,7 +68,7 @@ def main(argv=None) -> int:
     CollisionPipeline(s, graph=False).detect(advance=0.01)  # loads every module of the frame
     rows = []
     for name, kernel in _kernels().items():
-        row = {"kernel": name, "key": kernel.key, **attributes(kernel, device)}
+        row = {"kernel": name, "key": kernel.key, **attributes(kernel, device, BLOCK_DIMS.get(name, 256))}
         rows.append(row)
         print(f"{name:<14} registers {row['registers']:>4}  local {row['local_bytes']:>5} B  "
               f"threads/SM {row['resident_threads_per_sm']:>5}", flush=True)

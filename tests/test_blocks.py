@@ -57,7 +57,7 @@ def test_sap_in_blocks(device, blocks):
     hi[:40] = 4.0
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    bp = wc.BroadPhaseSAP(device=device)
+    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=0)
     bp._resize(len(lo))
     bp.entry._allocate(1)
     got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)  # both buffers overflow first
@@ -65,14 +65,17 @@ def test_sap_in_blocks(device, blocks):
     assert np.array_equal(got, box_pairs_numpy(lo, hi))
 
 
+@pytest.mark.parametrize("plan", ["walk", "levels"])
 @pytest.mark.parametrize("front_capacity", [1, None])
-def test_traversal_in_blocks(device, blocks, front_capacity):
+def test_traversal_in_blocks(device, blocks, front_capacity, plan):
     """Front entries and candidates reserved per block and round, with a candidate buffer (and a
-    front) of capacity 1."""
+    front) of capacity 1; a launch a level, or one block walking every level (its threads wait
+    for each other between levels)."""
     scene = wc.Scene.random(30, seed=4, shapes=("cube", "icosphere3", "icosphere4"), density=0.08, device=device)
     scene.advance(0.4)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene, candidate_capacity=1)
+    pipe.mid.walk_max = 10**9 if plan == "walk" else 0
     if front_capacity is not None:
         pipe.mid.front._allocate(front_capacity)
     assert pipe.mid.block_dim == BLOCK_DIM

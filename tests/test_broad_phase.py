@@ -5,7 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.broad_phase import make_broad_phase
+from warp_ccd.broad_phase import ALL_PAIRS_MAX, NXN_MAX_BOXES, make_broad_phase
 
 from oracles import box_pairs_numpy
 
@@ -84,13 +84,31 @@ DISTRIBUTIONS = {
 }
 
 
-@pytest.mark.parametrize("method", ["sap", "nxn"])
+SAP_PATHS = {"sweep": 0, "all_pairs": NXN_MAX_BOXES}
+"""``all_pairs_max`` of :class:`BroadPhaseSAP` that makes it sweep, or test all pairs, at any size
+(by default a small scene tests all pairs on CUDA and sweeps on the CPU)."""
+
+
+def pairs_of(method: str, lo, hi, device) -> np.ndarray:
+    """Sorted pairs of a method of :func:`wc.broad_phase_pairs`, or of a path of the SAP (``sap_sweep``,
+    ``sap_all_pairs``) forced with ``all_pairs_max``."""
+    if not method.startswith("sap_"):
+        return wc.broad_phase_pairs(lo, hi, method=method, device=device)
+    if len(lo) < 2:
+        return np.zeros((0, 2), np.int32)
+    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=SAP_PATHS[method[4:]])
+    got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
+    got = got.numpy().reshape(-1, 2).astype(np.int32)
+    return got[np.lexsort((got[:, 1], got[:, 0]))]
+
+
+@pytest.mark.parametrize("method", ["sap", "sap_sweep", "sap_all_pairs", "nxn"])
 @pytest.mark.parametrize("dist", sorted(DISTRIBUTIONS))
 def test_equals_numpy(device, method, dist):
     rng = np.random.default_rng(abs(hash(dist)) % 2**32)
     n = 200 if dist == "identical" else 1500
     lo, hi = DISTRIBUTIONS[dist](rng, n)
-    got = wc.broad_phase_pairs(lo, hi, method=method, device=device)
+    got = pairs_of(method, lo, hi, device)
     want = box_pairs_numpy(lo, hi)
     assert got.dtype == np.int32 and got.shape[1] == 2
     assert np.array_equal(got, want), f"{dist}/{method}: {len(got)} pairs, truth {len(want)}"
@@ -120,8 +138,8 @@ def test_sap_either_side_of_16_bit_keys(device, n):
 def test_tiny_counts(device, n):
     rng = np.random.default_rng(n)
     lo, hi = boxes_random(rng, n, spread=0.1)
-    for method in ("sap", "nxn"):
-        got = wc.broad_phase_pairs(lo.reshape(-1, 3), hi.reshape(-1, 3), method=method, device=device)
+    for method in ("sap", "sap_sweep", "sap_all_pairs", "nxn"):
+        got = pairs_of(method, lo.reshape(-1, 3), hi.reshape(-1, 3), device)
         assert np.array_equal(got.reshape(-1, 2), box_pairs_numpy(lo, hi).reshape(-1, 2))
 
 
@@ -151,7 +169,8 @@ def test_capacity_one_is_complete(device):
     want = box_pairs_numpy(lo, hi)
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    for bp in (wc.BroadPhaseSAP(device=device), wc.BroadPhaseNxN(device=device)):
+    for bp in (wc.BroadPhaseSAP(device=device, all_pairs_max=0), wc.BroadPhaseSAP(device=device, all_pairs_max=800),
+               wc.BroadPhaseNxN(device=device)):
         for b in bp.counters:
             b._allocate(1)
         got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)
@@ -166,7 +185,7 @@ def test_sap_grid_entries_grow(device):
     tiny_lo, tiny_hi = boxes_random(rng, 3000, spread=5.0, size=(0.005, 0.015))
     mid_lo, mid_hi = boxes_random(rng, 600, spread=5.0, size=(2.45, 2.55))
     lo, hi = np.concatenate([tiny_lo, mid_lo]), np.concatenate([tiny_hi, mid_hi])
-    bp = wc.BroadPhaseSAP(device=device)
+    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=0)
     bp._resize(len(lo))
     start = bp.entry.capacity  # the room it starts with
     got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
@@ -196,6 +215,29 @@ def test_float64_input_rounds_outward(device):
 def test_bad_input(lower, upper, match):
     with pytest.raises(ValueError, match=match):
         wc.broad_phase_pairs(lower, upper)
+
+
+@pytest.mark.parametrize("value", [-1, NXN_MAX_BOXES + 1, 2.5, True, "all"])
+def test_bad_all_pairs_max(value):
+    with pytest.raises(ValueError, match="all_pairs_max"):
+        wc.BroadPhaseSAP(device="cpu", all_pairs_max=value)
+
+
+def test_sap_all_pairs_below_the_limit(device):
+    """Up to ``all_pairs_max`` boxes the SAP tests every pair in one launch (no grid entries), above
+    it sweeps; frame after frame with one broad phase, sizes either side of the limit, the pairs are
+    the numpy truth; CUDA's default limit is :data:`ALL_PAIRS_MAX`, the CPU's 0."""
+    assert wc.BroadPhaseSAP(device="cpu").all_pairs_max == 0
+    if wp.get_device(device).is_cuda:
+        assert wc.BroadPhaseSAP(device=device).all_pairs_max == ALL_PAIRS_MAX
+    rng = np.random.default_rng(17)
+    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=400)
+    for n in (400, 401, 2, 400):
+        lo, hi = boxes_random(rng, n, spread=4.0, size=(0.2, 1.5))
+        got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
+        got = got.numpy().reshape(-1, 2)
+        assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi)), n
+        assert (bp.entry.last_count == 0) == (n <= 400), n
 
 
 def test_unknown_method():

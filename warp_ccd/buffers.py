@@ -8,8 +8,8 @@ in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
 protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),
-:func:`block_reserve` (slots for a whole block of threads with one atomic add) and
-:func:`device_fence` (for a kernel whose last block finishes the work of all).
+:func:`block_reserve` (slots for a whole block of threads with one atomic add), :func:`block_sync`
+(a barrier of the block) and :func:`device_fence` (for a kernel whose last block finishes the work of all).
 
 Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
 their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
@@ -36,6 +36,8 @@ __all__ = [
     "GrowableBuffer",
     "block_dim_for",
     "block_reserve",
+    "block_reserve_at",
+    "block_sync",
     "device_fence",
     "emit_pair",
     "reserve_slot",
@@ -64,19 +66,36 @@ def block_dim_for(device) -> int:
 
 
 @wp.func
+def block_reserve_at(count: wp.array[wp.int64], index: int, lane: int, items: int) -> wp.int64:
+    """:func:`block_reserve` on the counter ``count[index]``."""
+    start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
+    total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
+    base = wp.int64(0)
+    if lane == 0 and total > 0:
+        base = wp.atomic_add(count, index, wp.int64(total))
+    base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
+    return base + wp.int64(start)
+
+
+@wp.func
 def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
     """Cooperative: every thread of the block calls it (``lane``: its own index in the block, from
     ``wp.tid()``) with its number of items; reserves them all with one atomic add on ``count`` and
     returns the thread's first slot. Like :func:`reserve_slot`, the counter counts past the
     capacity: the caller writes only slots below it. The block's items must stay below 2**31
     (int32 scan)."""
-    start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
-    total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
-    base = wp.int64(0)
-    if lane == 0 and total > 0:
-        base = wp.atomic_add(count, 0, wp.int64(total))
-    base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
-    return base + wp.int64(start)
+    return block_reserve_at(count, 0, lane, items)
+
+
+@wp.func_native("""
+WP_TILE_SYNC();
+""")
+def block_sync():
+    """Barrier of the block (CUDA's ``__syncthreads``; the CPU's fibers with
+    ``wp.config.enable_cpu_blocks``, else nothing): every thread of the block calls it, and the
+    writes to global memory of each before it are seen by all after it. For a one-block kernel
+    that runs several dependent passes in one launch."""
+    ...
 
 
 @wp.func_native("""
