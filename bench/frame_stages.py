@@ -2,9 +2,9 @@
 
 The frame of a few thousand objects is latency: each launch of a graph costs a few microseconds
 however little it does. For each case (``--cases``, ``triangles:N`` of the scaling scene) and each
-variant of the pipeline (``default``; ``levels``: the mid phase never walks its levels in one block,
-``walk_max=0``; ``sap``: the broad phase never tests all pairs, ``all_pairs_max=0``;
-``levels+sap``: both, the frame as it was without the small-scene paths), after warm-up frames:
+variant of the pipeline (``default``; ``one_level``: the mid phase descends one level a launch,
+``levels_per_launch=1``; ``sap``: the broad phase never tests all pairs, ``all_pairs_max=0``;
+``one_level+sap``: both, the frame as it was without the small-scene paths), after warm-up frames:
 
 1. **Frames.** ``--frames`` calls of ``detect(advance=dt)`` (the scene's motion and detection, one
    graph), each timed with a synchronisation before and after: wall ms (min, median) and Python's
@@ -17,7 +17,7 @@ variant of the pipeline (``default``; ``levels``: the mid phase never walks its 
    recorded with ``wp.timing_begin``; CUB's sort kernels are not listed).
 
 JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"case", "triangles",
-"n_objects", "variant", "plan", "measure", "ms_min", "ms_median", "launches"}``: ``measure`` is
+"n_objects", "variant", "measure", "ms_min", "ms_median", "launches"}``: ``measure`` is
 ``frame``, ``host``, ``loop`` or ``upto_<stage>``.
 
     PYTHONPATH=. python bench/frame_stages.py --device cuda:0 --cases poly:1000 poly:10000 \\
@@ -41,38 +41,25 @@ from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
 STAGES = ("reset", "motion", "refit", "broad", "mid", "narrow", "read")
-VARIANTS = {"default": {}, "levels": {"walk_max": 0}, "sap": {"all_pairs_max": 0},
-            "levels+sap": {"walk_max": 0, "all_pairs_max": 0}}
+VARIANTS = {"default": {}, "one_level": {"levels_per_launch": 1}, "sap": {"all_pairs_max": 0},
+            "one_level+sap": {"levels_per_launch": 1, "all_pairs_max": 0}}
 
 
 def make_pipeline(scene: Scene, variant: str) -> CollisionPipeline:
     """A graph pipeline of ``variant`` (:data:`VARIANTS`)."""
     pipe = CollisionPipeline(scene, graph=True)
     settings = VARIANTS[variant]
-    if "walk_max" in settings and isinstance(pipe.mid, MidPhaseBVH):
-        pipe.mid.walk_max = settings["walk_max"]
+    if "levels_per_launch" in settings and isinstance(pipe.mid, MidPhaseBVH):
+        pipe.mid.levels_per_launch = settings["levels_per_launch"]
     if "all_pairs_max" in settings and hasattr(pipe.broad, "all_pairs_max"):
         pipe.broad.all_pairs_max = settings["all_pairs_max"]
     return pipe
 
 
-def enqueue_upto(pipe: CollisionPipeline, stage: str, plan: str | None) -> None:
+def enqueue_upto(pipe: CollisionPipeline, stage: str) -> None:
     """Enqueues the frame (motion by 0 s) up to and including ``stage``."""
-    scene = pipe.scene
-    steps = {
-        "reset": pipe.counter_read.reset,
-        "motion": lambda: scene.enqueue_advance(0.0),
-        "refit": lambda: pipe.boxes.refit(scene),
-        "broad": lambda: pipe.broad.launch(pipe.boxes.lower, pipe.boxes.upper, pipe.pairs),
-        "mid": lambda: pipe.mid.launch(scene, pipe.pairs, reset_counters=False, plan=plan),
-        "narrow": lambda: pipe.narrow.launch(scene, pipe.mid.candidates, pipe.pairs, pipe.boxes.lower,
-                                             pipe.boxes.upper, reset_counters=False),
-        "read": pipe.counter_read.enqueue,
-    }
-    for name in STAGES:
-        steps[name]()
-        if name == stage:
-            return
+    for name in STAGES[: STAGES.index(stage) + 1]:
+        enqueue_one(pipe, name)
 
 
 def replay_ms(graph, device, replays: int) -> list[float]:
@@ -88,19 +75,19 @@ def replay_ms(graph, device, replays: int) -> list[float]:
     return out
 
 
-def launches_by_stage(pipe: CollisionPipeline, plan: str | None) -> dict:
+def launches_by_stage(pipe: CollisionPipeline) -> dict:
     """Kernels, copies and memsets each stage enqueues (one eager frame, recorded)."""
     out = {}
     for stage in STAGES:
         wp.synchronize_device(pipe.device)
         wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-        enqueue_one(pipe, stage, plan)
+        enqueue_one(pipe, stage)
         wp.synchronize_device(pipe.device)
         out[stage] = len(wp.timing_end())
     return out
 
 
-def enqueue_one(pipe: CollisionPipeline, stage: str, plan: str | None) -> None:
+def enqueue_one(pipe: CollisionPipeline, stage: str) -> None:
     """Enqueues ``stage`` alone."""
     scene = pipe.scene
     if stage == "reset":
@@ -112,7 +99,7 @@ def enqueue_one(pipe: CollisionPipeline, stage: str, plan: str | None) -> None:
     elif stage == "broad":
         pipe.broad.launch(pipe.boxes.lower, pipe.boxes.upper, pipe.pairs)
     elif stage == "mid":
-        pipe.mid.launch(scene, pipe.pairs, reset_counters=False, plan=plan)
+        pipe.mid.launch(scene, pipe.pairs, reset_counters=False)
     elif stage == "narrow":
         pipe.narrow.launch(scene, pipe.mid.candidates, pipe.pairs, pipe.boxes.lower, pipe.boxes.upper,
                            reset_counters=False)
@@ -129,8 +116,7 @@ def measure_case(spec: str, variant: str, args, device) -> list[dict]:
     pipe = make_pipeline(scene, variant)
     for _ in range(args.warmup):
         pipe.detect(advance=DT)
-    plan = pipe.mid.plan(pipe.pairs) if isinstance(pipe.mid, MidPhaseBVH) else None
-    base = {"case": spec, "triangles": name, "n_objects": n, "variant": variant, "plan": plan}
+    base = {"case": spec, "triangles": name, "n_objects": n, "variant": variant}
     rows = []
     walls, hosts = [], []
     for _ in range(args.frames):
@@ -148,10 +134,10 @@ def measure_case(spec: str, variant: str, args, device) -> list[dict]:
     for measure, values in (("frame", walls), ("host", hosts), ("loop", [loop])):
         rows.append({**base, "measure": measure, "ms_min": float(np.min(values)),
                      "ms_median": float(np.median(values)), "launches": None})
-    counts = launches_by_stage(pipe, plan)
+    counts = launches_by_stage(pipe)
     for stage in STAGES:
         with wp.ScopedCapture(device=device, force_module_load=False) as capture:
-            enqueue_upto(pipe, stage, plan)
+            enqueue_upto(pipe, stage)
         times = replay_ms(capture.graph, device, args.replays)
         rows.append({**base, "measure": f"upto_{stage}", "ms_min": float(np.min(times)),
                      "ms_median": float(np.median(times)), "launches": counts[stage]})
@@ -181,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             doc["rows"].extend(rows)
             by = {r["measure"]: r for r in rows}
             cuts = "  ".join(f"{s} {by['upto_' + s]['ms_median']:.4f}({by['upto_' + s]['launches']})" for s in STAGES)
-            print(f"{spec:>12} {variant:<10} plan {rows[0]['plan']}: frame {by['frame']['ms_median']:.4f} "
+            print(f"{spec:>12} {variant:<13}: frame {by['frame']['ms_median']:.4f} "
                   f"(min {by['frame']['ms_min']:.4f}) host {by['host']['ms_median']:.4f} loop "
                   f"{by['loop']['ms_median']:.4f} | device up to: {cuts}", flush=True)
             if args.out:

@@ -27,7 +27,6 @@ def _kernels() -> dict:
         "narrow moller": narrow_phase._NARROW_MOLLER["float32"],
         "narrow touch": narrow_phase._NARROW_TOUCH["float32"],
         "expand": mid_phase._expand_kernel,
-        "walk": mid_phase._WALK["float32"],
         "pair": mid_phase._PAIR["float32"],
         "rigid bounds": bvh._RIGID_BOUNDS["float32"],
         "sap sweep": broad_phase._sap_sweep_kernel,
@@ -36,7 +35,7 @@ def _kernels() -> dict:
     }
 
 
-BLOCK_DIMS = {"walk": mid_phase.WALK_BLOCK_DIM}
+BLOCK_DIMS = {}
 """Block size a kernel is launched with, where not 256 (its module is compiled for it)."""
 
 

@@ -5,7 +5,6 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.mid_phase import PLANS
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 from test_narrow_phase import run_test
@@ -54,61 +53,36 @@ def test_pipeline_options_agree(device, options):
     assert np.array_equal(got.colliding, ref.colliding)
 
 
-@pytest.mark.parametrize("plan", PLANS)
+@pytest.mark.parametrize("levels_per_launch", [1, 2])
 @pytest.mark.parametrize("front_capacity", [1, None])
-def test_traversal_front(device, front_capacity, plan):
-    """The descent level by level (a launch a level, or one block walking them all): trees of
-    different depths end together at leaves (the last level's front is empty), the front's counter
-    holds its largest level, and a front of capacity 1 grows until the frame fits; the pairs are
-    those of every triangle pair."""
+def test_traversal_front(device, front_capacity, levels_per_launch):
+    """The descent level by level, one or two a launch: trees of different depths end together at
+    leaves (the last launch's front is empty), the front's counter holds its largest level, and a
+    front of capacity 1 grows until the frame fits; the pairs are those of every triangle pair, and
+    the candidates the same either way."""
     scene = wc.Scene.random(80, seed=2, shapes=("cube", "icosphere2", "dodecahedron"), density=0.2, device=device)
     scene.advance(0.3)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene)
     mid = pipe.mid
-    mid.walk_max = 10**9 if plan == "walk" else 0
-    assert mid.plan(pipe.pairs) == plan
+    mid.levels_per_launch = levels_per_launch
     if front_capacity is not None:
         mid.front._allocate(front_capacity)
     got = pipe.detect()
     assert ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     assert mid.num_levels == pipe.boxes.num_levels - 1 == 9  # icosphere2: 320 leaves of 1 triangle, 10 levels
-    levels = mid._level_count.numpy()
+    assert mid.num_launches == (9 if levels_per_launch == 1 else 5)
+    levels = mid._level_count.numpy()[: mid.num_launches + 1]
     assert levels[-1] == 0 and levels[1:-1].min() > 0
     assert mid.front.last_count == levels.max() <= mid.front.capacity
     if front_capacity is not None:
         assert got.runs >= 2  # the front grew (a frame overflowing at one level counts less below it)
     again = pipe.detect()
     assert again.runs == 1 and np.array_equal(again.triangle_pairs, ref.triangle_pairs)
-
-
-def test_traversal_plan_follows_the_counts(device):
-    """The mid phase walks its levels in one block while the object pairs and the largest front
-    stay within ``walk_max`` (before a frame: the pairs' capacity), else launches a level each; the
-    plans find the same candidates and triangle pairs, frame after frame, as the plan changes."""
-    scene = wc.Scene.random(300, seed=8, density=0.3, device=device)
-    pipe = wc.CollisionPipeline(scene, pair_capacity=50)
-    mid = pipe.mid
-    mid.walk_max = 60
-    assert mid.plan(pipe.pairs) == "walk"  # 50 pair slots, no frame yet
-    seen = set()
-    for k in range(4):
-        got = pipe.detect(advance=0.05)
-        ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
-        assert np.array_equal(got.triangle_pairs, ref.triangle_pairs), k
-        other = wc.CollisionPipeline(scene)
-        other.mid.walk_max = 0 if mid.plan(pipe.pairs) == "walk" else 10**9
-        assert other.detect().num_candidates == got.num_candidates
-        seen.add(mid.plan(pipe.pairs))
-        assert mid.plan(pipe.pairs) == ("walk" if max(pipe.pairs.last_count, mid.front.last_count) <= 60
-                                        else "levels")
-    assert seen == {"levels"}  # this scene's front passes 60
-    mid.walk_max = 10**6
-    got = pipe.detect()
-    assert mid.plan(pipe.pairs) == "walk" and np.array_equal(got.triangle_pairs, ref.triangle_pairs)
-    with pytest.raises(ValueError, match="plan"):
-        mid.launch(scene, pipe.pairs, plan="dfs")
+    other = wc.CollisionPipeline(scene)
+    other.mid.levels_per_launch = 3 - levels_per_launch
+    assert other.detect().num_candidates == again.num_candidates
 
 
 def test_timings(device):

@@ -8,8 +8,8 @@ in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
 protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),
-:func:`block_reserve` (slots for a whole block of threads with one atomic add), :func:`block_sync`
-(a barrier of the block) and :func:`device_fence` (for a kernel whose last block finishes the work of all).
+:func:`block_reserve` (slots for a whole block of threads with one atomic add) and
+:func:`device_fence` (for a kernel whose last block finishes the work of all).
 
 Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
 their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
@@ -37,7 +37,6 @@ __all__ = [
     "block_dim_for",
     "block_reserve",
     "block_reserve_at",
-    "block_sync",
     "device_fence",
     "emit_pair",
     "reserve_slot",
@@ -85,17 +84,6 @@ def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
     capacity: the caller writes only slots below it. The block's items must stay below 2**31
     (int32 scan)."""
     return block_reserve_at(count, 0, lane, items)
-
-
-@wp.func_native("""
-WP_TILE_SYNC();
-""")
-def block_sync():
-    """Barrier of the block (CUDA's ``__syncthreads``; the CPU's fibers with
-    ``wp.config.enable_cpu_blocks``, else nothing): every thread of the block calls it, and the
-    writes to global memory of each before it are seen by all after it. For a one-block kernel
-    that runs several dependent passes in one launch."""
-    ...
 
 
 @wp.func_native("""

@@ -43,7 +43,6 @@ from .buffers import (
     block_dim_for,
     block_reserve,
     block_reserve_at,
-    block_sync,
     upper_bound,
     used_count,
 )
@@ -71,17 +70,10 @@ in units in the last place of the boxes' and the translation's sizes."""
 SEPARATING_AXES = (3, 6)
 """Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
 
-WALK_MAX = 4096
-"""Default :attr:`MidPhaseBVH.walk_max`: up to this many object pairs and node pairs a level, one
-block of :data:`WALK_BLOCK_DIM` threads walks all levels in one launch (the levels' launches,
-each a few microseconds of latency, cost more than one multiprocessor's work)."""
-
-WALK_BLOCK_DIM = 512
-"""Threads of the one block that walks a small scene's levels on CUDA (128 registers a thread:
-the multiprocessor's 65,536)."""
-
-PLANS = ("walk", "levels")
-"""How :class:`MidPhaseBVH` descends (:meth:`MidPhaseBVH.plan`)."""
+LEVELS_PER_LAUNCH = 2
+"""Default :attr:`MidPhaseBVH.levels_per_launch`: each launch opens the node pairs two levels down
+(up to 16 pairs of grandchildren tested, none of the children's): half the launches, each a few
+microseconds of latency in a small scene, and no front written between the two levels."""
 
 assert EXPAND_THREADS_PER_SM % BLOCK_DIM == 0
 
@@ -322,14 +314,14 @@ def _leaf_rows(tree: TreeView, r: TreePair, kind: int, xa: int, xb: int) -> int:
 
 
 @wp.func
-def _push(front_out: wp.array[wp.vec3i], out_start: int, front_capacity: int, slot: wp.int64, kind: int, k: int,
-          xa: int, xb: int) -> wp.int64:
+def _push(front_out: wp.array[wp.vec3i], front_capacity: int, slot: wp.int64, kind: int, k: int, xa: int,
+          xb: int) -> wp.int64:
     """Writes a child pair of kind :data:`CHILD_PUSH` of pair ``k`` into the front at ``slot``
-    (below the capacity; ``out_start``: the level's half of ``front_out``); returns the next slot."""
+    (below the capacity); returns the next slot."""
     if kind != CHILD_PUSH:
         return slot
     if slot < wp.int64(front_capacity):
-        front_out[out_start + int(slot)] = wp.vec3i(k, xa, xb)
+        front_out[int(slot)] = wp.vec3i(k, xa, xb)
     return slot + wp.int64(1)
 
 
@@ -343,6 +335,28 @@ def _emit(tree: TreeView, row: wp.vec4i, r: TreePair, kind: int, xa: int, xb: in
 
 
 @wp.func
+def _open(tree: TreeView, start: int, n: int, two: int) -> wp.vec4i:
+    """The nodes that node ``n`` (local id; its tree's global ids from ``start``) opens to, -1 past
+    them: itself if a leaf, else its children, and with ``two`` their children in turn (a child
+    that is a leaf stays itself)."""
+    c = tree.node_child[start + n]
+    if c[0] < 0:
+        return wp.vec4i(n, -1, -1, -1)
+    if two == 0:
+        return wp.vec4i(c[0], c[1], -1, -1)
+    out = wp.vec4i(c[0], -1, c[1], -1)
+    g = tree.node_child[start + c[0]]
+    if g[0] >= 0:
+        out[0] = g[0]
+        out[1] = g[1]
+    g = tree.node_child[start + c[1]]
+    if g[0] >= 0:
+        out[2] = g[0]
+        out[3] = g[1]
+    return out
+
+
+@wp.func
 def _expand_entry(
     tree: TreeView,
     r: TreePair,
@@ -351,11 +365,11 @@ def _expand_entry(
     nb: int,
     valid: bool,
     roots: bool,
+    two: int,
     axes: int,
     lane: int,
     pair_rows: wp.array[wp.vec4i],
     front_out: wp.array[wp.vec3i],
-    out_start: int,
     front_capacity: int,
     level_count: wp.array[wp.int64],
     out_level: int,
@@ -365,59 +379,42 @@ def _expand_entry(
     candidate_count: wp.array[wp.int64],
 ):
     """Cooperative (every thread of the block calls it): one node pair ``(k, na, nb)`` of pair
-    ``k`` (``r``; local ids; when ``valid``) opens both nodes (a leaf stays itself) and tests the
-    two to four pairs of children; overlapping pairs of two leaves become candidate rows, the
-    others go to the front (``front_out`` from ``out_start``, counted by ``level_count[out_level]``;
-    the largest level's count kept in ``front_peak``). With ``roots`` the node pair is the roots,
-    not tested yet: tested first. The block reserves its front slots and its rows with one atomic
-    add each (:func:`~warp_ccd.buffers.block_reserve_at`)."""
-    # The (up to) four child pairs (xa0 | xa1) x (xb0 | xb1) and their kinds (_child_kind), in
-    # registers: no arrays indexed at run time (they would live in local memory).
-    xa0 = na
-    xa1 = na
-    xb0 = nb
-    xb1 = nb
-    k00 = int(0)
-    k01 = int(0)
-    k10 = int(0)
-    k11 = int(0)
+    ``k`` (``r``; local ids; when ``valid``) opens both nodes one level down, or two with ``two``
+    (:func:`_open`), and tests the pairs of what they open to (up to 4, or 16); overlapping pairs
+    of two leaves become candidate rows, the others go to ``front_out`` (counted by
+    ``level_count[out_level]``; the largest level's count kept in ``front_peak``). With ``roots``
+    the node pair is the roots, not tested yet: tested first. The kinds (:func:`_child_kind`) are
+    kept two bits each in one integer between counting and writing; the block reserves its front
+    slots and its rows with one atomic add each (:func:`~warp_ccd.buffers.block_reserve_at`)."""
+    oa = wp.vec4i(-1)
+    ob = wp.vec4i(-1)
+    kinds = int(0)
+    num_push = int(0)
+    rows = int(0)
     if valid:
         if not roots or _overlap(tree, r, na, nb, axes):
-            ca = tree.node_child[r.node_a_start + na]
-            cb = tree.node_child[r.node_b_start + nb]
-            if ca[0] < 0 and cb[0] < 0:
-                k00 = CHILD_LEAF  # two roots that are leaves
-            else:
-                if ca[0] >= 0:
-                    xa0 = ca[0]
-                    xa1 = ca[1]
-                if cb[0] >= 0:
-                    xb0 = cb[0]
-                    xb1 = cb[1]
-                k00 = _child_kind(tree, r, xa0, xb0, axes)
-                if cb[0] >= 0:
-                    k01 = _child_kind(tree, r, xa0, xb1, axes)
-                if ca[0] >= 0:
-                    k10 = _child_kind(tree, r, xa1, xb0, axes)
-                    if cb[0] >= 0:
-                        k11 = _child_kind(tree, r, xa1, xb1, axes)
-    num_push = _is_push(k00) + _is_push(k01) + _is_push(k10) + _is_push(k11)
-    rows = (_leaf_rows(tree, r, k00, xa0, xb0) + _leaf_rows(tree, r, k01, xa0, xb1)
-            + _leaf_rows(tree, r, k10, xa1, xb0) + _leaf_rows(tree, r, k11, xa1, xb1))
+            oa = _open(tree, r.node_a_start, na, two)
+            ob = _open(tree, r.node_b_start, nb, two)
+            for i in range(4):
+                for j in range(4):
+                    if oa[i] >= 0 and ob[j] >= 0:
+                        kind = _child_kind(tree, r, oa[i], ob[j], axes)
+                        kinds = kinds | (kind << (2 * (4 * i + j)))
+                        num_push += _is_push(kind)
+                        rows += _leaf_rows(tree, r, kind, oa[i], ob[j])
     slot = block_reserve_at(level_count, out_level, lane, num_push)
     if lane == wp.block_dim() - 1:
         wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
-    slot = _push(front_out, out_start, front_capacity, slot, k00, k, xa0, xb0)
-    slot = _push(front_out, out_start, front_capacity, slot, k01, k, xa0, xb1)
-    slot = _push(front_out, out_start, front_capacity, slot, k10, k, xa1, xb0)
-    slot = _push(front_out, out_start, front_capacity, slot, k11, k, xa1, xb1)
-    slot = block_reserve(candidate_count, lane, rows)
-    if rows > 0:
-        row = pair_rows[k]
-        slot = _emit(tree, row, r, k00, xa0, xb0, slot, candidate, candidate_capacity)
-        slot = _emit(tree, row, r, k01, xa0, xb1, slot, candidate, candidate_capacity)
-        slot = _emit(tree, row, r, k10, xa1, xb0, slot, candidate, candidate_capacity)
-        slot = _emit(tree, row, r, k11, xa1, xb1, slot, candidate, candidate_capacity)
+    row_slot = block_reserve(candidate_count, lane, rows)
+    if kinds != 0:
+        row = wp.vec4i(0)
+        if rows > 0:
+            row = pair_rows[k]
+        for i in range(4):
+            for j in range(4):
+                kind = (kinds >> (2 * (4 * i + j))) & 3
+                slot = _push(front_out, front_capacity, slot, kind, k, oa[i], ob[j])
+                row_slot = _emit(tree, row, r, kind, oa[i], ob[j], row_slot, candidate, candidate_capacity)
 
 
 @wp.kernel
@@ -429,6 +426,7 @@ def _expand_kernel(
     front_in_count: wp.array[wp.int64],
     front_in_capacity: int,
     roots: int,
+    two: int,
     num_blocks: int,
     front_capacity: int,
     candidate_capacity: int,
@@ -441,10 +439,10 @@ def _expand_kernel(
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
 ):
-    """One level of the simultaneous descent (:func:`_expand_entry` for each node pair ``(k, na,
-    nb)`` of ``front_in``, pair ``k``'s nodes, local ids, boxes known to overlap). With ``roots``
-    the entries are the pairs themselves (entry ``k`` is ``(k, 0, 0)``). ``num_blocks`` blocks
-    stride over the entries."""
+    """One step of the simultaneous descent, one level down or two (``two``): :func:`_expand_entry`
+    for each node pair ``(k, na, nb)`` of ``front_in`` (pair ``k``'s nodes, local ids, boxes known
+    to overlap). With ``roots`` the entries are the pairs themselves (entry ``k`` is ``(k, 0,
+    0)``). ``num_blocks`` blocks stride over the entries."""
     block, lane = wp.tid()
     width = wp.block_dim()
     n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
@@ -464,79 +462,9 @@ def _expand_kernel(
                 na = f[1]
                 nb = f[2]
             r = tree_pair[k]
-        _expand_entry(tree, r, k, na, nb, e < n, roots != 0, axes, lane, pair_rows, front_out, 0, front_capacity,
+        _expand_entry(tree, r, k, na, nb, e < n, roots != 0, two, axes, lane, pair_rows, front_out, front_capacity,
                       level_count, out_level, front_peak, candidate, candidate_capacity, candidate_count)
         base += num_blocks * width
-
-
-@wp.kernel(cuda_max_registers=PAIR_MAX_REGISTERS)
-def _walk_kernel(
-    tree: TreeView,
-    instance_shape: wp.array[wp.int32],
-    instance_pose: wp.array[Any],
-    instance_scale: wp.array[wp.float32],
-    instance_deforming: wp.array[wp.int32],
-    world_eps: float,
-    pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int64],
-    pair_capacity: int,
-    num_levels: int,
-    front_capacity: int,
-    candidate_capacity: int,
-    axes: int,
-    # Outputs
-    tree_pair: wp.array[TreePair],
-    pair_rows: wp.array[wp.vec4i],
-    front: wp.array[wp.vec3i],
-    level_count: wp.array[wp.int64],
-    front_peak: wp.array[wp.int64],
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-):
-    """The whole descent in one block (a small scene's, in one launch): the pairs' :class:`TreePair`
-    and their roots, then every level, the block striding over each level's node pairs
-    (:func:`_expand_entry`) and waiting for all its threads (:func:`~warp_ccd.buffers.block_sync`)
-    before the next; the levels alternate between the halves of ``front`` (``2 * front_capacity``)."""
-    _block, lane = wp.tid()
-    width = wp.block_dim()
-    if lane == 0:
-        for i in range(1, level_count.shape[0]):
-            level_count[i] = wp.int64(0)
-    block_sync()
-    for level in range(num_levels):
-        n = used_count(pair_count, pair_capacity)
-        if level > 0:
-            n = int(wp.min(level_count[level], wp.int64(front_capacity)))
-        in_start = ((level + 1) % 2) * front_capacity
-        base = int(0)
-        while base < n:
-            e = base + lane
-            k = int(0)
-            na = int(0)
-            nb = int(0)
-            r = TreePair()
-            if e < n:
-                if level == 0:
-                    k = e
-                    p = pair[k]
-                    r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps,
-                                   p[0], p[1])
-                    tree_pair[k] = r
-                    pair_rows[k] = wp.vec4i(r.a, r.b, r.tri_a_start, r.tri_b_start)
-                else:
-                    f = front[in_start + e]
-                    k = f[0]
-                    na = f[1]
-                    nb = f[2]
-                    r = tree_pair[k]
-            _expand_entry(tree, r, k, na, nb, e < n, level == 0, axes, lane, pair_rows, front,
-                          (level % 2) * front_capacity, front_capacity, level_count, level + 1, front_peak, candidate,
-                          candidate_capacity, candidate_count)
-            base += width
-        block_sync()
-
-
-_WALK = precision_overloads(_walk_kernel, lambda s, v, q, t: {"instance_pose": wp.array[t]})
 
 
 class MidPhaseBVH:
@@ -557,23 +485,23 @@ class MidPhaseBVH:
         front: the :class:`~warp_ccd.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
             b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
             counter holds the largest level's count.
-        num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
+        num_levels: levels below the deepest tree's root (at least 1): a frame's expansion
+            launches (:attr:`num_launches`) descend them all.
         separating_axes: as above (read at each launch: a captured frame keeps the value it was
             captured with).
         num_blocks, block_dim: the largest grid of an expansion, in blocks, and their size (on the
             CPU one block, of one thread that takes every node pair in turn unless
             ``wp.config.enable_cpu_blocks`` is set); a launch takes at most one thread per slot of
             its input (the pairs' capacity, the front's).
-        walk_max: the most object pairs, and node pairs of a level, for which one block walks
-            every level in one launch (:meth:`plan`; 0: never). Read at each launch.
-        walk_block_dim: threads of that block.
+        levels_per_launch: 1, or 2 (default :data:`LEVELS_PER_LAUNCH`): levels a launch descends
+            (:func:`_expand_entry`; the candidates are the same). Read at each launch.
 
     The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
-                 separating_axes: int = 6, walk_max: int = WALK_MAX, device=None):
+                 separating_axes: int = 6, levels_per_launch: int = LEVELS_PER_LAUNCH, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
@@ -585,12 +513,18 @@ class MidPhaseBVH:
                                     "tree-pair front", factor=2)
         self.block_dim = block_dim_for(self.device)
         self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
-        self.walk_max = int(walk_max)
-        self.walk_block_dim = WALK_BLOCK_DIM if self.device.is_cuda else self.block_dim
+        if levels_per_launch not in (1, 2):
+            raise ValueError(f"levels_per_launch must be 1 or 2, got {levels_per_launch!r}")
+        self.levels_per_launch = levels_per_launch
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
         self._pairs_capacity = -1
+
+    @property
+    def num_launches(self) -> int:
+        """Expansion launches a frame: :attr:`num_levels` over :attr:`levels_per_launch`, rounded up."""
+        return -(-self.num_levels // self.levels_per_launch)
 
     @property
     def counters(self) -> list[GrowableBuffer]:
@@ -598,29 +532,15 @@ class MidPhaseBVH:
         reads after it: the front (its largest level), then the candidates."""
         return [self.front, self.candidates]
 
-    def plan(self, pairs: GrowableBuffer) -> str:
-        """How the next :meth:`launch` descends: ``"walk"`` (one block, one launch) when the last
-        frame's object pairs and largest front were at most :attr:`walk_max` (before any frame:
-        the pairs' capacity), else ``"levels"`` (a launch a level over the whole GPU). Both find
-        the same candidates."""
-        seen = max(pairs.last_count, self.front.last_count)
-        if seen == 0:
-            seen = pairs.capacity
-        return "walk" if seen <= self.walk_max else "levels"
-
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True, plan: str | None = None) -> None:
+    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
 
         Args:
             scene: the scene whose trees :attr:`bvh` holds (refit for this frame).
             pairs: the broad phase's object pairs.
             reset_counters: zero the counters of :attr:`counters` first; False when the caller has.
-            plan: ``"walk"`` or ``"levels"`` (default: :meth:`plan`'s).
         """
         d = self.device
-        plan = plan or self.plan(pairs)
-        if plan not in PLANS:
-            raise ValueError(f"plan must be one of {PLANS}, got {plan!r}")
         if reset_counters:
             for buffer in self.counters:
                 buffer.reset()
@@ -634,27 +554,20 @@ class MidPhaseBVH:
                  WORLD_ERROR_ULPS * eps, pairs.data, pairs.count, pairs.capacity]
         cap = self.front.capacity
         cand = self.candidates
-        if plan == "walk":
-            wp.launch_tiled(
-                _WALK[scene.precision], dim=[1],
-                inputs=[*poses, self.num_levels, cap, cand.capacity, self.separating_axes],
-                outputs=[self._tree_pair, self._pair_rows, self.front.data, self._level_count, self.front.count,
-                         cand.data, cand.count],
-                block_dim=self.walk_block_dim, device=d)
-            return
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity, inputs=poses,
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
-        for level in range(self.num_levels):
-            roots = level == 0
+        two = int(self.levels_per_launch == 2)
+        for step in range(self.num_launches):
+            roots = step == 0
             slots = pairs.capacity if roots else cap
             blocks = min(self.num_blocks, (slots + self.block_dim - 1) // self.block_dim)
             wp.launch_tiled(
                 _expand_kernel, dim=[blocks],
-                inputs=[tree, self._tree_pair, self._pair_rows, halves[(level + 1) % 2],
-                        pairs.count if roots else self._level_views[level], slots, int(roots), blocks, cap,
-                        cand.capacity, self.separating_axes, level + 1],
-                outputs=[halves[level % 2], self._level_count, self.front.count, cand.data, cand.count],
+                inputs=[tree, self._tree_pair, self._pair_rows, halves[(step + 1) % 2],
+                        pairs.count if roots else self._level_views[step], slots, int(roots), two, blocks, cap,
+                        cand.capacity, self.separating_axes, step + 1],
+                outputs=[halves[step % 2], self._level_count, self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
 
 

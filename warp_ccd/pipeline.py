@@ -322,10 +322,9 @@ class CollisionPipeline:
         self._detects = 0
         self._times = None
 
-    def _launch_stages(self, plan: str | None = None) -> None:
-        """Enqueues the four stages (the frame's counters were reset before; ``plan``: the bvh
-        mid phase's, :meth:`MidPhaseBVH.plan <warp_ccd.mid_phase.MidPhaseBVH.plan>`); with
-        ``timings``, times each stage."""
+    def _launch_stages(self) -> None:
+        """Enqueues the four stages (the frame's counters were reset before); with ``timings``,
+        times each stage."""
         scene = self.scene
         times = {} if self.timings else None
 
@@ -344,10 +343,7 @@ class CollisionPipeline:
         t = mark("refit", t)
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
         t = mark("broad", t)
-        if plan is None:
-            self.mid.launch(scene, self.pairs, reset_counters=False)
-        else:
-            self.mid.launch(scene, self.pairs, reset_counters=False, plan=plan)
+        self.mid.launch(scene, self.pairs, reset_counters=False)
         t = mark("mid", t)
         self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
                            reset_counters=False)
@@ -357,21 +353,18 @@ class CollisionPipeline:
         self._times = times
 
     def _frame(self, step: float | None) -> CountedFrame:
-        """The frame that advances the scene by ``step`` first (None: detection alone), with the
-        mid phase's plan for it (a frame each)."""
-        plan = self.mid.plan(self.pairs) if isinstance(self.mid, MidPhaseBVH) else None
-        key = (step, plan)
-        frame = self._frames.frames.get(key)
+        """The frame that advances the scene by ``step`` first (None: detection alone)."""
+        frame = self._frames.frames.get(step)
         if frame is not None:
             return frame
         if step is None:
-            return self._frames.get(key, lambda: self._launch_stages(plan))
+            return self._frames.get(None, self._launch_stages)
 
         def launch():
             self.scene.enqueue_advance(step)
-            self._launch_stages(plan)
+            self._launch_stages()
 
-        return self._frames.get(key, launch)
+        return self._frames.get(step, launch)
 
     def detect(self, advance: float | None = None) -> CollisionResult:
         """Runs one frame on the scene's world vertices.
