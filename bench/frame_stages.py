@@ -2,9 +2,10 @@
 
 The frame of a few thousand objects is latency: each launch of a graph costs a few microseconds
 however little it does. For each case (``--cases``, ``triangles:N`` of the scaling scene) and each
-variant of the pipeline (``default``; ``one_level``: the mid phase descends one level a launch,
-``levels_per_launch=1``; ``sap``: the broad phase never tests all pairs, ``all_pairs_max=0``;
-``one_level+sap``: both, the frame as it was without the small-scene paths), after warm-up frames:
+variant of the pipeline (``default``; ``trees``: no whole-object pairs, ``whole_pair_max=0``;
+``one_level``: that, and one level a launch, ``levels_per_launch=1``; ``sap``: the broad phase
+never tests all pairs, ``all_pairs_max=0``; ``before``: all three, the frame as it was without the
+small-scene paths), after warm-up frames:
 
 1. **Frames.** ``--frames`` calls of ``detect(advance=dt)`` (the scene's motion and detection, one
    graph), each timed with a synchronisation before and after: wall ms (min, median) and Python's
@@ -35,24 +36,22 @@ import warp as wp
 
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
 from warp_ccd.cli_common import quiet_warp, resolve_device
-from warp_ccd.mid_phase import MidPhaseBVH
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
 STAGES = ("reset", "motion", "refit", "broad", "mid", "narrow", "read")
-VARIANTS = {"default": {}, "one_level": {"levels_per_launch": 1}, "sap": {"all_pairs_max": 0},
-            "one_level+sap": {"levels_per_launch": 1, "all_pairs_max": 0}}
+VARIANTS = {"default": {}, "trees": {"whole_pair_max": 0}, "one_level": {"whole_pair_max": 0, "levels_per_launch": 1},
+            "sap": {"all_pairs_max": 0}, "before": {"whole_pair_max": 0, "levels_per_launch": 1, "all_pairs_max": 0}}
 
 
 def make_pipeline(scene: Scene, variant: str) -> CollisionPipeline:
     """A graph pipeline of ``variant`` (:data:`VARIANTS`)."""
     pipe = CollisionPipeline(scene, graph=True)
-    settings = VARIANTS[variant]
-    if "levels_per_launch" in settings and isinstance(pipe.mid, MidPhaseBVH):
-        pipe.mid.levels_per_launch = settings["levels_per_launch"]
-    if "all_pairs_max" in settings and hasattr(pipe.broad, "all_pairs_max"):
-        pipe.broad.all_pairs_max = settings["all_pairs_max"]
+    for name, value in VARIANTS[variant].items():
+        stage = pipe.broad if name == "all_pairs_max" else pipe.mid
+        if hasattr(stage, name):
+            setattr(stage, name, value)
     return pipe
 
 

@@ -109,6 +109,17 @@ class TreeView:
 
 
 @wp.func
+def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri: int, margin_rel: Any):
+    """``(lower, upper)`` float32 box of local triangle ``tri`` of object ``inst`` in the world,
+    padded by ``margin_rel`` times its longest edge (the narrow phase's tolerance) and rounded
+    outward: a leaf's box, or a triangle's in a whole-object pair (:mod:`warp_ccd.mid_phase`)."""
+    a, b, c = mesh_triangle(mesh, world_vertex, inst, tri)
+    edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+    pad = type(a)(margin_rel * edge, margin_rel * edge, margin_rel * edge)
+    return box_lower32(wp.min(wp.min(a, b), c) - pad), box_upper32(wp.max(wp.max(a, b), c) + pad)
+
+
+@wp.func
 def _refit_node(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
@@ -133,11 +144,9 @@ def _refit_node(
         lo = wp.vec3(BOX_EMPTY)
         hi = wp.vec3(-BOX_EMPTY)
         for k in range(rng[0], rng[0] + rng[1]):
-            a, b, c = mesh_triangle(mesh, world_vertex, inst, tree.tri_order[base + k])
-            edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
-            pad = type(a)(margin_rel * edge, margin_rel * edge, margin_rel * edge)
-            lo = wp.min(lo, box_lower32(wp.min(wp.min(a, b), c) - pad))
-            hi = wp.max(hi, box_upper32(wp.max(wp.max(a, b), c) + pad))
+            tri_lo, tri_hi = triangle_box(mesh, world_vertex, inst, tree.tri_order[base + k], margin_rel)
+            lo = wp.min(lo, tri_lo)
+            hi = wp.max(hi, tri_hi)
     else:
         base_slot = tree.instance_node_start[inst]
         lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
@@ -440,6 +449,7 @@ class SceneBVH:
         instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
         num_levels: levels of the deepest tree (the root alone: 1).
+        max_triangles: triangles of the largest object's mesh.
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
@@ -479,6 +489,8 @@ class SceneBVH:
         self.num_node_slots = int(own_slot[-1])
         inode = np.where(deforming, own_slot[:-1], shape_slot[inst_shape] if n else 0)
         self.num_levels = int(sizes.num_levels.max()) if num_shapes else 1
+        shape_tris = np.diff(scene.shape_triangle_start_np)
+        self.max_triangles = int(shape_tris[inst_shape].max()) if n else 0
         # Where each shape's first deforming object's world vertices start, which a rebuild reads
         # (-1: none, the shape's own vertices).
         first = np.full(num_shapes, n, np.int64)

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .aabb import boxes_overlap
 from .buffers import (
     BLOCK_DIM,
     GrowableBuffer,
@@ -46,8 +47,9 @@ from .buffers import (
     upper_bound,
     used_count,
 )
-from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius
+from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, triangle_box
 from .precision import precision_overloads
+from .scene import MeshTopology
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -59,6 +61,10 @@ that the frame can be a CUDA graph), no bigger than one thread per slot of the l
 small scene launches few blocks), and its threads stride over the level's node pairs. On the H100
 1,024 and 2,048 gave the same frames within noise (``bench/results/box_tests_sweep_cuda0.json``)."""
 
+EXPAND_MAX_REGISTERS = 128
+"""Most registers a thread of the expansion kernel on CUDA (167 as compiled freely with two levels a
+launch: 256 threads a multiprocessor, half as many, and the traversal waits on memory)."""
+
 PAIR_MAX_REGISTERS = 128
 """Most registers a thread of the pair set-up kernel on CUDA (148 as compiled freely, 256 threads a
 multiprocessor; capped with the exact test's kernels in ``bench/results/box_tests_registers_cuda0.json``)."""
@@ -69,6 +75,14 @@ in units in the last place of the boxes' and the translation's sizes."""
 
 SEPARATING_AXES = (3, 6)
 """Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
+
+WHOLE_PAIR_MAX = 4096
+"""Default :attr:`MidPhaseBVH.whole_pair_max`: an object pair of at most this many triangle pairs
+(two polyhedra of up to 64 triangles) skips the trees: :data:`WHOLE_LANES` threads test all its
+triangle pairs' world boxes in one launch (:func:`_whole_pair_kernel`)."""
+
+WHOLE_LANES = 64
+"""Threads per whole-object pair (:func:`_whole_pair_kernel`; fewer when a block has fewer)."""
 
 LEVELS_PER_LAUNCH = 2
 """Default :attr:`MidPhaseBVH.levels_per_launch`: each launch opens the node pairs two levels down
@@ -417,7 +431,7 @@ def _expand_entry(
                 row_slot = _emit(tree, row, r, kind, oa[i], ob[j], row_slot, candidate, candidate_capacity)
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=EXPAND_MAX_REGISTERS)
 def _expand_kernel(
     tree: TreeView,
     tree_pair: wp.array[TreePair],
@@ -427,6 +441,8 @@ def _expand_kernel(
     front_in_capacity: int,
     roots: int,
     two: int,
+    instance_triangle_start: wp.array[wp.int32],
+    whole_max: int,
     num_blocks: int,
     front_capacity: int,
     candidate_capacity: int,
@@ -442,7 +458,8 @@ def _expand_kernel(
     """One step of the simultaneous descent, one level down or two (``two``): :func:`_expand_entry`
     for each node pair ``(k, na, nb)`` of ``front_in`` (pair ``k``'s nodes, local ids, boxes known
     to overlap). With ``roots`` the entries are the pairs themselves (entry ``k`` is ``(k, 0,
-    0)``). ``num_blocks`` blocks stride over the entries."""
+    0)``), less the whole-object pairs (of at most ``whole_max`` triangle pairs, tested by
+    :func:`_whole_pair_kernel`). ``num_blocks`` blocks stride over the entries."""
     block, lane = wp.tid()
     width = wp.block_dim()
     n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
@@ -453,7 +470,8 @@ def _expand_kernel(
         na = int(0)
         nb = int(0)
         r = TreePair()
-        if e < n:
+        valid = e < n
+        if valid:
             if roots != 0:
                 k = e
             else:
@@ -462,9 +480,82 @@ def _expand_kernel(
                 na = f[1]
                 nb = f[2]
             r = tree_pair[k]
-        _expand_entry(tree, r, k, na, nb, e < n, roots != 0, two, axes, lane, pair_rows, front_out, front_capacity,
+            if roots != 0 and _whole_pair_size(instance_triangle_start, r.a, r.b, whole_max) > 0:
+                valid = False
+        _expand_entry(tree, r, k, na, nb, valid, roots != 0, two, axes, lane, pair_rows, front_out, front_capacity,
                       level_count, out_level, front_peak, candidate, candidate_capacity, candidate_count)
         base += num_blocks * width
+
+
+@wp.func
+def _whole_pair_size(instance_triangle_start: wp.array[wp.int32], a: int, b: int, whole_max: int) -> int:
+    """Triangle pairs of objects ``a`` and ``b`` when at most ``whole_max`` (a whole-object pair,
+    :func:`_whole_pair_kernel`), else 0 (the trees' pair)."""
+    ma = instance_triangle_start[a + 1] - instance_triangle_start[a]
+    mb = instance_triangle_start[b + 1] - instance_triangle_start[b]
+    if wp.int64(ma) * wp.int64(mb) <= wp.int64(whole_max):
+        return ma * mb
+    return 0
+
+
+@wp.func
+def _triangle_pair_overlaps(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, a: int, b: int,
+                            t: int, mb: int) -> bool:
+    """Whether the world boxes (:func:`~warp_ccd.bvh.triangle_box`) of triangle pair ``t`` (``t //
+    mb`` of ``a``, ``t % mb`` of ``b``) overlap."""
+    lo_a, hi_a = triangle_box(topology, world_vertex, a, t // mb, margin_rel)
+    lo_b, hi_b = triangle_box(topology, world_vertex, b, t % mb, margin_rel)
+    return boxes_overlap(lo_a, hi_a, lo_b, hi_b)
+
+
+@wp.kernel
+def _whole_pair_kernel(
+    topology: MeshTopology,
+    world_vertex: wp.array[Any],
+    margin_rel: Any,
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int64],
+    pair_capacity: int,
+    whole_max: int,
+    lanes: int,
+    candidate_capacity: int,
+    # Outputs
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+):
+    """Whole-object pairs: ``lanes`` threads per pair slot (a block holds ``block_dim / lanes``
+    pairs); for a pair of at most ``whole_max`` triangle pairs they take its triangle pairs in turn,
+    count those whose world boxes overlap, reserve their rows for the block
+    (:func:`~warp_ccd.buffers.block_reserve`) and test them again to write them. Larger pairs are
+    left to the trees."""
+    block, lane = wp.tid()
+    width = wp.block_dim()
+    k = block * (width // lanes) + lane // lanes
+    sub = lane % lanes
+    a = int(0)
+    b = int(0)
+    mb = int(0)
+    total = int(0)
+    if k < used_count(pair_count, pair_capacity):
+        p = pair[k]
+        a = p[0]
+        b = p[1]
+        mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
+        total = _whole_pair_size(topology.instance_triangle_start, a, b, whole_max)
+    count = int(0)
+    for t in range(sub, total, lanes):
+        if _triangle_pair_overlaps(topology, world_vertex, margin_rel, a, b, t, mb):
+            count += 1
+    slot = block_reserve(candidate_count, lane, count)
+    if count > 0:
+        for t in range(sub, total, lanes):
+            if _triangle_pair_overlaps(topology, world_vertex, margin_rel, a, b, t, mb):
+                if slot < wp.int64(candidate_capacity):
+                    candidate[int(slot)] = wp.vec4i(a, t // mb, b, t % mb)
+                slot += wp.int64(1)
+
+
+_WHOLE = precision_overloads(_whole_pair_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
 
 
 class MidPhaseBVH:
@@ -495,13 +586,18 @@ class MidPhaseBVH:
             its input (the pairs' capacity, the front's).
         levels_per_launch: 1, or 2 (default :data:`LEVELS_PER_LAUNCH`): levels a launch descends
             (:func:`_expand_entry`; the candidates are the same). Read at each launch.
+        whole_pair_max: object pairs of at most this many triangle pairs skip the trees (default
+            :data:`WHOLE_PAIR_MAX`; 0: none): their triangles' world boxes are tested pair by pair
+            in one launch (:func:`_whole_pair_kernel`). A scene whose every object pair is one
+            launches no tree traversal at all. Read at each launch.
 
     The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
-                 separating_axes: int = 6, levels_per_launch: int = LEVELS_PER_LAUNCH, device=None):
+                 separating_axes: int = 6, levels_per_launch: int = LEVELS_PER_LAUNCH,
+                 whole_pair_max: int = WHOLE_PAIR_MAX, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
@@ -516,6 +612,9 @@ class MidPhaseBVH:
         if levels_per_launch not in (1, 2):
             raise ValueError(f"levels_per_launch must be 1 or 2, got {levels_per_launch!r}")
         self.levels_per_launch = levels_per_launch
+        if isinstance(whole_pair_max, bool) or not isinstance(whole_pair_max, (int, np.integer)) or whole_pair_max < 0:
+            raise ValueError(f"whole_pair_max must be an integer >= 0, got {whole_pair_max!r}")
+        self.whole_pair_max = int(whole_pair_max)
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
@@ -554,6 +653,16 @@ class MidPhaseBVH:
                  WORLD_ERROR_ULPS * eps, pairs.data, pairs.count, pairs.capacity]
         cap = self.front.capacity
         cand = self.candidates
+        whole = self.whole_pair_max
+        if whole > 0:
+            lanes = min(WHOLE_LANES, self.block_dim)
+            per_block = self.block_dim // lanes
+            wp.launch_tiled(_WHOLE[scene.precision], dim=[(pairs.capacity + per_block - 1) // per_block],
+                            inputs=[scene.topology, scene.world_vertex, scene.scalar_type(self.bvh.margin_rel),
+                                    pairs.data, pairs.count, pairs.capacity, whole, lanes, cand.capacity],
+                            outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
+        if self.bvh.max_triangles**2 <= whole:
+            return  # every pair is a whole-object pair
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity, inputs=poses,
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
@@ -565,8 +674,9 @@ class MidPhaseBVH:
             wp.launch_tiled(
                 _expand_kernel, dim=[blocks],
                 inputs=[tree, self._tree_pair, self._pair_rows, halves[(step + 1) % 2],
-                        pairs.count if roots else self._level_views[step], slots, int(roots), two, blocks, cap,
-                        cand.capacity, self.separating_axes, step + 1],
+                        pairs.count if roots else self._level_views[step], slots, int(roots), two,
+                        scene.instance_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes,
+                        step + 1],
                 outputs=[halves[step % 2], self._level_count, self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
 
