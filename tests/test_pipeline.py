@@ -86,37 +86,36 @@ def test_traversal_front(device, front_capacity, levels_per_launch):
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])
-@pytest.mark.parametrize("whole_pair_max", [0, 4096, 10**9])
-def test_whole_object_pairs(device, whole_pair_max, precision):
-    """Object pairs of at most ``whole_pair_max`` triangle pairs test their triangles' world boxes
-    pair by pair instead of walking trees; with none, some or all pairs so (and deforming objects
-    among them), a candidate buffer of capacity 1, the pairs are those of every triangle pair; a
-    scene of small objects alone launches no traversal."""
+@pytest.mark.parametrize("whole_triangles_max", [0, 12, 64])
+def test_whole_object_pairs(device, whole_triangles_max, precision):
+    """Pairs of objects of at most ``whole_triangles_max`` triangles test their triangles' world
+    boxes pair by pair instead of walking trees; with none, some or all pairs so, a candidate
+    buffer of capacity 1, the pairs are those of every triangle pair; a scene of small objects
+    alone launches no traversal."""
     shapes = ("cube", "icosphere2", "dodecahedron", "tetrahedron")
     scene = wc.Scene.random(120, seed=3, shapes=shapes, density=0.2, device=device, precision=precision)
     scene.advance(0.3)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene, candidate_capacity=1)
-    pipe.mid.whole_pair_max = whole_pair_max
+    pipe.mid.whole_triangles_max = whole_triangles_max
     got = pipe.detect()
     assert got.runs >= 2 and ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     small = wc.Scene.random(200, seed=4, density=0.3, device=device, precision=precision)  # polyhedra: <= 36 triangles
     pipe = wc.CollisionPipeline(small)
-    pipe.mid.whole_pair_max = whole_pair_max
+    pipe.mid.whole_triangles_max = whole_triangles_max
     got = pipe.detect()
     want = wc.CollisionPipeline(small, mid_phase="all_pairs").detect()
     assert np.array_equal(got.triangle_pairs, want.triangle_pairs)
-    assert (pipe.mid.front.last_count == 0) == (whole_pair_max >= 36 * 36)  # no traversal: its front stays empty
+    assert (pipe.mid.front.last_count == 0) == (whole_triangles_max >= 36)  # no traversal: its front stays empty
 
 
 def test_whole_object_pairs_deforming(device):
     """Deforming small objects (their world vertices given each frame) as whole-object pairs."""
-    v, t = wc.icosphere(1)
+    v, t = wc.icosphere(0)
     meshes = [(v * 0.5 + np.float32([0.6 * k, 0.1 * k, 0.0]), t) for k in range(6)]
     scene = wc.Scene.from_meshes(meshes, deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene)
-    pipe.mid.whole_pair_max = 80 * 80
     for k in range(3):
         world = np.concatenate([m[0] * np.float32(1.0 + 0.2 * k) for m in meshes])
         scene.set_world_vertices(world)
@@ -126,11 +125,11 @@ def test_whole_object_pairs_deforming(device):
         assert pipe.mid.front.last_count == 0  # no traversal
 
 
-@pytest.mark.parametrize("value", [-1, 2.5, True])
-def test_bad_whole_pair_max(value):
+@pytest.mark.parametrize("value", [-1, 65, 2.5, True])
+def test_bad_whole_triangles_max(value):
     scene = wc.Scene.random(4, seed=0)
-    with pytest.raises(ValueError, match="whole_pair_max"):
-        wc.MidPhaseBVH(wc.SceneBVH(scene), whole_pair_max=value)
+    with pytest.raises(ValueError, match="whole_triangles_max"):
+        wc.MidPhaseBVH(wc.SceneBVH(scene), whole_triangles_max=value)
 
 
 def test_timings(device):

@@ -76,13 +76,14 @@ in units in the last place of the boxes' and the translation's sizes."""
 SEPARATING_AXES = (3, 6)
 """Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
 
-WHOLE_PAIR_MAX = 4096
-"""Default :attr:`MidPhaseBVH.whole_pair_max`: an object pair of at most this many triangle pairs
-(two polyhedra of up to 64 triangles) skips the trees: :data:`WHOLE_LANES` threads test all its
-triangle pairs' world boxes in one launch (:func:`_whole_pair_kernel`)."""
+WHOLE_TRIANGLES_MAX = 64
+"""Default :attr:`MidPhaseBVH.whole_triangles_max`: a pair of objects of at most this many triangles
+each (polyhedra) skips the trees: a thread per triangle of the larger tests its box against those
+of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`WHOLE_LANES`."""
 
 WHOLE_LANES = 64
-"""Threads per whole-object pair (:func:`_whole_pair_kernel`; fewer when a block has fewer)."""
+"""Threads per whole-object pair (:func:`_whole_pair_kernel`; fewer when a block has fewer), and the
+most triangles of an object in one (a thread's hits are the bits of an int64)."""
 
 LEVELS_PER_LAUNCH = 2
 """Default :attr:`MidPhaseBVH.levels_per_launch`: each launch opens the node pairs two levels down
@@ -458,7 +459,7 @@ def _expand_kernel(
     """One step of the simultaneous descent, one level down or two (``two``): :func:`_expand_entry`
     for each node pair ``(k, na, nb)`` of ``front_in`` (pair ``k``'s nodes, local ids, boxes known
     to overlap). With ``roots`` the entries are the pairs themselves (entry ``k`` is ``(k, 0,
-    0)``), less the whole-object pairs (of at most ``whole_max`` triangle pairs, tested by
+    0)``), less the whole-object pairs (objects of at most ``whole_max`` triangles, tested by
     :func:`_whole_pair_kernel`). ``num_blocks`` blocks stride over the entries."""
     block, lane = wp.tid()
     width = wp.block_dim()
@@ -480,7 +481,7 @@ def _expand_kernel(
                 na = f[1]
                 nb = f[2]
             r = tree_pair[k]
-            if roots != 0 and _whole_pair_size(instance_triangle_start, r.a, r.b, whole_max) > 0:
+            if roots != 0 and _is_whole_pair(instance_triangle_start, r.a, r.b, whole_max):
                 valid = False
         _expand_entry(tree, r, k, na, nb, valid, roots != 0, two, axes, lane, pair_rows, front_out, front_capacity,
                       level_count, out_level, front_peak, candidate, candidate_capacity, candidate_count)
@@ -488,24 +489,43 @@ def _expand_kernel(
 
 
 @wp.func
-def _whole_pair_size(instance_triangle_start: wp.array[wp.int32], a: int, b: int, whole_max: int) -> int:
-    """Triangle pairs of objects ``a`` and ``b`` when at most ``whole_max`` (a whole-object pair,
-    :func:`_whole_pair_kernel`), else 0 (the trees' pair)."""
+def _is_whole_pair(instance_triangle_start: wp.array[wp.int32], a: int, b: int, whole_max: int) -> bool:
+    """Whether objects ``a`` and ``b`` have at most ``whole_max`` triangles each (a whole-object
+    pair, :func:`_whole_pair_kernel`, not the trees')."""
     ma = instance_triangle_start[a + 1] - instance_triangle_start[a]
     mb = instance_triangle_start[b + 1] - instance_triangle_start[b]
-    if wp.int64(ma) * wp.int64(mb) <= wp.int64(whole_max):
-        return ma * mb
-    return 0
+    return ma <= whole_max and mb <= whole_max
 
 
 @wp.func
-def _triangle_pair_overlaps(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, a: int, b: int,
-                            t: int, mb: int) -> bool:
-    """Whether the world boxes (:func:`~warp_ccd.bvh.triangle_box`) of triangle pair ``t`` (``t //
-    mb`` of ``a``, ``t % mb`` of ``b``) overlap."""
-    lo_a, hi_a = triangle_box(topology, world_vertex, a, t // mb, margin_rel)
-    lo_b, hi_b = triangle_box(topology, world_vertex, b, t % mb, margin_rel)
-    return boxes_overlap(lo_a, hi_a, lo_b, hi_b)
+def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, big: int, i: int, small: int,
+               m_small: int):
+    """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes
+    (:func:`~warp_ccd.bvh.triangle_box`) of triangle ``i`` of ``big`` and ``j`` of ``small`` overlap."""
+    lo, hi = triangle_box(topology, world_vertex, big, i, margin_rel)
+    hits = wp.int64(0)
+    count = int(0)
+    for j in range(m_small):
+        lo_j, hi_j = triangle_box(topology, world_vertex, small, j, margin_rel)
+        if boxes_overlap(lo, hi, lo_j, hi_j):
+            hits = hits | (wp.int64(1) << wp.int64(j))
+            count += 1
+    return hits, count
+
+
+@wp.func
+def _write_whole_row(hits: wp.int64, m_small: int, a: int, b: int, big_is_a: bool, i: int, slot: wp.int64,
+                     candidate: wp.array[wp.vec4i], candidate_capacity: int) -> wp.int64:
+    """Writes the rows of a row's ``hits`` (:func:`_whole_row`) from ``slot``; returns the next slot."""
+    for j in range(m_small):
+        if (hits >> wp.int64(j)) & wp.int64(1) != wp.int64(0):
+            if slot < wp.int64(candidate_capacity):
+                if big_is_a:
+                    candidate[int(slot)] = wp.vec4i(a, i, b, j)
+                else:
+                    candidate[int(slot)] = wp.vec4i(a, j, b, i)
+            slot += wp.int64(1)
+    return slot
 
 
 @wp.kernel
@@ -524,35 +544,46 @@ def _whole_pair_kernel(
     candidate_count: wp.array[wp.int64],
 ):
     """Whole-object pairs: ``lanes`` threads per pair slot (a block holds ``block_dim / lanes``
-    pairs); for a pair of at most ``whole_max`` triangle pairs they take its triangle pairs in turn,
-    count those whose world boxes overlap, reserve their rows for the block
-    (:func:`~warp_ccd.buffers.block_reserve`) and test them again to write them. Larger pairs are
-    left to the trees."""
+    pairs). For a pair of objects of at most ``whole_max`` triangles each, thread ``l`` takes
+    triangles ``l, l + lanes, ...`` of the larger object and tests each one's world box against
+    every triangle's of the smaller (:func:`_whole_row`); the block reserves the rows
+    (:func:`~warp_ccd.buffers.block_reserve`) and each thread writes its hits (a thread with more
+    than one triangle tests the later ones again). Other pairs are left to the trees."""
     block, lane = wp.tid()
     width = wp.block_dim()
     k = block * (width // lanes) + lane // lanes
     sub = lane % lanes
     a = int(0)
     b = int(0)
-    mb = int(0)
-    total = int(0)
+    big = int(0)
+    small = int(0)
+    m_big = int(0)
+    m_small = int(0)
     if k < used_count(pair_count, pair_capacity):
         p = pair[k]
         a = p[0]
         b = p[1]
-        mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
-        total = _whole_pair_size(topology.instance_triangle_start, a, b, whole_max)
+        if _is_whole_pair(topology.instance_triangle_start, a, b, whole_max):
+            ma = topology.instance_triangle_start[a + 1] - topology.instance_triangle_start[a]
+            mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
+            big = wp.where(ma >= mb, a, b)
+            small = wp.where(ma >= mb, b, a)
+            m_big = wp.max(ma, mb)
+            m_small = wp.min(ma, mb)
     count = int(0)
-    for t in range(sub, total, lanes):
-        if _triangle_pair_overlaps(topology, world_vertex, margin_rel, a, b, t, mb):
-            count += 1
+    first = wp.int64(0)
+    for i in range(sub, m_big, lanes):
+        hits, n = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+        if i == sub:
+            first = hits
+        count += n
     slot = block_reserve(candidate_count, lane, count)
     if count > 0:
-        for t in range(sub, total, lanes):
-            if _triangle_pair_overlaps(topology, world_vertex, margin_rel, a, b, t, mb):
-                if slot < wp.int64(candidate_capacity):
-                    candidate[int(slot)] = wp.vec4i(a, t // mb, b, t % mb)
-                slot += wp.int64(1)
+        for i in range(sub, m_big, lanes):
+            hits = first
+            if i != sub:
+                hits, _n = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+            slot = _write_whole_row(hits, m_small, a, b, big == a, i, slot, candidate, candidate_capacity)
 
 
 _WHOLE = precision_overloads(_whole_pair_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
@@ -586,10 +617,10 @@ class MidPhaseBVH:
             its input (the pairs' capacity, the front's).
         levels_per_launch: 1, or 2 (default :data:`LEVELS_PER_LAUNCH`): levels a launch descends
             (:func:`_expand_entry`; the candidates are the same). Read at each launch.
-        whole_pair_max: object pairs of at most this many triangle pairs skip the trees (default
-            :data:`WHOLE_PAIR_MAX`; 0: none): their triangles' world boxes are tested pair by pair
-            in one launch (:func:`_whole_pair_kernel`). A scene whose every object pair is one
-            launches no tree traversal at all. Read at each launch.
+        whole_triangles_max: pairs of objects of at most this many triangles each skip the trees
+            (default :data:`WHOLE_TRIANGLES_MAX`, at most :data:`WHOLE_LANES`; 0: none): their
+            triangles' world boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`).
+            A scene of such objects alone launches no tree traversal. Read at each launch.
 
     The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
@@ -597,7 +628,7 @@ class MidPhaseBVH:
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
                  separating_axes: int = 6, levels_per_launch: int = LEVELS_PER_LAUNCH,
-                 whole_pair_max: int = WHOLE_PAIR_MAX, device=None):
+                 whole_triangles_max: int = WHOLE_TRIANGLES_MAX, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
@@ -612,9 +643,11 @@ class MidPhaseBVH:
         if levels_per_launch not in (1, 2):
             raise ValueError(f"levels_per_launch must be 1 or 2, got {levels_per_launch!r}")
         self.levels_per_launch = levels_per_launch
-        if isinstance(whole_pair_max, bool) or not isinstance(whole_pair_max, (int, np.integer)) or whole_pair_max < 0:
-            raise ValueError(f"whole_pair_max must be an integer >= 0, got {whole_pair_max!r}")
-        self.whole_pair_max = int(whole_pair_max)
+        if isinstance(whole_triangles_max, bool) or not isinstance(whole_triangles_max, (int, np.integer)) \
+                or not 0 <= whole_triangles_max <= WHOLE_LANES:
+            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_LANES}], "
+                             f"got {whole_triangles_max!r}")
+        self.whole_triangles_max = int(whole_triangles_max)
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
@@ -653,7 +686,9 @@ class MidPhaseBVH:
                  WORLD_ERROR_ULPS * eps, pairs.data, pairs.count, pairs.capacity]
         cap = self.front.capacity
         cand = self.candidates
-        whole = self.whole_pair_max
+        whole = self.whole_triangles_max
+        if not 0 <= whole <= WHOLE_LANES:
+            raise ValueError(f"whole_triangles_max must lie in [0, {WHOLE_LANES}], got {whole!r}")
         if whole > 0:
             lanes = min(WHOLE_LANES, self.block_dim)
             per_block = self.block_dim // lanes
@@ -661,7 +696,7 @@ class MidPhaseBVH:
                             inputs=[scene.topology, scene.world_vertex, scene.scalar_type(self.bvh.margin_rel),
                                     pairs.data, pairs.count, pairs.capacity, whole, lanes, cand.capacity],
                             outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
-        if self.bvh.max_triangles**2 <= whole:
+        if self.bvh.max_triangles <= whole:
             return  # every pair is a whole-object pair
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity, inputs=poses,
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
