@@ -27,6 +27,7 @@ def _kernels() -> dict:
         "narrow moller": narrow_phase._NARROW_MOLLER["float32"],
         "narrow touch": narrow_phase._NARROW_TOUCH["float32"],
         "expand": mid_phase._expand_kernel,
+        "whole pairs": mid_phase._WHOLE["float32"],
         "pair": mid_phase._PAIR["float32"],
         "rigid bounds": bvh._RIGID_BOUNDS["float32"],
         "sap sweep": broad_phase._sap_sweep_kernel,

@@ -52,7 +52,7 @@ from .aabb import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from .buffers import upper_bound
 from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, TreeSizes, packed_upload
 from .precision import precision_overloads
-from .scene import MeshTopology, mesh_triangle
+from .scene import MeshTopology
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -109,14 +109,26 @@ class TreeView:
 
 
 @wp.func
-def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri: int, margin_rel: Any):
-    """``(lower, upper)`` float32 box of local triangle ``tri`` of object ``inst`` in the world,
-    padded by ``margin_rel`` times its longest edge (the narrow phase's tolerance) and rounded
-    outward: a leaf's box, or a triangle's in a whole-object pair (:mod:`warp_ccd.mid_phase`)."""
-    a, b, c = mesh_triangle(mesh, world_vertex, inst, tri)
-    edge = wp.max(wp.max(wp.length(b - a), wp.length(c - b)), wp.length(a - c))
+def triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, tri_start: int,
+                    vertex_start: int, tri: int):
+    """``(lower, upper)`` float32 box in the world of triangle ``tri`` of an object whose shape's
+    triangles start at ``tri_start`` (in ``mesh.shape_triangle``) and whose world vertices at
+    ``vertex_start``, padded by ``margin_rel`` times its longest edge (the narrow phase's tolerance)
+    and rounded outward: a leaf's box, or a triangle's in a whole-object pair (:mod:`warp_ccd.mid_phase`)."""
+    idx = mesh.shape_triangle[tri_start + tri]
+    a = world_vertex[vertex_start + idx[0]]
+    b = world_vertex[vertex_start + idx[1]]
+    c = world_vertex[vertex_start + idx[2]]
+    edge = wp.sqrt(wp.max(wp.max(wp.length_sq(b - a), wp.length_sq(c - b)), wp.length_sq(a - c)))
     pad = type(a)(margin_rel * edge, margin_rel * edge, margin_rel * edge)
     return box_lower32(wp.min(wp.min(a, b), c) - pad), box_upper32(wp.max(wp.max(a, b), c) + pad)
+
+
+@wp.func
+def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri: int, margin_rel: Any):
+    """:func:`triangle_box_at` of local triangle ``tri`` of object ``inst``."""
+    return triangle_box_at(mesh, world_vertex, margin_rel, mesh.shape_triangle_start[mesh.instance_shape[inst]],
+                           mesh.instance_vertex_start[inst], tri)
 
 
 @wp.func
@@ -449,7 +461,7 @@ class SceneBVH:
         instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
         num_levels: levels of the deepest tree (the root alone: 1).
-        max_triangles: triangles of the largest object's mesh.
+        max_triangles, min_triangles: triangles of the largest and of the smallest object's mesh.
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
@@ -491,6 +503,7 @@ class SceneBVH:
         self.num_levels = int(sizes.num_levels.max()) if num_shapes else 1
         shape_tris = np.diff(scene.shape_triangle_start_np)
         self.max_triangles = int(shape_tris[inst_shape].max()) if n else 0
+        self.min_triangles = int(shape_tris[inst_shape].min()) if n else 0
         # Where each shape's first deforming object's world vertices start, which a rebuild reads
         # (-1: none, the shape's own vertices).
         first = np.full(num_shapes, n, np.int64)

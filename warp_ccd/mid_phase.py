@@ -47,7 +47,7 @@ from .buffers import (
     upper_bound,
     used_count,
 )
-from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, triangle_box
+from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, triangle_box_at
 from .precision import precision_overloads
 from .scene import MeshTopology
 
@@ -500,13 +500,17 @@ def _is_whole_pair(instance_triangle_start: wp.array[wp.int32], a: int, b: int, 
 @wp.func
 def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, big: int, i: int, small: int,
                m_small: int):
-    """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes
-    (:func:`~warp_ccd.bvh.triangle_box`) of triangle ``i`` of ``big`` and ``j`` of ``small`` overlap."""
-    lo, hi = triangle_box(topology, world_vertex, big, i, margin_rel)
+    """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes of triangle
+    ``i`` of ``big`` and ``j`` of ``small`` overlap (:func:`~warp_ccd.bvh.triangle_box_at`, the
+    trees' leaf boxes)."""
+    big_start = topology.shape_triangle_start[topology.instance_shape[big]]
+    lo, hi = triangle_box_at(topology, world_vertex, margin_rel, big_start, topology.instance_vertex_start[big], i)
+    tri_start = topology.shape_triangle_start[topology.instance_shape[small]]
+    vertex_start = topology.instance_vertex_start[small]
     hits = wp.int64(0)
     count = int(0)
     for j in range(m_small):
-        lo_j, hi_j = triangle_box(topology, world_vertex, small, j, margin_rel)
+        lo_j, hi_j = triangle_box_at(topology, world_vertex, margin_rel, tri_start, vertex_start, j)
         if boxes_overlap(lo, hi, lo_j, hi_j):
             hits = hits | (wp.int64(1) << wp.int64(j))
             count += 1
@@ -538,52 +542,56 @@ def _whole_pair_kernel(
     pair_capacity: int,
     whole_max: int,
     lanes: int,
+    num_blocks: int,
     candidate_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
 ):
-    """Whole-object pairs: ``lanes`` threads per pair slot (a block holds ``block_dim / lanes``
-    pairs). For a pair of objects of at most ``whole_max`` triangles each, thread ``l`` takes
-    triangles ``l, l + lanes, ...`` of the larger object and tests each one's world box against
-    every triangle's of the smaller (:func:`_whole_row`); the block reserves the rows
-    (:func:`~warp_ccd.buffers.block_reserve`) and each thread writes its hits (a thread with more
-    than one triangle tests the later ones again). Other pairs are left to the trees."""
+    """Whole-object pairs: ``lanes`` threads per pair (a block holds ``block_dim / lanes`` pairs a
+    round; ``num_blocks`` blocks stride over the stored pairs). For a pair of objects of at most
+    ``whole_max`` triangles each, thread ``l`` takes triangles ``l, l + lanes, ...`` of the larger
+    object and tests each one's world box against every triangle's of the smaller
+    (:func:`_whole_row`); the block reserves the rows (:func:`~warp_ccd.buffers.block_reserve`) and
+    each thread writes its hits (a thread with more than one triangle tests the later ones again).
+    Other pairs are left to the trees."""
     block, lane = wp.tid()
-    width = wp.block_dim()
-    k = block * (width // lanes) + lane // lanes
+    per_block = wp.block_dim() // lanes
+    n = used_count(pair_count, pair_capacity)
     sub = lane % lanes
-    a = int(0)
-    b = int(0)
-    big = int(0)
-    small = int(0)
-    m_big = int(0)
-    m_small = int(0)
-    if k < used_count(pair_count, pair_capacity):
-        p = pair[k]
-        a = p[0]
-        b = p[1]
-        if _is_whole_pair(topology.instance_triangle_start, a, b, whole_max):
-            ma = topology.instance_triangle_start[a + 1] - topology.instance_triangle_start[a]
-            mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
-            big = wp.where(ma >= mb, a, b)
-            small = wp.where(ma >= mb, b, a)
-            m_big = wp.max(ma, mb)
-            m_small = wp.min(ma, mb)
-    count = int(0)
-    first = wp.int64(0)
-    for i in range(sub, m_big, lanes):
-        hits, n = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
-        if i == sub:
-            first = hits
-        count += n
-    slot = block_reserve(candidate_count, lane, count)
-    if count > 0:
+    for base in range(block * per_block, n, num_blocks * per_block):
+        k = base + lane // lanes
+        a = int(0)
+        b = int(0)
+        big = int(0)
+        small = int(0)
+        m_big = int(0)
+        m_small = int(0)
+        if k < n:
+            p = pair[k]
+            a = p[0]
+            b = p[1]
+            if _is_whole_pair(topology.instance_triangle_start, a, b, whole_max):
+                ma = topology.instance_triangle_start[a + 1] - topology.instance_triangle_start[a]
+                mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
+                big = wp.where(ma >= mb, a, b)
+                small = wp.where(ma >= mb, b, a)
+                m_big = wp.max(ma, mb)
+                m_small = wp.min(ma, mb)
+        count = int(0)
+        first = wp.int64(0)
         for i in range(sub, m_big, lanes):
-            hits = first
-            if i != sub:
-                hits, _n = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
-            slot = _write_whole_row(hits, m_small, a, b, big == a, i, slot, candidate, candidate_capacity)
+            hits, found = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+            if i == sub:
+                first = hits
+            count += found
+        slot = block_reserve(candidate_count, lane, count)
+        if count > 0:
+            for i in range(sub, m_big, lanes):
+                hits = first
+                if i != sub:
+                    hits, _found = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+                slot = _write_whole_row(hits, m_small, a, b, big == a, i, slot, candidate, candidate_capacity)
 
 
 _WHOLE = precision_overloads(_whole_pair_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
@@ -689,12 +697,13 @@ class MidPhaseBVH:
         whole = self.whole_triangles_max
         if not 0 <= whole <= WHOLE_LANES:
             raise ValueError(f"whole_triangles_max must lie in [0, {WHOLE_LANES}], got {whole!r}")
-        if whole > 0:
+        if whole >= self.bvh.min_triangles:  # some object pairs may be whole-object pairs
             lanes = min(WHOLE_LANES, self.block_dim)
             per_block = self.block_dim // lanes
-            wp.launch_tiled(_WHOLE[scene.precision], dim=[(pairs.capacity + per_block - 1) // per_block],
+            blocks = min(self.num_blocks, (pairs.capacity + per_block - 1) // per_block)
+            wp.launch_tiled(_WHOLE[scene.precision], dim=[blocks],
                             inputs=[scene.topology, scene.world_vertex, scene.scalar_type(self.bvh.margin_rel),
-                                    pairs.data, pairs.count, pairs.capacity, whole, lanes, cand.capacity],
+                                    pairs.data, pairs.count, pairs.capacity, whole, lanes, blocks, cand.capacity],
                             outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
         if self.bvh.max_triangles <= whole:
             return  # every pair is a whole-object pair
