@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Everything to check and measure on a CUDA machine, in parts that each fit one run of a few
-# minutes: the test suite, one frame profiled activity by activity (and as a graph), what one
+# minutes: the test suite, kernel resources, a small frame's graph cut stage by stage (and its small-scene
+# paths against the trees), one frame profiled activity by activity (and as a graph), what one
 # verdict on every device costs the narrow phase, then the benchmarks the README quotes: scaling with polyhedra and 80-triangle objects up to 1e6,
 # and meshes of the sizes of real assets (120 to 12,640 triangles) up to 1e4, 1,280-triangle objects up to 1e5,
 # the traversal's options (box test, object boxes, leaf size), deforming meshes refit every frame (1,280
@@ -10,7 +11,7 @@
 # 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each.
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
-#   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, profile, narrow, scaling, spheres, boxes, deforming,
+#   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, stages, profile, narrow, scaling, spheres, boxes, deforming,
 #                                          # broad, build, host, usd
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
@@ -27,19 +28,20 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests resources profile narrow scaling spheres boxes deforming broad build host usd}
+parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
     profiled="100"; hosted="300"; waits="0.05 5"; builds="100x20 10x80 1x1280"; small="32"; rebuild="2x320"
     usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
-    mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2
+    mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
     builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="16"; rebuild="27x5120"
     usd="--frames 240 --rigid 10000 --deforming 100 --fcl-every 10"
     mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
+    staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -57,6 +59,11 @@ for part in $parts; do
         tail -n 15 "$log" ;;
     resources)
         step python3 bench/kernel_resources.py --device "$device" --out "$out/kernel_resources_$tag.json" ;;
+    stages)
+        step python3 bench/frame_stages.py --device "$device" --cases $staged --frames $((frames * 2)) \
+            --out "$out/frame_stages_$tag.json"
+        step python3 bench/frame_stages.py --device "$device" --cases $staged_big --variants default lanes64 trees \
+            --frames $((frames / 2)) --replays 10 --out "$out/frame_stages_big_$tag.json" ;;
     profile)
         step python3 bench/profile_frame.py --device "$device" --objects $profiled --frames $((frames * 5)) \
             --out "$out/profile_$tag.json" ;;

@@ -86,8 +86,8 @@ def test_traversal_front(device, front_capacity, levels_per_launch):
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])
-@pytest.mark.parametrize("whole_triangles_max", [0, 12, 64])
-def test_whole_object_pairs(device, whole_triangles_max, precision):
+@pytest.mark.parametrize("whole_triangles_max, lanes", [(0, 32), (12, 32), (64, 32), (64, 8), (64, 64)])
+def test_whole_object_pairs(device, whole_triangles_max, lanes, precision):
     """Pairs of objects of at most ``whole_triangles_max`` triangles test their triangles' world
     boxes pair by pair instead of walking trees; with none, some or all pairs so, a candidate
     buffer of capacity 1, the pairs are those of every triangle pair; a scene of small objects
@@ -98,12 +98,14 @@ def test_whole_object_pairs(device, whole_triangles_max, precision):
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene, candidate_capacity=1)
     pipe.mid.whole_triangles_max = whole_triangles_max
+    pipe.mid.whole_lanes = lanes
     got = pipe.detect()
     assert got.runs >= 2 and ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     small = wc.Scene.random(200, seed=4, density=0.3, device=device, precision=precision)  # polyhedra: <= 36 triangles
     pipe = wc.CollisionPipeline(small)
     pipe.mid.whole_triangles_max = whole_triangles_max
+    pipe.mid.whole_lanes = lanes
     got = pipe.detect()
     want = wc.CollisionPipeline(small, mid_phase="all_pairs").detect()
     assert np.array_equal(got.triangle_pairs, want.triangle_pairs)

@@ -79,11 +79,15 @@ SEPARATING_AXES = (3, 6)
 WHOLE_TRIANGLES_MAX = 64
 """Default :attr:`MidPhaseBVH.whole_triangles_max`: a pair of objects of at most this many triangles
 each (polyhedra) skips the trees: a thread per triangle of the larger tests its box against those
-of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`WHOLE_LANES`."""
+of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`WHOLE_TRIANGLES_LIMIT`."""
 
-WHOLE_LANES = 64
-"""Threads per whole-object pair (:func:`_whole_pair_kernel`; fewer when a block has fewer), and the
-most triangles of an object in one (a thread's hits are the bits of an int64)."""
+WHOLE_LANES = 32
+"""Default :attr:`MidPhaseBVH.whole_lanes`, threads per whole-object pair (:func:`_whole_pair_kernel`;
+fewer when a block has fewer): a thread takes a triangle of the larger object (two of a
+dodecahedron's 36), eight pairs a block of 256."""
+
+WHOLE_TRIANGLES_LIMIT = 64
+"""Most triangles of an object in a whole-object pair: a thread's hits are the bits of an int64."""
 
 LEVELS_PER_LAUNCH = 2
 """Default :attr:`MidPhaseBVH.levels_per_launch`: each launch opens the node pairs two levels down
@@ -626,9 +630,11 @@ class MidPhaseBVH:
         levels_per_launch: 1, or 2 (default :data:`LEVELS_PER_LAUNCH`): levels a launch descends
             (:func:`_expand_entry`; the candidates are the same). Read at each launch.
         whole_triangles_max: pairs of objects of at most this many triangles each skip the trees
-            (default :data:`WHOLE_TRIANGLES_MAX`, at most :data:`WHOLE_LANES`; 0: none): their
+            (default :data:`WHOLE_TRIANGLES_MAX`, at most :data:`WHOLE_TRIANGLES_LIMIT`; 0: none): their
             triangles' world boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`).
             A scene of such objects alone launches no tree traversal. Read at each launch.
+        whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up
+            to 256). Read at each launch.
 
     The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
@@ -652,10 +658,11 @@ class MidPhaseBVH:
             raise ValueError(f"levels_per_launch must be 1 or 2, got {levels_per_launch!r}")
         self.levels_per_launch = levels_per_launch
         if isinstance(whole_triangles_max, bool) or not isinstance(whole_triangles_max, (int, np.integer)) \
-                or not 0 <= whole_triangles_max <= WHOLE_LANES:
-            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_LANES}], "
+                or not 0 <= whole_triangles_max <= WHOLE_TRIANGLES_LIMIT:
+            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], "
                              f"got {whole_triangles_max!r}")
         self.whole_triangles_max = int(whole_triangles_max)
+        self.whole_lanes = WHOLE_LANES
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
@@ -695,10 +702,12 @@ class MidPhaseBVH:
         cap = self.front.capacity
         cand = self.candidates
         whole = self.whole_triangles_max
-        if not 0 <= whole <= WHOLE_LANES:
-            raise ValueError(f"whole_triangles_max must lie in [0, {WHOLE_LANES}], got {whole!r}")
+        if not 0 <= whole <= WHOLE_TRIANGLES_LIMIT:
+            raise ValueError(f"whole_triangles_max must lie in [0, {WHOLE_TRIANGLES_LIMIT}], got {whole!r}")
+        if self.whole_lanes not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
+            raise ValueError(f"whole_lanes must be a power of two up to 256, got {self.whole_lanes!r}")
         if whole >= self.bvh.min_triangles:  # some object pairs may be whole-object pairs
-            lanes = min(WHOLE_LANES, self.block_dim)
+            lanes = min(self.whole_lanes, self.block_dim)
             per_block = self.block_dim // lanes
             blocks = min(self.num_blocks, (pairs.capacity + per_block - 1) // per_block)
             wp.launch_tiled(_WHOLE[scene.precision], dim=[blocks],
