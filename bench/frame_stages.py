@@ -3,10 +3,9 @@
 The frame of a few thousand objects is latency: each launch of a graph costs a few microseconds
 however little it does. For each case (``--cases``, ``triangles:N`` of the scaling scene) and each
 variant of the pipeline (``default``; ``trees``: no whole-object pairs, ``whole_triangles_max=0``;
-``lanes32``: 32 threads a whole-object pair, ``whole_lanes=32``;
-``one_level``: that, and one level a launch, ``levels_per_launch=1``; ``sap``: the broad phase
-never tests all pairs, ``all_pairs_max=0``; ``before``: all three, the frame as it was without the
-small-scene paths), after warm-up frames:
+``whole``: whole-object pairs at any size, ``whole_triangles_max=64``; ``lanes32``: 32 threads a
+whole-object pair, ``whole_lanes=32``; ``sap``: the broad phase never tests all pairs,
+``all_pairs_max=0``; ``before``: neither small-scene path, the frame as it was), after warm-up frames:
 
 1. **Frames.** ``--frames`` calls of ``detect(advance=dt)`` (the scene's motion and detection, one
    graph), each timed with a synchronisation before and after: wall ms (min, median) and Python's
@@ -42,9 +41,9 @@ from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
 STAGES = ("reset", "motion", "refit", "broad", "mid", "narrow", "read")
-VARIANTS = {"default": {}, "trees": {"whole_triangles_max": 0}, "lanes32": {"whole_lanes": 32},
-            "one_level": {"whole_triangles_max": 0, "levels_per_launch": 1}, "sap": {"all_pairs_max": 0},
-            "before": {"whole_triangles_max": 0, "levels_per_launch": 1, "all_pairs_max": 0}}
+VARIANTS = {"default": {}, "trees": {"whole_triangles_max": 0}, "whole": {"whole_triangles_max": 64},
+            "lanes32": {"whole_lanes": 32}, "sap": {"all_pairs_max": 0},
+            "before": {"whole_triangles_max": 0, "all_pairs_max": 0}}
 
 
 def make_pipeline(scene: Scene, variant: str) -> CollisionPipeline:

@@ -62,7 +62,7 @@ for part in $parts; do
     stages)
         step python3 bench/frame_stages.py --device "$device" --cases $staged --frames $((frames * 2)) \
             --out "$out/frame_stages_$tag.json"
-        step python3 bench/frame_stages.py --device "$device" --cases $staged_big --variants default trees one_level \
+        step python3 bench/frame_stages.py --device "$device" --cases $staged_big --variants default trees whole \
             --frames $((frames / 2)) --replays 10 --out "$out/frame_stages_big_$tag.json" ;;
     profile)
         step python3 bench/profile_frame.py --device "$device" --objects $profiled --frames $((frames * 5)) \

@@ -65,16 +65,16 @@ def test_sap_in_blocks(device, blocks):
     assert np.array_equal(got, box_pairs_numpy(lo, hi))
 
 
-@pytest.mark.parametrize("levels_per_launch", [1, 2])
+@pytest.mark.parametrize("whole_triangles_max", [0, 64])
 @pytest.mark.parametrize("front_capacity", [1, None])
-def test_traversal_in_blocks(device, blocks, front_capacity, levels_per_launch):
+def test_traversal_in_blocks(device, blocks, front_capacity, whole_triangles_max):
     """Front entries and candidates reserved per block and round, with a candidate buffer (and a
-    front) of capacity 1, descending one level a launch or two."""
+    front) of capacity 1; the cube pairs by trees or as whole-object pairs."""
     scene = wc.Scene.random(30, seed=4, shapes=("cube", "icosphere3", "icosphere4"), density=0.08, device=device)
     scene.advance(0.4)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene, candidate_capacity=1)
-    pipe.mid.levels_per_launch = levels_per_launch
+    pipe.mid.whole_triangles_max = whole_triangles_max
     if front_capacity is not None:
         pipe.mid.front._allocate(front_capacity)
     assert pipe.mid.block_dim == BLOCK_DIM

@@ -53,36 +53,30 @@ def test_pipeline_options_agree(device, options):
     assert np.array_equal(got.colliding, ref.colliding)
 
 
-@pytest.mark.parametrize("levels_per_launch", [1, 2])
 @pytest.mark.parametrize("front_capacity", [1, None])
-def test_traversal_front(device, front_capacity, levels_per_launch):
-    """The descent level by level, one or two a launch: trees of different depths end together at
-    leaves (the last launch's front is empty), the front's counter holds its largest level, and a
-    front of capacity 1 grows until the frame fits; the pairs are those of every triangle pair, and
-    the candidates the same either way."""
+def test_traversal_front(device, front_capacity):
+    """The descent level by level: trees of different depths end together at leaves (the last
+    level's front is empty), the front's counter holds its largest level, and a front of capacity 1
+    grows until the frame fits; the pairs are those of every triangle pair."""
     scene = wc.Scene.random(80, seed=2, shapes=("cube", "icosphere2", "dodecahedron"), density=0.2, device=device)
     scene.advance(0.3)
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene)
     mid = pipe.mid
-    mid.levels_per_launch = levels_per_launch
+    mid.whole_triangles_max = 0  # every pair walks its trees
     if front_capacity is not None:
         mid.front._allocate(front_capacity)
     got = pipe.detect()
     assert ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     assert mid.num_levels == pipe.boxes.num_levels - 1 == 9  # icosphere2: 320 leaves of 1 triangle, 10 levels
-    assert mid.num_launches == (9 if levels_per_launch == 1 else 5)
-    levels = mid._level_count.numpy()[: mid.num_launches + 1]
+    levels = mid._level_count.numpy()
     assert levels[-1] == 0 and levels[1:-1].min() > 0
     assert mid.front.last_count == levels.max() <= mid.front.capacity
     if front_capacity is not None:
         assert got.runs >= 2  # the front grew (a frame overflowing at one level counts less below it)
     again = pipe.detect()
     assert again.runs == 1 and np.array_equal(again.triangle_pairs, ref.triangle_pairs)
-    other = wc.CollisionPipeline(scene)
-    other.mid.levels_per_launch = 3 - levels_per_launch
-    assert other.detect().num_candidates == again.num_candidates
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])
@@ -125,6 +119,16 @@ def test_whole_object_pairs_deforming(device):
         want = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
         assert want.num_triangle_pairs > 0 and np.array_equal(got.triangle_pairs, want.triangle_pairs)
         assert pipe.mid.front.last_count == 0  # no traversal
+
+
+def test_whole_object_pairs_default_by_scene_size():
+    """Whole-object pairs by default up to WHOLE_OBJECTS_MAX objects, trees for every pair above."""
+    from warp_ccd.mid_phase import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
+
+    bvh = wc.SceneBVH(wc.Scene.random(50, seed=0))
+    assert wc.MidPhaseBVH(bvh).whole_triangles_max == WHOLE_TRIANGLES_MAX
+    bvh.lower = wp.zeros(WHOLE_OBJECTS_MAX + 1, dtype=wp.vec3, device=bvh.device)  # as a larger scene's
+    assert wc.MidPhaseBVH(bvh).whole_triangles_max == 0
 
 
 @pytest.mark.parametrize("value", [-1, 65, 2.5, True])

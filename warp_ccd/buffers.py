@@ -36,7 +36,6 @@ __all__ = [
     "GrowableBuffer",
     "block_dim_for",
     "block_reserve",
-    "block_reserve_at",
     "device_fence",
     "emit_pair",
     "reserve_slot",
@@ -65,25 +64,19 @@ def block_dim_for(device) -> int:
 
 
 @wp.func
-def block_reserve_at(count: wp.array[wp.int64], index: int, lane: int, items: int) -> wp.int64:
-    """:func:`block_reserve` on the counter ``count[index]``."""
-    start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
-    total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
-    base = wp.int64(0)
-    if lane == 0 and total > 0:
-        base = wp.atomic_add(count, index, wp.int64(total))
-    base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
-    return base + wp.int64(start)
-
-
-@wp.func
 def block_reserve(count: wp.array[wp.int64], lane: int, items: int) -> wp.int64:
     """Cooperative: every thread of the block calls it (``lane``: its own index in the block, from
     ``wp.tid()``) with its number of items; reserves them all with one atomic add on ``count`` and
     returns the thread's first slot. Like :func:`reserve_slot`, the counter counts past the
     capacity: the caller writes only slots below it. The block's items must stay below 2**31
     (int32 scan)."""
-    return block_reserve_at(count, 0, lane, items)
+    start = wp.untile(wp.tile_scan_exclusive(wp.tile(items)))
+    total = wp.tile_extract(wp.tile_from_thread(shape=1, value=start + items, thread_idx=wp.block_dim() - 1), 0)
+    base = wp.int64(0)
+    if lane == 0 and total > 0:
+        base = wp.atomic_add(count, 0, wp.int64(total))
+    base = wp.tile_extract(wp.tile_from_thread(shape=1, value=base, thread_idx=0), 0)
+    return base + wp.int64(start)
 
 
 @wp.func_native("""

@@ -18,6 +18,13 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   whose trees do not costs a few tests at level 0. The front is a buffer with a capacity and a
   counter (its largest level's count), grown as any other.
 
+  *Whole-object pairs* skip the trees: in a scene of up to 10^5 objects, a pair of objects of at
+  most 64 triangles each (polyhedra) has a block of 64 threads, one per triangle of the larger,
+  test its world box against every triangle's of the smaller (:func:`_whole_pair_kernel`, one
+  launch for all such pairs; the boxes are the trees' leaf boxes, padded alike). A small scene's
+  traversal is latency, a few microseconds a launch a level; a scene of such objects alone
+  launches no traversal at all.
+
   The boxes are tested in ``a``'s box space (:mod:`warp_ccd.bvh`: a rigid object's shape space, a
   deforming object's world): ``b``'s box under the pair's relative transform, the box around it
   (three axes, ``a``'s), then ``a``'s box in ``b``'s space (``b``'s three axes): a separating-axis
@@ -43,7 +50,6 @@ from .buffers import (
     GrowableBuffer,
     block_dim_for,
     block_reserve,
-    block_reserve_at,
     upper_bound,
     used_count,
 )
@@ -61,10 +67,6 @@ that the frame can be a CUDA graph), no bigger than one thread per slot of the l
 small scene launches few blocks), and its threads stride over the level's node pairs. On the H100
 1,024 and 2,048 gave the same frames within noise (``bench/results/box_tests_sweep_cuda0.json``)."""
 
-EXPAND_MAX_REGISTERS = 128
-"""Most registers a thread of the expansion kernel on CUDA (167 as compiled freely with two levels a
-launch: 256 threads a multiprocessor, half as many, and the traversal waits on memory)."""
-
 PAIR_MAX_REGISTERS = 128
 """Most registers a thread of the pair set-up kernel on CUDA (148 as compiled freely, 256 threads a
 multiprocessor; capped with the exact test's kernels in ``bench/results/box_tests_registers_cuda0.json``)."""
@@ -81,6 +83,13 @@ WHOLE_TRIANGLES_MAX = 64
 each (polyhedra) skips the trees: a thread per triangle of the larger tests its box against those
 of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`WHOLE_TRIANGLES_LIMIT`."""
 
+WHOLE_OBJECTS_MAX = 100_000
+"""Scenes of at most this many objects use whole-object pairs by default (:data:`WHOLE_TRIANGLES_MAX`),
+larger ones walk trees for every pair: on the H100 whole-object pairs took 0.088 / 0.174 / 0.463 ms
+a frame at 10^3 / 10^4 / 10^5 polyhedra against 0.184 / 0.227 / 0.472 with trees, but 3.24 against
+2.90 ms at 10^6, where the latency of a launch a level no longer counts and the trees' tighter
+boxes do (``bench/results/scaling_cuda0.json`` at this commit and at c5867c9)."""
+
 WHOLE_LANES = 64
 """Default :attr:`MidPhaseBVH.whole_lanes`, threads per whole-object pair (:func:`_whole_pair_kernel`;
 fewer when a block has fewer): a thread takes a triangle of the larger object, four pairs a block
@@ -89,14 +98,6 @@ of 256. On the H100 32 lanes (two triangles a thread for a dodecahedron) took 0.
 
 WHOLE_TRIANGLES_LIMIT = 64
 """Most triangles of an object in a whole-object pair: a thread's hits are the bits of an int64."""
-
-LEVELS_PER_LAUNCH = 2
-"""Default :attr:`MidPhaseBVH.levels_per_launch`: each launch opens the node pairs two levels down
-(up to 16 pairs of grandchildren tested, none of the children's): half the launches, each a few
-microseconds of latency in a small scene, and no front written between the two levels."""
-
-assert EXPAND_THREADS_PER_SM % BLOCK_DIM == 0
-
 
 @wp.struct
 class TreePair:
@@ -354,90 +355,7 @@ def _emit(tree: TreeView, row: wp.vec4i, r: TreePair, kind: int, xa: int, xb: in
     return _write_rows(tree, row, r.node_a_start + xa, r.node_b_start + xb, slot, candidate, candidate_capacity)
 
 
-@wp.func
-def _open(tree: TreeView, start: int, n: int, two: int) -> wp.vec4i:
-    """The nodes that node ``n`` (local id; its tree's global ids from ``start``) opens to, -1 past
-    them: itself if a leaf, else its children, and with ``two`` their children in turn (a child
-    that is a leaf stays itself)."""
-    c = tree.node_child[start + n]
-    if c[0] < 0:
-        return wp.vec4i(n, -1, -1, -1)
-    if two == 0:
-        return wp.vec4i(c[0], c[1], -1, -1)
-    out = wp.vec4i(c[0], -1, c[1], -1)
-    g = tree.node_child[start + c[0]]
-    if g[0] >= 0:
-        out[0] = g[0]
-        out[1] = g[1]
-    g = tree.node_child[start + c[1]]
-    if g[0] >= 0:
-        out[2] = g[0]
-        out[3] = g[1]
-    return out
-
-
-@wp.func
-def _expand_entry(
-    tree: TreeView,
-    r: TreePair,
-    k: int,
-    na: int,
-    nb: int,
-    valid: bool,
-    roots: bool,
-    two: int,
-    axes: int,
-    lane: int,
-    pair_rows: wp.array[wp.vec4i],
-    front_out: wp.array[wp.vec3i],
-    front_capacity: int,
-    level_count: wp.array[wp.int64],
-    out_level: int,
-    front_peak: wp.array[wp.int64],
-    candidate: wp.array[wp.vec4i],
-    candidate_capacity: int,
-    candidate_count: wp.array[wp.int64],
-):
-    """Cooperative (every thread of the block calls it): one node pair ``(k, na, nb)`` of pair
-    ``k`` (``r``; local ids; when ``valid``) opens both nodes one level down, or two with ``two``
-    (:func:`_open`), and tests the pairs of what they open to (up to 4, or 16); overlapping pairs
-    of two leaves become candidate rows, the others go to ``front_out`` (counted by
-    ``level_count[out_level]``; the largest level's count kept in ``front_peak``). With ``roots``
-    the node pair is the roots, not tested yet: tested first. The kinds (:func:`_child_kind`) are
-    kept two bits each in one integer between counting and writing; the block reserves its front
-    slots and its rows with one atomic add each (:func:`~warp_ccd.buffers.block_reserve_at`)."""
-    oa = wp.vec4i(-1)
-    ob = wp.vec4i(-1)
-    kinds = int(0)
-    num_push = int(0)
-    rows = int(0)
-    if valid:
-        if not roots or _overlap(tree, r, na, nb, axes):
-            oa = _open(tree, r.node_a_start, na, two)
-            ob = _open(tree, r.node_b_start, nb, two)
-            for i in range(4):
-                for j in range(4):
-                    if oa[i] >= 0 and ob[j] >= 0:
-                        kind = _child_kind(tree, r, oa[i], ob[j], axes)
-                        kinds = kinds | (kind << (2 * (4 * i + j)))
-                        num_push += _is_push(kind)
-                        rows += _leaf_rows(tree, r, kind, oa[i], ob[j])
-    slot = block_reserve_at(level_count, out_level, lane, num_push)
-    if lane == wp.block_dim() - 1:
-        wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
-    row_slot = block_reserve(candidate_count, lane, rows)
-    if kinds != 0:
-        row = wp.vec4i(0)
-        if rows > 0:
-            row = pair_rows[k]
-        for i in range(4):
-            for j in range(4):
-                kind = (kinds >> (2 * (4 * i + j))) & 3
-                slot = _push(front_out, front_capacity, slot, kind, k, oa[i], ob[j])
-                row_slot = _emit(tree, row, r, kind, oa[i], ob[j], row_slot, candidate, candidate_capacity)
-
-
-@wp.kernel(cuda_max_registers=EXPAND_MAX_REGISTERS)
+@wp.kernel
 def _expand_kernel(
     tree: TreeView,
     tree_pair: wp.array[TreePair],
@@ -446,26 +364,29 @@ def _expand_kernel(
     front_in_count: wp.array[wp.int64],
     front_in_capacity: int,
     roots: int,
-    two: int,
     instance_triangle_start: wp.array[wp.int32],
     whole_max: int,
     num_blocks: int,
     front_capacity: int,
     candidate_capacity: int,
     axes: int,
-    out_level: int,
     # Outputs
     front_out: wp.array[wp.vec3i],
-    level_count: wp.array[wp.int64],
+    front_out_count: wp.array[wp.int64],
     front_peak: wp.array[wp.int64],
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
 ):
-    """One step of the simultaneous descent, one level down or two (``two``): :func:`_expand_entry`
-    for each node pair ``(k, na, nb)`` of ``front_in`` (pair ``k``'s nodes, local ids, boxes known
-    to overlap). With ``roots`` the entries are the pairs themselves (entry ``k`` is ``(k, 0,
-    0)``), less the whole-object pairs (objects of at most ``whole_max`` triangles, tested by
-    :func:`_whole_pair_kernel`). ``num_blocks`` blocks stride over the entries."""
+    """One level of the simultaneous descent: each node pair ``(k, na, nb)`` of ``front_in`` (pair
+    ``k``'s nodes, local ids, boxes known to overlap) opens both nodes (a leaf stays itself) and
+    tests the two to four pairs of children; overlapping pairs of two leaves become candidate rows,
+    the others go to ``front_out``. With ``roots`` the entries are the pairs themselves (entry
+    ``k`` is ``(k, 0, 0)``, its roots not tested yet: tested first), less the whole-object pairs
+    (objects of at most ``whole_max`` triangles, :func:`_whole_pair_kernel`).
+
+    ``num_blocks`` blocks stride over the entries; each round a block reserves its threads' front
+    slots and rows with one atomic add each (:func:`~warp_ccd.buffers.block_reserve`). The front's
+    counter (``front_peak``) keeps the largest level's count, against the front's capacity."""
     block, lane = wp.tid()
     width = wp.block_dim()
     n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
@@ -473,11 +394,20 @@ def _expand_kernel(
     while base < n:
         e = base + lane
         k = int(0)
-        na = int(0)
-        nb = int(0)
         r = TreePair()
-        valid = e < n
-        if valid:
+        # The (up to) four child pairs (xa0 | xa1) x (xb0 | xb1) and their kinds (_child_kind), in
+        # registers: no arrays indexed at run time (they would live in local memory).
+        xa0 = int(0)
+        xa1 = int(0)
+        xb0 = int(0)
+        xb1 = int(0)
+        k00 = int(0)
+        k01 = int(0)
+        k10 = int(0)
+        k11 = int(0)
+        if e < n:
+            na = int(0)
+            nb = int(0)
             if roots != 0:
                 k = e
             else:
@@ -486,10 +416,47 @@ def _expand_kernel(
                 na = f[1]
                 nb = f[2]
             r = tree_pair[k]
-            if roots != 0 and _is_whole_pair(instance_triangle_start, r.a, r.b, whole_max):
-                valid = False
-        _expand_entry(tree, r, k, na, nb, valid, roots != 0, two, axes, lane, pair_rows, front_out, front_capacity,
-                      level_count, out_level, front_peak, candidate, candidate_capacity, candidate_count)
+            ca = tree.node_child[r.node_a_start + na]
+            cb = tree.node_child[r.node_b_start + nb]
+            xa0 = na
+            xa1 = na
+            xb0 = nb
+            xb1 = nb
+            if roots == 0 or (not _is_whole_pair(instance_triangle_start, r.a, r.b, whole_max)
+                              and _overlap(tree, r, na, nb, axes)):
+                if ca[0] < 0 and cb[0] < 0:
+                    k00 = CHILD_LEAF  # two roots that are leaves
+                else:
+                    if ca[0] >= 0:
+                        xa0 = ca[0]
+                        xa1 = ca[1]
+                    if cb[0] >= 0:
+                        xb0 = cb[0]
+                        xb1 = cb[1]
+                    k00 = _child_kind(tree, r, xa0, xb0, axes)
+                    if cb[0] >= 0:
+                        k01 = _child_kind(tree, r, xa0, xb1, axes)
+                    if ca[0] >= 0:
+                        k10 = _child_kind(tree, r, xa1, xb0, axes)
+                        if cb[0] >= 0:
+                            k11 = _child_kind(tree, r, xa1, xb1, axes)
+        num_push = _is_push(k00) + _is_push(k01) + _is_push(k10) + _is_push(k11)
+        rows = (_leaf_rows(tree, r, k00, xa0, xb0) + _leaf_rows(tree, r, k01, xa0, xb1)
+                + _leaf_rows(tree, r, k10, xa1, xb0) + _leaf_rows(tree, r, k11, xa1, xb1))
+        slot = block_reserve(front_out_count, lane, num_push)
+        if lane == width - 1:
+            wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
+        slot = _push(front_out, front_capacity, slot, k00, k, xa0, xb0)
+        slot = _push(front_out, front_capacity, slot, k01, k, xa0, xb1)
+        slot = _push(front_out, front_capacity, slot, k10, k, xa1, xb0)
+        slot = _push(front_out, front_capacity, slot, k11, k, xa1, xb1)
+        slot = block_reserve(candidate_count, lane, rows)
+        if rows > 0:
+            row = pair_rows[k]
+            slot = _emit(tree, row, r, k00, xa0, xb0, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k01, xa0, xb1, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k10, xa1, xb0, slot, candidate, candidate_capacity)
+            slot = _emit(tree, row, r, k11, xa1, xb1, slot, candidate, candidate_capacity)
         base += num_blocks * width
 
 
@@ -620,18 +587,16 @@ class MidPhaseBVH:
         front: the :class:`~warp_ccd.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
             b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
             counter holds the largest level's count.
-        num_levels: levels below the deepest tree's root (at least 1): a frame's expansion
-            launches (:attr:`num_launches`) descend them all.
+        num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
         separating_axes: as above (read at each launch: a captured frame keeps the value it was
             captured with).
         num_blocks, block_dim: the largest grid of an expansion, in blocks, and their size (on the
             CPU one block, of one thread that takes every node pair in turn unless
             ``wp.config.enable_cpu_blocks`` is set); a launch takes at most one thread per slot of
             its input (the pairs' capacity, the front's).
-        levels_per_launch: 1, or 2 (default :data:`LEVELS_PER_LAUNCH`): levels a launch descends
-            (:func:`_expand_entry`; the candidates are the same). Read at each launch.
         whole_triangles_max: pairs of objects of at most this many triangles each skip the trees
-            (default :data:`WHOLE_TRIANGLES_MAX`, at most :data:`WHOLE_TRIANGLES_LIMIT`; 0: none): their
+            (default :data:`WHOLE_TRIANGLES_MAX` in a scene of at most :data:`WHOLE_OBJECTS_MAX`
+            objects, else 0; at most :data:`WHOLE_TRIANGLES_LIMIT`; 0: none): their
             triangles' world boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`).
             A scene of such objects alone launches no tree traversal. Read at each launch.
         whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up
@@ -642,8 +607,7 @@ class MidPhaseBVH:
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
-                 separating_axes: int = 6, levels_per_launch: int = LEVELS_PER_LAUNCH,
-                 whole_triangles_max: int = WHOLE_TRIANGLES_MAX, device=None):
+                 separating_axes: int = 6, whole_triangles_max: int | None = None, device=None):
         self.device = wp.get_device(device)
         self.bvh = bvh
         if separating_axes not in SEPARATING_AXES:
@@ -655,9 +619,8 @@ class MidPhaseBVH:
                                     "tree-pair front", factor=2)
         self.block_dim = block_dim_for(self.device)
         self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
-        if levels_per_launch not in (1, 2):
-            raise ValueError(f"levels_per_launch must be 1 or 2, got {levels_per_launch!r}")
-        self.levels_per_launch = levels_per_launch
+        if whole_triangles_max is None:
+            whole_triangles_max = WHOLE_TRIANGLES_MAX if bvh.lower.shape[0] <= WHOLE_OBJECTS_MAX else 0
         if isinstance(whole_triangles_max, bool) or not isinstance(whole_triangles_max, (int, np.integer)) \
                 or not 0 <= whole_triangles_max <= WHOLE_TRIANGLES_LIMIT:
             raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], "
@@ -668,11 +631,6 @@ class MidPhaseBVH:
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
         self._pairs_capacity = -1
-
-    @property
-    def num_launches(self) -> int:
-        """Expansion launches a frame: :attr:`num_levels` over :attr:`levels_per_launch`, rounded up."""
-        return -(-self.num_levels // self.levels_per_launch)
 
     @property
     def counters(self) -> list[GrowableBuffer]:
@@ -720,18 +678,16 @@ class MidPhaseBVH:
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity, inputs=poses,
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
-        two = int(self.levels_per_launch == 2)
-        for step in range(self.num_launches):
-            roots = step == 0
+        for level in range(self.num_levels):
+            roots = level == 0
             slots = pairs.capacity if roots else cap
             blocks = min(self.num_blocks, (slots + self.block_dim - 1) // self.block_dim)
             wp.launch_tiled(
                 _expand_kernel, dim=[blocks],
-                inputs=[tree, self._tree_pair, self._pair_rows, halves[(step + 1) % 2],
-                        pairs.count if roots else self._level_views[step], slots, int(roots), two,
-                        scene.instance_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes,
-                        step + 1],
-                outputs=[halves[step % 2], self._level_count, self.front.count, cand.data, cand.count],
+                inputs=[tree, self._tree_pair, self._pair_rows, halves[(level + 1) % 2],
+                        pairs.count if roots else self._level_views[level], slots, int(roots),
+                        scene.instance_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes],
+                outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
 
 
