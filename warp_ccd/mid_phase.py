@@ -18,7 +18,7 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   whose trees do not costs a few tests at level 0. The front is a buffer with a capacity and a
   counter (its largest level's count), grown as any other.
 
-  *Whole-object pairs* skip the trees: in a scene of up to 10^5 objects, a pair of objects of at
+  *Whole-object pairs* skip the trees: in a scene of up to 30,000 objects, a pair of objects of at
   most 64 triangles each (polyhedra) has a block of 64 threads, one per triangle of the larger,
   test its world box against every triangle's of the smaller (:func:`_whole_pair_kernel`, one
   launch for all such pairs; the boxes are the trees' leaf boxes, padded alike). A small scene's
@@ -83,12 +83,13 @@ WHOLE_TRIANGLES_MAX = 64
 each (polyhedra) skips the trees: a thread per triangle of the larger tests its box against those
 of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`WHOLE_TRIANGLES_LIMIT`."""
 
-WHOLE_OBJECTS_MAX = 100_000
+WHOLE_OBJECTS_MAX = 30_000
 """Scenes of at most this many objects use whole-object pairs by default (:data:`WHOLE_TRIANGLES_MAX`),
-larger ones walk trees for every pair: on the H100 whole-object pairs took 0.088 / 0.174 / 0.463 ms
-a frame at 10^3 / 10^4 / 10^5 polyhedra against 0.184 / 0.227 / 0.472 with trees, but 3.24 against
-2.90 ms at 10^6, where the latency of a launch a level no longer counts and the trees' tighter
-boxes do (``bench/results/scaling_cuda0.json`` at this commit and at c5867c9)."""
+larger ones walk trees for every pair. On the H100 (frames as graphs, motion included,
+``bench/results/frame_stages*_cuda0.json``) whole-object pairs took 0.081 / 0.147 ms at 10^3 /
+10^4 polyhedra against 0.128 / 0.194 with trees, but 0.434 / 3.22 ms at 10^5 / 10^6 against
+0.417 / 2.77: past a few 10^4 objects the latency of a launch a level no longer counts, and the
+trees' tighter boxes do."""
 
 WHOLE_LANES = 64
 """Default :attr:`MidPhaseBVH.whole_lanes`, threads per whole-object pair (:func:`_whole_pair_kernel`;
