@@ -35,6 +35,7 @@ import numpy as np
 import warp as wp
 
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.bench.timing import detect_frames
 from warp_ccd.cli_common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene import Scene
@@ -118,14 +119,7 @@ def measure_case(spec: str, variant: str, args, device) -> list[dict]:
         pipe.detect(advance=DT)
     base = {"case": spec, "triangles": name, "n_objects": n, "variant": variant}
     rows = []
-    walls, hosts = [], []
-    for _ in range(args.frames):
-        wp.synchronize_device(device)
-        start = time.perf_counter()
-        result = pipe.detect(advance=DT)
-        wp.synchronize_device(device)
-        walls.append((time.perf_counter() - start) * 1e3)
-        hosts.append(result.host_ms)
+    walls, hosts = detect_frames(pipe, args.frames, DT)
     wp.synchronize_device(device)
     start = time.perf_counter()
     for _ in range(args.frames):

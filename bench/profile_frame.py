@@ -24,12 +24,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 import numpy as np
 import warp as wp
 
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.bench.timing import detect_frames
 from warp_ccd.cli_common import quiet_warp, resolve_device
 from warp_ccd.frame import MODES
 from warp_ccd.pipeline import CollisionPipeline
@@ -63,15 +63,7 @@ def activities(pipe: CollisionPipeline, count: int = 10) -> list[dict]:
 
 def frames(pipe: CollisionPipeline, count: int) -> dict:
     """``count`` frames of ``detect(advance=dt)``: ms min and median, host ms median."""
-    ms, host = [], []
-    device = pipe.device
-    for _ in range(count):
-        wp.synchronize_device(device)
-        start = time.perf_counter()
-        result = pipe.detect(advance=DT)
-        wp.synchronize_device(device)
-        ms.append((time.perf_counter() - start) * 1e3)
-        host.append(result.host_ms)
+    ms, host = detect_frames(pipe, count, DT)
     return {"ms_min": float(np.min(ms)), "ms_median": float(np.median(ms)), "host_ms_median": float(np.median(host))}
 
 

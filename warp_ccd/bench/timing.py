@@ -1,6 +1,7 @@
 """Timing a frame the way a careful Warp user runs it, and summarising the times.
 
 * :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
+* :func:`detect_frames`: a pipeline's ``detect`` frames, each timed that way, with their host time.
 * :class:`~warp_ccd.frame.CountedFrame` (the library's): one frame of device work followed by one
   small kernel copying its counters into pinned host memory and one wait, launched eagerly from
   Python or replayed as a captured graph. A counter past its buffer's capacity grows the buffer,
@@ -22,7 +23,7 @@ import warp as wp
 from ..buffers import CounterRead
 from ..frame import MODES, CountedFrame
 
-__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "run_stages", "synced_ms"]
+__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "detect_frames", "run_stages", "synced_ms"]
 
 
 def synced_ms(fn, device) -> float:
@@ -32,6 +33,25 @@ def synced_ms(fn, device) -> float:
     fn()
     wp.synchronize_device(device)
     return (time.perf_counter() - start) * 1e3
+
+
+def detect_frames(pipe, count: int, dt: float) -> tuple[list[float], list[float]]:
+    """``count`` frames of ``pipe.detect(advance=dt)``, each timed by :func:`synced_ms`.
+
+    Args:
+        pipe: a :class:`~warp_ccd.pipeline.CollisionPipeline`, warmed up.
+        count: frames to time.
+        dt: s the scene advances each frame.
+
+    Returns:
+        ``(wall, host)``: ms per frame, wall-clock and Python's own (``FrameResult.host_ms``).
+    """
+    wall, host = [], []
+    for _ in range(count):
+        result = []
+        wall.append(synced_ms(lambda: result.append(pipe.detect(advance=dt)), pipe.device))
+        host.append(result[0].host_ms)
+    return wall, host
 
 
 class ModeFrames:
