@@ -31,6 +31,7 @@ import warp as wp
 
 from warp_ccd import mid_phase, narrow_phase
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.bvh import OBJECT_BOUNDS
 from warp_ccd.cli_common import quiet_warp, resolve_device
 from warp_ccd.mid_phase import EXPAND_THREADS_PER_SM
 from warp_ccd.pipeline import STAGES, CollisionPipeline
@@ -38,6 +39,15 @@ from warp_ccd.precision import PRECISIONS
 from warp_ccd.scene import Scene
 
 DT = 1.0 / 60.0
+
+
+def _bounds(text: str) -> str | int:
+    """``--bounds`` value: a name of :data:`~warp_ccd.bvh.OBJECT_BOUNDS` or a vertex count."""
+    if text in OBJECT_BOUNDS:
+        return text
+    if text.isdigit():
+        return int(text)
+    raise argparse.ArgumentTypeError(f"{text!r} is neither one of {tuple(OBJECT_BOUNDS)} nor a vertex count")
 
 
 def _case(text: str) -> tuple[str, int]:
@@ -126,7 +136,7 @@ def run(spec: str, n: int, args, device, registers: int, pairs_by_case: dict) ->
                     stages[s].append(t[s])
         rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
-        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {bounds:<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
+        print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {str(bounds):<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
               f"  registers {registers or '-':>3}"
               f"  frame {frame_ms:8.3f} ms"
               f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
@@ -141,8 +151,9 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", type=_case, nargs="+", default=[("poly", 1000), ("80", 1000)],
                         help="TRIANGLES:N scenes (default: %(default)s)")
     parser.add_argument("--axes", type=int, nargs="+", default=[3, 6], choices=[3, 6])
-    parser.add_argument("--bounds", nargs="+", default=["auto", "vertices", "tree"],
-                        choices=["auto", "vertices", "tree"])
+    parser.add_argument("--bounds", type=_bounds, nargs="+", default=["auto", "vertices", "tree"],
+                        help="object_bounds: auto, vertices, tree, or the most vertices of an object whose box "
+                             "comes from its vertices (default: %(default)s)")
     parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[None],
                         help="leaf sizes (default: the pipeline's own)")
     parser.add_argument("--threads-per-sm", type=int, nargs="+", default=[EXPAND_THREADS_PER_SM],

@@ -252,6 +252,35 @@ def test_object_bounds_hold_their_objects(device, object_bounds):
         assert np.array_equal(pipe.boxes.upper.numpy(), ref.boxes.upper.numpy())
 
 
+def test_object_bounds_by_vertex_count(device):
+    """An integer ``object_bounds`` takes the vertices' box of objects of up to that many vertices
+    and the tree's of bigger ones: here the polyhedra (at most 12 vertices) as with ``"vertices"``
+    and the icospheres (642 and 2,562) as with ``"tree"``; every choice gives the same pairs."""
+    scene = mixed_scene(device, n=30, seed=3)
+    scene.advance(0.2)
+    boxes, pairs = {}, {}
+    for bounds in ("vertices", "tree", 100, 0):
+        pipe = wc.CollisionPipeline(scene, object_bounds=bounds)
+        res = pipe.detect()
+        boxes[bounds] = pipe.boxes.lower.numpy(), pipe.boxes.upper.numpy()
+        pairs[bounds] = res.copy().triangle_pairs
+    counts = np.diff(scene.instance_vertex_start_np)
+    small = counts <= 100
+    assert small.any() and (~small).any()
+    for k in range(2):
+        assert np.array_equal(boxes[100][k][small], boxes["vertices"][k][small])
+        assert np.array_equal(boxes[100][k][~small], boxes["tree"][k][~small])
+        assert np.array_equal(boxes[0][k], boxes["tree"][k])
+    for bounds in (100, 0, "tree"):
+        assert np.array_equal(pairs[bounds], pairs["vertices"])
+
+
+@pytest.mark.parametrize("value", ["box", -1, 2**31, 1.5, True, None])
+def test_bad_object_bounds(value):
+    with pytest.raises(ValueError, match="object_bounds"):
+        wc.CollisionPipeline(wc.Scene.random(3), object_bounds=value)
+
+
 def test_rigid_and_deforming_objects_share_one_traversal(device):
     """A scene of rigid objects and deforming ones (every other object): the traversal maps boxes
     between shape spaces and the world, and finds what the reference finds, frame after frame."""

@@ -450,7 +450,8 @@ class SceneBVH:
             ``"vertices"`` the box of its world vertices (tight; a thread reads them all);
             ``"tree"`` the union of its shape's cut boxes under its pose (a few boxes; loose where
             the cut's boxes are big, in small trees); ``"auto"`` (default) the vertices of objects
-            of up to 1,024 vertices, the tree of bigger ones (:data:`OBJECT_BOUNDS`).
+            of up to :data:`OBJECT_BOUNDS` ``["auto"]`` vertices, the tree of bigger ones; an integer
+            ``n``, the vertices of objects of up to ``n`` vertices (0: ``"tree"``).
         small_subtree: largest subtree one thread of the build finishes alone (default: see
             :class:`~warp_ccd.bvh_build.TreeBuild`).
 
@@ -462,22 +463,31 @@ class SceneBVH:
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
         num_levels: levels of the deepest tree (the root alone: 1).
         max_triangles, min_triangles: triangles of the largest and of the smallest object's mesh.
+        bounds_vertices_max: most vertices of a rigid object whose box comes from its vertices
+            (from ``object_bounds``).
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
-                 cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str = "auto",
+                 cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
                  small_subtree: int | None = None):
         if not 1 <= leaf_size <= LEAF_SIZE_MAX:
             raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
         if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
             raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
-        if object_bounds not in OBJECT_BOUNDS:
-            raise ValueError(f"object_bounds must be one of {tuple(OBJECT_BOUNDS)}, got {object_bounds!r}")
+        if isinstance(object_bounds, str) and object_bounds in OBJECT_BOUNDS:
+            vertices_max = OBJECT_BOUNDS[object_bounds]
+        elif (not isinstance(object_bounds, (bool, str)) and isinstance(object_bounds, (int, np.integer))
+              and 0 <= object_bounds < 2**31):
+            vertices_max = int(object_bounds)
+        else:
+            raise ValueError(f"object_bounds must be one of {tuple(OBJECT_BOUNDS)} or a vertex count in "
+                             f"[0, 2**31), got {object_bounds!r}")
         self.device = scene.device
         self.margin_rel = float(margin_rel)
         self.leaf_size = int(leaf_size)
         self.cut_depth = int(cut_depth)
         self.object_bounds = object_bounds
+        self.bounds_vertices_max = vertices_max
         d = self.device
         build = TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np, leaf_size=leaf_size,
                           cut_depth=cut_depth, cut_triangles=cut_triangles, small=small_subtree, device=d)
@@ -587,5 +597,5 @@ class SceneBVH:
             wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_instance.shape[0],
                       inputs=[self.tree, self.rigid_instance, scene.instance_shape, scene.instance_pose,
                               scene.instance_scale, scene.world_vertex, scene.instance_vertex_start,
-                              OBJECT_BOUNDS[self.object_bounds], margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
+                              self.bounds_vertices_max, margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
                       outputs=[self.lower, self.upper], device=self.device)

@@ -214,7 +214,8 @@ class CollisionPipeline:
             one object's box in the other's space, both ways round; 3, one way (see
             :mod:`warp_ccd.mid_phase`).
         object_bounds: a rigid object's box for the broad phase (``bvh`` mid phase): ``"auto"``
-            (default), ``"vertices"`` or ``"tree"`` (see :class:`~warp_ccd.bvh.SceneBVH`).
+            (default), ``"vertices"``, ``"tree"``, or the most vertices of an object whose box comes
+            from its vertices (see :class:`~warp_ccd.bvh.SceneBVH`).
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
@@ -252,7 +253,7 @@ class CollisionPipeline:
         leaf_size: int | None = None,
         cut_depth: int = 3,
         separating_axes: int = 6,
-        object_bounds: str = "auto",
+        object_bounds: str | int = "auto",
         segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
