@@ -25,7 +25,7 @@ of the object's *box space*:
   (:mod:`warp_ccd.mid_phase`) tests one object's boxes against the other's under the pair's
   relative transform, as FCL does; the broad phase's object box is the union of the shape's cut
   boxes (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
-  vertices (one thread an object either way; by default the vertices of objects of up to 1,024,
+  vertices (one thread an object either way; by default the vertices of objects of up to 64,
   whose cuts are fewer, bigger boxes, and the cut of bigger ones, whose cuts are many small ones).
 * **deforming objects** (``scene.instance_deforming_np``) have boxes of their own, in world space,
   refit every frame from their world vertices: instances of small trees (up to 255 nodes:
@@ -60,13 +60,15 @@ LEAF_SIZE_MAX = 256
 """Most triangles per leaf: a traversal thread emits up to 4 leaf pairs of ``leaf_size**2`` rows at
 once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
 
-OBJECT_BOUNDS = {"auto": 1024, "tree": -1, "vertices": 2**31 - 1}
+OBJECT_BOUNDS = {"auto": 64, "tree": -1, "vertices": 2**31 - 1}
 """How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
-vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 1,024. On the
-H100 (``bench/results/box_tests_cuda0.json``) the vertices' boxes of 10^4 icospheres of 642
-vertices took 0.18 ms against 0.06 for the cuts' of 32 boxes, whose looser boxes cost the
-traversal 1.1 ms more; but for 1,000 objects of up to 6,480 vertices the vertices took 0.96 ms
-against 0.16, for a frame 0.7 ms slower."""
+vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 64. On the
+H100 (``bench/results/box_bounds_*_cuda0.json``, frames as a graph) the vertices win only for the
+smallest shapes, whose cuts are a few big boxes: 10^5 x 80 triangles (42 vertices) 1.11 against
+1.18 ms. From 162 vertices on the tree wins (10^4 x 1,280, 642 vertices: 0.67 against 0.79 ms;
+3 x 10^4 x 320: 0.86 against 0.87): one thread reading hundreds of vertices costs more than the
+looser boxes cost the traversal. 1,000 objects of real-asset sizes (62 to 6,480 vertices): 0.31 ms
+up to 64 vertices against 0.34 up to 512, 0.42 up to 1,024 and 1.13 for the vertices of all."""
 
 WORLD_ERROR_ULPS = 128.0
 """Bound on the rounding of a world vertex computed from its pose (``pose * (scale * p)``: a
