@@ -164,7 +164,7 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default=None)
     parser.add_argument("--objects", type=lambda x: int(float(x)), nargs="+", default=[1000, 10000])
     parser.add_argument("--level", type=int, default=3, help="icosphere level (3: 1,280 triangles)")
-    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1, 2, 4])
+    parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1, 2, 4, 8])
     parser.add_argument("--frames", type=int, default=10)
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
