@@ -50,7 +50,7 @@ import warp as wp
 
 from .aabb import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from .buffers import upper_bound
-from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, TreeSizes, packed_upload
+from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, packed_upload
 from .precision import precision_overloads
 from .scene import MeshTopology
 
@@ -172,53 +172,46 @@ def _refit_node(
         instance_upper[inst] = hi
 
 
+@wp.func
+def _layout_item(
+    t: int,
+    block_start: wp.array[wp.int32],
+    block_count: wp.array[wp.int32],
+    layout_instance: wp.array[wp.int32],
+    layout_instance_start: wp.array[wp.int32],
+):
+    """Flat work item ``t`` of a launch whose items are laid out layout by layout: block ``b`` (one
+    per tree layout with objects in the launch) owns items ``block_start[b] .. block_start[b + 1]``,
+    ``block_count[b]`` per object, its objects ``layout_instance[layout_instance_start[b]:
+    layout_instance_start[b + 1]]``. Returns ``(block, object, index of the item within its
+    object)``: one search over the few layouts, not over the objects or shapes."""
+    b = upper_bound(block_start, 0, block_start.shape[0], t) - 1  # last b with block_start[b] <= t
+    local = t - block_start[b]
+    cnt = block_count[b]
+    return b, layout_instance[layout_instance_start[b] + local / cnt], local % cnt
+
+
 @wp.kernel
 def _refit_level_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
     tree: TreeView,
     block_start: wp.array[wp.int32],
-    level_first: wp.array[wp.int32],
     level_count: wp.array[wp.int32],
-    shape_instance: wp.array[wp.int32],
-    shape_instance_start: wp.array[wp.int32],
+    level_first: int,
+    layout_instance: wp.array[wp.int32],
+    layout_instance_start: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
     instance_lower: wp.array[wp.vec3],
     instance_upper: wp.array[wp.vec3],
 ):
-    """One thread per (instance, node of this level): leaf box from triangles, else children union.
-
-    Work items are laid out shape by shape: shape ``s`` owns ``block_start[s] .. block_start[s+1]``
-    (its instances times its nodes on this level).
-    """
-    t = wp.tid()
-    s = upper_bound(block_start, 0, block_start.shape[0], t) - 1  # last s with block_start[s] <= t
-    local = t - block_start[s]
-    cnt = level_count[s]
-    inst = shape_instance[shape_instance_start[s] + local / cnt]
-    node = level_first[s] + local % cnt
-    _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
-
-
-@wp.func
-def _small_item(
-    t: int,
-    small_end: wp.array[wp.int32],
-    small_instance: wp.array[wp.int32],
-    instance_shape: wp.array[wp.int32],
-    shape_layout: wp.array[wp.int32],
-    layout_start: wp.array[wp.int32],
-):
-    """Flat work item ``t`` over the small instances, ``small_end`` the inclusive scan of their
-    per-layout item counts (``layout_start`` offsets per layout): ``(instance, shape, index of the
-    item in the layouts' concatenated list)``."""
-    k = upper_bound(small_end, 0, small_end.shape[0], t)
-    inst = small_instance[k]
-    s = instance_shape[inst]
-    layout = shape_layout[s]
-    first = layout_start[layout]
-    return inst, s, first + t - (small_end[k] - (layout_start[layout + 1] - first))
+    """One thread per (object, node of this level): leaf box from triangles, else children union.
+    Items laid out by layout (:func:`_layout_item`), ``level_count`` nodes of the level per object;
+    the level's nodes are ``level_first ..`` in every tree (:meth:`~warp_ccd.bvh_build.TreeSizes.level`)."""
+    _b, inst, k = _layout_item(wp.tid(), block_start, level_count, layout_instance, layout_instance_start)
+    _refit_node(mesh, world_vertex, tree, mesh.instance_shape[inst], inst, level_first + k, margin_rel,
+                instance_lower, instance_upper)
 
 
 @wp.kernel
@@ -226,39 +219,44 @@ def _refit_small_leaf_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
     tree: TreeView,
-    small_instance: wp.array[wp.int32],
-    small_leaf_end: wp.array[wp.int32],
+    block_start: wp.array[wp.int32],
+    block_count: wp.array[wp.int32],
+    block_layout: wp.array[wp.int32],
+    layout_instance: wp.array[wp.int32],
+    layout_instance_start: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
     instance_lower: wp.array[wp.vec3],
     instance_upper: wp.array[wp.vec3],
 ):
-    """One thread per leaf of each instance of a small shape: the leaf's box from its triangles.
-    ``small_leaf_end`` is the inclusive scan of the leaf counts of ``small_instance``."""
-    inst, s, item = _small_item(wp.tid(), small_leaf_end, small_instance, mesh.instance_shape, tree.shape_layout,
-                                tree.layout_leaf_start)
-    node = tree.leaf_node[item]
-    _refit_node(mesh, world_vertex, tree, s, inst, node, margin_rel, instance_lower, instance_upper)
+    """One thread per leaf of each object of a small tree: the leaf's box from its triangles. Items
+    laid out by layout (:func:`_layout_item`), ``block_count`` leaves per object."""
+    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_instance, layout_instance_start)
+    node = tree.leaf_node[tree.layout_leaf_start[block_layout[b]] + k]
+    _refit_node(mesh, world_vertex, tree, mesh.instance_shape[inst], inst, node, margin_rel, instance_lower,
+                instance_upper)
 
 
 @wp.kernel
 def _refit_small_inner_kernel(
     tree: TreeView,
-    instance_shape: wp.array[wp.int32],
-    small_instance: wp.array[wp.int32],
-    small_inner_end: wp.array[wp.int32],
+    block_start: wp.array[wp.int32],
+    block_count: wp.array[wp.int32],
+    block_layout: wp.array[wp.int32],
+    layout_instance: wp.array[wp.int32],
+    layout_instance_start: wp.array[wp.int32],
     layout_inner_start: wp.array[wp.int32],
     inner_node: wp.array[wp.int32],
     # Outputs
     instance_lower: wp.array[wp.vec3],
     instance_upper: wp.array[wp.vec3],
 ):
-    """One thread per inner node of each instance of a small shape, after the leaves: the union
-    of the boxes of the leaves of its subtree (the same bits as the union of its children's)."""
-    inst, s, item = _small_item(wp.tid(), small_inner_end, small_instance, instance_shape, tree.shape_layout,
-                                layout_inner_start)
-    node = inner_node[item]
-    layout = tree.shape_layout[s]
+    """One thread per inner node of each object of a small tree, after the leaves: the union of the
+    boxes of the leaves of its subtree (the same bits as the union of its children's). Items laid
+    out by layout (:func:`_layout_item`), ``block_count`` inner nodes per object."""
+    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_instance, layout_instance_start)
+    layout = block_layout[b]
+    node = inner_node[layout_inner_start[layout] + k]
     leaves = tree.node_leaf[tree.layout_node_start[layout] + node]
     leaf_base = tree.layout_leaf_start[layout]
     slot = tree.instance_node_start[inst]
@@ -363,71 +361,78 @@ class _RefitPlan:
     Args:
         instances: ``(K,)`` ids of the objects to refit.
         instance_shape: ``(N,)`` shape of every object of the topology the launches take.
-        sizes: per-shape :class:`~warp_ccd.bvh_build.TreeSizes`.
-        build: the :class:`~warp_ccd.bvh_build.TreeBuild` (inner-node lists).
+        build: the :class:`~warp_ccd.bvh_build.TreeBuild` (layouts, their sizes and inner-node lists).
         small_max_nodes: trees of at most this many nodes are refit leaves-then-inner-nodes, the
             others level by level.
         device: Warp device.
     """
 
-    def __init__(self, instances: np.ndarray, instance_shape: np.ndarray, sizes: TreeSizes, build: TreeBuild,
-                 small_max_nodes: int, device):
+    def __init__(self, instances: np.ndarray, instance_shape: np.ndarray, build: TreeBuild, small_max_nodes: int,
+                 device):
         self.device = device
         self.build = build
         instances = np.asarray(instances, np.int64)
-        shape = instance_shape[instances]
-        num_shapes = len(sizes.m)
-        small = sizes.num_nodes <= small_max_nodes
-        is_small = small[shape]
-        self.small_instance = wp.array(instances[is_small].astype(np.int32), dtype=wp.int32, device=device)
-        small_shape = shape[is_small]
-        small_leaf_end = np.cumsum(sizes.num_leaves[small_shape])
-        small_inner_end = np.cumsum(sizes.num_inner[small_shape])
-        self.num_small_leaves = int(small_leaf_end[-1]) if len(small_leaf_end) else 0
-        self.num_small_inner = int(small_inner_end[-1]) if len(small_inner_end) else 0
-        if max(self.num_small_leaves, self.num_small_inner) >= 2**31:
-            raise ValueError("scene too large for the BVH refit (2**31 tree nodes of small shapes)")
-        self.small_leaf_end = wp.array(small_leaf_end.astype(np.int32), dtype=wp.int32, device=device)
-        self.small_inner_end = wp.array(small_inner_end.astype(np.int32), dtype=wp.int32, device=device)
-        # The others grouped by shape, and per level the work blocks of each shape.
-        big = instances[~is_small]
-        order = big[np.argsort(shape[~is_small], kind="stable")].astype(np.int32)
-        per_shape = np.bincount(shape[~is_small], minlength=num_shapes).astype(np.int64)
-        self.shape_instance = wp.array(order, dtype=wp.int32, device=device)
-        self.shape_instance_start = wp.array(np.concatenate([[0], np.cumsum(per_shape)]).astype(np.int32),
-                                             device=device)
-        depth = int(sizes.num_levels[per_shape > 0].max()) if per_shape.any() else 0
-        level_items, level_arrays = [], []
-        for level in range(depth):
-            level_first, count = sizes.level(level)
-            block = np.concatenate([[0], np.cumsum(count * per_shape)])
+        layout = build.shape_layout[instance_shape[instances]]
+        lsizes = build.layout_sizes  # a tree's shape depends on its layout (triangle count) alone
+        small = (lsizes.num_nodes <= small_max_nodes)[layout]
+
+        def group(members: np.ndarray, member_layout: np.ndarray) -> tuple:
+            """``(layouts with members, members sorted by layout, start of each layout's members)``."""
+            used, per = np.unique(member_layout, return_counts=True)
+            order = members[np.argsort(member_layout, kind="stable")]
+            return used, order, np.concatenate([[0], np.cumsum(per)])
+
+        def blocks(per_member: np.ndarray, members: np.ndarray) -> tuple:
+            """``(items, block_start, block_count)``: ``per_member[b]`` items for each of
+            ``members[b]`` objects."""
+            block = np.concatenate([[0], np.cumsum(per_member.astype(np.int64) * members)])
             if block[-1] >= 2**31:
-                raise ValueError("scene too large for the BVH refit (2**31 work items on one level)")
-            level_items.append(int(block[-1]))
-            level_arrays += [block, level_first, np.maximum(count, 1)]
-        views = packed_upload(level_arrays, device) if level_arrays else []  # one copy for all levels
-        # (items, block_start, level_first, level_count) per level
-        self.levels = [(items, *views[3 * k: 3 * k + 3]) for k, items in enumerate(level_items)]
+                raise ValueError("scene too large for the BVH refit (2**31 work items in one launch)")
+            return int(block[-1]), block, np.maximum(per_member, 1)
+
+        # Small trees: their leaves, then their inner nodes, one launch each for every such object.
+        used, order, start = group(instances[small], layout[small])
+        self.num_small_leaves, leaf_block, leaf_count = blocks(lsizes.num_leaves[used], np.diff(start))
+        self.num_small_inner, inner_block, inner_count = blocks(lsizes.num_inner[used], np.diff(start))
+        arrays = [leaf_block, leaf_count, inner_block, inner_count, used, order, start]
+        # The others level by level, deepest first (the nodes of level d are the same ids in every tree).
+        used_big, order_big, start_big = group(instances[~small], layout[~small])
+        arrays += [order_big, start_big]
+        depth = int(lsizes.num_levels[used_big].max()) if len(used_big) else 0
+        self.level_items, self.level_first = [], []
+        for level in range(depth):
+            first, count = lsizes.level(level)
+            items, block, per = blocks(count[used_big], np.diff(start_big))
+            self.level_items.append(items)
+            self.level_first.append(int(first[0]))
+            arrays += [block, per]
+        views = packed_upload(arrays, device)  # one copy for all
+        (self.small_leaf_block, self.small_leaf_count, self.small_inner_block, self.small_inner_count,
+         self.small_layout, self.small_instance, self.small_instance_start, self.big_instance,
+         self.big_instance_start) = views[:9]
+        self.levels = [tuple(views[9 + 2 * k: 11 + 2 * k]) for k in range(depth)]  # (block_start, level_count)
 
     def launch(self, topology: MeshTopology, vertices: wp.array, tree: TreeView, margin, precision: str,
                lower: wp.array, upper: wp.array) -> None:
         """Refits the boxes of the plan's objects from ``vertices`` (``topology``'s), small trees
         first, then the others deepest level first; roots also into ``lower`` / ``upper``."""
         d = self.device
+        small = [self.small_layout, self.small_instance, self.small_instance_start]
         if self.num_small_leaves:
             wp.launch(_REFIT_SMALL_LEAF[precision], dim=self.num_small_leaves,
-                      inputs=[topology, vertices, tree, self.small_instance, self.small_leaf_end, margin],
+                      inputs=[topology, vertices, tree, self.small_leaf_block, self.small_leaf_count, *small, margin],
                       outputs=[lower, upper], device=d)
         if self.num_small_inner:
             wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
-                      inputs=[tree, topology.instance_shape, self.small_instance, self.small_inner_end,
+                      inputs=[tree, self.small_inner_block, self.small_inner_count, *small,
                               self.build.layout_inner_start_device, self.build.inner_node],
                       outputs=[lower, upper], device=d)
-        for items, block, first, count in reversed(self.levels):
-            if items:
-                wp.launch(_REFIT_LEVEL[precision], dim=items,
-                          inputs=[topology, vertices, tree, block, first, count, self.shape_instance,
-                                  self.shape_instance_start, margin],
+        for k in reversed(range(len(self.levels))):
+            if self.level_items[k]:
+                block, count = self.levels[k]
+                wp.launch(_REFIT_LEVEL[precision], dim=self.level_items[k],
+                          inputs=[topology, vertices, tree, block, count, self.level_first[k], self.big_instance,
+                                  self.big_instance_start, margin],
                           outputs=[lower, upper], device=d)
 
 
@@ -527,8 +532,8 @@ class SceneBVH:
 
         self.rigid_instance = wp.array(np.nonzero(~deforming)[0].astype(np.int32), dtype=wp.int32, device=d)
         self.instance_deforming = wp.array(deforming.astype(np.int32), dtype=wp.int32, device=d)
-        self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, sizes, build, instance_refit_max_nodes, d)
-        self._shape_plan = _RefitPlan(np.nonzero(has_rigid)[0], np.arange(num_shapes), sizes, build,
+        self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, build, instance_refit_max_nodes, d)
+        self._shape_plan = _RefitPlan(np.nonzero(has_rigid)[0], np.arange(num_shapes), build,
                                       instance_refit_max_nodes, d)
 
         def view(node_start):
