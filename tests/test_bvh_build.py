@@ -203,8 +203,8 @@ def test_from_meshes_shares_only_the_same_arrays():
 
 
 def test_one_shot_runs_its_frame_once(device, monkeypatch):
-    """collide() sizes its buffers from the scene: one run of the frame for 1,000 polyhedra and for
-    big meshes in contact."""
+    """collide() sizes its buffers from the scene: one run of the frame for 1,000 polyhedra, for
+    big meshes in contact and for objects whose boxes overlap many others'."""
     runs = []
     detect = wc.CollisionPipeline.detect
 
@@ -221,7 +221,14 @@ def test_one_shot_runs_its_frame_once(device, monkeypatch):
     v, t = wc.icosphere(4)
     meshes = [(v * rng.uniform(1, 2) + rng.uniform(-2, 2, 3).astype(np.float32), t) for _ in range(6)]
     assert len(wc.collide(meshes, device=device).object_pairs) > 0
-    assert runs == [1, 1]
+    # Unit spheres on the even sites of a grid of spacing 1.9: each one's box overlaps those of its
+    # twelve nearest neighbours (1.9 apart on two axes), far more box pairs than objects, but no two
+    # spheres meet (2.69 apart).
+    v, t = wc.icosphere(1)
+    sites = [(i, j, k) for i in range(5) for j in range(5) for k in range(5) if (i + j + k) % 2 == 0]
+    meshes = [(v + 1.9 * np.array(c, np.float32), t) for c in sites]
+    assert len(wc.collide(meshes, device=device).object_pairs) == 0
+    assert runs == [1, 1, 1]
 
 
 def test_validate_meshes_mixed_arrays():

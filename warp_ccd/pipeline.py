@@ -449,11 +449,13 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
-    # one candidate a triangle per triangle of a leaf, 16 bytes each, a node pair of the front a
-    # triangle, 24 bytes, and 8 bytes of hits a triangle, for this call only), where a persistent
-    # pipeline starts lean and grows.
+    # every object pair of a small scene or 32 pairs an object, 8 bytes each; one candidate a
+    # triangle per triangle of a leaf, 16 bytes each, a node pair of the front a triangle, 24 bytes,
+    # and 8 bytes of hits a triangle, for this call only), where a persistent pipeline starts lean
+    # and grows.
     n, tris = scene.num_objects, scene.num_triangles
     leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
+    options.setdefault("pair_capacity", max(64, min(n * (n - 1) // 2, 32 * n)))
     options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
     options.setdefault("front_capacity", max(1024, 4 * n, tris))
