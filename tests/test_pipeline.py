@@ -136,6 +136,12 @@ def test_bad_whole_triangles_max(value):
     scene = wc.Scene.random(4, seed=0)
     with pytest.raises(ValueError, match="whole_triangles_max"):
         wc.MidPhaseBVH(wc.SceneBVH(scene), whole_triangles_max=value)
+    mid = wc.MidPhaseBVH(wc.SceneBVH(scene))
+    with pytest.raises(ValueError, match="whole_triangles_max"):
+        mid.whole_triangles_max = value
+    for lanes in (0, 3, 512, 32.0, True):
+        with pytest.raises(ValueError, match="whole_lanes"):
+            mid.whole_lanes = lanes
 
 
 def test_timings(device):

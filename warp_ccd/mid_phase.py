@@ -599,9 +599,10 @@ class MidPhaseBVH:
             (default :data:`WHOLE_TRIANGLES_MAX` in a scene of at most :data:`WHOLE_OBJECTS_MAX`
             objects, else 0; at most :data:`WHOLE_TRIANGLES_LIMIT`; 0: none): their
             triangles' world boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`).
-            A scene of such objects alone launches no tree traversal. Read at each launch.
+            A scene of such objects alone launches no tree traversal. An attribute too, checked when
+            set and read at each launch.
         whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up
-            to 256). Read at each launch.
+            to 256): an attribute, checked when set and read at each launch.
 
     The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
@@ -622,11 +623,7 @@ class MidPhaseBVH:
         self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
         if whole_triangles_max is None:
             whole_triangles_max = WHOLE_TRIANGLES_MAX if bvh.lower.shape[0] <= WHOLE_OBJECTS_MAX else 0
-        if isinstance(whole_triangles_max, bool) or not isinstance(whole_triangles_max, (int, np.integer)) \
-                or not 0 <= whole_triangles_max <= WHOLE_TRIANGLES_LIMIT:
-            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], "
-                             f"got {whole_triangles_max!r}")
-        self.whole_triangles_max = int(whole_triangles_max)
+        self.whole_triangles_max = whole_triangles_max
         self.whole_lanes = WHOLE_LANES
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
@@ -638,6 +635,30 @@ class MidPhaseBVH:
         """The buffers with counters that :meth:`launch` resets and writes, whose counters the caller
         reads after it: the front (its largest level), then the candidates."""
         return [self.front, self.candidates]
+
+    @property
+    def whole_triangles_max(self) -> int:
+        """Pairs of objects of at most this many triangles each skip the trees (see the class docs)."""
+        return self._whole_triangles_max
+
+    @whole_triangles_max.setter
+    def whole_triangles_max(self, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or not 0 <= value <= WHOLE_TRIANGLES_LIMIT:
+            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], got {value!r}")
+        self._whole_triangles_max = int(value)
+
+    @property
+    def whole_lanes(self) -> int:
+        """Threads per whole-object pair (see the class docs)."""
+        return self._whole_lanes
+
+    @whole_lanes.setter
+    def whole_lanes(self, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or value not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
+            raise ValueError(f"whole_lanes must be a power of two up to 256, got {value!r}")
+        self._whole_lanes = int(value)
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
@@ -657,15 +678,9 @@ class MidPhaseBVH:
             self._pair_rows = wp.zeros(pairs.capacity, dtype=wp.vec4i, device=d)
         tree = self.bvh.tree
         eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
-        poses = [tree, scene.instance_shape, scene.instance_pose, scene.instance_scale, self.bvh.instance_deforming,
-                 WORLD_ERROR_ULPS * eps, pairs.data, pairs.count, pairs.capacity]
         cap = self.front.capacity
         cand = self.candidates
         whole = self.whole_triangles_max
-        if not 0 <= whole <= WHOLE_TRIANGLES_LIMIT:
-            raise ValueError(f"whole_triangles_max must lie in [0, {WHOLE_TRIANGLES_LIMIT}], got {whole!r}")
-        if self.whole_lanes not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
-            raise ValueError(f"whole_lanes must be a power of two up to 256, got {self.whole_lanes!r}")
         if whole >= self.bvh.min_triangles:  # some object pairs may be whole-object pairs
             lanes = min(self.whole_lanes, self.block_dim)
             per_block = self.block_dim // lanes
@@ -676,7 +691,10 @@ class MidPhaseBVH:
                             outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
         if self.bvh.max_triangles <= whole:
             return  # every pair is a whole-object pair
-        wp.launch(_PAIR[scene.precision], dim=pairs.capacity, inputs=poses,
+        wp.launch(_PAIR[scene.precision], dim=pairs.capacity,
+                  inputs=[tree, scene.instance_shape, scene.instance_pose, scene.instance_scale,
+                          self.bvh.instance_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
+                          pairs.capacity],
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
         for level in range(self.num_levels):
@@ -756,6 +774,30 @@ class MidPhaseAllPairs:
         """The buffers with counters that :meth:`launch` writes (the candidates, their counter set
         by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
+
+    @property
+    def whole_triangles_max(self) -> int:
+        """Pairs of objects of at most this many triangles each skip the trees (see the class docs)."""
+        return self._whole_triangles_max
+
+    @whole_triangles_max.setter
+    def whole_triangles_max(self, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or not 0 <= value <= WHOLE_TRIANGLES_LIMIT:
+            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], got {value!r}")
+        self._whole_triangles_max = int(value)
+
+    @property
+    def whole_lanes(self) -> int:
+        """Threads per whole-object pair (see the class docs)."""
+        return self._whole_lanes
+
+    @whole_lanes.setter
+    def whole_lanes(self, value: int) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or value not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
+            raise ValueError(f"whole_lanes must be a power of two up to 256, got {value!r}")
+        self._whole_lanes = int(value)
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
