@@ -1,0 +1,733 @@
+"""Penetrating or touching: whether two surfaces cross where their triangles meet, and how deep.
+
+The exact test (:mod:`~warp_ccd.narrow_phase`) finds every pair of closed triangles that meet.
+Whether two *surfaces* pass through each other is a question about the surfaces, not about how
+they are cut into triangles: a crate standing on a floor touches it wherever the floor's grid
+lines fall, and a crate sunk into it crosses it wherever they fall. This module decides it from
+each intersecting triangle pair together with the triangles around it.
+
+**Surfaces are oriented**: a triangle's normal (right-handed winding) points out of its object,
+so the object lies *behind* its triangles. For a closed mesh that is its solid; for an open one
+(a floor, a cloth) it is the side behind its faces. Two surfaces **cross** (penetrate) where,
+near a point they share, one enters the region behind the other: their insides overlap. They
+**touch** where they meet but neither enters the other: a crate resting on a floor, parts meeting
+face to face, edge on edge, edge on face or vertex on anything.
+
+**The verdict of one triangle pair** ``(ta, tb)`` (:func:`surface_crossing`):
+
+* *coplanar* (each within the tolerance of the other's plane): they cross when they face the
+  same way and overlap in an area (two solids with flush faces overlap behind them); facing
+  each other, or meeting only along edges, they touch.
+* otherwise their intersection is a segment ``s`` on the line where the planes meet (a point:
+  they touch). Along the open segment each triangle is either crossed through its interior or
+  has ``s`` on one of its edges (its vertices can only be at ``s``'s ends). In the plane across
+  ``s`` at its midpoint each surface is a set of rays from that point: a face crossed through its
+  interior gives two opposite rays (a sheet); with ``s`` on an edge the triangle gives one ray,
+  and its neighbour across that edge another (a fold, convex or concave by the orientation; on
+  an open boundary or a non-manifold edge a single ray with no inside). The region behind a
+  sheet is a half-plane; behind a convex fold, the wedge behind both faces; behind a concave
+  one, behind either. The pair **crosses** when a ray of one surface goes into the region behind
+  the other by more than the tolerance (within its triangle's reach). A floor's grid line under
+  a crate's wall is a flat fold: the floor there is still one sheet, crossed by the wall.
+
+The tolerance is the exact test's: ``tolerance * L`` with ``L`` the longest edge of the pair.
+Degenerate triangles (slivers, segments, points) have no side: their pairs only touch, the
+surfaces' crossings are decided at their neighbours; a degenerate neighbour across a fold is
+taken as the flat continuation of its triangle (a sliver in a fan-triangulated polygon).
+
+**Depth** of a crossing pair: how far a vertex of either triangle lies behind the other surface,
+measured to the nearest triangle of the other object that meets a triangle of that vertex (its
+closest point's feature decides the side: the face's normal, an edge's two faces, a vertex's
+angle-weighted fan, the pseudo-normals of Bærentzen and Aanæs). A vertex poking ``h`` through a
+face has depth ``h`` however the face is cut; a crate sunk ``h`` into a floor, ``h``. Where the
+surfaces cross with no vertex behind the other (two sheets crossing between their vertices,
+flush faces), the depth is the pair's local crossing depth
+(:func:`~warp_ccd.narrow_phase.crossing_depth`), at least the tolerance: a crossing never has
+depth 0.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from .narrow_phase import CONTACT_SEGMENT, TOLERANCE, _unit_normal, crossing_depth, tri_tri_segment
+from .precision import precision_overloads
+from .scene import MeshTopology, mesh_triangle
+
+__all__ = ["CrossingClassifier", "SurfaceTopology", "classify_pairs", "surface_crossing", "surface_topology"]
+
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
+
+SURFACE_SHEET = wp.constant(0)
+"""A surface crossed through a face's interior: two opposite rays, one normal."""
+SURFACE_FOLD = wp.constant(1)
+"""A surface met along an edge with a neighbour across it: two rays, two normals."""
+SURFACE_OPEN = wp.constant(2)
+"""A surface met along a boundary (or non-manifold) edge: one ray, nothing behind it."""
+
+
+@wp.struct
+class SurfaceTopology:
+    """Neighbours and vertex fans of every shape's triangles, for the sides of a surface.
+
+    ``neighbour[shape_triangle_start[s] + t][k]``: the local triangle across edge ``k`` (vertices
+    ``k``, ``k + 1``) of triangle ``t`` of shape ``s``, -1 on a boundary or non-manifold edge.
+    The fan of local vertex ``v`` of shape ``s``: local triangles ``fan[fan_start[g]:fan_start[g + 1]]``
+    with ``g = shape_vertex_start[s] + v``. ``shape_side[s]``: 1, or -1 for a solid wound inside
+    out (:func:`shape_sides`), which turns its normals the right way round.
+    """
+
+    neighbour: wp.array[wp.vec3i]
+    shape_side: wp.array[wp.float64]
+    shape_vertex_start: wp.array[wp.int32]
+    fan_start: wp.array[wp.int32]
+    fan: wp.array[wp.int32]
+
+
+def surface_topology(scene) -> SurfaceTopology:
+    """Neighbours across edges and vertex fans of all the scene's shapes, built at once (numpy).
+
+    Args:
+        scene: a :class:`~warp_ccd.scene.Scene`.
+
+    Returns:
+        The :class:`SurfaceTopology` on the scene's device.
+    """
+    tri_local = scene.shapes.triangles.astype(np.int64).reshape(-1, 3)
+    t_start = scene.shape_triangle_start_np.astype(np.int64)
+    v_start = scene.shape_vertex_start_np.astype(np.int64)
+    num_tri = len(tri_local)
+    tri_shape = np.repeat(np.arange(len(t_start) - 1), np.diff(t_start))
+    tri = tri_local + v_start[tri_shape][:, None]  # shape-vertex ids, unique over all shapes
+    num_vertices = int(v_start[-1])
+    # Edges k = (k, k + 1): a manifold edge is used by exactly two triangles.
+    e0 = tri.reshape(-1)
+    e1 = np.roll(tri, -1, axis=1).reshape(-1)
+    key = np.minimum(e0, e1) * max(num_vertices, 1) + np.maximum(e0, e1)
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    starts = np.ones(len(key), bool)
+    starts[1:] = sorted_key[1:] != sorted_key[:-1]
+    group = np.cumsum(starts) - 1
+    size = np.bincount(group)[group]
+    partner = np.full(len(key), -1, np.int64)
+    two = np.nonzero((size == 2) & starts)[0]
+    partner[order[two]] = order[two + 1]
+    partner[order[two + 1]] = order[two]
+    neighbour = np.where(partner >= 0, partner // 3, -1)
+    neighbour = np.where(neighbour >= 0, neighbour - t_start[tri_shape.repeat(3)], -1)
+    # Fans: the triangles at each shape vertex, as local triangle ids.
+    corner = tri.reshape(-1)
+    by_vertex = np.argsort(corner, kind="stable")
+    fan_start = np.zeros(num_vertices + 1, np.int64)
+    np.cumsum(np.bincount(corner, minlength=num_vertices), out=fan_start[1:])
+    fan = (by_vertex // 3) - t_start[tri_shape[by_vertex // 3]]
+    side = shape_sides(scene.shapes.vertices.reshape(-1, 3), tri, tri_shape, len(t_start) - 1, neighbour < 0)
+    d = scene.device
+    s = SurfaceTopology()
+    s.neighbour = wp.array(neighbour.reshape(num_tri, 3).astype(np.int32), dtype=wp.vec3i, device=d)
+    s.shape_side = wp.array(side, dtype=wp.float64, device=d)
+    s.shape_vertex_start = scene.shape_vertex_start
+    s.fan_start = wp.array(fan_start.astype(np.int32), dtype=wp.int32, device=d)
+    s.fan = wp.array(fan.astype(np.int32), dtype=wp.int32, device=d)
+    return s
+
+
+OPEN_EDGES_MAX = 0.25
+"""A shape with at most this fraction of open (boundary or non-manifold) edges encloses a volume:
+its winding may be turned round (:func:`shape_sides`)."""
+
+
+def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, num_shapes: int,
+                open_edge: np.ndarray) -> np.ndarray:
+    """Which way each shape faces: -1 for a solid wound inside out, else 1.
+
+    A shape that encloses a volume (at most :data:`OPEN_EDGES_MAX` of its edges open) and whose
+    signed volume, its triangles' cones from its centroid, is negative has its normals pointing
+    in: it is turned round. Open surfaces (a floor, a cloth) are taken as wound.
+
+    Args:
+        vertices: ``(V, 3)`` all shapes' vertices; tri: ``(T, 3)`` int64 indices into them.
+        tri_shape: ``(T,)`` shape of each triangle; num_shapes: how many shapes.
+        open_edge: ``(T * 3,)`` bool, edge ``k`` of triangle ``t`` at ``3 t + k`` is open.
+
+    Returns:
+        ``(num_shapes,)`` float64, 1 or -1.
+    """
+    v = np.asarray(vertices, np.float64)
+    counts = np.bincount(tri_shape, minlength=num_shapes).astype(np.float64)
+    centre = np.zeros((num_shapes, 3))
+    corners = v[tri].mean(axis=1)
+    for axis in range(3):
+        centre[:, axis] = np.bincount(tri_shape, corners[:, axis], minlength=num_shapes) / np.maximum(counts, 1)
+    x = v[tri] - centre[tri_shape][:, None, :]
+    volume = np.bincount(tri_shape, np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])),
+                         minlength=num_shapes)
+    open_fraction = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.float64),
+                                minlength=num_shapes) / np.maximum(3 * counts, 1)
+    return np.where((volume < 0) & (open_fraction <= OPEN_EDGES_MAX), -1.0, 1.0)
+
+
+@wp.func
+def _d(x: Any):
+    return wp.vec3d(x)
+
+
+@wp.func
+def _local_triangle(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, o: wp.vec3d):
+    """Triangle ``tri`` of object ``obj`` in float64, relative to ``o``, and its local vertex ids."""
+    x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
+    s = mesh.instance_shape[obj]
+    idx = mesh.shape_triangle[mesh.shape_triangle_start[s] + tri]
+    return _d(x0) - o, _d(x1) - o, _d(x2) - o, idx
+
+
+@wp.func
+def _pick3(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, i: int):
+    if i == 0:
+        return x0
+    if i == 1:
+        return x1
+    return x2
+
+
+@wp.func
+def _neighbour(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    obj: int,
+    tri: int,
+    idx: wp.vec3i,
+    k: int,
+    o: wp.vec3d,
+    tol_rel: wp.float64,
+):
+    """The triangle across edge ``k`` of ``tri``: ``(found, normal oriented as the triangle's, its
+    vertex off the edge)``; ``found`` 1, or 0 on a boundary or non-manifold edge, 2 for a
+    degenerate neighbour (no normal)."""
+    s = mesh.instance_shape[obj]
+    nbr = surface.neighbour[mesh.shape_triangle_start[s] + tri][k]
+    if nbr < 0:
+        return 0, wp.vec3d(), wp.vec3d()
+    y0, y1, y2, jdx = _local_triangle(mesh, world_vertex, obj, nbr, o)
+    n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
+    if degenerate:
+        return 2, wp.vec3d(), wp.vec3d()
+    i0 = idx[k]
+    i1 = idx[(k + 1) % 3]
+    # Consistent orientation walks the shared edge the other way round.
+    same_way = (jdx[0] == i0 and jdx[1] == i1) or (jdx[1] == i0 and jdx[2] == i1) or (jdx[2] == i0 and jdx[0] == i1)
+    if same_way:
+        n = -n
+    n = n * surface.shape_side[s]
+    y = y0
+    if jdx[1] != i0 and jdx[1] != i1:
+        y = y1
+    if jdx[2] != i0 and jdx[2] != i1:
+        y = y2
+    return 1, n, y
+
+
+@wp.func
+def _closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d):
+    """Closest point of triangle ``abc`` to ``p`` and its feature: 0 the face, 1-3 vertex 0-2,
+    4-6 edge 0-2 (edge ``k`` joins vertices ``k`` and ``k + 1``). Ericson, Real-Time Collision
+    Detection, 5.1.5."""
+    zero = wp.float64(0.0)
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = wp.dot(ab, ap)
+    d2 = wp.dot(ac, ap)
+    if d1 <= zero and d2 <= zero:
+        return a, 1
+    bp = p - b
+    d3 = wp.dot(ab, bp)
+    d4 = wp.dot(ac, bp)
+    if d3 >= zero and d4 <= d3:
+        return b, 2
+    vc = d1 * d4 - d3 * d2
+    if vc <= zero and d1 >= zero and d3 <= zero:
+        return a + ab * (d1 / (d1 - d3)), 4
+    cp = p - c
+    d5 = wp.dot(ab, cp)
+    d6 = wp.dot(ac, cp)
+    if d6 >= zero and d5 <= d6:
+        return c, 3
+    vb = d5 * d2 - d1 * d6
+    if vb <= zero and d2 >= zero and d6 <= zero:
+        return a + ac * (d2 / (d2 - d6)), 6
+    va = d3 * d6 - d5 * d4
+    if va <= zero and (d4 - d3) >= zero and (d5 - d6) >= zero:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), 5
+    denom = wp.float64(1.0) / (va + vb + vc)
+    return a + ab * (vb * denom) + ac * (vc * denom), 0
+
+
+@wp.func
+def _fan_normal(
+    mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, v: int, o: wp.vec3d
+):
+    """Angle-weighted normal of the fan of local vertex ``v`` of object ``obj`` (not normalised)."""
+    s = mesh.instance_shape[obj]
+    g = surface.shape_vertex_start[s] + v
+    acc = wp.vec3d()
+    for f in range(surface.fan_start[g], surface.fan_start[g + 1]):
+        x0, x1, x2, idx = _local_triangle(mesh, world_vertex, obj, surface.fan[f], o)
+        n = wp.cross(x1 - x0, x2 - x0)
+        ln = wp.length(n)
+        # The fan triangle's edges from its corner at v.
+        e1 = x1 - x0
+        e2 = x2 - x0
+        if idx[1] == v:
+            e1 = x2 - x1
+            e2 = x0 - x1
+        if idx[2] == v:
+            e1 = x0 - x2
+            e2 = x1 - x2
+        l1 = wp.length(e1)
+        l2 = wp.length(e2)
+        if ln > wp.float64(0.0) and l1 > wp.float64(0.0) and l2 > wp.float64(0.0):
+            cosine = wp.clamp(wp.dot(e1, e2) / (l1 * l2), wp.float64(-1.0), wp.float64(1.0))
+            acc = acc + n * (wp.acos(cosine) / ln)
+    return acc * surface.shape_side[s]
+
+
+@wp.func
+def _signed_distance(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    obj: int,
+    tri: int,
+    idx: wp.vec3i,
+    x0: wp.vec3d,
+    x1: wp.vec3d,
+    x2: wp.vec3d,
+    n: wp.vec3d,
+    degenerate: bool,
+    o: wp.vec3d,
+    tol_rel: wp.float64,
+    p: wp.vec3d,
+):
+    """Distance from ``p`` to triangle ``tri`` of ``obj``, negative when ``p`` lies behind the
+    surface there (by the pseudo-normal of the closest point's feature); positive for a
+    degenerate triangle (no side)."""
+    c, feature = _closest_on_triangle(p, x0, x1, x2)
+    dist = wp.length(p - c)
+    if degenerate:
+        return dist
+    pn = n
+    if feature >= 4:
+        found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, feature - 4, o, tol_rel)
+        if found == 1:
+            pn = n + n2
+    elif feature >= 1:
+        pn = _fan_normal(mesh, surface, world_vertex, obj, idx[feature - 1], o)
+    if wp.dot(p - c, pn) < wp.float64(0.0):
+        return -dist
+    return dist
+
+
+@wp.func
+def _support(d0: wp.float64, d1: wp.float64, d2: wp.float64):
+    """Where a triangle meets the other's plane, from its vertices' snapped distances: -1 through
+    its interior, edge ``k`` (0-2) along that edge, -2 at a point only (touching)."""
+    zero = wp.float64(0.0)
+    if d0 == zero and d1 == zero and d2 != zero:
+        return 0
+    if d1 == zero and d2 == zero and d0 != zero:
+        return 1
+    if d2 == zero and d0 == zero and d1 != zero:
+        return 2
+    lo = wp.min(wp.min(d0, d1), d2)
+    hi = wp.max(wp.max(d0, d1), d2)
+    if (lo < zero and hi > zero) or (lo == zero and hi == zero):
+        return -1
+    return -2
+
+
+@wp.func
+def _snap(d: wp.float64, eps: wp.float64):
+    if wp.abs(d) <= eps:
+        return wp.float64(0.0)
+    return d
+
+
+@wp.func
+def _reach(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, m: wp.vec3d, w: wp.vec3d):
+    """How far triangle ``x`` extends from ``m`` along ``w``."""
+    return wp.max(wp.max(wp.dot(x0 - m, w), wp.dot(x1 - m, w)), wp.dot(x2 - m, w))
+
+
+@wp.func
+def _across(y: wp.vec3d, m: wp.vec3d, d: wp.vec3d):
+    """Unit direction from ``m`` toward ``y`` across the line of direction ``d``, and the distance."""
+    w = y - m
+    w = w - d * wp.dot(w, d)
+    r = wp.length(w)
+    if r > wp.float64(0.0):
+        return w / r, r
+    return w, r
+
+
+@wp.func
+def _behind(kind: int, n1: wp.vec3d, n2: wp.vec3d, w2: wp.vec3d, r: wp.vec3d):
+    """How far (per unit length) direction ``r`` goes behind a surface seen across its crossing:
+    a sheet of normal ``n1``; a fold of faces ``n1`` and ``n2`` (``w2`` the second's ray); an open
+    edge has nothing behind it (-1)."""
+    b1 = -wp.dot(n1, r)
+    if kind == SURFACE_SHEET:
+        return b1
+    if kind == SURFACE_OPEN:
+        return wp.float64(-1.0)
+    b2 = -wp.dot(n2, r)
+    if wp.dot(n1, w2) < wp.float64(0.0):  # convex: the second face bends behind the first
+        return wp.min(b1, b2)
+    return wp.max(b1, b2)
+
+
+@wp.func
+def _surface_at(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    obj: int,
+    tri: int,
+    idx: wp.vec3i,
+    x0: wp.vec3d,
+    x1: wp.vec3d,
+    x2: wp.vec3d,
+    n: wp.vec3d,
+    sup: int,
+    m: wp.vec3d,
+    d: wp.vec3d,
+    o: wp.vec3d,
+    tol_rel: wp.float64,
+):
+    """The surface of ``obj`` across the line ``m + t d`` where triangle ``tri`` meets the other
+    (``sup``: :func:`_support`): ``(kind, n1, w1, reach1, n2, w2, reach2)``, two rays ``w`` from
+    ``m`` across the line with the normals of their faces and how far each face reaches along
+    its ray (the second 0 on an open edge)."""
+    if sup < 0:
+        w = wp.normalize(wp.cross(n, d))
+        return SURFACE_SHEET, n, w, _reach(x0, x1, x2, m, w), n, -w, _reach(x0, x1, x2, m, -w)
+    w1, r1 = _across(_pick3(x0, x1, x2, (sup + 2) % 3), m, d)
+    found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, sup, o, tol_rel)
+    if found == 0:
+        return SURFACE_OPEN, n, w1, r1, n, -w1, wp.float64(0.0)
+    if found == 2:  # a degenerate neighbour: the flat continuation of this face
+        return SURFACE_FOLD, n, w1, r1, n, -w1, r1
+    w2, r2 = _across(y, m, d)
+    return SURFACE_FOLD, n, w1, r1, n2, w2, r2
+
+
+@wp.func
+def _enters(kind: int, n1: wp.vec3d, n2: wp.vec3d, w2: wp.vec3d, ray: wp.vec3d, reach: wp.float64, eps: wp.float64):
+    """Whether a face reaching ``reach`` along ``ray`` goes more than ``eps`` behind the surface."""
+    return reach * _behind(kind, n1, n2, w2, ray) > eps
+
+
+@wp.func
+def _verdict(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    c: wp.vec4i,
+    a0: wp.vec3d,
+    a1: wp.vec3d,
+    a2: wp.vec3d,
+    ia: wp.vec3i,
+    na: wp.vec3d,
+    b0: wp.vec3d,
+    b1: wp.vec3d,
+    b2: wp.vec3d,
+    ib: wp.vec3i,
+    nb: wp.vec3d,
+    o: wp.vec3d,
+    eps: wp.float64,
+    tol_rel: wp.float64,
+) -> bool:
+    """Whether the surfaces of two non-degenerate intersecting triangles cross there (module docstring)."""
+    zero = wp.float64(0.0)
+    da0 = _snap(wp.dot(nb, a0 - b0), eps)
+    da1 = _snap(wp.dot(nb, a1 - b0), eps)
+    da2 = _snap(wp.dot(nb, a2 - b0), eps)
+    db0 = _snap(wp.dot(na, b0 - a0), eps)
+    db1 = _snap(wp.dot(na, b1 - a0), eps)
+    db2 = _snap(wp.dot(na, b2 - a0), eps)
+    if da0 == zero and da1 == zero and da2 == zero and db0 == zero and db1 == zero and db2 == zero:
+        return wp.dot(na, nb) > zero and _coplanar_area(a0, a1, a2, b0, b1, b2, na, eps)
+    sup_a = _support(da0, da1, da2)
+    sup_b = _support(db0, db1, db2)
+    if sup_a == -2 or sup_b == -2:
+        return False
+    kind, p, q = tri_tri_segment(a0, a1, a2, b0, b1, b2, tol_rel)
+    if kind != CONTACT_SEGMENT:
+        return False
+    length = wp.length(q - p)
+    if length <= eps:
+        return False
+    d = (q - p) / length
+    m = (p + q) * wp.float64(0.5)
+    ka, na1, wa1, ra1, na2, wa2, ra2 = _surface_at(mesh, surface, world_vertex, c[0], c[1], ia, a0, a1, a2, na,
+                                                   sup_a, m, d, o, tol_rel)
+    kb, nb1, wb1, rb1, nb2, wb2, rb2 = _surface_at(mesh, surface, world_vertex, c[2], c[3], ib, b0, b1, b2, nb,
+                                                   sup_b, m, d, o, tol_rel)
+    return (_enters(kb, nb1, nb2, wb2, wa1, ra1, eps) or _enters(kb, nb1, nb2, wb2, wa2, ra2, eps)
+            or _enters(ka, na1, na2, wa2, wb1, rb1, eps) or _enters(ka, na1, na2, wa2, wb2, rb2, eps))
+
+
+@wp.func
+def _centred_pair(
+    mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], c: wp.vec4i, tol_rel: wp.float64
+):
+    """Row ``c``'s triangles in float64 relative to their centroid ``o``, their local vertex ids,
+    unit normals (out of their objects) and degeneracy, and the absolute tolerance ``eps``."""
+    a0, a1, a2, ia = _local_triangle(mesh, world_vertex, c[0], c[1], wp.vec3d())
+    b0, b1, b2, ib = _local_triangle(mesh, world_vertex, c[2], c[3], wp.vec3d())
+    o = (a0 + a1 + a2 + b0 + b1 + b2) / wp.float64(6.0)
+    a0 = a0 - o
+    a1 = a1 - o
+    a2 = a2 - o
+    b0 = b0 - o
+    b1 = b1 - o
+    b2 = b2 - o
+    longest = wp.max(wp.max(wp.max(wp.length(a1 - a0), wp.length(a2 - a1)), wp.length(a0 - a2)),
+                     wp.max(wp.max(wp.length(b1 - b0), wp.length(b2 - b1)), wp.length(b0 - b2)))
+    na, degenerate_a = _unit_normal(a0, a1, a2, tol_rel)
+    nb, degenerate_b = _unit_normal(b0, b1, b2, tol_rel)
+    na = na * surface.shape_side[mesh.instance_shape[c[0]]]
+    nb = nb * surface.shape_side[mesh.instance_shape[c[2]]]
+    return a0, a1, a2, ia, na, degenerate_a, b0, b1, b2, ib, nb, degenerate_b, o, tol_rel * longest
+
+
+@wp.func
+def surface_crossing(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    c: wp.vec4i,
+    tol_rel: wp.float64,
+) -> bool:
+    """Whether the surfaces cross (penetrate) where the triangles of row ``c`` meet (module docstring).
+
+    Args:
+        mesh, surface: the scene's topology and its :class:`SurfaceTopology`.
+        world_vertex: the scene's world vertices (either precision; computed in float64).
+        c: ``(obj_a, tri_a, obj_b, tri_b)``, triangles that meet (the exact test's hit).
+        tol_rel: the test's relative tolerance.
+    """
+    a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, eps = _centred_pair(mesh, surface, world_vertex, c, tol_rel)
+    if dega or degb:
+        return False
+    return _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, eps, tol_rel)
+
+
+@wp.kernel
+def _crossing_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    pair: wp.array[wp.vec4i],
+    tol_rel: wp.float64,
+    # Outputs
+    crossing: wp.array[wp.int32],
+    eps_out: wp.array[wp.float64],
+    local_depth: wp.array[wp.float64],
+    distance: wp.array2d[wp.float64],
+    vertex: wp.array2d[wp.int32],
+):
+    """One thread per intersecting triangle pair: :func:`surface_crossing`, the tolerance, the
+    local crossing depth, and each of the six vertices' signed distance to the other triangle
+    (:func:`_signed_distance`) with its world vertex index (first ``tri_a``'s, then ``tri_b``'s)."""
+    k = wp.tid()
+    c = pair[k]
+    a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, eps = _centred_pair(mesh, surface, world_vertex, c, tol_rel)
+    base_a = mesh.instance_vertex_start[c[0]]
+    base_b = mesh.instance_vertex_start[c[2]]
+    for i in range(3):
+        distance[k, i] = _signed_distance(mesh, surface, world_vertex, c[2], c[3], ib, b0, b1, b2, nb, degb, o,
+                                          tol_rel, _pick3(a0, a1, a2, i))
+        distance[k, 3 + i] = _signed_distance(mesh, surface, world_vertex, c[0], c[1], ia, a0, a1, a2, na, dega, o,
+                                              tol_rel, _pick3(b0, b1, b2, i))
+        vertex[k, i] = base_a + ia[i]
+        vertex[k, 3 + i] = base_b + ib[i]
+    hit = 0
+    if not dega and not degb:
+        if _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, eps, tol_rel):
+            hit = 1
+    crossing[k] = hit
+    eps_out[k] = eps
+    local_depth[k] = crossing_depth(a0, a1, a2, b0, b1, b2, tol_rel)
+
+
+_CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+
+
+def vertex_depths(pair: np.ndarray, crossing: np.ndarray, eps: np.ndarray, local: np.ndarray,
+                  distance: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+    """Depths of crossing rows from their vertices' sides (module docstring), vectorised.
+
+    A vertex's side and distance to the other object are those of its nearest triangle among the
+    rows of that object pair that hold it; a row's depth is the deepest of its six vertices behind
+    the other surface, or its local depth (at least ``eps``) when none is.
+
+    Args:
+        pair: ``(M, 4)`` rows ``(obj_a, tri_a, obj_b, tri_b)``.
+        crossing: ``(M,)`` bool, the rows whose surfaces cross.
+        eps: ``(M,)`` absolute tolerances; local: ``(M,)`` local crossing depths.
+        distance: ``(M, 6)`` signed distances; vertex: ``(M, 6)`` world vertex indices.
+
+    Returns:
+        ``(M,)`` float64 depths, scene units: 0 where the row does not cross.
+    """
+    m = len(pair)
+    depth = np.zeros(m)
+    if m == 0 or not crossing.any():
+        return depth
+    pair = pair.astype(np.int64)
+    num = int(max(pair[:, 0].max(), pair[:, 2].max())) + 1
+    key_pair = np.repeat(pair[:, 0] * num + pair[:, 2], 6)
+    vid = vertex.reshape(-1).astype(np.int64)
+    dist = distance.reshape(-1)
+    row_eps = np.repeat(eps, 6)
+    # Per (object pair, vertex): the signed distance of least magnitude.
+    order = np.lexsort((np.abs(dist), vid, key_pair))
+    k_sorted, v_sorted = key_pair[order], vid[order]
+    first = np.ones(len(order), bool)
+    first[1:] = (k_sorted[1:] != k_sorted[:-1]) | (v_sorted[1:] != v_sorted[:-1])
+    group = np.cumsum(first) - 1
+    nearest = dist[order][first]
+    behind = np.where(-nearest > row_eps[order][first], -nearest, 0.0)
+    per_entry = np.empty(len(order))
+    per_entry[order] = behind[group]
+    row_depth = per_entry.reshape(m, 6).max(axis=1)
+    depth = np.where(row_depth > 0, row_depth, np.maximum(local, eps))
+    return np.where(crossing, depth, 0.0)
+
+
+class CrossingClassifier:
+    """Penetrating or touching, for the intersecting triangle pairs of a scene (module docstring).
+
+    Owns the scene's :class:`SurfaceTopology` (built once: topology does not change with the
+    poses or the world vertices) and its output buffers, grown as needed.
+
+    Example::
+
+        classify = CrossingClassifier(scene)
+        res = pipe.detect()
+        crossing, depth = classify(res.device_triangle_pairs)
+    """
+
+    def __init__(self, scene, *, tolerance: float = TOLERANCE):
+        """
+        Args:
+            scene: the :class:`~warp_ccd.scene.Scene` whose pairs will be classified.
+            tolerance: the exact test's relative tolerance.
+        """
+        self.scene = scene
+        self.tolerance = float(tolerance)
+        self.surface = surface_topology(scene)
+        self._capacity = 0
+
+    def _grow(self, m: int) -> None:
+        if m <= self._capacity:
+            return
+        cap = max(m, 2 * self._capacity, 64)
+        d = self.scene.device
+        self._crossing = wp.zeros(cap, dtype=wp.int32, device=d)
+        self._eps = wp.zeros(cap, dtype=wp.float64, device=d)
+        self._local = wp.zeros(cap, dtype=wp.float64, device=d)
+        self._distance = wp.zeros((cap, 6), dtype=wp.float64, device=d)
+        self._vertex = wp.zeros((cap, 6), dtype=wp.int32, device=d)
+        self._capacity = cap
+
+    def __call__(self, pairs: wp.array) -> tuple[np.ndarray, np.ndarray]:
+        """Classifies rows of the scene as its world vertices are now.
+
+        Args:
+            pairs: ``(M,)`` ``wp.vec4i`` rows ``(obj_a, tri_a, obj_b, tri_b)`` of triangles that
+                meet, on the scene's device (a result's ``device_triangle_pairs``).
+
+        Returns:
+            ``(crossing (M,) bool, depth (M,) float64)``: whether the surfaces cross at each row,
+            and how deep (scene units; 0 where they only touch).
+        """
+        m = int(pairs.shape[0])
+        if m == 0:
+            return np.zeros(0, bool), np.zeros(0)
+        self._grow(m)
+        scene = self.scene
+        wp.launch(_CROSSING[scene.precision], dim=m,
+                  inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance],
+                  outputs=[self._crossing, self._eps, self._local, self._distance, self._vertex], device=scene.device)
+        crossing = self._crossing.numpy()[:m].astype(bool)
+        rows = pairs.numpy().reshape(-1, 4)
+        depth = vertex_depths(rows, crossing, self._eps.numpy()[:m], self._local.numpy()[:m],
+                              self._distance.numpy()[:m], self._vertex.numpy()[:m])
+        return crossing, depth
+
+
+def classify_pairs(scene, pairs: wp.array, tolerance: float = TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """One-off :class:`CrossingClassifier` call: ``(crossing (M,) bool, depth (M,) float64)``."""
+    return CrossingClassifier(scene, tolerance=tolerance)(pairs)
+
+
+@wp.func
+def _coplanar_area(
+    a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b1: wp.vec3d, b2: wp.vec3d, n: wp.vec3d, eps: wp.float64
+) -> bool:
+    """Whether coplanar triangles overlap in an area wider than ``eps``: a vertex or centroid of
+    one inside the other by more than ``eps``, or two edges crossing more than ``eps`` from their ends."""
+    ca = (a0 + a1 + a2) / wp.float64(3.0)
+    cb = (b0 + b1 + b2) / wp.float64(3.0)
+    if _inside_by(b0, b1, b2, n, a0, eps) or _inside_by(b0, b1, b2, n, a1, eps) or _inside_by(b0, b1, b2, n, a2, eps):
+        return True
+    if _inside_by(a0, a1, a2, n, b0, eps) or _inside_by(a0, a1, a2, n, b1, eps) or _inside_by(a0, a1, a2, n, b2, eps):
+        return True
+    if _inside_by(b0, b1, b2, n, ca, eps) or _inside_by(a0, a1, a2, n, cb, eps):
+        return True
+    for i in range(3):
+        p = _pick3(a0, a1, a2, i)
+        q = _pick3(a0, a1, a2, (i + 1) % 3)
+        for j in range(3):
+            r = _pick3(b0, b1, b2, j)
+            s = _pick3(b0, b1, b2, (j + 1) % 3)
+            if _edges_cross(p, q, r, s, n, eps):
+                return True
+    return False
+
+
+@wp.func
+def _side(p: wp.vec3d, q: wp.vec3d, x: wp.vec3d, n: wp.vec3d):
+    """Signed distance of ``x`` from the line ``pq`` in the plane of normal ``n`` (positive to the left)."""
+    e = q - p
+    le = wp.length(e)
+    if le == wp.float64(0.0):
+        return wp.float64(0.0)
+    return wp.dot(wp.cross(e, x - p), n) / le
+
+
+@wp.func
+def _inside_by(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, n: wp.vec3d, p: wp.vec3d, eps: wp.float64) -> bool:
+    """Whether ``p`` lies inside triangle ``x`` (coplanar, either winding) farther than ``eps`` from its edges."""
+    s0 = _side(x0, x1, p, n)
+    s1 = _side(x1, x2, p, n)
+    s2 = _side(x2, x0, p, n)
+    return (s0 > eps and s1 > eps and s2 > eps) or (s0 < -eps and s1 < -eps and s2 < -eps)
+
+
+@wp.func
+def _edges_cross(p: wp.vec3d, q: wp.vec3d, r: wp.vec3d, s: wp.vec3d, n: wp.vec3d, eps: wp.float64) -> bool:
+    """Whether coplanar segments ``pq`` and ``rs`` cross, each end more than ``eps`` off the other's line."""
+    d1 = _side(p, q, r, n)
+    d2 = _side(p, q, s, n)
+    d3 = _side(r, s, p, n)
+    d4 = _side(r, s, q, n)
+    return ((d1 > eps and d2 < -eps) or (d1 < -eps and d2 > eps)) and (
+        (d3 > eps and d4 < -eps) or (d3 < -eps and d4 > eps))
