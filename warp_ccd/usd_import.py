@@ -53,7 +53,7 @@ import numpy as np
 from .scene import Scene, _matrix_to_quat
 from .shapes import MeshSet
 
-__all__ = ["UsdMeshImport", "open_stage", "stage_time_codes"]
+__all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "stage_time_codes"]
 
 SIMILARITY_TOLERANCE = 1e-5
 """Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
@@ -120,6 +120,8 @@ def open_stage(stage_or_path):
         path = os.fsdecode(os.fspath(stage_or_path))
     except TypeError:
         raise ValueError(f"stage: expected a Usd.Stage or a file path, got {type(stage_or_path).__name__}") from None
+    if os.path.isdir(path):
+        raise ValueError(f"cannot read {path}: it is a directory, not a USD file")
     if not os.path.isfile(path):
         raise ValueError(f"cannot read {path}: no such file")
     if not os.access(path, os.R_OK):
@@ -135,6 +137,65 @@ def open_stage(stage_or_path):
     if stage is None:
         raise ValueError(f"cannot read {path}: not a USD file USD can open")
     return stage
+
+
+def missing_layers(stage) -> list[str]:
+    """The sublayers, references and payloads of a stage that could not be opened.
+
+    USD opens a stage whose sublayer, reference or payload files are missing (it prints a
+    warning and composes the stage without them); this lists those files, as composition
+    reported them (``Usd.Stage.GetCompositionErrors``; muted layers are not listed).
+
+    Args:
+        stage: a ``Usd.Stage``.
+
+    Returns:
+        Their asset paths (absolute where USD made them so), sorted, each once.
+    """
+    import re
+
+    from pxr import Ar, Pcp
+
+    if hasattr(stage, "GetCompositionErrors"):
+        kinds = (Pcp.ErrorType_InvalidAssetPath, Pcp.ErrorType_InvalidSublayerPath)
+        found = set()
+        for error in stage.GetCompositionErrors():
+            if error.errorType in kinds:
+                match = re.search(r"@([^@]+)@", str(error))
+                found.add(match.group(1) if match else str(error).strip())
+        return sorted(found)
+    # Older USD: every composition arc of the layers in use that does not resolve.
+    resolver = Ar.GetResolver()
+    found = set()
+    for layer in stage.GetUsedLayers():
+        for asset in layer.GetCompositionAssetDependencies():
+            path = layer.ComputeAbsolutePath(asset) if not layer.anonymous else asset
+            if path and not resolver.Resolve(path):
+                found.add(path)
+    return sorted(found)
+
+
+def layer_files(stage) -> list[str]:
+    """The files of every layer a stage uses: its root layer, sublayers, references, payloads and
+    value clips (a layer inside a ``.usdz`` package as the package), resolved through symbolic links.
+
+    Args:
+        stage: a ``Usd.Stage``.
+
+    Returns:
+        Absolute real paths, sorted, each once (anonymous layers have none).
+    """
+    from pxr import Ar
+
+    found = set()
+    for layer in stage.GetUsedLayers():
+        path = layer.realPath
+        if not path:
+            continue
+        if Ar.IsPackageRelativePath(path):
+            path = Ar.SplitPackageRelativePathOuter(path)[0]
+        found.add(os.path.realpath(path))
+    return sorted(found)
 
 
 def stage_time_codes(stage, frames=None) -> np.ndarray:
@@ -368,6 +429,8 @@ class UsdMeshImport:
 
     # ------------------------------------------------------------------ traversal
     def _roots(self, prims):
+        """``(roots, patterns)``: the prims named by path, then the pseudo-root when there are
+        patterns (whose subtree is filtered by them; the named prims' subtrees are not)."""
         stage = self.stage
         if prims is None:
             return [stage.GetPseudoRoot()], None
@@ -392,10 +455,13 @@ class UsdMeshImport:
         from pxr import Usd, UsdGeom
 
         roots, patterns = self._roots(prims)
+        named = len(roots) - (1 if patterns else 0)  # roots[named:] is the pseudo-root that patterns filter
         t0 = self._codes[0]
         predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
         found, seen = [], set()
-        for root in roots:
+        by_pattern = 0  # meshes and instancers that a pattern selects
+        for r, root in enumerate(roots):
+            filtering = patterns is not None and r >= named
             if root.IsA(UsdGeom.Imageable) and not root.IsPseudoRoot():
                 img = UsdGeom.Imageable(root)
                 if img.ComputePurpose() not in purposes or (
@@ -406,7 +472,7 @@ class UsdMeshImport:
             for prim in it:
                 path = prim.GetPath()
                 depth = path.pathElementCount
-                if patterns is not None:
+                if filtering:
                     if chosen is not None and depth <= chosen:
                         chosen = None
                     if chosen is None and any(fnmatch.fnmatchcase(str(path), pat) for pat in patterns):
@@ -422,7 +488,9 @@ class UsdMeshImport:
                         self.skipped.append((str(path), "invisible"))
                         it.PruneChildren()
                         continue
-                selected = patterns is None or chosen is not None
+                selected = not filtering or chosen is not None
+                if filtering and selected and (prim.IsA(UsdGeom.PointInstancer) or prim.IsA(UsdGeom.Mesh)):
+                    by_pattern += 1
                 if prim.IsA(UsdGeom.PointInstancer):
                     it.PruneChildren()  # prototypes are drawn through the instancer only
                     if selected and str(path) not in seen:
@@ -432,7 +500,7 @@ class UsdMeshImport:
                 if selected and prim.IsA(UsdGeom.Mesh) and str(path) not in seen:
                     seen.add(str(path))
                     found.append(prim)
-        if patterns and not found and not self._instancers:
+        if patterns and not by_pattern:
             raise ValueError(f"prims: no mesh matches {', '.join(patterns)}")
         return found
 
