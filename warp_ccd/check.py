@@ -37,7 +37,7 @@ from .narrow_phase import TOLERANCE, pair_crossing_depth
 from .output import PendingFile, check_output_path
 from .usd import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 
-__all__ = ["CheckReport", "FrameContacts", "check_usd", "write_overlay"]
+__all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
 
 COLOR_PENETRATING = COLOR_COLLIDING
 """displayColor of a prim while it penetrates another (the animation writer's colliding colour)."""
@@ -91,6 +91,8 @@ class CheckReport:
             poses, deforming points read and copied), ``detect`` (the pipeline's frames) and
             ``classify`` (depths, USD faces, the report's rows).
         skipped: ``(path, reason)`` of the meshes left out.
+        missing: the sublayers, references and payloads that could not be opened (checked
+            without them; see :func:`~warp_ccd.usd_import.missing_layers`).
         source: the :class:`~warp_ccd.usd_import.UsdMeshImport` (its scene is at the last frame).
     """
 
@@ -102,12 +104,31 @@ class CheckReport:
     device: str = ""
     seconds: dict = field(default_factory=dict)
     skipped: list = field(default_factory=list)
+    missing: list = field(default_factory=list)
     source: object = field(default=None, repr=False, compare=False)
 
     @property
     def penetrating(self) -> bool:
-        """Whether any frame has a penetrating pair (the command's exit status 1)."""
-        return any(len(f.triangle_pairs) for f in self.frames)
+        """Whether any frame has a penetrating pair: one that crosses deeper than ``min_depth``
+        (with ``count_touching``, touching rows are reported but do not make this true)."""
+        return any(bool((f.depth > self.min_depth).any()) for f in self.frames)
+
+    @property
+    def touching(self) -> bool:
+        """Whether any frame has a touching pair (crossing no deeper than ``min_depth``), reported
+        (``count_touching``) or only counted."""
+        return any(f.num_touching > 0 or bool((f.depth <= self.min_depth).any()) for f in self.frames)
+
+    @property
+    def findings(self) -> str | None:
+        """What the check found, as the command's exit status reads it: ``"penetrating"`` when a
+        pair penetrates, else ``"touching"`` when pairs touch and ``count_touching`` counts them as
+        collisions, else None (exit status 0)."""
+        if self.penetrating:
+            return "penetrating"
+        if self.count_touching and self.touching:
+            return "touching"
+        return None
 
     @property
     def worst_frame(self) -> int:
@@ -158,7 +179,9 @@ class CheckReport:
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
         return {
             "stage": self.stage,
+            "findings": self.findings,
             "penetrating": self.penetrating,
+            "touching": self.touching,
             "min_depth": self.min_depth,
             "count_touching": self.count_touching,
             "device": self.device,
@@ -166,13 +189,27 @@ class CheckReport:
             "frames_with_contacts": with_contacts,
             "objects": len(self.object_path),
             "skipped": [{"prim": p, "reason": r} for p, r in self.skipped],
+            "missing": list(self.missing),
             "pairs": self.pair_summary(),
             "frames": frames,
             "seconds": self.seconds,
         }
 
     def write_json(self, path) -> str:
-        """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place."""
+        """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place.
+
+        Returns:
+            The absolute path written.
+        """
+        return self.prepare_json(path).commit()
+
+    def prepare_json(self, path) -> PendingFile:
+        """Writes :meth:`to_json` to a temporary file beside ``path`` (``.json``), not yet in place.
+
+        Returns:
+            The :class:`~warp_ccd.output.PendingFile`: :meth:`~warp_ccd.output.PendingFile.commit`
+            moves it to ``path``, :meth:`~warp_ccd.output.PendingFile.discard` removes it.
+        """
         full, _ = check_output_path(path, (".json",), "report")
         pending = PendingFile(full)
         try:
@@ -181,29 +218,36 @@ class CheckReport:
         except BaseException:
             pending.discard()
             raise
-        return pending.commit()
+        return pending
 
     def summary(self, top: int = 10) -> str:
-        """A few lines for a terminal: frames with contacts, the prim pairs that collide most, times."""
+        """A few lines for a terminal: frames with contacts, USD face pairs per frame, the prim
+        pairs that collide most, times."""
         n = len(self.frames)
         hit = [f for f in self.frames if len(f.triangle_pairs)]
         per_frame = np.array([len(f.triangle_pairs) for f in self.frames])
+        touching = np.array([f.num_touching for f in self.frames])
         what = "penetrating" if not self.count_touching else "intersecting (touching included)"
         lines = [f"{self.stage}: {len(self.object_path)} objects, {n} frames on {self.device}",
                  f"  frames with {what} pairs: {len(hit)} of {n}"
                  + (f" ({hit[0].time:g} .. {hit[-1].time:g})" if hit else ""),
-                 f"  triangle pairs / frame   : mean {per_frame.mean():.1f}, max {per_frame.max(initial=0)}"
-                 + f"  (touching only, not counted: {sum(f.num_touching for f in self.frames)})"]
+                 f"  face pairs / frame: {what} mean {per_frame.mean() if n else 0.0:.1f}, "
+                 f"max {per_frame.max(initial=0)}"
+                 + ("" if self.count_touching else f"; touching only, not counted: mean "
+                    f"{touching.mean() if n else 0.0:.1f}, max {touching.max(initial=0)}")]
+        if self.missing:
+            lines.append(f"  not checked, cannot be opened: {', '.join(self.missing)}")
         pairs = self.pair_summary()
         if pairs:
             wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
             wb = min(max(len(p["b"]) for p in pairs[:top]), 60)
             spans = [f"{p['first']:g}..{p['last']:g}" for p in pairs[:top]]
             ws = max(11, max(len(x) for x in spans))
-            lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  {'first..last':<{ws}}  max pairs  max depth")
+            lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  {'first..last':<{ws}}  "
+                         "max face pairs  max depth")
             for p, span in zip(pairs[:top], spans):
                 lines.append(f"  {p['a']:<{wa}}  {p['b']:<{wb}}  {p['frames']:6d}  {span:<{ws}}  "
-                             f"{p['max_triangle_pairs']:9d}  {p['max_depth']:.3g}")
+                             f"{p['max_triangle_pairs']:14d}  {p['max_depth']:.3g}")
             if len(pairs) > top:
                 lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
         s = self.seconds
@@ -240,7 +284,7 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
 def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision: str = "float32",
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
               include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
-              progress: bool = False) -> CheckReport:
+              progress: bool = False, allow_missing: bool = False) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -256,24 +300,33 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         include_invisible, include_purposes: also check invisible prims, guides or proxies.
         tolerance: relative tolerance of the triangle test.
         progress: show a progress bar on stderr.
+        allow_missing: check a stage whose sublayers, references or payloads cannot all be
+            opened (without them; :attr:`CheckReport.missing` lists them) instead of raising.
 
     Returns:
         The :class:`CheckReport`.
 
     Raises:
-        ValueError: naming the file or prim: see :class:`~warp_ccd.usd_import.UsdMeshImport`.
+        ValueError: naming the file or prim: see :class:`~warp_ccd.usd_import.UsdMeshImport`; or
+            a sublayer, reference or payload cannot be opened (unless ``allow_missing``).
     """
     import warp as wp
     from tqdm import tqdm
 
     from .pipeline import CollisionPipeline
-    from .usd_import import UsdMeshImport, open_stage, stage_time_codes
+    from .usd_import import UsdMeshImport, missing_layers, open_stage, stage_time_codes
 
     if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
             or not np.isfinite(min_depth) or min_depth < 0:
         raise ValueError(f"min_depth must be a finite number >= 0, got {min_depth!r}")
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
+    missing = missing_layers(stage)
+    if missing and not allow_missing:
+        root = stage.GetRootLayer()
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise ValueError(f"{root.realPath or root.identifier}: cannot open {missing[0]}{more}, which the stage "
+                         "uses as a sublayer, reference or payload")
     times = stage_time_codes(stage, frames)
     opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
@@ -308,6 +361,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     wp.synchronize_device(scene.device)
     report.seconds = {k: round(v, 4) for k, v in seconds.items()}
     report.source = imp
+    report.missing = missing
     return report
 
 
@@ -317,7 +371,7 @@ def write_overlay(report: CheckReport, out_path) -> str:
 
     The layer's only sublayer is the checked stage's file (a relative path when they share a
     folder), so it opens as the animation with the overlay on top. Written to a temporary file
-    and moved into place.
+    and moved into place (:func:`prepare_overlay`).
 
     Args:
         report: a :class:`CheckReport` of a stage read from a file.
@@ -327,15 +381,33 @@ def write_overlay(report: CheckReport, out_path) -> str:
         The absolute path written.
 
     Raises:
-        ValueError: the checked stage was not a file, or the destination cannot be written.
+        ValueError: the checked stage was not a file, ``out_path`` is one of its layers' files, or
+            the destination cannot be written.
+    """
+    return prepare_overlay(report, out_path).commit()
+
+
+def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
+    """Writes the overlay of :func:`write_overlay` to a temporary file beside ``out_path``, not yet in place.
+
+    Returns:
+        The :class:`~warp_ccd.output.PendingFile`: :meth:`~warp_ccd.output.PendingFile.commit`
+        moves it to ``out_path``, :meth:`~warp_ccd.output.PendingFile.discard` removes it.
+
+    Raises:
+        ValueError: as :func:`write_overlay`.
     """
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
+    from .usd_import import layer_files
 
     full, ext = validate_stage_path(out_path)
     imp = report.source
     source = imp.stage.GetRootLayer().realPath
     if not source:
         raise ValueError("overlay: the checked stage is not a file (save it first)")
+    if os.path.realpath(full) in layer_files(imp.stage):
+        raise ValueError(f"cannot write {out_path}: it is a layer of the checked stage ({os.path.realpath(full)})")
     pending = PendingFile(full)
     try:
         layer = Sdf.Layer.CreateAnonymous(ext)
@@ -414,4 +486,4 @@ def write_overlay(report: CheckReport, out_path) -> str:
     except BaseException:
         pending.discard()
         raise
-    return pending.commit()
+    return pending

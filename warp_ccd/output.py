@@ -8,7 +8,9 @@ Every file the library writes (USD stages, preview images) goes through here:
 * :class:`PendingFile` is written as a hidden temporary file in the destination's folder and
   renamed over the destination only when complete (``os.replace``, atomic on one file system), so
   an interrupted run never leaves a partial file at the destination, and a file already there
-  stays as it was until the new one is whole.
+  stays as it was until the new one is whole. :func:`commit_all` moves several into place
+  together once every one of them is written, so that a run writing several files leaves all of
+  them or none.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import os
 import tempfile
 import weakref
 
-__all__ = ["PendingFile", "check_output_path"]
+__all__ = ["PendingFile", "check_output_path", "commit_all", "same_file"]
 
 
 def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str, str]:
@@ -137,3 +139,48 @@ def _new_file_mode(path: str) -> int:
         mask = os.umask(0)
         os.umask(mask)
         return 0o666 & ~mask
+
+
+def commit_all(pending) -> list[str]:
+    """Moves every pending file into place, after all of them were written.
+
+    Call it once every output is complete: an error or an interrupt before it leaves every
+    destination as it was. If one rename fails, the files not yet moved are discarded (those
+    before it are in place).
+
+    Args:
+        pending: :class:`PendingFile` objects.
+
+    Returns:
+        Their destination paths, in order.
+
+    Raises:
+        ValueError: a rename failed (naming the destination).
+    """
+    pending = list(pending)
+    done = []
+    try:
+        for p in pending:
+            done.append(p.commit())
+    except BaseException:
+        for p in pending:
+            if not p.done:
+                p.discard()
+        raise
+    return done
+
+
+def same_file(a, b) -> bool:
+    """Whether two paths name one file: equal after symbolic links are resolved (and case, where
+    the file system ignores it), or the same existing file (``os.path.samefile``).
+
+    Args:
+        a, b: paths (str or path-like); either may not exist.
+    """
+    ra, rb = os.path.realpath(a), os.path.realpath(b)
+    if os.path.normcase(ra) == os.path.normcase(rb):
+        return True
+    try:
+        return os.path.samefile(ra, rb)
+    except OSError:
+        return False

@@ -27,6 +27,7 @@ __all__ = [
     "PREVIEW_EXTENSIONS",
     "PreviewRenderer",
     "mesh_triangle_indices",
+    "prepare_preview",
     "render_frame",
     "save_preview",
     "validate_preview_path",
@@ -281,7 +282,8 @@ def render_frame(scene, colliding=None, width: int = 640, height: int = 480, dev
 
 
 def save_preview(frames, path, *, fps: float = 30.0) -> str:
-    """Writes one frame as PNG or several as an animated GIF (looping).
+    """Writes one frame as PNG or several as an animated GIF (looping), through a temporary file
+    moved into place (:func:`prepare_preview`).
 
     Args:
         frames: one ``(H, W, 3)`` uint8 image, or a sequence of them (all the same size).
@@ -294,6 +296,25 @@ def save_preview(frames, path, *, fps: float = 30.0) -> str:
 
     Raises:
         ValueError: a bad path (see :func:`validate_preview_path`), no frames, or bad images.
+    """
+    return prepare_preview(frames, path, fps=fps).commit()
+
+
+def prepare_preview(frames, path, *, fps: float = 30.0) -> PendingFile:
+    """Writes the picture of :func:`save_preview` to a temporary file beside ``path``, not yet in place.
+
+    Args:
+        frames: one ``(H, W, 3)`` uint8 image, or a sequence of them (all the same size).
+        path: ``.png`` (exactly one frame; of a sequence, the last) or ``.gif``.
+        fps: GIF playback rate in frames per second (GIF delays are whole centiseconds, at least
+            2, so at most 50 frames per second).
+
+    Returns:
+        The :class:`~warp_ccd.output.PendingFile`: :meth:`~warp_ccd.output.PendingFile.commit`
+        moves it to ``path``, :meth:`~warp_ccd.output.PendingFile.discard` removes it.
+
+    Raises:
+        ValueError: as :func:`save_preview`.
     """
     from PIL import Image
 
@@ -322,4 +343,4 @@ def save_preview(frames, path, *, fps: float = 30.0) -> str:
     except BaseException:
         pending.discard()
         raise
-    return pending.commit()
+    return pending
