@@ -765,7 +765,9 @@ def test_cli_exits_0_when_nothing_penetrates(tmp_path, capsys):
 
 def test_cli_options_select_what_is_checked(tmp_path, capsys, mixed_file):
     report = tmp_path / "r.json"
-    args = ["check", str(mixed_file), "--frames", "0", "--prims", "/World/Floor", "/World/Guide", "/World/Hidden"]
+    # Several prims: separated by commas, or --prims again; the file name after them stays the input.
+    args = ["check", "--prims", "/World/Floor,/World/Guide", "--prims", "/World/Hidden", str(mixed_file),
+            "--frames", "0"]
     rc, captured = run_cli(capsys, args + ["--include-purpose", "guide", "--include-invisible",
                                            "--report", str(report)])
     assert rc == 1, captured.err

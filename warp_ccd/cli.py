@@ -7,11 +7,14 @@ Subcommands:
   a summary of what was found and how long each stage took.
 * ``check``: every interpenetration in a USD animation, frame by frame (:mod:`warp_ccd.check`): a
   summary table, optionally a JSON report, a USD overlay and a picture of the worst frame. Exit
-  status 0 when nothing penetrates, 1 when something does, 2 when the input or the arguments
-  are bad (nothing is written then), so that it can gate a pipeline.
+  status 0 when nothing penetrates, 1 when something does (or, with ``--count-touching``,
+  touches), 2 when the input or the arguments are bad, 3 on an internal error, so that it can
+  gate a pipeline. No output may be the input or one of its layers; every output is written to a
+  temporary file and all are moved into place at the end, so a failed run writes nothing.
 * ``bench``: the benchmarks of :mod:`warp_ccd.bench`; every argument after ``bench`` goes there.
 
-Bad arguments end with one line on stderr and a non-zero exit status, never a traceback.
+Bad arguments end with one line on stderr and a non-zero exit status, never a traceback; so does
+an unexpected exception (exit status 3), unless ``--debug`` asks for its traceback.
 """
 
 from __future__ import annotations
@@ -19,23 +22,36 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 import time
+import traceback
 
 from .cli_common import (
     EXIT_ERROR,
+    EXIT_FINDINGS,
+    EXIT_INTERNAL,
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_USAGE,
     CliError,
     OneLineParser,
+    init_warp,
     quiet_warp,
     resolve_device,
+    uncached_modules,
 )
 
 __all__ = ["main"]
 
 PROG = "warp-ccd"
+
+CHECK_KERNEL_MODULES = ("warp_ccd.scene", "warp_ccd.bvh_build", "warp_ccd.bvh", "warp_ccd.broad_phase",
+                        "warp_ccd.mid_phase", "warp_ccd.narrow_phase", "warp_ccd.buffers")
+"""The modules whose Warp kernels ``check`` runs (``warp_ccd.preview`` too with ``--preview``)."""
+
+_DASH_VALUE = re.compile(r"-\.?\d")
+"""A value that starts like a negative number (``-5:10``), which argparse would take for an option."""
 
 def _count(minimum: int):
     def parse(text: str) -> int:
@@ -108,13 +124,15 @@ def _build_parser() -> OneLineParser:
         help="find every interpenetration in a USD animation, frame by frame (exit 1 if any)",
         description="Read a USD stage's meshes, detect the prim pairs whose surfaces pass through each other at "
         "every frame, print a summary, optionally write a JSON report, a USD overlay and a picture. "
-        "Exit status: 0 nothing penetrates, 1 something does, 2 bad arguments or input.",
+        "Exit status: 0 nothing penetrates, 1 something does (or touches, with --count-touching), 2 bad "
+        "arguments or input, 3 an internal error.",
     )
     check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
     check.add_argument("--frames", default=None, metavar="START:END[:STEP]",
                        help="time codes to check, END included (default: the stage's time range)")
-    check.add_argument("--prims", nargs="+", default=None, metavar="PATH",
-                       help="prim paths or fnmatch patterns ('/World/Robot', '/World/*/Wheel*'); default: all")
+    check.add_argument("--prims", type=_prims, action="append", default=None, metavar="PATH[,PATH...]",
+                       help="prim paths or fnmatch patterns to check ('/World/Robot', '/World/*/Wheel*'); several "
+                       "separated by commas or by repeating --prims (default: all)")
     check.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
     check.add_argument("--precision", choices=("float32", "float64"), default="float32",
                        help="vertices, poses and the exact test (default: %(default)s)")
@@ -133,9 +151,41 @@ def _build_parser() -> OneLineParser:
     check.add_argument("--include-purpose", action="append", choices=("guide", "proxy"), default=[],
                        help="also check prims of this purpose (repeatable)")
     check.add_argument("--top", type=_count(1), default=10, help="prim pairs in the summary table (default: 10)")
+    check.add_argument("--allow-missing", action="store_true",
+                       help="check a stage whose sublayers, references or payloads cannot all be opened, "
+                       "without them (default: an error)")
 
+    for command in (demo, check):
+        command.add_argument("--debug", action="store_true",
+                             help="on an internal error, print the traceback (default: one line)")
     sub.add_parser("bench", help="benchmarks (arguments after 'bench' go to warp_ccd.bench)", add_help=False)
     return parser
+
+
+def _prims(text: str) -> list[str]:
+    """``--prims``: one prim path or pattern, or several separated by commas."""
+    parts = [p.strip() for p in text.split(",")]
+    if not all(parts):
+        raise argparse.ArgumentTypeError(f"expected prim paths separated by commas, got {text!r}")
+    return parts
+
+
+def _join_dash_values(argv: list[str]) -> list[str]:
+    """``--frames -5:10`` as ``--frames=-5:10``: argparse takes a value starting with ``-`` for an
+    option unless it is a plain negative number."""
+    out = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--frames" and i + 1 < len(argv) and _DASH_VALUE.match(argv[i + 1]):
+            out.append(f"--frames={argv[i + 1]}")
+            i += 2
+            continue
+        if argv[i] == "--":
+            out += argv[i:]
+            break
+        out.append(argv[i])
+        i += 1
+    return out
 
 
 def _run_demo(args) -> int:
@@ -155,6 +205,7 @@ def _run_demo(args) -> int:
         raise CliError(f"{PROG} demo: error: usd-core is not installed (pip install usd-core)", EXIT_ERROR) from None
 
     quiet_warp()
+    init_warp()
     import numpy as np
     from tqdm import tqdm
 
@@ -241,8 +292,13 @@ def _run_check(args) -> int:
     def fail(message: str) -> CliError:  # bad arguments or input: exit 2 (1 means "penetrates")
         return CliError(f"{PROG} check: error: {message}", EXIT_USAGE)
 
+    outputs = [(flag, path) for flag, path in (("--report", args.report), ("--usd-out", args.usd_out),
+                                               ("--preview", args.preview)) if path is not None]
     # Every destination is checked before the stage is read; nothing is written on an error.
     try:
+        _refuse_overwriting([("the input", args.stage)], outputs)
+        for i, output in enumerate(outputs):
+            _refuse_overwriting([(f"the {flag} file", path) for flag, path in outputs[:i]], [output])
         if args.report is not None:
             from .output import check_output_path
 
@@ -264,26 +320,56 @@ def _run_check(args) -> int:
     except ImportError:
         raise fail("usd-core is not installed (pip install usd-core)") from None
     quiet_warp()
-    from .check import check_usd, write_overlay
+    init_warp()
+    from .check import check_usd, prepare_overlay
+    from .usd_import import layer_files, missing_layers, open_stage
 
+    t = time.perf_counter()
     try:
+        stage = open_stage(args.stage)
+        missing = missing_layers(stage)
+        # A layer the stage uses (or one it names but cannot open) is an input too.
+        _refuse_overwriting([(f"a layer of {args.stage}", p) for p in layer_files(stage)]
+                            + [(f"an asset {args.stage} uses", p) for p in missing], outputs)
+        if missing and not args.allow_missing:
+            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+            raise ValueError(f"{args.stage}: cannot open {missing[0]}{more}, a sublayer, reference or payload "
+                             "of the stage (--allow-missing checks the stage without it)")
         device = resolve_device(args.device)
-        report = check_usd(args.stage, frames=frames, prims=args.prims, device=device, precision=args.precision,
-                           min_depth=args.min_depth, count_touching=args.count_touching, segments=args.segments,
-                           include_invisible=args.include_invisible, include_purposes=tuple(args.include_purpose),
-                           progress=True)
     except ValueError as exc:
         raise fail(str(exc)) from None
+    opened = time.perf_counter() - t
+
+    modules = CHECK_KERNEL_MODULES + (("warp_ccd.preview",) if args.preview is not None else ())
+    for name in modules:
+        importlib.import_module(name)
+    if uncached_modules(device, modules):
+        print(f"{PROG} check: compiling kernels for {device} (not in Warp's kernel cache yet; later runs "
+              "reuse them)...", file=sys.stderr, flush=True)
+    try:
+        report = check_usd(stage, frames=frames, prims=_flat(args.prims), device=device, precision=args.precision,
+                           min_depth=args.min_depth, count_touching=args.count_touching, segments=args.segments,
+                           include_invisible=args.include_invisible, include_purposes=tuple(args.include_purpose),
+                           progress=True, allow_missing=args.allow_missing)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+    report.seconds["read"] = round(report.seconds.get("read", 0.0) + opened, 4)  # the stage was opened here
     print(report.summary(top=args.top))
+
+    # Every output to a temporary file first; all moved into place once all are written.
+    pending = []
+    lines = []
     try:
         if args.report is not None:
-            print(f"  report : {report.write_json(args.report)}")
+            pending.append(report.prepare_json(args.report))
+            lines.append("  report : {}")
         if args.usd_out is not None:
-            print(f"  overlay: {write_overlay(report, args.usd_out)}")
+            pending.append(prepare_overlay(report, args.usd_out))
+            lines.append("  overlay: {}")
         if args.preview is not None:
             import numpy as np
 
-            from .preview import PreviewRenderer, save_preview
+            from .preview import PreviewRenderer, prepare_preview
 
             worst = report.worst_frame
             imp = report.source
@@ -291,10 +377,42 @@ def _run_check(args) -> int:
             colliding = np.zeros(len(report.object_path), bool)
             colliding[report.frames[worst].triangle_pairs[:, [0, 2]].ravel()] = True
             picture = PreviewRenderer(imp.scene, 640, 480).render(colliding)
-            print(f"  preview: {save_preview([picture], args.preview)} (time {report.frames[worst].time:g})")
-    except ValueError as exc:
-        raise fail(str(exc)) from None
-    return EXIT_ERROR if report.penetrating else EXIT_OK
+            pending.append(prepare_preview([picture], args.preview))
+            lines.append(f"  preview: {{}} (time {report.frames[worst].time:g})")
+        from .output import commit_all
+
+        written = commit_all(pending)
+    except BaseException as exc:
+        for p in pending:
+            if not p.done:
+                p.discard()
+        if isinstance(exc, ValueError):
+            raise fail(str(exc)) from None
+        raise
+    for line, path in zip(lines, written):
+        print(line.format(path))
+    return EXIT_FINDINGS if report.findings else EXIT_OK
+
+
+def _flat(prims):
+    """``--prims`` values (lists, one per use of the option) as one list, or None."""
+    return None if prims is None else [p for group in prims for p in group]
+
+
+def _refuse_overwriting(inputs, outputs) -> None:
+    """Raises ValueError when an output names the same file as an input (or an earlier output).
+
+    Args:
+        inputs: ``(what, path)`` of the files that must not be written.
+        outputs: ``(option, path)`` of the destinations.
+    """
+    from .output import same_file
+
+    for flag, out in outputs:
+        for what, path in inputs:
+            if same_file(out, path):
+                where = "" if os.path.realpath(path) == os.path.abspath(out) else f" ({os.path.realpath(path)})"
+                raise ValueError(f"{flag} {out} is {what}{where}: it would be written over")
 
 
 def _run_bench(argv: list[str]) -> int:
@@ -327,14 +445,17 @@ def main(argv: list[str] | None = None) -> int:
         argv: arguments without the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        Exit status: 0 success, 1 failure while running, 2 bad arguments, 130 interrupted.
+        Exit status: 0 success; 1 ``check`` found collisions (``demo``: it failed while running);
+        2 bad arguments or input; 3 an internal error (an unexpected exception: one line on stderr,
+        its traceback with ``--debug``); 130 interrupted.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "bench":
         return _run_bench(argv[1:])
+    args = None
     try:
         try:
-            args = _build_parser().parse_args(argv)
+            args = _build_parser().parse_args(_join_dash_values(argv))
         except SystemExit as exc:  # --help
             return exc.code if isinstance(exc.code, int) else EXIT_OK
         if args.command == "demo":
@@ -349,8 +470,26 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: interrupted; no file was written", file=sys.stderr)
         return EXIT_INTERRUPTED
     except (ValueError, TypeError, OSError, MemoryError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        if args is None or args.command != "demo":
+            return _internal_error(exc, args)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)  # the demo's failures while running: exit status 1
         return EXIT_ERROR
+    except Exception as exc:
+        return _internal_error(exc, args)
+
+
+def _internal_error(exc: Exception, args) -> int:
+    """One line on stderr for an unexpected exception (a bug, or the machine: memory, the device;
+    not the input), its traceback first with ``--debug``; returns :data:`EXIT_INTERNAL`."""
+    debug = getattr(args, "debug", False)
+    if debug:
+        traceback.print_exception(exc)
+    text = str(exc).strip().splitlines()
+    where = f" {args.command}" if args is not None else ""
+    hint = "" if debug else " (--debug prints the traceback)"
+    print(f"{PROG}{where}: internal error: {type(exc).__name__}" + (f": {text[0]}" if text else "") + hint,
+          file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":

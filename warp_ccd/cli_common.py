@@ -7,14 +7,25 @@ neither imports the other at module level.
 from __future__ import annotations
 
 import argparse
+import os
+import sys
+import tempfile
 
-__all__ = ["EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError", "OneLineParser", "quiet_warp",
-           "resolve_device"]
+__all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError",
+           "OneLineParser", "init_warp", "quiet_warp", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
+EXIT_FINDINGS = EXIT_ERROR
+"""``check``: something penetrates (or, with ``--count-touching``, touches)."""
 EXIT_USAGE = 2
+EXIT_INTERNAL = 3
+"""An unexpected exception: a bug or the machine (out of memory), not the input."""
 EXIT_INTERRUPTED = 130
+
+DRIVER_NOTICE = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
+"""The start of the line Warp's native library prints on initialisation when there is no CUDA
+driver (a machine without a GPU): the device list says as much, so the commands leave it out."""
 
 
 class CliError(Exception):
@@ -39,6 +50,79 @@ def quiet_warp() -> None:
     if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     wp.config.quiet = True
+
+
+def init_warp() -> None:
+    """Initialises Warp, without its no-CUDA-driver notice on stderr.
+
+    Warp's native library prints :data:`DRIVER_NOTICE` to the process's stderr on
+    initialisation on a machine without a CUDA driver. Here stderr (file descriptor 2) goes to a
+    temporary file while Warp initialises, and every other line written meanwhile is passed on.
+    Nothing happens when Warp is initialised already.
+    """
+    import warp as wp
+
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to redirect
+        wp.init()
+        return
+    try:
+        with tempfile.TemporaryFile() as held:
+            os.dup2(held.fileno(), 2)
+            try:
+                wp.init()
+            finally:
+                sys.stderr.flush()
+                os.dup2(saved, 2)
+            held.seek(0)
+            text = held.read().decode(errors="replace")
+    finally:
+        os.close(saved)
+    rest = [line for line in text.splitlines(keepends=True) if not line.startswith(DRIVER_NOTICE)]
+    if rest:
+        sys.stderr.write("".join(rest))
+        sys.stderr.flush()
+
+
+def uncached_modules(device, names) -> list[str] | None:
+    """The Warp modules among ``names`` whose kernels for ``device`` are not in Warp's kernel cache.
+
+    Warp compiles a module's kernels at its first launch on a device and keeps the binary in
+    its kernel cache (``wp.config.kernel_cache_dir``), under a name that carries a hash of the
+    module's code and options; this looks for that file as ``Module.load`` does.
+
+    Args:
+        device: a Warp device.
+        names: Python module names whose Warp kernels will run (``"warp_ccd.narrow_phase"``).
+
+    Returns:
+        The names to be compiled, or None when that cannot be told (kernel caching off, or a Warp
+        without the methods used here).
+    """
+    import warp as wp
+
+    try:
+        from warp._src import context
+
+        if not wp.config.cache_kernels or not wp.config.kernel_cache_dir:
+            return None
+        device = wp.get_device(device)
+        out = []
+        for name in names:
+            module = context.user_modules.get(name)
+            if module is None:
+                continue
+            default = None if device.is_cpu else module.options["block_dim"]  # as a launch resolves it
+            block_dim = context._resolve_launch_block_dim(device, default)
+            binary = os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(block_dim),
+                                  module._get_compile_output_name(device, block_dim=block_dim))
+            if not os.path.exists(binary):
+                out.append(name)
+        return out
+    except Exception:  # Warp's internals differ: say nothing rather than something wrong
+        return None
 
 
 def resolve_device(name: str | None):
