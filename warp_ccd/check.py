@@ -299,7 +299,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         segments: keep the intersection segments (for the report and the overlay).
         include_invisible, include_purposes: also check invisible prims, guides or proxies.
         tolerance: relative tolerance of the triangle test.
-        progress: show a progress bar on stderr.
+        progress: show progress bars on stderr (reading the transforms of every time code, then
+            the frames).
         allow_missing: check a stage whose sublayers, references or payloads cannot all be
             opened (without them; :attr:`CheckReport.missing` lists them) instead of raising.
 
@@ -330,7 +331,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     times = stage_time_codes(stage, frames)
     opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
-                        include_purposes=include_purposes, device=device, precision=precision)
+                        include_purposes=include_purposes, device=device, precision=precision, progress=progress)
     seconds = dict(imp.seconds)
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()

@@ -49,6 +49,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from tqdm import tqdm
 
 from .scene import Scene, _matrix_to_quat
 from .shapes import MeshSet
@@ -58,14 +59,18 @@ __all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "stag
 SIMILARITY_TOLERANCE = 1e-5
 """Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
 
+MAX_FRAMES = 10**6
+"""The most time codes one read takes (every one is looked up, and its poses kept, up front)."""
+
 PARALLEL_LOOKUPS = 200_000
 """Transform lookups (animated prims times time codes) from which a file's transforms are read by
 worker processes, each opening the file and reading a share of the time codes."""
 
 
-def _run_pose_workers(tasks: list) -> list:
+def _run_pose_workers(tasks: list, progress: bool = False) -> list:
     """Runs :func:`_pose_worker` on each task in a process of its own (``python -m
-    warp_ccd.usd_import TASK OUT``: nothing of the caller's ``__main__`` is imported again)."""
+    warp_ccd.usd_import TASK OUT``: nothing of the caller's ``__main__`` is imported again); with
+    ``progress``, a bar on stderr counts the time codes of the workers done."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
         procs = []
@@ -76,13 +81,17 @@ def _run_pose_workers(tasks: list) -> list:
             procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd_import", src, dst], env=env,
                                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True), dst))
         results = []
-        for proc, dst in procs:
+        bar = tqdm(total=sum(len(task[2]) for task in tasks), desc="reading transforms", unit="time code",
+                   leave=False, disable=not progress or None, file=sys.stderr)
+        for (proc, dst), task in zip(procs, tasks):
             _, err = proc.communicate()
+            bar.update(len(task[2]))
             if proc.returncode != 0:
                 last = err.strip().splitlines()[-1] if err.strip() else f"exit status {proc.returncode}"
                 raise ValueError(f"reading transforms in a worker process failed: {last}")
             with open(dst, "rb") as fh:
                 results.append(pickle.load(fh))
+        bar.close()
     return results
 
 
@@ -205,21 +214,29 @@ def stage_time_codes(stage, frames=None) -> np.ndarray:
         stage: a ``Usd.Stage``.
         frames: ``None`` (every integer time code of the stage's authored range; ``[0]`` when it
             has none), a number, a sequence of numbers, or ``(start, end)`` / ``(start, end, step)``
-            given as a ``slice`` (``end`` included).
+            given as a ``slice`` (``end`` included; a missing ``start`` or ``end`` is the stage's).
 
     Returns:
-        ``(F,)`` float64 time codes, increasing.
+        ``(F,)`` float64 time codes, increasing, at most :data:`MAX_FRAMES` of them.
 
     Raises:
-        ValueError: an empty, non-finite or decreasing range, a step <= 0, or times outside the
-            stage's authored range.
+        ValueError: an empty, non-finite or decreasing range, a step <= 0, times outside the
+            stage's authored range, a stage range whose start is after its end (when the frames
+            come from it), or more than :data:`MAX_FRAMES` time codes.
     """
     has_range = stage.HasAuthoredTimeCodeRange()
     lo, hi = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
+    layer = stage.GetRootLayer()
+    name = layer.realPath or layer.identifier
+    reversed_range = has_range and hi < lo
+    from_stage = frames is None or (isinstance(frames, slice) and (frames.start is None or frames.stop is None))
+    if reversed_range and from_stage:
+        raise ValueError(f"{name}: its startTimeCode {lo:g} is after its endTimeCode {hi:g}; choose the time codes "
+                         "with frames (--frames START:END[:STEP])")
     if frames is None:
         if not has_range:
             return np.zeros(1)
-        return np.arange(lo, hi + 0.5, 1.0) if hi >= lo else np.array([lo])
+        frames = slice(lo, hi, 1.0)
     if isinstance(frames, slice):
         start = lo if frames.start is None else frames.start
         end = hi if frames.stop is None else frames.stop
@@ -230,7 +247,11 @@ def stage_time_codes(stage, frames=None) -> np.ndarray:
             raise ValueError(f"frames: expected numbers, got {frames!r}") from None
         if not np.isfinite([start, end, step]).all() or step <= 0 or end < start:
             raise ValueError(f"frames: need start <= end and step > 0, got {start:g}:{end:g}:{step:g}")
-        times = start + step * np.arange(int(np.floor((end - start) / step + 1e-9)) + 1)
+        count = np.floor((end - start) / step + 1e-9) + 1
+        if count > MAX_FRAMES:
+            raise ValueError(f"{name}: {count:.0f} time codes in {start:g}..{end:g} (step {step:g}), more than "
+                             f"{MAX_FRAMES} at once; choose fewer with frames (--frames START:END[:STEP])")
+        times = start + step * np.arange(int(count))
     else:
         try:
             times = np.atleast_1d(np.asarray(frames, dtype=np.float64))
@@ -240,7 +261,9 @@ def stage_time_codes(stage, frames=None) -> np.ndarray:
             raise ValueError(f"frames: expected finite time codes, got {frames!r}")
         if (np.diff(times) <= 0).any():
             raise ValueError("frames: time codes must increase")
-    if has_range and (times[0] < lo - 1e-9 or times[-1] > hi + 1e-9):
+        if times.size > MAX_FRAMES:
+            raise ValueError(f"frames: {times.size} time codes, more than {MAX_FRAMES} at once")
+    if has_range and not reversed_range and (times[0] < lo - 1e-9 or times[-1] > hi + 1e-9):
         raise ValueError(f"frames {times[0]:g}..{times[-1]:g} lie outside the stage's time range {lo:g}..{hi:g}")
     return times
 
@@ -380,6 +403,7 @@ class UsdMeshImport:
             (each opens the file and takes a share of the time codes). Default: the CPU count
             (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` lookups, else none; 0 or 1:
             none. A stage with unsaved edits is always read in this process.
+        progress: show a progress bar on stderr while the transforms of every time code are read.
 
     Attributes:
         stage: the ``Usd.Stage``.
@@ -402,16 +426,20 @@ class UsdMeshImport:
     """
 
     def __init__(self, stage_or_path, *, prims=None, times=None, include_invisible: bool = False,
-                 include_purposes=(), device=None, precision: str = "float32", workers: int | None = None):
+                 include_purposes=(), device=None, precision: str = "float32", workers: int | None = None,
+                 progress: bool = False):
         from pxr import Usd
 
         self._start = time.perf_counter()
         self.stage = open_stage(stage_or_path)
-        if times is None:
-            times = stage_time_codes(self.stage)[:1]
+        if times is None:  # the start time code (even of a range whose end comes before it), else 0
+            times = [self.stage.GetStartTimeCode() if self.stage.HasAuthoredTimeCodeRange() else 0.0]
         self.times = np.atleast_1d(np.asarray(times, np.float64))
         if self.times.ndim != 1 or self.times.size == 0 or not np.isfinite(self.times).all():
             raise ValueError(f"times: expected finite time codes, got {times!r}")
+        if self.times.size > MAX_FRAMES:
+            raise ValueError(f"times: {self.times.size} time codes, more than {MAX_FRAMES} at once")
+        self._progress = bool(progress)
         self._codes = [Usd.TimeCode(float(t)) for t in self.times]
         purposes = {"default", "render"} | set(include_purposes)
         bad = set(include_purposes) - {"guide", "proxy", "render", "default"}
@@ -663,13 +691,17 @@ class UsdMeshImport:
         pooled = self._pooled_poses(varying[by_prim], bake[varying[by_prim]], obj_path)
         rest = varying[~by_prim] if pooled is not None else varying
         cols = ~by_prim if pooled is not None else slice(None)
-        for f, code in enumerate(self._codes):
+        bar = tqdm(total=len(self._codes), desc="reading transforms", unit="time code", leave=False,
+                   disable=not (self._progress and rest.size) or None, file=sys.stderr)
+        for f, code in enumerate(self._codes if rest.size else ()):
             finite, var_poses[f, cols], var_scale[f, cols], ok = _finite_poses(
                 first[rest] if f == 0 else self._matrices(code, rest), bake[rest])
             if not finite.all():
                 raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
                                  f"finite at time {code.GetValue():g}")
             var_ok[cols] &= ok
+            bar.update()
+        bar.close()
         if pooled is not None:
             var_poses[:, by_prim], var_scale[:, by_prim], ok = pooled
             var_ok[by_prim] &= ok
@@ -766,7 +798,7 @@ class UsdMeshImport:
         paths = [str(self._prims[h].GetPath()) for h in self._obj_handle[objects].tolist()]
         chunks = [c for c in np.array_split(np.arange(len(self._codes)), workers) if c.size]
         tasks = [(layer.realPath, paths, self.times[c], bake) for c in chunks]
-        parts = _run_pose_workers(tasks)
+        parts = _run_pose_workers(tasks, self._progress)
         finite = np.concatenate([p[3] for p in parts])
         if not finite.all():
             f, k = np.unravel_index(int(np.argmin(finite)), finite.shape)
