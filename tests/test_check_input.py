@@ -1,6 +1,8 @@
 """Bad input to ``warp-ccd check``: errors naming the stage or prim, never a silent clean result.
 
-Stage time ranges: a reversed range, too many time codes; the read's progress bar.
+Stage time ranges (reversed, too many time codes), PointInstancers (negative or out-of-range
+prototype indices, zero or non-finite orientations, prototypes outside the instancer), holes
+that are not faces, and the read's progress bar.
 """
 
 
@@ -18,7 +20,7 @@ from warp_ccd.usd_import import MAX_FRAMES, UsdMeshImport, stage_time_codes
 from conftest import DEFAULT_DEVICE
 
 pxr = pytest.importorskip("pxr")
-from pxr import Gf, Usd, UsdGeom  # noqa: E402
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
 from usd_stages import define_mesh, grid  # noqa: E402
 
 
@@ -36,6 +38,27 @@ def unit_cube():
     points = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
     quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [0, 4, 7, 3], [1, 2, 6, 5]]
     return points, [4] * 6, [i for q in quads for i in q]
+
+
+def instancer_stage(proto_indices=(0, 1, 0), orientations=None, orientations_f=None, prototypes=None):
+    """``/World/Inst``: a PointInstancer of two prototypes under it (a cube and a smaller cube),
+    instances 3 apart along x; time codes 0..2."""
+    stage = new_stage(end=2)
+    inst = UsdGeom.PointInstancer.Define(stage, "/World/Inst")
+    define_mesh(stage, "/World/Inst/Protos/Big", *unit_cube())
+    small = define_mesh(stage, "/World/Inst/Protos/Small", *unit_cube())
+    UsdGeom.Xformable(small).AddScaleOp().Set(Gf.Vec3f(0.5, 0.5, 0.5))
+    define_mesh(stage, "/World/Elsewhere", *unit_cube())
+    targets = prototypes or ["/World/Inst/Protos/Big", "/World/Inst/Protos/Small"]
+    inst.CreatePrototypesRel().SetTargets([Sdf.Path(t) for t in targets])
+    inst.CreateProtoIndicesAttr(Vt.IntArray(list(proto_indices)))
+    n = len(proto_indices)
+    inst.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(3.0 * i, 0, 0) for i in range(n)]))
+    if orientations is not None:
+        inst.CreateOrientationsAttr(Vt.QuathArray([Gf.Quath(*q) for q in orientations]))
+    if orientations_f is not None:
+        inst.CreateOrientationsfAttr(Vt.QuatfArray([Gf.Quatf(*q) for q in orientations_f]))
+    return stage
 
 
 # ---------------------------------------------------------------------------------------------
@@ -99,3 +122,64 @@ def test_reading_shows_progress(monkeypatch):
     check_usd(stage, device=DEFAULT_DEVICE, progress=False)
     UsdMeshImport(stage, times=np.arange(300.0), device=DEFAULT_DEVICE)
     assert err.getvalue() == ""
+
+
+# ---------------------------------------------------------------------------------------------
+# PointInstancers and holes
+
+
+@pytest.mark.parametrize("indices, words", [
+    ((0, 1, -1, 0), "prim /World/Inst: protoIndices has index -1 at instance 2"),
+    ((0, -3), "prim /World/Inst: protoIndices has index -3 at instance 1"),
+    ((0, 5, 1), "prim /World/Inst: protoIndices refer to prototype 5 at instance 1, but it has 2 prototypes"),
+])
+def test_bad_proto_indices(indices, words):
+    with pytest.raises(ValueError, match=re.escape(words)):
+        UsdMeshImport(instancer_stage(indices), device=DEFAULT_DEVICE)
+
+
+@pytest.mark.parametrize("half", [True, False])
+@pytest.mark.parametrize("bad, words", [((0, 0, 0, 0), "is zero"), ((float("nan"), 0, 0, 1), "is not finite"),
+                                        ((float("inf"), 0, 0, 0), "is not finite")])
+def test_zero_or_non_finite_orientation(half, bad, words):
+    quats = [(1, 0, 0, 0), (1, 0, 0, 0), bad]
+    stage = instancer_stage(orientations=quats) if half else instancer_stage(orientations_f=quats)
+    attr = "orientations" if half else "orientationsf"
+    with pytest.raises(ValueError, match=re.escape(f"prim /World/Inst: {attr}[2] (instance 2) {words} at time 0")):
+        UsdMeshImport(stage, device=DEFAULT_DEVICE)
+
+
+def test_zero_orientation_at_a_later_time():
+    stage = instancer_stage(orientations_f=[(1, 0, 0, 0)] * 3)
+    attr = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Inst")).GetOrientationsfAttr()
+    attr.Set(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)] * 3), 0)
+    attr.Set(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0), Gf.Quatf(0, 0, 0, 0), Gf.Quatf(1, 0, 0, 0)]), 2)
+    words = "prim /World/Inst: orientationsf[1] (instance 1) is zero at time 2"
+    with pytest.raises(ValueError, match=re.escape(words)):
+        check_usd(stage, device=DEFAULT_DEVICE)
+    # A masked instance is not checked.
+    UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Inst")).DeactivateId(1)
+    assert check_usd(stage, device=DEFAULT_DEVICE).object_path == ["/World/Elsewhere", "/World/Inst[0]/Big",
+                                                                     "/World/Inst[2]/Big"]
+    # Unit and merely unnormalised quaternions are read as USD computes their transforms.
+    imp = UsdMeshImport(instancer_stage(orientations=[(1, 0, 0, 0), (0, 0, 1, 0), (0.5, 0, 0, 0)]),
+                        device=DEFAULT_DEVICE)
+    assert set(imp.object_path) == {"/World/Elsewhere", "/World/Inst[0]/Big", "/World/Inst[1]/Small",
+                                    "/World/Inst[2]/Big"}
+
+
+@pytest.mark.parametrize("target", ["/World/Elsewhere", "/World", "/World/Inst"])
+def test_prototype_outside_the_instancer(target):
+    stage = instancer_stage(prototypes=["/World/Inst/Protos/Big", target])
+    with pytest.raises(ValueError, match=re.escape(f"prim /World/Inst: prototype {target} is not under the instancer")):
+        UsdMeshImport(stage, device=DEFAULT_DEVICE)
+
+
+@pytest.mark.parametrize("holes, words", [([1, 6], "holeIndices[1] = 6 is not a face index (it has 6 faces)"),
+                                          ([-1], "holeIndices[0] = -1 is not a face index")])
+def test_holes_that_are_not_faces(holes, words):
+    stage = new_stage()
+    define_mesh(stage, "/World/Floor", *grid(2, 4.0))
+    define_mesh(stage, "/World/Holed", *unit_cube(), holes=holes)
+    with pytest.raises(ValueError, match=re.escape(f"prim /World/Holed: {words}")):
+        UsdMeshImport(stage, device=DEFAULT_DEVICE)

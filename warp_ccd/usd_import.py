@@ -12,7 +12,9 @@ per object its world transform at every time code asked for:
 * **Triangles.** Polygons are fanned (``n - 2`` triangles from a face of ``n`` vertices; faces in
   ``holeIndices`` are left out); :attr:`UsdMeshImport.triangle_face` maps every triangle of the
   scene back to its USD face index. Faces of fewer than 3 vertices, indices outside the points,
-  non-finite points and animated topology are errors naming the prim.
+  ``holeIndices`` that are not face indices, non-finite points and animated topology are errors
+  naming the prim; so are a PointInstancer's negative or out-of-range ``protoIndices`` (naming
+  the instance), prototypes outside its subtree, and zero or non-finite orientations.
 * **Shapes** are stored once and shared by the objects that show them: instance proxies of one
   prototype, a PointInstancer's instances of one prototype, and meshes whose points and
   triangles are byte for byte the same.
@@ -304,6 +306,28 @@ class _Instancer:
     varying: bool = False
 
 
+ZERO_QUATERNION = 1e-6
+"""A PointInstancer orientation whose norm is below this is zero: no rotation (an error)."""
+
+
+def _check_orientations(rec: _Instancer, code) -> None:
+    """Raises ValueError naming the instancer and the instance whose orientation at ``code`` is zero
+    (norm below :data:`ZERO_QUATERNION`) or not finite, among the instances kept."""
+    for attr in (rec.schema.GetOrientationsAttr(), rec.schema.GetOrientationsfAttr()):
+        value = attr.Get(code) if attr.HasAuthoredValue() else None
+        if value is None or len(value) == 0:
+            continue
+        q = np.asarray(value, np.float64).reshape(-1, 4)
+        kept = rec.instance_index[rec.instance_index < len(q)]
+        norm = np.linalg.norm(q[kept], axis=1)
+        bad = ~np.isfinite(norm) | (norm < ZERO_QUATERNION)
+        if bad.any():
+            i = int(kept[np.argmax(bad)])
+            what = "is not finite" if not np.isfinite(norm[np.argmax(bad)]) else "is zero"
+            raise ValueError(f"prim {rec.path}: {attr.GetName()}[{i}] (instance {i}) {what} at time "
+                             f"{code.GetValue():g} (a rotation needs a nonzero quaternion)")
+
+
 def _fan(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, path: str, num_points: int):
     """Fan triangulation of USD polygons, vectorised: ``(triangles (m, 3) int32, face (m,) int32)``."""
     counts = np.asarray(counts, np.int64)
@@ -320,7 +344,11 @@ def _fan(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, path: str, 
     start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
     keep = np.ones(counts.size, bool)
     if holes.size:
-        holes = holes[(holes >= 0) & (holes < counts.size)]
+        bad = (holes < 0) | (holes >= counts.size)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(f"prim {path}: holeIndices[{k}] = {int(holes[k])} is not a face index "
+                             f"(it has {counts.size} faces)")
         keep[holes] = False
     per_face = counts[keep] - 2
     face = np.repeat(np.nonzero(keep)[0], per_face)
@@ -583,9 +611,18 @@ class UsdMeshImport:
                     raise ValueError(f"prim {name}: protoIndices change at time {code.GetValue():g} (instances "
                                      "that change prototype or number are not supported)")
         targets = inst.GetPrototypesRel().GetForwardedTargets()
-        if proto_idx.size and (proto_idx.min() < 0 or proto_idx.max() >= len(targets)):
-            raise ValueError(f"prim {name}: protoIndices refer to prototype {int(proto_idx.max())}, "
+        if proto_idx.size and proto_idx.min() < 0:
+            i = int(np.argmax(proto_idx < 0))
+            raise ValueError(f"prim {name}: protoIndices has index {int(proto_idx[i])} at instance {i} "
+                             "(prototype indices start at 0)")
+        if proto_idx.size and proto_idx.max() >= len(targets):
+            i = int(np.argmax(proto_idx >= len(targets)))
+            raise ValueError(f"prim {name}: protoIndices refer to prototype {int(proto_idx[i])} at instance {i}, "
                              f"but it has {len(targets)} prototypes")
+        outside = [t for t in targets if not t.HasPrefix(prim.GetPath()) or t == prim.GetPath()]
+        if outside:
+            raise ValueError(f"prim {name}: prototype {outside[0]} is not under the instancer "
+                             "(USD requires a PointInstancer's prototypes beneath it)")
         mask = inst.ComputeMaskAtTime(t0)
         keep = np.arange(proto_idx.size) if not mask else np.nonzero(np.asarray(mask, bool))[0]
         record = _Instancer(name, inst, keep, proto_idx[keep])
@@ -822,6 +859,7 @@ class UsdMeshImport:
         for j in np.unique(which[which >= 0]).tolist():
             rec = self._instancers[j]
             rows = np.nonzero(which == j)[0]
+            _check_orientations(rec, code)
             xforms = rec.schema.ComputeInstanceTransformsAtTime(
                 code, code, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)
             xforms = np.asarray(xforms, np.float64).reshape(-1, 4, 4)
