@@ -1,20 +1,25 @@
-"""Bad input to ``warp-ccd check``: errors naming the stage or prim, never a silent clean result.
+"""Bad input to ``warp-ccd check`` and ``collide()``: errors naming the prim or object, never a
+silent clean result.
 
 Stage time ranges (reversed, too many time codes), PointInstancers (negative or out-of-range
 prototype indices, zero or non-finite orientations, prototypes outside the instancer), holes
-that are not faces, and the read's progress bar.
+that are not faces, the read's progress bar, and the precision guard: coordinates too far from
+the origin for float32 at the triangles' size switch a check to float64 (with a warning) and
+make ``collide()`` refuse float32; beyond float64, or float32's range, everything refuses.
 """
-
 
 import io
 import re
 import sys
+import warnings
 
 import numpy as np
 import pytest
 
+import warp_ccd as wc
 from warp_ccd import cli
 from warp_ccd.check import check_usd
+from warp_ccd.precision import PrecisionWarning, needed_precision, triangle_size
 from warp_ccd.usd_import import MAX_FRAMES, UsdMeshImport, stage_time_codes
 
 from conftest import DEFAULT_DEVICE
@@ -183,3 +188,117 @@ def test_holes_that_are_not_faces(holes, words):
     define_mesh(stage, "/World/Holed", *unit_cube(), holes=holes)
     with pytest.raises(ValueError, match=re.escape(f"prim /World/Holed: {words}")):
         UsdMeshImport(stage, device=DEFAULT_DEVICE)
+
+
+# ---------------------------------------------------------------------------------------------
+# precision
+
+
+def overlapping_cubes_stage(offset: float, deforming: bool = False):
+    """Two unit cubes overlapping by 0.5 on every axis (a vertex of each inside the other),
+    translated by ``(offset, offset, -offset)``; with ``deforming``, their points time-sampled."""
+    stage = new_stage(end=1)
+    for name, d in (("A", 0.0), ("B", 0.5)):
+        mesh = define_mesh(stage, f"/World/{name}", *unit_cube())
+        UsdGeom.Xformable(mesh).AddTranslateOp().Set(Gf.Vec3d(offset + d, offset + d, -offset + d))
+        if deforming:
+            points = np.asarray(unit_cube()[0], np.float32)
+            for f in (0, 1):
+                mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(points * (1 + 0.01 * f)), f)
+    return stage
+
+
+def test_needed_precision_thresholds():
+    assert needed_precision(8e3, 1.0) == "float32"
+    assert needed_precision(9e3, 1.0) == "float64"  # 9e3 * 2**-23 > 1e-3
+    assert needed_precision(4e12, 1.0) == "float64"
+    assert needed_precision(5e12, 1.0) is None  # 5e12 * 2**-52 > 1e-3
+    assert needed_precision(1e30, 1e27) == "float32"  # scale-free: R / s counts
+    assert needed_precision(1e30, 1e25) == "float64"
+    assert needed_precision(3.5e38, 1e36) is None  # beyond float32's range: boxes are float32
+    assert needed_precision(1e30, 0.0) == "float32"  # no triangle has a size: only the range counts
+    # The typical size: the median longest edge over the objects' triangles (shapes times scales).
+    v, t = wc.shape("cube")  # longest edge 2 sqrt(2/3) = 1.633
+    packed = wc.Scene.from_meshes([(v, t)] * 3).shapes
+    args = packed.vertices, packed.triangles, packed.vertex_start, packed.triangle_start
+    assert triangle_size(*args, [0, 0, 0]) == pytest.approx(1.6329931)
+    assert triangle_size(*args, [0, 0, 0], [1.0, 3.0, 3.0]) == pytest.approx(3 * 1.6329931)
+
+
+@pytest.mark.parametrize("deforming", [False, True])
+def test_check_far_from_the_origin_switches_to_float64(device, deforming):
+    near = check_usd(overlapping_cubes_stage(0.0, deforming), device=device)
+    assert near.penetrating and near.source.scene.precision == "float32"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        far = check_usd(overlapping_cubes_stage(1e8, deforming), device=device)
+    assert far.penetrating  # in float32 every vertex there is a multiple of 8: no cube, no crossing
+    note = ("coordinates up to 1e+08 are beyond float32 at triangles of size 1.41 (its step there: 12): "
+            "checking in float64")
+    assert [(w.category, str(w.message)) for w in caught] == [(PrecisionWarning, f"prim /World/B: {note}")]
+    assert far.source.scene.precision == "float64" and far.source.precision_note == f"prim /World/B: {note}"
+    assert near.source.precision_note is None
+    for a, b in zip(near.frames, far.frames):
+        np.testing.assert_array_equal(a.triangle_pairs, b.triangle_pairs)
+        np.testing.assert_allclose(a.depth, b.depth, rtol=0, atol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # asked for float64: nothing to say
+        assert check_usd(overlapping_cubes_stage(1e8, deforming), precision="float64", device=device).penetrating
+
+
+@pytest.mark.parametrize("offset, words", [
+    (1e19, "coordinates up to 1e+19 are beyond float64 at triangles of size 1.41 (its step there: 2.2e+03)"),
+    (1e30, "coordinates up to 1e+30 are beyond float64 at triangles of size 1.41"),
+    (1e39, "coordinates up to 1e+39 are beyond float32's range"),
+])
+def test_check_beyond_float64_is_an_error(offset, words):
+    for precision in ("float32", "float64"):
+        with pytest.raises(ValueError, match=r"prim /World/[AB]: " + re.escape(words)):
+            check_usd(overlapping_cubes_stage(offset), precision=precision, device=DEFAULT_DEVICE)
+
+
+def test_deforming_points_that_move_away_later():
+    """Deforming points are read frame by frame: one that leaves float32's reach at a later time
+    code stops a float32 check there, naming the prim and the time."""
+    stage = overlapping_cubes_stage(0.0, deforming=True)
+    op = UsdGeom.Xformable(stage.GetPrimAtPath("/World/B")).GetOrderedXformOps()[0]
+    op.Set(Gf.Vec3d(0.5, 0.5, 0.5), 0)
+    op.Set(Gf.Vec3d(3e4, 0.5, 0.5), 1)
+    with pytest.raises(ValueError, match=re.escape("prim /World/B at time 1: coordinates up to 3e+04 are beyond "
+                                                   "float32") + ".*precision='float64'"):
+        check_usd(stage, device=DEFAULT_DEVICE)
+    report = check_usd(stage, precision="float64", device=DEFAULT_DEVICE)
+    assert [len(f.triangle_pairs) > 0 for f in report.frames] == [True, False]
+
+
+def cube_meshes_and_transforms(offset: float):
+    v, t = unit_cube()[0], [[0, 3, 2], [0, 2, 1], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [2, 3, 7], [2, 7, 6],
+                            [0, 4, 7], [0, 7, 3], [1, 2, 6], [1, 6, 5]]
+    v, t = np.asarray(v, np.float64), np.asarray(t, np.int32)
+    transforms = np.tile(np.eye(4), (2, 1, 1))
+    transforms[:, :3, 3] = [[offset, offset, -offset], [offset + 0.5, offset + 0.5, -offset + 0.5]]
+    return [(v, t), (v, t)], transforms
+
+
+def test_collide_far_from_the_origin(device):
+    meshes, transforms = cube_meshes_and_transforms(0.0)
+    ref = wc.collide(meshes, transforms, device=device)
+    assert ref.object_pairs.tolist() == [[0, 1]]
+    far_meshes, far = cube_meshes_and_transforms(1e8)
+    world = [(v + tr[:3, 3], t) for (v, t), tr in zip(far_meshes, far)]
+    for args in ((far_meshes, far), (world, None)):
+        with pytest.raises(ValueError, match=r"mesh [01]: " + re.escape("coordinates up to 1e+08 are beyond float32 "
+                                                                         "at triangles of size 1.41")
+                           + r".*use precision='float64'"):
+            wc.collide(*args, device=device)
+        with pytest.raises(ValueError, match="use precision='float64'"):
+            wc.Scene.from_meshes(*args, device=device)
+        got = wc.collide(*args, device=device, precision="float64")
+        np.testing.assert_array_equal(got.triangle_pairs, ref.triangle_pairs)
+    for offset in (1e19, 1e30):
+        far_meshes, far = cube_meshes_and_transforms(offset)
+        with pytest.raises(ValueError, match=r"mesh [01]: coordinates up to .* are beyond float64"):
+            wc.collide(far_meshes, far, device=device, precision="float64")
+    # Near enough for float32: 1e3 from the origin with triangles of 1.4.
+    meshes, transforms = cube_meshes_and_transforms(1e3)
+    assert wc.collide(meshes, transforms, device=device).object_pairs.tolist() == [[0, 1]]

@@ -293,7 +293,10 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
             integer time code of the stage's range).
         prims: prim paths or patterns to check (default: the whole stage).
         device: Warp device (default: Warp's preferred device).
-        precision: ``"float32"`` or ``"float64"``.
+        precision: ``"float32"`` or ``"float64"``; float32 becomes float64, with a
+            :class:`~warp_ccd.precision.PrecisionWarning` (``report.source.precision_note``), where
+            the coordinates are too far from the origin for it at the triangles' size
+            (:func:`~warp_ccd.precision.needed_precision`).
         min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
         count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
         segments: keep the intersection segments (for the report and the overlay).

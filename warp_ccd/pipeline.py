@@ -445,7 +445,10 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``.
 
     Raises:
-        ValueError / TypeError: naming the bad mesh or transform and the problem.
+        ValueError / TypeError: naming the bad mesh or transform and the problem; a ValueError
+            too where the coordinates are too far from the origin for ``precision`` at the
+            triangles' size (float32: beyond about ``8.4e3`` times the typical triangle, use
+            ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd.scene.Scene.from_meshes>`).
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:

@@ -4,11 +4,38 @@ A scene is float32 or float64: the type of its shape vertices, poses and world v
 exact triangle test (object and node boxes stay float32, rounded outward). Kernels are written once
 as Warp generics and their two variants declared with ``wp.overload`` over :data:`PRECISIONS`
 (:func:`precision_overloads`), and the variant of the scene's precision is what is launched.
+
+**Which precision a scene needs** (:func:`needed_precision`): a coordinate ``x`` is held to
+within half a unit in the last place, at most ``|x| * 2**-24`` in float32 and ``|x| * 2**-53`` in
+float64. With ``R`` the largest ``|coordinate|`` of the world vertices and ``s`` the scene's
+typical triangle size (:func:`triangle_size`: the median longest edge of its triangles), a
+precision is good enough while one unit in the last place at ``R``, ``R * 2**-23`` (float32) or
+``R * 2**-52`` (float64), stays within :data:`RESOLUTION` ``= 1e-3`` of ``s``: float32 while
+``R <= 8.4e3 * s``, float64 while ``R <= 4.5e12 * s``. Beyond that the exact test would decide
+touching and crossing on rounding, not on the geometry. Coordinates beyond float32's range
+(``3.4e38``) fit no scene at all: object and node boxes are float32 at both precisions.
 """
 
+import numpy as np
 import warp as wp
 
-__all__ = ["PRECISIONS", "precision_overloads", "precision_types"]
+__all__ = ["PRECISIONS", "RESOLUTION", "PrecisionWarning", "coordinate_message", "needed_precision",
+           "precision_overloads", "precision_types", "shape_radius", "triangle_size"]
+
+RESOLUTION = 1e-3
+"""One unit in the last place at the largest coordinate may be at most this fraction of the typical
+triangle size (:func:`needed_precision`)."""
+FLOAT32_STEP = 2.0**-23
+"""float32's unit in the last place relative to the number (its machine epsilon; an upper bound)."""
+FLOAT64_STEP = 2.0**-52
+"""float64's unit in the last place relative to the number."""
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""The largest float32 (``3.4e38``): boxes are float32, so no coordinate may exceed it."""
+
+
+class PrecisionWarning(UserWarning):
+    """A scene's coordinates are too far from the origin for float32 at its triangles' size, and it
+    is checked in float64 instead."""
 
 PRECISIONS = ("float32", "float64")
 """Scene precisions: the type of shape vertices, poses and world vertices (boxes stay float32)."""
@@ -41,3 +68,97 @@ def precision_overloads(kernel, arg_types) -> dict:
         of host time a launch, more on the first).
     """
     return {p: wp.overload(kernel, arg_types(*precision_types(p))) for p in PRECISIONS}
+
+
+def needed_precision(max_coordinate: float, size: float) -> str | None:
+    """The precision that resolves a scene's geometry (see the module docstring).
+
+    Args:
+        max_coordinate: ``R``, the largest ``|coordinate|`` of the world vertices (scene units).
+        size: ``s``, the typical triangle size (scene units; 0 when every triangle is degenerate:
+            then only float32's range is checked).
+
+    Returns:
+        ``"float32"``, ``"float64"`` when only float64 resolves it, or None when neither does
+        (``R * 2**-52 > 1e-3 * s``, or ``R`` beyond float32's range).
+    """
+    r, s = float(max_coordinate), float(size)
+    if not r <= FLOAT32_MAX:
+        return None
+    if s > 0.0 and r * FLOAT64_STEP > RESOLUTION * s:
+        return None
+    if s > 0.0 and r * FLOAT32_STEP > RESOLUTION * s:
+        return "float64"
+    return "float32"
+
+
+def coordinate_message(max_coordinate: float, size: float, precision: str) -> str:
+    """``"coordinates up to R are beyond <precision> at triangles of size s (its step there: u)"``,
+    or beyond float32's range."""
+    if not float(max_coordinate) <= FLOAT32_MAX:
+        return f"coordinates up to {max_coordinate:.3g} are beyond float32's range ({FLOAT32_MAX:.3g}, which boxes use)"
+    step = max_coordinate * (FLOAT64_STEP if precision == "float64" else FLOAT32_STEP)
+    return (f"coordinates up to {max_coordinate:.3g} are beyond {precision} at triangles of size {size:.3g} "
+            f"(its step there: {step:.2g})")
+
+
+def shape_radius(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
+    """``(S,)`` float64 largest distance of each shape's vertices from its origin (0 for a shape
+    without vertices), from ``(V, 3)`` vertices and ``(S + 1,)`` offsets."""
+    start = np.asarray(vertex_start, np.int64)
+    radius = np.zeros(len(start) - 1)
+    if len(vertices):
+        owner = np.repeat(np.arange(len(start) - 1), np.diff(start))
+        np.maximum.at(radius, owner, np.linalg.norm(np.asarray(vertices, np.float64), axis=1))
+    return radius
+
+
+def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
+                  triangle_start: np.ndarray, instance_shape: np.ndarray, instance_scale=None) -> float:
+    """The scene's typical triangle size: the median, over its objects' triangles, of each
+    triangle's longest edge (each shape's median taken once, times each object's scale).
+
+    Triangles of zero size (every vertex the same point) count for nothing.
+
+    Args:
+        vertices: ``(V, 3)`` shape vertices; ``triangles``: ``(T, 3)`` shape-local indices.
+        vertex_start, triangle_start: ``(S + 1,)`` offsets of each shape.
+        instance_shape: ``(N,)`` shape of each object.
+        instance_scale: ``(N,)`` uniform scale of each object (default 1).
+
+    Returns:
+        The size (scene units), 0.0 when no triangle has a size.
+    """
+    tri = np.asarray(triangles, np.int64)
+    tstart = np.asarray(triangle_start, np.int64)
+    vstart = np.asarray(vertex_start, np.int64)
+    inst = np.asarray(instance_shape, np.int64)
+    if not len(tri) or not inst.size:
+        return 0.0
+    tcount = np.diff(tstart)
+    owner = np.repeat(np.arange(len(tcount)), tcount)
+    v = np.asarray(vertices)
+    longest = np.empty(len(tri))
+    step = 1 << 20  # triangles a block: bounded temporaries for scenes of millions
+    for lo in range(0, len(tri), step):
+        idx = tri[lo:lo + step] + vstart[owner[lo:lo + step], None]
+        a, b, c = (v[idx[:, k]].astype(np.float64) for k in range(3))
+        longest[lo:lo + step] = np.sqrt(np.maximum.reduce([((b - a) ** 2).sum(1), ((c - b) ** 2).sum(1),
+                                                           ((a - c) ** 2).sum(1)]))
+    keep = longest > 0.0
+    count = np.bincount(owner[keep], minlength=len(tcount))
+    order = np.lexsort((longest[keep], owner[keep]))  # by shape, then size
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    median = np.zeros(len(tcount))
+    has = count > 0
+    median[has] = longest[keep][order][first[has] + (count[has] - 1) // 2]
+    scale = np.ones(inst.size) if instance_scale is None else np.asarray(instance_scale, np.float64)
+    size = median[inst] * scale
+    weight = count[inst]
+    use = (size > 0.0) & (weight > 0)
+    if not use.any():
+        return 0.0
+    size, weight = size[use], weight[use]
+    by_size = np.argsort(size)
+    cum = np.cumsum(weight[by_size])
+    return float(size[by_size][np.searchsorted(cum, 0.5 * cum[-1])])

@@ -31,7 +31,14 @@ import numpy as np
 import warp as wp
 
 from .motion import EllipseMotion, advance_time
-from .precision import precision_overloads, precision_types
+from .precision import (
+    coordinate_message,
+    needed_precision,
+    precision_overloads,
+    precision_types,
+    shape_radius,
+    triangle_size,
+)
 from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
 
@@ -176,6 +183,38 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
         if not np.isfinite(out.astype(np.float32)).all():
             raise ValueError("transforms: translations overflow float32")
     return out
+
+
+def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | None, precision: str) -> None:
+    """Raises ValueError when ``precision`` does not resolve the scene's world vertices at its
+    triangles' size (:func:`~warp_ccd.precision.needed_precision`), naming the mesh with the
+    largest coordinate.
+
+    Args:
+        packed: the meshes (float64 vertices: world vertices when ``poses`` is None).
+        inst: ``(N,)`` shape of each object.
+        poses: ``(N, 7)`` rigid poses, or None.
+        precision: the scene's precision.
+    """
+    if not inst.size or not len(packed.vertices):
+        return
+    if poses is None:
+        far = np.abs(packed.vertices).max(axis=1)
+        owner = np.repeat(np.arange(len(packed)), np.diff(packed.vertex_start))
+        per_shape = np.zeros(len(packed))
+        np.maximum.at(per_shape, owner, far)
+        reach = per_shape[inst]
+    else:  # |world coordinate| <= |translation| + the shape's radius
+        reach = np.abs(poses[:, :3]).max(axis=1) + shape_radius(packed.vertices, packed.vertex_start)[inst]
+    worst = int(np.argmax(reach))
+    size = triangle_size(packed.vertices, packed.triangles, packed.vertex_start, packed.triangle_start, inst)
+    needed = needed_precision(reach[worst], size)
+    if needed is None:
+        raise ValueError(f"mesh {worst}: {coordinate_message(reach[worst], size, 'float64')}: move the scene "
+                         "nearer the origin")
+    if needed == "float64" and precision == "float32":
+        raise ValueError(f"mesh {worst}: {coordinate_message(reach[worst], size, 'float32')}: "
+                         "use precision='float64'")
 
 
 class Scene:
@@ -378,6 +417,14 @@ class Scene:
             deforming: the caller will write world vertices every frame (:meth:`set_world_vertices`).
             device: Warp device.
             precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
+
+        Raises:
+            ValueError: a bad mesh or transform (naming it), or world vertices too far from the
+                origin for ``precision`` at the triangles' size (naming the mesh with the largest
+                coordinate; :func:`~warp_ccd.precision.needed_precision`): float32 beyond about
+                ``8.4e3`` times the typical triangle size (use ``precision="float64"``), float64
+                beyond ``4.5e12`` times, either beyond ``3.4e38``. Only the vertices as given are
+                checked, not later poses.
         """
         if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
             raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
@@ -403,6 +450,8 @@ class Scene:
             if deforming:
                 raise ValueError("transforms: a deforming scene takes world vertices, not transforms")
             poses = transforms_to_poses(transforms, n)
+        precision_types(precision)  # a bad precision named before the guard's message
+        _check_coordinates(packed, np.asarray(inst, np.int64), poses, precision)
         return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
                    precision=precision)
 

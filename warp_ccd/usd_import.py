@@ -23,6 +23,12 @@ per object its world transform at every time code asked for:
   a non-uniform scale, a shear or a reflection is baked into a shape of its own (the points times
   the linear part at the first time code), and the object moves rigidly from there while the
   rest of its transform stays a rotation and a uniform scale.
+* **Precision.** Where float32 cannot resolve the coordinates of every time code read at the
+  triangles' size (:func:`~warp_ccd.precision.needed_precision`: coordinates beyond about
+  ``8.4e3`` times the typical triangle), the scene is float64 instead, with a
+  :class:`~warp_ccd.precision.PrecisionWarning`; beyond what float64 resolves (``4.5e12`` times)
+  or float32's range, a ValueError names the prim. Deforming points are read frame by frame and
+  checked as they come (:meth:`UsdMeshImport.set_frame` raises).
 * **Rigid or deforming.** An object is deforming when its points are time-sampled, or when its
   transform changes shape over time (an animated non-uniform scale): its world vertices are
   computed on the host each frame (``points(t) M(t)``) and copied to the device. Every other
@@ -48,11 +54,13 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
+from .precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
 from .scene import Scene, _matrix_to_quat
 from .shapes import MeshSet
 
@@ -426,7 +434,8 @@ class UsdMeshImport:
         include_invisible: also read invisible prims.
         include_purposes: also read prims of these purposes (``"guide"``, ``"proxy"``).
         device: Warp device of the scene.
-        precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.Scene`).
+        precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.Scene`); float32
+            becomes float64 where the coordinates need it (see the module docstring).
         workers: processes that read the transforms of animated prims of a stage saved in a file
             (each opens the file and takes a share of the time codes). Default: the CPU count
             (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` lookups, else none; 0 or 1:
@@ -445,12 +454,19 @@ class UsdMeshImport:
         triangle_face: ``(T,)`` int32 USD face index of every shape triangle, indexed like
             ``scene.shape_triangle`` (shape start + local triangle).
         skipped: ``(path, reason)`` of the meshes left out (no faces, invisible, purpose).
+        max_coordinate: the largest ``|coordinate|`` of any world vertex over the time codes
+            (deforming points: at the first one), scene units.
+        triangle_size: the typical triangle size (:func:`~warp_ccd.precision.triangle_size`).
+        precision_note: why the scene is float64 though float32 was asked for, or None (also
+            given as a :class:`~warp_ccd.precision.PrecisionWarning`).
         seconds: wall time of ``read`` (opening, traversal, topology, transforms at every time
             code) and ``build`` (the scene on its device, the first frame).
 
     Raises:
         ValueError: naming the file or prim: a missing or unreadable file, a prim path that does
-            not exist, patterns that match nothing, a stage without meshes, or a bad mesh.
+            not exist, patterns that match nothing, a stage without meshes, a bad mesh or
+            PointInstancer, more than :data:`MAX_FRAMES` time codes, or coordinates beyond float64
+            at the triangles' size.
     """
 
     def __init__(self, stage_or_path, *, prims=None, times=None, include_invisible: bool = False,
@@ -720,8 +736,7 @@ class UsdMeshImport:
         deforming = np.array([self._meshes[k].deforming for k in obj_mesh.tolist()], bool)
         poses0, scale0, ok0 = _poses(first, bake)
         deforming |= ~ok0
-        fdtype = np.float64 if precision == "float64" else np.float32
-        var_poses = np.empty((len(self._codes), varying.size, 7), fdtype)
+        var_poses = np.empty((len(self._codes), varying.size, 7))  # float64 until the precision is known
         var_scale = np.empty((len(self._codes), varying.size), np.float32)
         var_ok = np.ones(varying.size, bool)
         by_prim = self._obj_instancer[varying] < 0
@@ -798,11 +813,7 @@ class UsdMeshImport:
             shape_faces.append(data.triangle_face)
         vcount = np.array([len(v) for v in shape_vertices], np.int64)
         tcount = np.array([len(t) for t in shape_triangles], np.int64)
-        with np.errstate(over="ignore"):
-            vertices = np.concatenate(shape_vertices).astype(fdtype)
-        if not np.isfinite(vertices).all():
-            raise ValueError("points overflow float32 once transformed (use precision='float64')")
-        packed = MeshSet(vertices, np.concatenate(shape_triangles).astype(np.int32),
+        packed = MeshSet(np.concatenate(shape_vertices), np.concatenate(shape_triangles).astype(np.int32),
                          np.concatenate([[0], np.cumsum(vcount)]), np.concatenate([[0], np.cumsum(tcount)]))
         self.triangle_face = np.concatenate(shape_faces).astype(np.int32)
 
@@ -811,6 +822,10 @@ class UsdMeshImport:
         defo_slice = slice(self._num_rigid, n)
         poses[defo_slice] = np.array([0, 0, 0, 0, 0, 0, 1.0])
         scale[defo_slice] = 1.0
+        precision = self._choose_precision(packed, shape_of, poses, scale, precision)
+        fdtype = np.float64 if precision == "float64" else np.float32
+        packed.vertices = packed.vertices.astype(fdtype)
+        self._anim_poses = self._anim_poses.astype(fdtype, copy=False)
         self.seconds = {"read": time.perf_counter() - self._start}
         start = time.perf_counter()
         self.scene = Scene(packed, shape_of, instance_scale=scale, poses=poses,
@@ -818,6 +833,51 @@ class UsdMeshImport:
         self.scene.usd = self
         self.set_frame(0)
         self.seconds["build"] = time.perf_counter() - start
+
+    def _choose_precision(self, packed: MeshSet, shape_of: np.ndarray, poses: np.ndarray, scale: np.ndarray,
+                          precision: str) -> str:
+        """The scene's precision: ``precision``, or float64 (with a :class:`~warp_ccd.precision.PrecisionWarning`)
+        where float32 does not resolve the coordinates of every time code read at the triangles'
+        size (:func:`~warp_ccd.precision.needed_precision`); sets :attr:`max_coordinate`,
+        :attr:`triangle_size` and :attr:`precision_note`.
+
+        Args:
+            packed: the shapes, float64 (deforming objects' in world space at the first time code).
+            shape_of: ``(N,)`` shape of each object (in object order).
+            poses, scale: ``(N, 7)`` and ``(N,)`` first poses and scales (identity for deforming objects).
+            precision: the precision asked for.
+
+        Raises:
+            ValueError: naming the prim with the largest coordinate, when even float64 does not
+                resolve them, or they exceed float32's range.
+        """
+        radius = shape_radius(packed.vertices, packed.vertex_start)[shape_of]
+        reach = np.abs(poses[:, :3]).max(axis=1) + scale * radius  # static rigid (deforming: radius alone)
+        a, b = self._num_static, self._num_rigid
+        if b > a:  # animated rigid: over every time code
+            reach[a:b] = np.abs(self._anim_poses[:, :, :3]).max(axis=(0, 2)) \
+                + self._anim_scale.max(axis=0) * radius[a:b]
+        if b < len(reach):  # deforming: the world points themselves
+            far = np.zeros(len(packed))
+            owner = np.repeat(np.arange(len(packed)), np.diff(packed.vertex_start))
+            np.maximum.at(far, owner, np.abs(packed.vertices).max(axis=1))
+            reach[b:] = far[shape_of[b:]]
+        worst = int(np.argmax(reach))
+        self.max_coordinate = float(reach[worst])
+        self.triangle_size = triangle_size(packed.vertices, packed.triangles, packed.vertex_start,
+                                           packed.triangle_start, shape_of, scale)
+        self.precision_note = None
+        needed = needed_precision(self.max_coordinate, self.triangle_size)
+        if needed is None:
+            raise ValueError(f"prim {self.object_path[worst]}: "
+                             f"{coordinate_message(self.max_coordinate, self.triangle_size, 'float64')}")
+        if needed == "float64" and precision == "float32":
+            self.precision_note = (f"prim {self.object_path[worst]}: "
+                                   f"{coordinate_message(self.max_coordinate, self.triangle_size, 'float32')}: "
+                                   "checking in float64")
+            warnings.warn(self.precision_note, PrecisionWarning, stacklevel=4)
+            return "float64"
+        return precision
 
     def _pooled_poses(self, objects: np.ndarray, bake: np.ndarray, obj_path: list):
         """Poses, scales and similarity flags of prim ``objects`` at every time code, read by worker
@@ -880,8 +940,9 @@ class UsdMeshImport:
         vertices of every object (a kernel), and the deforming objects' vertices from the host.
 
         Raises:
-            ValueError: a bad frame index, or a deforming mesh whose points change in number or
-                are not finite at that time (naming the prim).
+            ValueError: a bad frame index, or a deforming mesh whose points change in number, are
+                not finite, or reach beyond what the scene's precision resolves at that time
+                (naming the prim).
         """
         if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < len(self.times):
             raise ValueError(f"set_frame: expected a frame index in [0, {len(self.times)}), got {frame!r}")
@@ -909,12 +970,27 @@ class UsdMeshImport:
                 parts.append(p @ matrix[d, :3, :3] + matrix[d, 3, :3])
             world = np.concatenate(parts)
             start = int(scene.instance_vertex_start_np[b])
-            with np.errstate(over="ignore"):
-                world = world.astype(np.float64 if scene.precision == "float64" else np.float32)
-            if not np.isfinite(world).all():
-                raise ValueError("deforming points overflow float32 (use precision='float64')")
-            scene.world_vertex[start:].assign(world)
+            self._check_deforming_reach(world, start, frame)
+            scene.world_vertex[start:].assign(world.astype(np.float64 if scene.precision == "float64" else np.float32))
         self.frame = int(frame)
+
+    def _check_deforming_reach(self, world: np.ndarray, start: int, frame: int) -> None:
+        """Raises ValueError naming the prim when the deforming objects' world points ``world``
+        (``(V, 3)`` float64, from world vertex ``start`` on) at ``times[frame]`` reach beyond what
+        the scene's precision resolves at the triangles' size (read frame by frame, they were not
+        known up front)."""
+        reach = max(float(world.max(initial=0.0)), -float(world.min(initial=0.0)))
+        if reach <= self.max_coordinate:
+            return
+        precision = self.scene.precision
+        needed = needed_precision(reach, self.triangle_size)
+        if needed == "float32" or (needed == "float64" and precision == "float64"):
+            return
+        v = int(np.argmax(np.abs(world).max(axis=1))) + start
+        i = int(np.searchsorted(self.scene.instance_vertex_start_np, v, side="right") - 1)
+        hint = ": check it in float64 (precision='float64', --precision float64)" if needed else ""
+        raise ValueError(f"prim {self.object_path[i]} at time {self.times[frame]:g}: "
+                         f"{coordinate_message(reach, self.triangle_size, precision if needed else 'float64')}{hint}")
 
     def faces(self, objects: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """USD face indices of local triangles ``triangles`` of objects ``objects`` (same shapes, int32)."""
