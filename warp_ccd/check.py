@@ -5,16 +5,15 @@ collision pipeline at every time code asked for, and returns a :class:`CheckRepo
 the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross.
 
 **Touching is not penetrating.** Objects resting on each other touch every frame, and the exact
-test reports their triangle pairs (triangles are closed sets). Every reported pair gets a
-*crossing depth* (:func:`~warp_ccd.narrow_phase.crossing_depth`): of each triangle, how far it
-reaches to the lesser side of the other's plane, the smaller of the two. It is 0 when a face,
-an edge or a vertex rests on the other triangle (within the test's tolerance, relative to the
-triangles' size), and ``h`` for a vertex or an edge poking ``h`` through a face. A pair
-penetrates when its depth exceeds ``min_depth`` (scene units, default 0: any crossing beyond the
-tolerance); pairs at or below it are counted as touching, not reported as collisions, unless
-``count_touching`` asks for them. The depth is local to the two triangles: for large triangles
-crossing near an edge it can exceed how far the objects overlap, never fall below what a vertex
-pokes through.
+test reports their triangle pairs (triangles are closed sets). Each reported pair is classified
+from the surfaces around it (:mod:`~warp_ccd.crossing`): the surfaces *cross* where one enters
+the region behind the other (their insides overlap), and only *touch* where they meet face to
+face, edge on edge, edge or vertex on a face. That verdict is a property of the surfaces, not of
+how they are cut into triangles. A crossing pair's depth is how far a vertex of either triangle
+lies behind the other surface (a vertex poking ``h`` through a face, or a crate sunk ``h`` into a
+floor, has depth ``h``); touching pairs have depth 0. A pair penetrates when it crosses deeper
+than ``min_depth`` (scene units, default 0: every crossing); the others are counted as touching,
+not reported as collisions, unless ``count_touching`` asks for them.
 
 The overlay (:func:`write_overlay`) is a new layer whose sublayer is the checked stage: the
 colliding mesh prims get a time-sampled ``primvars:displayColor`` (red while they penetrate,
@@ -33,7 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .narrow_phase import TOLERANCE, pair_crossing_depth
+from .crossing import CrossingClassifier
+from .narrow_phase import TOLERANCE
 from .output import PendingFile, check_output_path
 from .usd import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 
@@ -340,6 +340,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     t = time.perf_counter()
     scene = imp.scene
     pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
+    classify = CrossingClassifier(scene, tolerance=tolerance)
     seconds["build"] += time.perf_counter() - t
     seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
@@ -353,7 +354,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         res = pipe.detect()
         t_detect = time.perf_counter()
         pairs = res.device_triangle_pairs
-        depth = pair_crossing_depth(scene, pairs, tolerance).numpy()
+        _, depth = classify(pairs)  # 0 where the surfaces only touch
         contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k])
         t2 = time.perf_counter()
         seconds["set"] += t1 - t

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .narrow_phase import CONTACT_SEGMENT, TOLERANCE, _unit_normal, crossing_depth, tri_tri_segment
+from .narrow_phase import TOLERANCE, _common_part, _plane_section, _unit_normal, crossing_depth
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
@@ -466,9 +466,10 @@ def _verdict(
     sup_b = _support(db0, db1, db2)
     if sup_a == -2 or sup_b == -2:
         return False
-    kind, p, q = tri_tri_segment(a0, a1, a2, b0, b1, b2, tol_rel)
-    if kind != CONTACT_SEGMENT:
-        return False
+    # Where they meet: the common part of each one's section by the other's plane.
+    pa, qa = _plane_section(a0, a1, a2, da0, da1, da2)
+    pb, qb = _plane_section(b0, b1, b2, db0, db1, db2)
+    p, q = _common_part(pa, qa, pb, qb)
     length = wp.length(q - p)
     if length <= eps:
         return False
@@ -569,46 +570,97 @@ def _crossing_kernel(
 _CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
-def vertex_depths(pair: np.ndarray, crossing: np.ndarray, eps: np.ndarray, local: np.ndarray,
-                  distance: np.ndarray, vertex: np.ndarray) -> np.ndarray:
-    """Depths of crossing rows from their vertices' sides (module docstring), vectorised.
+NEAREST_CHUNK = 256
+"""Triangles of the other object one thread measures a vertex against (:func:`_nearest_kernel`)."""
 
-    A vertex's side and distance to the other object are those of its nearest triangle among the
-    rows of that object pair that hold it; a row's depth is the deepest of its six vertices behind
-    the other surface, or its local depth (at least ``eps``) when none is.
 
-    Args:
-        pair: ``(M, 4)`` rows ``(obj_a, tri_a, obj_b, tri_b)``.
-        crossing: ``(M,)`` bool, the rows whose surfaces cross.
-        eps: ``(M,)`` absolute tolerances; local: ``(M,)`` local crossing depths.
-        distance: ``(M, 6)`` signed distances; vertex: ``(M, 6)`` world vertex indices.
+@wp.kernel
+def _nearest_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    query_vertex: wp.array[wp.int32],
+    query_object: wp.array[wp.int32],
+    # Outputs
+    nearest: wp.array[wp.float64],
+):
+    """Thread ``(q, c)``: the distance from world vertex ``query_vertex[q]`` to triangles
+    ``c * NEAREST_CHUNK ...`` of object ``query_object[q]``, folded into ``nearest[q]`` (atomic min)."""
+    q, c = wp.tid()
+    obj = query_object[q]
+    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
+    start = c * NEAREST_CHUNK
+    if start >= count:
+        return
+    p = wp.vec3d(world_vertex[query_vertex[q]])
+    best = nearest[q]
+    for t in range(start, wp.min(start + NEAREST_CHUNK, count)):
+        x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, t)
+        closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
+        best = wp.min(best, wp.length(p - closest))
+    wp.atomic_min(nearest, q, best)
+
+
+@wp.kernel
+def _nearest_side_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    query_vertex: wp.array[wp.int32],
+    query_object: wp.array[wp.int32],
+    nearest: wp.array[wp.float64],
+    # Outputs
+    side: wp.array[wp.float64],
+):
+    """Thread ``(q, c)``: where a triangle of the chunk is the nearest (:func:`_nearest_kernel`),
+    the vertex's side of the surface there, -1 behind (the closest feature's pseudo-normal; ties
+    share it), else 1."""
+    q, c = wp.tid()
+    obj = query_object[q]
+    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
+    start = c * NEAREST_CHUNK
+    if start >= count:
+        return
+    p = wp.vec3d(world_vertex[query_vertex[q]])
+    zero = wp.vec3d()
+    for t in range(start, wp.min(start + NEAREST_CHUNK, count)):
+        x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, t)
+        closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
+        if wp.length(p - closest) == nearest[q]:
+            y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, t, zero)
+            n, degenerate = _unit_normal(y0, y1, y2, wp.float64(TOLERANCE))
+            n = n * surface.shape_side[mesh.instance_shape[obj]]
+            d = _signed_distance(mesh, surface, world_vertex, obj, t, idx, y0, y1, y2, n, degenerate, zero,
+                                 wp.float64(TOLERANCE), p)
+            if d < wp.float64(0.0):
+                side[q] = wp.float64(-1.0)
+
+
+_NEAREST = precision_overloads(_nearest_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_NEAREST_SIDE = precision_overloads(_nearest_side_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+
+
+def _vertex_groups(pair: np.ndarray, distance: np.ndarray, vertex: np.ndarray):
+    """The rows' six vertex entries grouped by (object pair, vertex).
 
     Returns:
-        ``(M,)`` float64 depths, scene units: 0 where the row does not cross.
+        ``(group (M * 6,), vertex (G,), other (G,), distance (G,))``: each entry's group, and per
+        group its world vertex, the other object, and the least distance to the other's triangles
+        in those rows.
     """
-    m = len(pair)
-    depth = np.zeros(m)
-    if m == 0 or not crossing.any():
-        return depth
     pair = pair.astype(np.int64)
     num = int(max(pair[:, 0].max(), pair[:, 2].max())) + 1
     key_pair = np.repeat(pair[:, 0] * num + pair[:, 2], 6)
+    other = np.concatenate([np.repeat(pair[:, 2:3], 3, axis=1), np.repeat(pair[:, 0:1], 3, axis=1)], axis=1)
     vid = vertex.reshape(-1).astype(np.int64)
-    dist = distance.reshape(-1)
-    row_eps = np.repeat(eps, 6)
-    # Per (object pair, vertex): the signed distance of least magnitude.
-    order = np.lexsort((np.abs(dist), vid, key_pair))
+    dist = np.abs(distance.reshape(-1))
+    order = np.lexsort((dist, vid, key_pair))
     k_sorted, v_sorted = key_pair[order], vid[order]
     first = np.ones(len(order), bool)
     first[1:] = (k_sorted[1:] != k_sorted[:-1]) | (v_sorted[1:] != v_sorted[:-1])
-    group = np.cumsum(first) - 1
-    nearest = dist[order][first]
-    behind = np.where(-nearest > row_eps[order][first], -nearest, 0.0)
-    per_entry = np.empty(len(order))
-    per_entry[order] = behind[group]
-    row_depth = per_entry.reshape(m, 6).max(axis=1)
-    depth = np.where(row_depth > 0, row_depth, np.maximum(local, eps))
-    return np.where(crossing, depth, 0.0)
+    group = np.empty(len(order), np.int64)
+    group[order] = np.cumsum(first) - 1
+    lead = order[first]
+    return group, vid[lead], other.reshape(-1)[lead], dist[lead]
 
 
 class CrossingClassifier:
@@ -667,10 +719,43 @@ class CrossingClassifier:
                   inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance],
                   outputs=[self._crossing, self._eps, self._local, self._distance, self._vertex], device=scene.device)
         crossing = self._crossing.numpy()[:m].astype(bool)
+        if not crossing.any():
+            return crossing, np.zeros(m)
         rows = pairs.numpy().reshape(-1, 4)
-        depth = vertex_depths(rows, crossing, self._eps.numpy()[:m], self._local.numpy()[:m],
-                              self._distance.numpy()[:m], self._vertex.numpy()[:m])
-        return crossing, depth
+        eps = self._eps.numpy()[:m]
+        group, vertex, other, _ = _vertex_groups(rows, self._distance.numpy()[:m],
+                                                               self._vertex.numpy()[:m])
+        # The vertices of crossing rows: how far behind the other object's surface each lies, from
+        # its nearest point over all of that object's triangles, and its side there.
+        ask = np.unique(group.reshape(m, 6)[crossing])
+        behind = np.zeros(len(vertex))
+        d = scene.device
+        count = np.diff(scene.instance_triangle_start_np)[other[ask]]
+        dims = (len(ask), int(-(-count.max() // NEAREST_CHUNK)))
+        queries = [wp.array(vertex[ask].astype(np.int32), device=d), wp.array(other[ask].astype(np.int32), device=d)]
+        # Both passes compute each distance alike: the second finds the nearest by equality.
+        nearest = wp.full(len(ask), np.inf, dtype=wp.float64, device=d)
+        side = wp.ones(len(ask), dtype=wp.float64, device=d)
+        wp.launch(_NEAREST[scene.precision], dim=dims, inputs=[scene.topology, scene.world_vertex, *queries],
+                  outputs=[nearest], device=d)
+        wp.launch(_NEAREST_SIDE[scene.precision], dim=dims,
+                  inputs=[scene.topology, self.surface, scene.world_vertex, *queries, nearest], outputs=[side],
+                  device=d)
+        dist = nearest.numpy()
+        lead_eps = np.zeros(len(vertex))
+        np.maximum.at(lead_eps, group, np.repeat(eps, 6))
+        behind[ask] = np.where((side.numpy() < 0) & (dist > lead_eps[ask]), dist, 0.0)
+        row_depth = behind[group].reshape(m, 6).max(axis=1)
+        # A crossing row with no vertex behind (sheets crossing between their vertices, flush
+        # faces): its local depth, at most its object pair's deepest vertex, at least eps.
+        _, pair_index = np.unique(rows[:, [0, 2]], axis=0, return_inverse=True)
+        pair_depth = np.zeros(pair_index.max() + 1)
+        np.maximum.at(pair_depth, pair_index.reshape(-1), row_depth)
+        local = self._local.numpy()[:m]
+        cap = pair_depth[pair_index.reshape(-1)]
+        fallback = np.maximum(np.where(cap > 0, np.minimum(local, cap), local), eps)
+        depth = np.where(row_depth > 0, row_depth, fallback)
+        return crossing, np.where(crossing, depth, 0.0)
 
 
 def classify_pairs(scene, pairs: wp.array, tolerance: float = TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
