@@ -10,7 +10,10 @@ per object its world transform at every time code asked for:
   (``visibility = invisible`` at the first time code) and prims of purpose ``guide`` or
   ``proxy`` are skipped with their subtrees unless asked for; so are meshes without faces.
 * **Triangles.** Polygons are fanned (``n - 2`` triangles from a face of ``n`` vertices; faces in
-  ``holeIndices`` are left out); :attr:`UsdMeshImport.triangle_face` maps every triangle of the
+  ``holeIndices`` are left out), wound so that their normals point out of the object: a
+  ``leftHanded`` mesh, or one whose points a mirror was baked into, is wound the other way round
+  (penetrating or touching is decided by the sides of surfaces, :mod:`~warp_ccd.crossing`);
+  :attr:`UsdMeshImport.triangle_face` maps every triangle of the
   scene back to its USD face index. Faces of fewer than 3 vertices, indices outside the points,
   ``holeIndices`` that are not face indices, non-finite points and animated topology are errors
   naming the prim; so are a PointInstancer's negative or out-of-range ``protoIndices`` (naming
@@ -604,6 +607,8 @@ class UsdMeshImport:
             v = int(np.argmin(np.isfinite(points).all(axis=1)))
             raise ValueError(f"prim {name}: point {v} is not finite")
         tri, face = _fan(counts, indices, holes, name, len(points))
+        if mesh.GetOrientationAttr().Get(t0) == UsdGeom.Tokens.leftHanded:
+            tri = np.ascontiguousarray(tri[:, ::-1])  # wound right-handed: normals out of the object
         deforming = points_attr.ValueMightBeTimeVarying()
         digest = hashlib.blake2b(points.astype(np.float64).tobytes(), digest_size=16)
         digest.update(tri.tobytes())
@@ -804,12 +809,16 @@ class UsdMeshImport:
         for pos in first_use[by_use].tolist():
             i = int(order[pos])
             data = self._meshes[int(obj_mesh[i])]
+            linear = first[i, :3, :3] if o_def[pos] else bake[i] if o_baked[pos] else np.eye(3)
             if o_def[pos]:
-                verts = data.points @ first[i, :3, :3] + first[i, 3, :3]  # world, at the first time code
+                verts = data.points @ linear + first[i, 3, :3]  # world, at the first time code
             else:
-                verts = data.points @ bake[i] if o_baked[pos] else data.points
+                verts = data.points @ linear if o_baked[pos] else data.points
             shape_vertices.append(verts)
-            shape_triangles.append(data.triangles)
+            # A mirror baked into the points turns the winding round: wound back, the normals still
+            # point out of the object.
+            mirrored = np.linalg.det(linear) < 0
+            shape_triangles.append(np.ascontiguousarray(data.triangles[:, ::-1]) if mirrored else data.triangles)
             shape_faces.append(data.triangle_face)
         vcount = np.array([len(v) for v in shape_vertices], np.int64)
         tcount = np.array([len(t) for t in shape_triangles], np.int64)
