@@ -186,12 +186,17 @@ def world_polygon_meshes(stage, time) -> dict:
     cache = UsdGeom.XformCache(code)
     out = {}
 
-    def read(prim):
+    def read(prim, m):
+        """Points, triangles wound so that their normals point out of the object (the other way
+        round for a leftHanded mesh or under a mirroring world matrix ``m``), faces."""
         mesh = UsdGeom.Mesh(prim)
         points = np.asarray(mesh.GetPointsAttr().Get(code), np.float64)
         holes = set(mesh.GetHoleIndicesAttr().Get(code) or [])
         tri, face = fan(list(mesh.GetFaceVertexCountsAttr().Get(code)),
                         list(mesh.GetFaceVertexIndicesAttr().Get(code)), holes)
+        left = mesh.GetOrientationAttr().Get(code) == UsdGeom.Tokens.leftHanded
+        if left != (np.linalg.det(m[:3, :3]) < 0):
+            tri = np.ascontiguousarray(tri[:, ::-1])
         return points, tri, face
 
     it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
@@ -211,14 +216,14 @@ def world_polygon_meshes(stage, time) -> dict:
                 root = stage.GetPrimAtPath(protos[p_idx])
                 for p in Usd.PrimRange(root):
                     if p.IsA(UsdGeom.Mesh):
-                        points, tri, face = read(p)
                         rel = np.asarray(cache.ComputeRelativeTransform(p, root)[0])
                         m = rel @ np.asarray(xf[i]) @ world
+                        points, tri, face = read(p, m)
                         name = f"{prim.GetPath()}[{i}]{str(p.GetPath())[len(str(root.GetParent().GetPath())):]}"
                         out[name] = (points @ m[:3, :3] + m[3, :3], tri, face)
             continue
         if prim.IsA(UsdGeom.Mesh):
-            points, tri, face = read(prim)
             m = np.asarray(cache.GetLocalToWorldTransform(prim))
+            points, tri, face = read(prim, m)
             out[str(prim.GetPath())] = (points @ m[:3, :3] + m[3, :3], tri, face)
     return out
