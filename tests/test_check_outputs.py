@@ -29,7 +29,9 @@ def run_cli(capsys, args):
 
 
 def message_lines(err: str) -> list[str]:
-    return [line for line in err.strip().splitlines() if line.strip()]
+    """The lines of a command's stderr, less the notice that kernels are being compiled (a cold
+    kernel cache, as on a fresh machine)."""
+    return [line for line in err.strip().splitlines() if line.strip() and "compiling kernels" not in line]
 
 
 def listing(folder) -> dict:

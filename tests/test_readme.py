@@ -147,8 +147,8 @@ def test_usd_check_example_as_the_readme_runs_it(tmp_path):
     temp.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV", "PYTHONPATH", "PYTHONHOME")}
     env.update(TMPDIR=str(temp), TEMP=str(temp), TMP=str(temp))
-    if python == sys.executable:  # no .venv here: the package must still be found
-        env["PYTHONPATH"] = ROOT
+    if python == sys.executable:  # no .venv here: the package (and what this Python imports) must still be found
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH")) if p)
     proc = subprocess.run([python, script, "--device", DEFAULT_DEVICE, "--num-frames", "8"], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stderr
