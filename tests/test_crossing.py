@@ -235,3 +235,35 @@ def test_far_from_the_origin_and_tiny(device):
         assert cross and deepest == pytest.approx(0.5 * size, rel=1e-5)
         _, cross, _ = verdict([place(floor), place(rest)], device, "float64")
         assert not cross
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_tree_and_reference_depths_agree(device, precision, rng):
+    """Depths found down the pipeline's trees equal those measured against every triangle (the
+    reference), for rigid objects under poses and deforming ones."""
+    sphere = wc.shapes.icosphere(3)
+    meshes, transforms = [], []
+    for _ in range(12):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        m = np.eye(4)
+        w, x, y, z = q
+        m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+        m[:3, 3] = rng.uniform(-1.5, 1.5, 3) + [100.0, -50.0, 20.0]
+        meshes.append((sphere[0] * rng.uniform(0.6, 1.0), sphere[1]))
+        transforms.append(m)
+    for deforming in (False, True):
+        if deforming:
+            world = [(v @ t[:3, :3].T + t[:3, 3], f) for (v, f), t in zip(meshes, transforms)]
+            scene = wc.Scene.from_meshes(world, deforming=True, device=device, precision=precision)
+        else:
+            scene = wc.Scene.from_meshes(meshes, np.array(transforms), device=device, precision=precision)
+        pipe = wc.CollisionPipeline(scene)
+        pairs = pipe.detect().device_triangle_pairs
+        crossing, depth = CrossingClassifier(scene, trees=pipe.boxes)(pairs)
+        want_crossing, want = CrossingClassifier(scene)(pairs)
+        assert crossing.any() and (depth > 0).sum() > 10
+        np.testing.assert_array_equal(crossing, want_crossing)
+        np.testing.assert_array_equal(depth, want)

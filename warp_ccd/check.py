@@ -340,7 +340,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     t = time.perf_counter()
     scene = imp.scene
     pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
-    classify = CrossingClassifier(scene, tolerance=tolerance)
+    classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
     seconds["build"] += time.perf_counter() - t
     seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier

@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .bvh import SceneBVH, TreeView
 from .narrow_phase import TOLERANCE, _common_part, _plane_section, _unit_normal, crossing_depth
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
@@ -570,120 +571,182 @@ def _crossing_kernel(
 _CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
-NEAREST_CHUNK = 256
-"""Triangles of the other object one thread measures a vertex against (:func:`_nearest_kernel`)."""
+TREE_STACK = 64
+"""Nodes a nearest-point query keeps to visit (:func:`_nearest_tree_kernel`): a balanced tree's depth
+plus one suffices (24 levels hold 16M leaves)."""
+
+_NodeStack = wp.types.vector(length=TREE_STACK, dtype=wp.int32)
+
+BOX_SLACK = 2.0**-15
+"""Relative slack of a node box's distance in a nearest-point query, in units of ``|t| + |p - t|``
+(pose translation ``t``, query point ``p``): covers the rounding of world vertices computed from
+poses (the mid phase's :data:`~warp_ccd.bvh.WORLD_ERROR_ULPS` in float32) and of the query point
+taken to the box space."""
+
+
+@wp.func
+def _nearer(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, p: wp.vec3d, best: wp.float64,
+            best_tri: int):
+    """``(best, best_tri)`` with local triangle ``tri`` of ``obj`` taken in when it is no farther from ``p``."""
+    x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
+    closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
+    d = wp.length(p - closest)
+    if d < best or (best_tri < 0 and d <= best):
+        return d, tri
+    return best, best_tri
+
+
+@wp.func
+def _side_at(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
+             p: wp.vec3d):
+    """-1 when ``p`` lies behind the surface of ``obj`` at its nearest point, on triangle ``tri``
+    (the closest feature's pseudo-normal), else 1."""
+    if tri < 0:
+        return wp.float64(1.0)
+    zero = wp.vec3d()
+    y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, tri, zero)
+    n, degenerate = _unit_normal(y0, y1, y2, wp.float64(TOLERANCE))
+    n = n * surface.shape_side[mesh.instance_shape[obj]]
+    d = _signed_distance(mesh, surface, world_vertex, obj, tri, idx, y0, y1, y2, n, degenerate, zero,
+                         wp.float64(TOLERANCE), p)
+    if d < wp.float64(0.0):
+        return wp.float64(-1.0)
+    return wp.float64(1.0)
 
 
 @wp.kernel
-def _nearest_kernel(
-    mesh: MeshTopology,
-    world_vertex: wp.array[Any],
-    query_vertex: wp.array[wp.int32],
-    query_object: wp.array[wp.int32],
-    # Outputs
-    nearest: wp.array[wp.float64],
-):
-    """Thread ``(q, c)``: the distance from world vertex ``query_vertex[q]`` to triangles
-    ``c * NEAREST_CHUNK ...`` of object ``query_object[q]``, folded into ``nearest[q]`` (atomic min)."""
-    q, c = wp.tid()
-    obj = query_object[q]
-    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
-    start = c * NEAREST_CHUNK
-    if start >= count:
-        return
-    p = wp.vec3d(world_vertex[query_vertex[q]])
-    best = nearest[q]
-    for t in range(start, wp.min(start + NEAREST_CHUNK, count)):
-        x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, t)
-        closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
-        best = wp.min(best, wp.length(p - closest))
-    wp.atomic_min(nearest, q, best)
-
-
-@wp.kernel
-def _nearest_side_kernel(
+def _nearest_all_kernel(
     mesh: MeshTopology,
     surface: SurfaceTopology,
     world_vertex: wp.array[Any],
     query_vertex: wp.array[wp.int32],
     query_object: wp.array[wp.int32],
-    nearest: wp.array[wp.float64],
     # Outputs
+    nearest: wp.array[wp.float64],
     side: wp.array[wp.float64],
 ):
-    """Thread ``(q, c)``: where a triangle of the chunk is the nearest (:func:`_nearest_kernel`),
-    the vertex's side of the surface there, -1 behind (the closest feature's pseudo-normal; ties
-    share it), else 1."""
-    q, c = wp.tid()
+    """The reference: thread ``q`` measures world vertex ``query_vertex[q]`` against every triangle
+    of object ``query_object[q]``: its distance to the nearest, and its side there (:func:`_side_at`)."""
+    q = wp.tid()
     obj = query_object[q]
-    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
-    start = c * NEAREST_CHUNK
-    if start >= count:
-        return
     p = wp.vec3d(world_vertex[query_vertex[q]])
+    best = wp.float64(1.0e300)
+    best_tri = int(-1)
+    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
+    for t in range(count):
+        best, best_tri = _nearer(mesh, world_vertex, obj, t, p, best, best_tri)
+    nearest[q] = best
+    side[q] = _side_at(mesh, surface, world_vertex, obj, best_tri, p)
+
+
+@wp.kernel
+def _nearest_tree_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    tree: TreeView,
+    world_vertex: wp.array[Any],
+    pose: wp.array[Any],
+    scale: wp.array[wp.float32],
+    deforming: wp.array[wp.int32],
+    query_vertex: wp.array[wp.int32],
+    query_object: wp.array[wp.int32],
+    bound: wp.array[wp.float64],
+    # Outputs
+    nearest: wp.array[wp.float64],
+    side: wp.array[wp.float64],
+):
+    """:func:`_nearest_all_kernel` down the object's tree: nodes whose box (in the object's box
+    space: its shape's for a rigid object, under its pose and scale) is farther than the nearest
+    triangle so far, or than ``bound[q]`` (a distance already known, to a triangle of the object),
+    are skipped."""
+    q = wp.tid()
+    obj = query_object[q]
+    p = wp.vec3d(world_vertex[query_vertex[q]])
+    s = mesh.instance_shape[obj]
+    pb = p
+    sc = wp.float64(1.0)
+    slack = wp.float64(0.0)
+    if deforming[obj] == 0:
+        x = pose[obj]
+        t = wp.vec3d(wp.transform_get_translation(x))
+        rf = wp.transform_get_rotation(x)
+        r = wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3]))
+        sc = wp.float64(scale[obj])
+        pb = wp.quat_rotate_inv(r, p - t) / sc
+        slack = wp.float64(BOX_SLACK) * (wp.length(t) + wp.length(p - t))
+    else:
+        slack = wp.float64(BOX_SLACK) * wp.length(p)
+    best = bound[q] * wp.float64(1.0 + 1.0e-9) + slack
+    best_tri = int(-1)
+    node_start = tree.layout_node_start[tree.shape_layout[s]]
+    slot_start = tree.instance_node_start[obj]
+    tri_start = tree.shape_tri_order_start[s]
     zero = wp.vec3d()
-    for t in range(start, wp.min(start + NEAREST_CHUNK, count)):
-        x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, t)
-        closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
-        if wp.length(p - closest) == nearest[q]:
-            y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, t, zero)
-            n, degenerate = _unit_normal(y0, y1, y2, wp.float64(TOLERANCE))
-            n = n * surface.shape_side[mesh.instance_shape[obj]]
-            d = _signed_distance(mesh, surface, world_vertex, obj, t, idx, y0, y1, y2, n, degenerate, zero,
-                                 wp.float64(TOLERANCE), p)
-            if d < wp.float64(0.0):
-                side[q] = wp.float64(-1.0)
+    stack = _NodeStack()
+    stack[0] = 0
+    top = int(1)
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        lo = wp.vec3d(tree.node_lower[slot_start + node])
+        hi = wp.vec3d(tree.node_upper[slot_start + node])
+        gap = wp.max(wp.max(lo - pb, pb - hi), zero)
+        if wp.length(gap) * sc - slack > best:
+            continue
+        child = tree.node_child[node_start + node]
+        if child[0] < 0:
+            rng = tree.node_triangle[node_start + node]
+            for k in range(rng[0], rng[0] + rng[1]):
+                best, best_tri = _nearer(mesh, world_vertex, obj, tree.tri_order[tri_start + k], p, best, best_tri)
+        elif top + 2 <= TREE_STACK:
+            stack[top] = child[1]
+            stack[top + 1] = child[0]
+            top += 2
+    nearest[q] = best
+    side[q] = _side_at(mesh, surface, world_vertex, obj, best_tri, p)
 
 
-_NEAREST = precision_overloads(_nearest_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
-_NEAREST_SIDE = precision_overloads(_nearest_side_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_NEAREST_ALL = precision_overloads(_nearest_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_NEAREST_TREE = precision_overloads(_nearest_tree_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
+                                                                              "pose": wp.array[t]})
 
 
-def _vertex_groups(pair: np.ndarray, distance: np.ndarray, vertex: np.ndarray):
-    """The rows' six vertex entries grouped by (object pair, vertex).
-
-    Returns:
-        ``(group (M * 6,), vertex (G,), other (G,), distance (G,))``: each entry's group, and per
-        group its world vertex, the other object, and the least distance to the other's triangles
-        in those rows.
-    """
-    pair = pair.astype(np.int64)
-    num = int(max(pair[:, 0].max(), pair[:, 2].max())) + 1
-    key_pair = np.repeat(pair[:, 0] * num + pair[:, 2], 6)
-    other = np.concatenate([np.repeat(pair[:, 2:3], 3, axis=1), np.repeat(pair[:, 0:1], 3, axis=1)], axis=1)
-    vid = vertex.reshape(-1).astype(np.int64)
-    dist = np.abs(distance.reshape(-1))
-    order = np.lexsort((dist, vid, key_pair))
-    k_sorted, v_sorted = key_pair[order], vid[order]
-    first = np.ones(len(order), bool)
-    first[1:] = (k_sorted[1:] != k_sorted[:-1]) | (v_sorted[1:] != v_sorted[:-1])
-    group = np.empty(len(order), np.int64)
-    group[order] = np.cumsum(first) - 1
-    lead = order[first]
-    return group, vid[lead], other.reshape(-1)[lead], dist[lead]
+def _segment_max(values: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Per entry, the largest of ``values`` over the entries with its key."""
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    start = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    group = np.empty(len(keys), np.int64)
+    group[order] = np.cumsum(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]) - 1
+    return np.maximum.reduceat(values[order], start)[group]
 
 
 class CrossingClassifier:
     """Penetrating or touching, for the intersecting triangle pairs of a scene (module docstring).
 
     Owns the scene's :class:`SurfaceTopology` (built once: topology does not change with the
-    poses or the world vertices) and its output buffers, grown as needed.
+    poses or the world vertices) and its output buffers, grown as needed. A vertex's distance to
+    the other object is found down that object's tree when the pipeline's trees are given (as
+    they stand after its ``detect()``), else against every one of its triangles (the reference).
 
     Example::
 
-        classify = CrossingClassifier(scene)
+        pipe = CollisionPipeline(scene)
+        classify = CrossingClassifier(scene, trees=pipe.boxes)
         res = pipe.detect()
         crossing, depth = classify(res.device_triangle_pairs)
     """
 
-    def __init__(self, scene, *, tolerance: float = TOLERANCE):
+    def __init__(self, scene, *, tolerance: float = TOLERANCE, trees=None):
         """
         Args:
             scene: the :class:`~warp_ccd.scene.Scene` whose pairs will be classified.
             tolerance: the exact test's relative tolerance.
+            trees: the pipeline's :class:`~warp_ccd.bvh.SceneBVH` (``CollisionPipeline.boxes``), or None.
         """
         self.scene = scene
         self.tolerance = float(tolerance)
+        self.trees = trees if isinstance(trees, SceneBVH) else None
         self.surface = surface_topology(scene)
         self._capacity = 0
 
@@ -721,41 +784,46 @@ class CrossingClassifier:
         crossing = self._crossing.numpy()[:m].astype(bool)
         if not crossing.any():
             return crossing, np.zeros(m)
-        rows = pairs.numpy().reshape(-1, 4)
-        eps = self._eps.numpy()[:m]
-        group, vertex, other, _ = _vertex_groups(rows, self._distance.numpy()[:m],
-                                                               self._vertex.numpy()[:m])
-        # The vertices of crossing rows: how far behind the other object's surface each lies, from
-        # its nearest point over all of that object's triangles, and its side there.
-        ask = np.unique(group.reshape(m, 6)[crossing])
-        behind = np.zeros(len(vertex))
+        at = np.flatnonzero(crossing)
+        rows = pairs.numpy().reshape(-1, 4)[at].astype(np.int64)
+        eps = self._eps.numpy()[at]
+        # The six vertices of each crossing row, grouped by (vertex, other object): each group's
+        # distance to the other object's surface and its side there, measured once.
+        vertex = self._vertex.numpy()[at].reshape(-1).astype(np.int64)
+        other = np.repeat(rows[:, [2, 0]], 3, axis=1).reshape(-1)
+        key = other * max(scene.num_world_vertices, 1) + vertex
+        order = np.argsort(key, kind="stable")
+        first = np.r_[True, key[order][1:] != key[order][:-1]]
+        start = np.flatnonzero(first)
+        group = np.empty(len(key), np.int64)
+        group[order] = np.cumsum(first) - 1
+        lead = order[start]
         d = scene.device
-        count = np.diff(scene.instance_triangle_start_np)[other[ask]]
-        dims = (len(ask), int(-(-count.max() // NEAREST_CHUNK)))
-        queries = [wp.array(vertex[ask].astype(np.int32), device=d), wp.array(other[ask].astype(np.int32), device=d)]
-        # Both passes compute each distance alike: the second finds the nearest by equality.
-        nearest = wp.full(len(ask), np.inf, dtype=wp.float64, device=d)
-        side = wp.ones(len(ask), dtype=wp.float64, device=d)
-        wp.launch(_NEAREST[scene.precision], dim=dims, inputs=[scene.topology, scene.world_vertex, *queries],
-                  outputs=[nearest], device=d)
-        wp.launch(_NEAREST_SIDE[scene.precision], dim=dims,
-                  inputs=[scene.topology, self.surface, scene.world_vertex, *queries, nearest], outputs=[side],
-                  device=d)
-        dist = nearest.numpy()
-        lead_eps = np.zeros(len(vertex))
-        np.maximum.at(lead_eps, group, np.repeat(eps, 6))
-        behind[ask] = np.where((side.numpy() < 0) & (dist > lead_eps[ask]), dist, 0.0)
-        row_depth = behind[group].reshape(m, 6).max(axis=1)
+        queries = [wp.array(vertex[lead].astype(np.int32), device=d), wp.array(other[lead].astype(np.int32), device=d)]
+        nearest = wp.empty(len(lead), dtype=wp.float64, device=d)
+        side = wp.empty(len(lead), dtype=wp.float64, device=d)
+        if self.trees is not None:
+            bound = np.minimum.reduceat(np.abs(self._distance.numpy()[at].reshape(-1))[order], start)
+            tree = self.trees
+            wp.launch(_NEAREST_TREE[scene.precision], dim=len(lead),
+                      inputs=[scene.topology, self.surface, tree.tree, scene.world_vertex, scene.instance_pose,
+                              scene.instance_scale, tree.instance_deforming, *queries,
+                              wp.array(bound, dtype=wp.float64, device=d)], outputs=[nearest, side], device=d)
+        else:
+            wp.launch(_NEAREST_ALL[scene.precision], dim=len(lead),
+                      inputs=[scene.topology, self.surface, scene.world_vertex, *queries], outputs=[nearest, side],
+                      device=d)
+        dist, behind = nearest.numpy()[group], side.numpy()[group] < 0
+        entry = np.where(behind & (dist > np.repeat(eps, 6)), dist, 0.0)
+        row_depth = entry.reshape(-1, 6).max(axis=1)
         # A crossing row with no vertex behind (sheets crossing between their vertices, flush
         # faces): its local depth, at most its object pair's deepest vertex, at least eps.
-        _, pair_index = np.unique(rows[:, [0, 2]], axis=0, return_inverse=True)
-        pair_depth = np.zeros(pair_index.max() + 1)
-        np.maximum.at(pair_depth, pair_index.reshape(-1), row_depth)
-        local = self._local.numpy()[:m]
-        cap = pair_depth[pair_index.reshape(-1)]
+        cap = _segment_max(row_depth, rows[:, 0] * scene.num_objects + rows[:, 2])
+        local = self._local.numpy()[at]
         fallback = np.maximum(np.where(cap > 0, np.minimum(local, cap), local), eps)
-        depth = np.where(row_depth > 0, row_depth, fallback)
-        return crossing, np.where(crossing, depth, 0.0)
+        depth = np.zeros(m)
+        depth[at] = np.where(row_depth > 0, row_depth, fallback)
+        return crossing, depth
 
 
 def classify_pairs(scene, pairs: wp.array, tolerance: float = TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
