@@ -572,7 +572,7 @@ _CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_ver
 
 
 TREE_STACK = 64
-"""Nodes a nearest-point query keeps to visit (:func:`_nearest_tree_kernel`): a balanced tree's depth
+"""Nodes a nearest-point query keeps to visit (:func:`_depth_tree_kernel`): a balanced tree's depth
 plus one suffices (24 levels hold 16M leaves)."""
 
 _NodeStack = wp.types.vector(length=TREE_STACK, dtype=wp.int32)
@@ -614,33 +614,56 @@ def _side_at(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.arra
     return wp.float64(1.0)
 
 
+@wp.func
+def _entry(pair: wp.array[wp.vec4i], vertex: wp.array2d[wp.int32], world_vertex: wp.array[Any], k: int, i: int):
+    """Vertex ``i`` of row ``k`` (0-2 of its first triangle, 3-5 of its second): its world position
+    and the other object."""
+    c = pair[k]
+    other = c[2]
+    if i >= 3:
+        other = c[0]
+    return wp.vec3d(world_vertex[vertex[k, i]]), other
+
+
+@wp.func
+def _entry_depth(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
+                 p: wp.vec3d, best: wp.float64, eps: wp.float64):
+    """How far ``p`` lies behind the surface of ``obj`` (``best`` from it, nearest on ``tri``), 0
+    when in front or within ``eps``."""
+    if best > eps and _side_at(mesh, surface, world_vertex, obj, tri, p) < wp.float64(0.0):
+        return best
+    return wp.float64(0.0)
+
+
 @wp.kernel
-def _nearest_all_kernel(
+def _depth_all_kernel(
     mesh: MeshTopology,
     surface: SurfaceTopology,
     world_vertex: wp.array[Any],
-    query_vertex: wp.array[wp.int32],
-    query_object: wp.array[wp.int32],
+    pair: wp.array[wp.vec4i],
+    crossing: wp.array[wp.int32],
+    vertex: wp.array2d[wp.int32],
+    eps: wp.array[wp.float64],
     # Outputs
-    nearest: wp.array[wp.float64],
-    side: wp.array[wp.float64],
+    depth: wp.array2d[wp.float64],
 ):
-    """The reference: thread ``q`` measures world vertex ``query_vertex[q]`` against every triangle
-    of object ``query_object[q]``: its distance to the nearest, and its side there (:func:`_side_at`)."""
-    q = wp.tid()
-    obj = query_object[q]
-    p = wp.vec3d(world_vertex[query_vertex[q]])
+    """The reference: thread ``(k, i)`` measures vertex ``i`` of crossing row ``k`` against every
+    triangle of the other object: how far it lies behind that object's surface (:func:`_entry_depth`)."""
+    k, i = wp.tid()
+    if crossing[k] == 0:
+        depth[k, i] = wp.float64(0.0)
+        return
+    p, obj = _entry(pair, vertex, world_vertex, k, i)
     best = wp.float64(1.0e300)
     best_tri = int(-1)
     count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
     for t in range(count):
         best, best_tri = _nearer(mesh, world_vertex, obj, t, p, best, best_tri)
-    nearest[q] = best
-    side[q] = _side_at(mesh, surface, world_vertex, obj, best_tri, p)
+    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k])
 
 
 @wp.kernel
-def _nearest_tree_kernel(
+def _depth_tree_kernel(
     mesh: MeshTopology,
     surface: SurfaceTopology,
     tree: TreeView,
@@ -648,24 +671,26 @@ def _nearest_tree_kernel(
     pose: wp.array[Any],
     scale: wp.array[wp.float32],
     deforming: wp.array[wp.int32],
-    query_vertex: wp.array[wp.int32],
-    query_object: wp.array[wp.int32],
-    bound: wp.array[wp.float64],
+    pair: wp.array[wp.vec4i],
+    crossing: wp.array[wp.int32],
+    vertex: wp.array2d[wp.int32],
+    distance: wp.array2d[wp.float64],
+    eps: wp.array[wp.float64],
     # Outputs
-    nearest: wp.array[wp.float64],
-    side: wp.array[wp.float64],
+    depth: wp.array2d[wp.float64],
 ):
-    """:func:`_nearest_all_kernel` down the object's tree: nodes whose box (in the object's box
+    """:func:`_depth_all_kernel` down the other object's tree: nodes whose box (in the object's box
     space: its shape's for a rigid object, under its pose and scale) is farther than the nearest
-    triangle so far, or than ``bound[q]`` (a distance already known, to a triangle of the object),
-    are skipped."""
-    q = wp.tid()
-    obj = query_object[q]
-    p = wp.vec3d(world_vertex[query_vertex[q]])
+    triangle so far, or than the row's own triangle (``distance[k, i]``), are skipped."""
+    k, i = wp.tid()
+    if crossing[k] == 0:
+        depth[k, i] = wp.float64(0.0)
+        return
+    p, obj = _entry(pair, vertex, world_vertex, k, i)
     s = mesh.instance_shape[obj]
     pb = p
     sc = wp.float64(1.0)
-    slack = wp.float64(0.0)
+    slack = wp.float64(BOX_SLACK) * wp.length(p)
     if deforming[obj] == 0:
         x = pose[obj]
         t = wp.vec3d(wp.transform_get_translation(x))
@@ -674,9 +699,7 @@ def _nearest_tree_kernel(
         sc = wp.float64(scale[obj])
         pb = wp.quat_rotate_inv(r, p - t) / sc
         slack = wp.float64(BOX_SLACK) * (wp.length(t) + wp.length(p - t))
-    else:
-        slack = wp.float64(BOX_SLACK) * wp.length(p)
-    best = bound[q] * wp.float64(1.0 + 1.0e-9) + slack
+    best = wp.abs(distance[k, i]) * wp.float64(1.0 + 1.0e-9) + slack
     best_tri = int(-1)
     node_start = tree.layout_node_start[tree.shape_layout[s]]
     slot_start = tree.instance_node_start[obj]
@@ -688,37 +711,35 @@ def _nearest_tree_kernel(
     while top > 0:
         top -= 1
         node = stack[top]
-        lo = wp.vec3d(tree.node_lower[slot_start + node])
-        hi = wp.vec3d(tree.node_upper[slot_start + node])
-        gap = wp.max(wp.max(lo - pb, pb - hi), zero)
+        gap = wp.max(wp.max(wp.vec3d(tree.node_lower[slot_start + node]) - pb,
+                            pb - wp.vec3d(tree.node_upper[slot_start + node])), zero)
         if wp.length(gap) * sc - slack > best:
             continue
         child = tree.node_child[node_start + node]
         if child[0] < 0:
             rng = tree.node_triangle[node_start + node]
-            for k in range(rng[0], rng[0] + rng[1]):
-                best, best_tri = _nearer(mesh, world_vertex, obj, tree.tri_order[tri_start + k], p, best, best_tri)
+            for j in range(rng[0], rng[0] + rng[1]):
+                best, best_tri = _nearer(mesh, world_vertex, obj, tree.tri_order[tri_start + j], p, best, best_tri)
         elif top + 2 <= TREE_STACK:
             stack[top] = child[1]
             stack[top + 1] = child[0]
             top += 2
-    nearest[q] = best
-    side[q] = _side_at(mesh, surface, world_vertex, obj, best_tri, p)
+    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k])
 
 
-_NEAREST_ALL = precision_overloads(_nearest_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
-_NEAREST_TREE = precision_overloads(_nearest_tree_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
-                                                                              "pose": wp.array[t]})
+_DEPTH_ALL = precision_overloads(_depth_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_DEPTH_TREE = precision_overloads(_depth_tree_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
+                                                                          "pose": wp.array[t]})
 
 
 def _segment_max(values: np.ndarray, keys: np.ndarray) -> np.ndarray:
     """Per entry, the largest of ``values`` over the entries with its key."""
     order = np.argsort(keys, kind="stable")
     sorted_keys = keys[order]
-    start = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    first = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]
     group = np.empty(len(keys), np.int64)
-    group[order] = np.cumsum(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]) - 1
-    return np.maximum.reduceat(values[order], start)[group]
+    group[order] = np.cumsum(first) - 1
+    return np.maximum.reduceat(values[order], np.flatnonzero(first))[group]
 
 
 class CrossingClassifier:
@@ -760,6 +781,7 @@ class CrossingClassifier:
         self._local = wp.zeros(cap, dtype=wp.float64, device=d)
         self._distance = wp.zeros((cap, 6), dtype=wp.float64, device=d)
         self._vertex = wp.zeros((cap, 6), dtype=wp.int32, device=d)
+        self._entry_depth = wp.zeros((cap, 6), dtype=wp.float64, device=d)
         self._capacity = cap
 
     def __call__(self, pairs: wp.array) -> tuple[np.ndarray, np.ndarray]:
@@ -781,48 +803,32 @@ class CrossingClassifier:
         wp.launch(_CROSSING[scene.precision], dim=m,
                   inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance],
                   outputs=[self._crossing, self._eps, self._local, self._distance, self._vertex], device=scene.device)
-        crossing = self._crossing.numpy()[:m].astype(bool)
+        crossing = self._crossing[:m].numpy().astype(bool)
         if not crossing.any():
             return crossing, np.zeros(m)
-        at = np.flatnonzero(crossing)
-        rows = pairs.numpy().reshape(-1, 4)[at].astype(np.int64)
-        eps = self._eps.numpy()[at]
-        # The six vertices of each crossing row, grouped by (vertex, other object): each group's
-        # distance to the other object's surface and its side there, measured once.
-        vertex = self._vertex.numpy()[at].reshape(-1).astype(np.int64)
-        other = np.repeat(rows[:, [2, 0]], 3, axis=1).reshape(-1)
-        key = other * max(scene.num_world_vertices, 1) + vertex
-        order = np.argsort(key, kind="stable")
-        first = np.r_[True, key[order][1:] != key[order][:-1]]
-        start = np.flatnonzero(first)
-        group = np.empty(len(key), np.int64)
-        group[order] = np.cumsum(first) - 1
-        lead = order[start]
+        # How far each vertex of a crossing row lies behind the other object's surface.
         d = scene.device
-        queries = [wp.array(vertex[lead].astype(np.int32), device=d), wp.array(other[lead].astype(np.int32), device=d)]
-        nearest = wp.empty(len(lead), dtype=wp.float64, device=d)
-        side = wp.empty(len(lead), dtype=wp.float64, device=d)
+        inputs = [scene.topology, self.surface]
         if self.trees is not None:
-            bound = np.minimum.reduceat(np.abs(self._distance.numpy()[at].reshape(-1))[order], start)
             tree = self.trees
-            wp.launch(_NEAREST_TREE[scene.precision], dim=len(lead),
-                      inputs=[scene.topology, self.surface, tree.tree, scene.world_vertex, scene.instance_pose,
-                              scene.instance_scale, tree.instance_deforming, *queries,
-                              wp.array(bound, dtype=wp.float64, device=d)], outputs=[nearest, side], device=d)
+            inputs += [tree.tree, scene.world_vertex, scene.instance_pose, scene.instance_scale,
+                       tree.instance_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps]
+            kernel = _DEPTH_TREE
         else:
-            wp.launch(_NEAREST_ALL[scene.precision], dim=len(lead),
-                      inputs=[scene.topology, self.surface, scene.world_vertex, *queries], outputs=[nearest, side],
-                      device=d)
-        dist, behind = nearest.numpy()[group], side.numpy()[group] < 0
-        entry = np.where(behind & (dist > np.repeat(eps, 6)), dist, 0.0)
-        row_depth = entry.reshape(-1, 6).max(axis=1)
+            inputs += [scene.world_vertex, pairs, self._crossing, self._vertex, self._eps]
+            kernel = _DEPTH_ALL
+        wp.launch(kernel[scene.precision], dim=(m, 6), inputs=inputs, outputs=[self._entry_depth], device=d)
+        depth = self._entry_depth[:m].numpy().max(axis=1)
         # A crossing row with no vertex behind (sheets crossing between their vertices, flush
         # faces): its local depth, at most its object pair's deepest vertex, at least eps.
-        cap = _segment_max(row_depth, rows[:, 0] * scene.num_objects + rows[:, 2])
-        local = self._local.numpy()[at]
-        fallback = np.maximum(np.where(cap > 0, np.minimum(local, cap), local), eps)
-        depth = np.zeros(m)
-        depth[at] = np.where(row_depth > 0, row_depth, fallback)
+        need = crossing & (depth == 0)
+        if need.any():
+            at = np.flatnonzero(crossing)
+            rows = pairs.numpy().reshape(-1, 4)[at].astype(np.int64)
+            cap = _segment_max(depth[at], rows[:, 0] * scene.num_objects + rows[:, 2])
+            local, eps = self._local[:m].numpy()[at], self._eps[:m].numpy()[at]
+            fallback = np.maximum(np.where(cap > 0, np.minimum(local, cap), local), eps)
+            depth[at] = np.where(depth[at] > 0, depth[at], fallback)
         return crossing, depth
 
 
