@@ -302,3 +302,13 @@ def test_collide_far_from_the_origin(device):
     # Near enough for float32: 1e3 from the origin with triangles of 1.4.
     meshes, transforms = cube_meshes_and_transforms(1e3)
     assert wc.collide(meshes, transforms, device=device).object_pairs.tolist() == [[0, 1]]
+
+
+def test_cli_says_it_switched_to_float64_in_one_line(tmp_path, capsys):
+    path = tmp_path / "far.usda"
+    stage = overlapping_cubes_stage(1e8)
+    stage.GetRootLayer().Export(str(path))
+    assert cli.main(["check", str(path), "--device", DEFAULT_DEVICE]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if "float64" in line]
+    assert err == ["warp-ccd check: note: prim /World/B: coordinates up to 1e+08 are beyond float32 at triangles "
+                   "of size 1.41 (its step there: 12): checking in float64"]

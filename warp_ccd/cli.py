@@ -26,6 +26,7 @@ import re
 import sys
 import time
 import traceback
+import warnings
 
 from .cli_common import (
     EXIT_ERROR,
@@ -346,13 +347,24 @@ def _run_check(args) -> int:
     if uncached_modules(device, modules):
         print(f"{PROG} check: compiling kernels for {device} (not in Warp's kernel cache yet; later runs "
               "reuse them)...", file=sys.stderr, flush=True)
+    from .precision import PrecisionWarning
+
     try:
-        report = check_usd(stage, frames=frames, prims=_flat(args.prims), device=device, precision=args.precision,
-                           min_depth=args.min_depth, count_touching=args.count_touching, segments=args.segments,
-                           include_invisible=args.include_invisible, include_purposes=tuple(args.include_purpose),
-                           progress=True, allow_missing=args.allow_missing)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", PrecisionWarning)
+            report = check_usd(stage, frames=frames, prims=_flat(args.prims), device=device,
+                               precision=args.precision, min_depth=args.min_depth,
+                               count_touching=args.count_touching, segments=args.segments,
+                               include_invisible=args.include_invisible,
+                               include_purposes=tuple(args.include_purpose), progress=True,
+                               allow_missing=args.allow_missing)
     except ValueError as exc:
         raise fail(str(exc)) from None
+    for w in caught:  # a switch to float64: one plain line (others as Python shows them)
+        if issubclass(w.category, PrecisionWarning):
+            print(f"{PROG} check: note: {w.message}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     report.seconds["read"] = round(report.seconds.get("read", 0.0) + opened, 4)  # the stage was opened here
     print(report.summary(top=args.top))
 
