@@ -48,7 +48,7 @@ __all__ = ["main"]
 PROG = "warp-ccd"
 
 CHECK_KERNEL_MODULES = ("warp_ccd.scene", "warp_ccd.bvh_build", "warp_ccd.bvh", "warp_ccd.broad_phase",
-                        "warp_ccd.mid_phase", "warp_ccd.narrow_phase", "warp_ccd.buffers")
+                        "warp_ccd.mid_phase", "warp_ccd.narrow_phase", "warp_ccd.buffers", "warp_ccd.crossing")
 """The modules whose Warp kernels ``check`` runs (``warp_ccd.preview`` too with ``--preview``)."""
 
 _DASH_VALUE = re.compile(r"-\.?\d")

@@ -13,7 +13,7 @@ near a point they share, one enters the region behind the other: their insides o
 **touch** where they meet but neither enters the other: a crate resting on a floor, parts meeting
 face to face, edge on edge, edge on face or vertex on anything.
 
-**The verdict of one triangle pair** ``(ta, tb)`` (:func:`surface_crossing`):
+**The verdict of one triangle pair** ``(ta, tb)`` (:func:`_verdict`):
 
 * *coplanar* (each within the tolerance of the other's plane): they cross when they face the
   same way and overlap in an area (two solids with flush faces overlap behind them); facing
@@ -54,11 +54,11 @@ import numpy as np
 import warp as wp
 
 from .bvh import SceneBVH, TreeView
-from .narrow_phase import TOLERANCE, _common_part, _plane_section, _unit_normal, crossing_depth
+from .narrow_phase import TOLERANCE, _common_part, _pick, _plane_section, _snap, _unit_normal, crossing_depth
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
-__all__ = ["CrossingClassifier", "SurfaceTopology", "classify_pairs", "surface_crossing", "surface_topology"]
+__all__ = ["CrossingClassifier", "SurfaceTopology", "shape_sides", "surface_topology"]
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -173,26 +173,12 @@ def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, nu
 
 
 @wp.func
-def _d(x: Any):
-    return wp.vec3d(x)
-
-
-@wp.func
 def _local_triangle(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, o: wp.vec3d):
     """Triangle ``tri`` of object ``obj`` in float64, relative to ``o``, and its local vertex ids."""
     x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
     s = mesh.instance_shape[obj]
     idx = mesh.shape_triangle[mesh.shape_triangle_start[s] + tri]
-    return _d(x0) - o, _d(x1) - o, _d(x2) - o, idx
-
-
-@wp.func
-def _pick3(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, i: int):
-    if i == 0:
-        return x0
-    if i == 1:
-        return x1
-    return x2
+    return wp.vec3d(x0) - o, wp.vec3d(x1) - o, wp.vec3d(x2) - o, idx
 
 
 @wp.func
@@ -353,13 +339,6 @@ def _support(d0: wp.float64, d1: wp.float64, d2: wp.float64):
 
 
 @wp.func
-def _snap(d: wp.float64, eps: wp.float64):
-    if wp.abs(d) <= eps:
-        return wp.float64(0.0)
-    return d
-
-
-@wp.func
 def _reach(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, m: wp.vec3d, w: wp.vec3d):
     """How far triangle ``x`` extends from ``m`` along ``w``."""
     return wp.max(wp.max(wp.dot(x0 - m, w), wp.dot(x1 - m, w)), wp.dot(x2 - m, w))
@@ -417,7 +396,7 @@ def _surface_at(
     if sup < 0:
         w = wp.normalize(wp.cross(n, d))
         return SURFACE_SHEET, n, w, _reach(x0, x1, x2, m, w), n, -w, _reach(x0, x1, x2, m, -w)
-    w1, r1 = _across(_pick3(x0, x1, x2, (sup + 2) % 3), m, d)
+    w1, r1 = _across(_pick(x0, x1, x2, (sup + 2) % 3), m, d)
     found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, sup, o, tol_rel)
     if found == 0:
         return SURFACE_OPEN, n, w1, r1, n, -w1, wp.float64(0.0)
@@ -508,28 +487,6 @@ def _centred_pair(
     return a0, a1, a2, ia, na, degenerate_a, b0, b1, b2, ib, nb, degenerate_b, o, tol_rel * longest
 
 
-@wp.func
-def surface_crossing(
-    mesh: MeshTopology,
-    surface: SurfaceTopology,
-    world_vertex: wp.array[Any],
-    c: wp.vec4i,
-    tol_rel: wp.float64,
-) -> bool:
-    """Whether the surfaces cross (penetrate) where the triangles of row ``c`` meet (module docstring).
-
-    Args:
-        mesh, surface: the scene's topology and its :class:`SurfaceTopology`.
-        world_vertex: the scene's world vertices (either precision; computed in float64).
-        c: ``(obj_a, tri_a, obj_b, tri_b)``, triangles that meet (the exact test's hit).
-        tol_rel: the test's relative tolerance.
-    """
-    a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, eps = _centred_pair(mesh, surface, world_vertex, c, tol_rel)
-    if dega or degb:
-        return False
-    return _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, eps, tol_rel)
-
-
 @wp.kernel
 def _crossing_kernel(
     mesh: MeshTopology,
@@ -544,19 +501,21 @@ def _crossing_kernel(
     distance: wp.array2d[wp.float64],
     vertex: wp.array2d[wp.int32],
 ):
-    """One thread per intersecting triangle pair: :func:`surface_crossing`, the tolerance, the
-    local crossing depth, and each of the six vertices' signed distance to the other triangle
-    (:func:`_signed_distance`) with its world vertex index (first ``tri_a``'s, then ``tri_b``'s)."""
+    """One thread per intersecting triangle pair: the verdict (:func:`_verdict`), the tolerance, the
+    local crossing depth, and each of the six vertices' distance to the other triangle (where the
+    depth pass's tree walk starts) with its world vertex index (first ``tri_a``'s, then ``tri_b``'s)."""
     k = wp.tid()
     c = pair[k]
     a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, eps = _centred_pair(mesh, surface, world_vertex, c, tol_rel)
     base_a = mesh.instance_vertex_start[c[0]]
     base_b = mesh.instance_vertex_start[c[2]]
     for i in range(3):
-        distance[k, i] = _signed_distance(mesh, surface, world_vertex, c[2], c[3], ib, b0, b1, b2, nb, degb, o,
-                                          tol_rel, _pick3(a0, a1, a2, i))
-        distance[k, 3 + i] = _signed_distance(mesh, surface, world_vertex, c[0], c[1], ia, a0, a1, a2, na, dega, o,
-                                              tol_rel, _pick3(b0, b1, b2, i))
+        p = _pick(a0, a1, a2, i)
+        q = _pick(b0, b1, b2, i)
+        closest_p, feature_p = _closest_on_triangle(p, b0, b1, b2)
+        closest_q, feature_q = _closest_on_triangle(q, a0, a1, a2)
+        distance[k, i] = wp.length(p - closest_p)
+        distance[k, 3 + i] = wp.length(q - closest_q)
         vertex[k, i] = base_a + ia[i]
         vertex[k, 3 + i] = base_b + ib[i]
     hit = 0
@@ -699,7 +658,7 @@ def _depth_tree_kernel(
         sc = wp.float64(scale[obj])
         pb = wp.quat_rotate_inv(r, p - t) / sc
         slack = wp.float64(BOX_SLACK) * (wp.length(t) + wp.length(p - t))
-    best = wp.abs(distance[k, i]) * wp.float64(1.0 + 1.0e-9) + slack
+    best = distance[k, i] * wp.float64(1.0 + 1.0e-9) + slack
     best_tri = int(-1)
     node_start = tree.layout_node_start[tree.shape_layout[s]]
     slot_start = tree.instance_node_start[obj]
@@ -832,11 +791,6 @@ class CrossingClassifier:
         return crossing, depth
 
 
-def classify_pairs(scene, pairs: wp.array, tolerance: float = TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
-    """One-off :class:`CrossingClassifier` call: ``(crossing (M,) bool, depth (M,) float64)``."""
-    return CrossingClassifier(scene, tolerance=tolerance)(pairs)
-
-
 @wp.func
 def _coplanar_area(
     a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b1: wp.vec3d, b2: wp.vec3d, n: wp.vec3d, eps: wp.float64
@@ -852,11 +806,11 @@ def _coplanar_area(
     if _inside_by(b0, b1, b2, n, ca, eps) or _inside_by(a0, a1, a2, n, cb, eps):
         return True
     for i in range(3):
-        p = _pick3(a0, a1, a2, i)
-        q = _pick3(a0, a1, a2, (i + 1) % 3)
+        p = _pick(a0, a1, a2, i)
+        q = _pick(a0, a1, a2, (i + 1) % 3)
         for j in range(3):
-            r = _pick3(b0, b1, b2, j)
-            s = _pick3(b0, b1, b2, (j + 1) % 3)
+            r = _pick(b0, b1, b2, j)
+            s = _pick(b0, b1, b2, (j + 1) % 3)
             if _edges_cross(p, q, r, s, n, eps):
                 return True
     return False
