@@ -267,3 +267,73 @@ def test_tree_and_reference_depths_agree(device, precision, rng):
         assert crossing.any() and (depth > 0).sum() > 10
         np.testing.assert_array_equal(crossing, want_crossing)
         np.testing.assert_array_equal(depth, want)
+
+
+# 3. What assets do that the crafted solids above do not.
+
+def test_open_surfaces_keep_their_winding(device):
+    """An open grid is never turned round, however many of its edges are inner ones: a tray-shaped
+    floor (its rim raised) or a tilted flat one, with a crate resting on it, only touches."""
+    floor = grid(8)
+    tray = (floor[0] + [[0, 0, 0.5 * (abs(x) > 1.2 or abs(y) > 1.2)] for x, y, _ in floor[0]], floor[1])
+    assert surface_topology(wc.Scene.from_meshes([tray], device=device)).shape_side.numpy().tolist() == [1.0]
+    touch, cross, _ = verdict([tray, box([-0.5, -0.5, 0], [0.5, 0.5, 1])], device, "float64")
+    assert touch and not cross
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        q[:, 0] *= np.sign(np.linalg.det(q))
+        shift = 10 * rng.normal(size=3)
+        place = lambda m: (m[0] @ q.T + shift, m[1])  # noqa: E731
+        touch, cross, _ = verdict([place(floor), place(box([-0.5, -0.5, 0], [0.5, 0.5, 1]))], device, "float64")
+        assert touch and not cross
+
+
+def test_float32_rounding_far_from_the_origin_is_not_a_crossing(device):
+    """A crate resting on a floor, both placed by one rotation and a translation of 1,000 or 3,000,
+    in float32: the world vertices' rounding (about 1e-4 there) is no penetration."""
+    rng = np.random.default_rng(0)
+    for offset in (1e3, 3e3):
+        for _ in range(3):
+            q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            q[:, 0] *= np.sign(np.linalg.det(q))
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = q, offset * np.array([1.0, -0.7, 0.5])
+            scene = wc.Scene.from_meshes([grid(4), box([-0.5, -0.5, 0], [0.5, 0.5, 1])], np.array([m, m]),
+                                         device=device)
+            pairs = wc.CollisionPipeline(scene).detect().device_triangle_pairs
+            crossing, _ = CrossingClassifier(scene)(pairs)
+            assert pairs.shape[0] > 0 and not crossing.any(), offset
+
+
+def test_two_sided_sheets_and_slivers_on_rims(device):
+    """A sheet drawn from both sides (each face twice) has nothing behind it; a sliver on a solid's
+    rim is no flat continuation."""
+    fv, ft = grid(4)
+    two_sided = (fv, np.concatenate([ft, ft[:, ::-1]]))
+    touch, cross, _ = verdict([two_sided, box([-0.5, -0.5, 0], [0.5, 0.5, 1])], device)
+    assert touch and not cross
+    touch, cross, _ = verdict([two_sided, box([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5])], device)
+    assert cross, "a crate sunk through a two-sided floor still crosses it"
+    shelf = (fv * [0.3, 0.3, 1] + [0.45, 0, 0.5], np.concatenate([ft, ft[:, ::-1]]))
+    touch, cross, _ = verdict([shelf, box([-1, -1, 0], [0, 1, 1])], device)
+    assert touch and not cross, "a two-sided shelf butting against a wall"
+    # A unit cube whose top face is fanned with a sliver (a collinear vertex on its front rim).
+    v = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1], [0.5, 0, 1], [0, 0, 0], [1, 0, 0], [1, 1, 0],
+                  [0, 1, 0]], float)
+    t = np.array([[0, 4, 1], [0, 1, 2], [0, 2, 3], [5, 6, 1], [5, 1, 4], [5, 4, 0], [5, 7, 6], [5, 8, 7],
+                  [6, 7, 2], [6, 2, 1], [7, 8, 3], [7, 3, 2], [8, 5, 0], [8, 0, 3]], np.int32)
+    touch, cross, _ = verdict([(v, t), box([0.2, -0.5, 1], [0.8, 0.5, 2])], device)
+    assert touch and not cross, "a crate resting on the cube, overhanging the sliver's rim"
+
+
+def test_depth_at_an_open_rim_and_a_tiny_object(device):
+    # A crate sunk 0.1 into a floor whose edge runs under it: as deep as it is sunk, not as far as
+    # its corners beyond the rim are from that edge.
+    floor = (grid(2)[0] * [0.5, 1, 1] - [0.75, 0, 0], grid(2)[1])  # x in [-1.5, 0]
+    touch, cross, deepest = verdict([floor, box([-0.5, -0.5, -0.1], [0.5, 0.5, 0.9])], device, "float64")
+    assert cross and deepest == pytest.approx(0.1, rel=1e-6)
+    # A 1 cm cube half sunk into a floor of two 1,000-unit triangles: the tolerance is the cube's.
+    big = (grid(1)[0] * 1000 / 3, grid(1)[1])
+    touch, cross, deepest = verdict([big, box([0, 0, -0.005], [0.01, 0.01, 0.005])], device, "float64")
+    assert cross and deepest == pytest.approx(0.005, rel=1e-6)

@@ -30,20 +30,28 @@ face to face, edge on edge, edge on face or vertex on anything.
   the other by more than the tolerance (within its triangle's reach). A floor's grid line under
   a crate's wall is a flat fold: the floor there is still one sheet, crossed by the wall.
 
-The tolerance is the exact test's: ``tolerance * L`` with ``L`` the longest edge of the pair.
-Degenerate triangles (slivers, segments, points) have no side: their pairs only touch, the
-surfaces' crossings are decided at their neighbours; a degenerate neighbour across a fold is
-taken as the flat continuation of its triangle (a sliver in a fan-triangulated polygon).
+The tolerance is ``tolerance * L`` with ``L`` the longest edge of the *smaller* triangle of the
+pair (a 1 cm cube half sunk into a floor of 1 km triangles crosses it), and at least what the
+world vertices' precision resolves at the pair's coordinates (:data:`ROUNDING_ULPS`: float32
+rounding at 1,000 units from the origin is not a crossing). A ray counts only as far as the other
+triangle's size: beyond it, that triangle's plane says nothing of its surface.
 
-**Depth** of a crossing pair: how far a vertex of either triangle lies behind the other surface,
-measured to the nearest triangle of the other object that meets a triangle of that vertex (its
-closest point's feature decides the side: the face's normal, an edge's two faces, a vertex's
-angle-weighted fan, the pseudo-normals of Bærentzen and Aanæs). A vertex poking ``h`` through a
+Nothing lies behind what has no side: a degenerate triangle (a sliver, a segment, a point; its
+pairs only touch, the surfaces' crossings are decided at its neighbours), a *two-sided* face (one
+listed twice, as assets draw both sides of a sheet), an open boundary, a non-manifold edge, or a
+fold whose neighbour is degenerate or two-sided. Closed shapes wound inside out are turned round
+(:func:`shape_sides`); open ones are taken as wound.
+
+**Depth** of a crossing pair: how far a vertex of either triangle lies behind the other object's
+surface, its distance to the nearest point of all that object's triangles (found down the
+object's tree), the side taken at that point from its feature's pseudo-normal (the face's normal,
+an edge's two faces, a vertex's angle-weighted fan: Bærentzen and Aanæs); a point nearest to an
+open edge or vertex lies beyond the surface's rim, not behind it. A vertex poking ``h`` through a
 face has depth ``h`` however the face is cut; a crate sunk ``h`` into a floor, ``h``. Where the
 surfaces cross with no vertex behind the other (two sheets crossing between their vertices,
 flush faces), the depth is the pair's local crossing depth
-(:func:`~warp_ccd.narrow_phase.crossing_depth`), at least the tolerance: a crossing never has
-depth 0.
+(:func:`~warp_ccd.narrow_phase.crossing_depth`) capped by the object pair's deepest vertex, at
+least the tolerance: a crossing never has depth 0.
 """
 
 from __future__ import annotations
@@ -77,11 +85,15 @@ class SurfaceTopology:
     ``neighbour[shape_triangle_start[s] + t][k]``: the local triangle across edge ``k`` (vertices
     ``k``, ``k + 1``) of triangle ``t`` of shape ``s``, -1 on a boundary or non-manifold edge.
     The fan of local vertex ``v`` of shape ``s``: local triangles ``fan[fan_start[g]:fan_start[g + 1]]``
-    with ``g = shape_vertex_start[s] + v``. ``shape_side[s]``: 1, or -1 for a solid wound inside
-    out (:func:`shape_sides`), which turns its normals the right way round.
+    with ``g = shape_vertex_start[s] + v``; ``vertex_open[g]`` 1 on a boundary. ``two_sided[t]`` (as
+    ``neighbour``) 1 for a triangle listed twice in its shape (a two-sided sheet: nothing behind it;
+    the edge joining it to its twin is open). ``shape_side[s]``: 1, or -1 for a closed solid wound
+    inside out (:func:`shape_sides`), which turns its normals the right way round.
     """
 
     neighbour: wp.array[wp.vec3i]
+    two_sided: wp.array[wp.int32]
+    vertex_open: wp.array[wp.int32]
     shape_side: wp.array[wp.float64]
     shape_vertex_start: wp.array[wp.int32]
     fan_start: wp.array[wp.int32]
@@ -119,17 +131,31 @@ def surface_topology(scene) -> SurfaceTopology:
     partner[order[two]] = order[two + 1]
     partner[order[two + 1]] = order[two]
     neighbour = np.where(partner >= 0, partner // 3, -1)
+    # Two-sided faces: a triangle listed twice (its twin reversed or not) is a sheet of no thickness.
+    by_corners = np.sort(tri, axis=1)
+    _, twin_group, twin_count = np.unique(by_corners, axis=0, return_inverse=True, return_counts=True)
+    two_sided = twin_count[twin_group.reshape(-1)] > 1
+    # A rim edge of a two-sided sheet joins the face to its own twin: an open edge, not a fold.
+    across = np.maximum(neighbour, 0)
+    own_twin = (neighbour >= 0) & (twin_group.reshape(-1)[across] == np.repeat(twin_group.reshape(-1), 3))
+    neighbour = np.where(own_twin, -1, neighbour)
+    open_edge = neighbour < 0
     neighbour = np.where(neighbour >= 0, neighbour - t_start[tri_shape.repeat(3)], -1)
+    vertex_open = np.zeros(num_vertices, bool)
+    vertex_open[e0[open_edge]] = True
+    vertex_open[e1[open_edge]] = True
     # Fans: the triangles at each shape vertex, as local triangle ids.
     corner = tri.reshape(-1)
     by_vertex = np.argsort(corner, kind="stable")
     fan_start = np.zeros(num_vertices + 1, np.int64)
     np.cumsum(np.bincount(corner, minlength=num_vertices), out=fan_start[1:])
     fan = (by_vertex // 3) - t_start[tri_shape[by_vertex // 3]]
-    side = shape_sides(scene.shapes.vertices.reshape(-1, 3), tri, tri_shape, len(t_start) - 1, neighbour < 0)
+    side = shape_sides(scene.shapes.vertices.reshape(-1, 3), tri, tri_shape, len(t_start) - 1, open_edge)
     d = scene.device
     s = SurfaceTopology()
     s.neighbour = wp.array(neighbour.reshape(num_tri, 3).astype(np.int32), dtype=wp.vec3i, device=d)
+    s.two_sided = wp.array(two_sided.astype(np.int32), dtype=wp.int32, device=d)
+    s.vertex_open = wp.array(vertex_open.astype(np.int32), dtype=wp.int32, device=d)
     s.shape_side = wp.array(side, dtype=wp.float64, device=d)
     s.shape_vertex_start = scene.shape_vertex_start
     s.fan_start = wp.array(fan_start.astype(np.int32), dtype=wp.int32, device=d)
@@ -137,18 +163,13 @@ def surface_topology(scene) -> SurfaceTopology:
     return s
 
 
-OPEN_EDGES_MAX = 0.25
-"""A shape with at most this fraction of open (boundary or non-manifold) edges encloses a volume:
-its winding may be turned round (:func:`shape_sides`)."""
-
-
 def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, num_shapes: int,
                 open_edge: np.ndarray) -> np.ndarray:
     """Which way each shape faces: -1 for a solid wound inside out, else 1.
 
-    A shape that encloses a volume (at most :data:`OPEN_EDGES_MAX` of its edges open) and whose
-    signed volume, its triangles' cones from its centroid, is negative has its normals pointing
-    in: it is turned round. Open surfaces (a floor, a cloth) are taken as wound.
+    A closed shape (no open edge) whose signed volume, its triangles' cones from its centroid, is
+    negative has its normals pointing in: it is turned round. Open surfaces (a floor, a cloth, a
+    terrain, a solid with a hole) are taken as wound: their volume says nothing of their side.
 
     Args:
         vertices: ``(V, 3)`` all shapes' vertices; tri: ``(T, 3)`` int64 indices into them.
@@ -167,9 +188,8 @@ def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, nu
     x = v[tri] - centre[tri_shape][:, None, :]
     volume = np.bincount(tri_shape, np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])),
                          minlength=num_shapes)
-    open_fraction = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.float64),
-                                minlength=num_shapes) / np.maximum(3 * counts, 1)
-    return np.where((volume < 0) & (open_fraction <= OPEN_EDGES_MAX), -1.0, 1.0)
+    open_edges = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.float64), minlength=num_shapes)
+    return np.where((volume < 0) & (open_edges == 0), -1.0, 1.0)
 
 
 @wp.func
@@ -195,14 +215,14 @@ def _neighbour(
 ):
     """The triangle across edge ``k`` of ``tri``: ``(found, normal oriented as the triangle's, its
     vertex off the edge)``; ``found`` 1, or 0 on a boundary or non-manifold edge, 2 for a
-    degenerate neighbour (no normal)."""
+    degenerate or two-sided neighbour (no side)."""
     s = mesh.instance_shape[obj]
     nbr = surface.neighbour[mesh.shape_triangle_start[s] + tri][k]
     if nbr < 0:
         return 0, wp.vec3d(), wp.vec3d()
     y0, y1, y2, jdx = _local_triangle(mesh, world_vertex, obj, nbr, o)
     n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
-    if degenerate:
+    if degenerate or surface.two_sided[mesh.shape_triangle_start[s] + nbr] != 0:
         return 2, wp.vec3d(), wp.vec3d()
     i0 = idx[k]
     i1 = idx[(k + 1) % 3]
@@ -302,19 +322,25 @@ def _signed_distance(
     p: wp.vec3d,
 ):
     """Distance from ``p`` to triangle ``tri`` of ``obj``, negative when ``p`` lies behind the
-    surface there (by the pseudo-normal of the closest point's feature); positive for a
-    degenerate triangle (no side)."""
+    surface there (by the pseudo-normal of the closest point's feature); positive where there is
+    no side: a degenerate or two-sided triangle, a closest point on an open edge or vertex (``p``
+    lies beyond the surface's rim, not behind it)."""
     c, feature = _closest_on_triangle(p, x0, x1, x2)
     dist = wp.length(p - c)
-    if degenerate:
+    s = mesh.instance_shape[obj]
+    if degenerate or surface.two_sided[mesh.shape_triangle_start[s] + tri] != 0:
         return dist
     pn = n
     if feature >= 4:
         found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, feature - 4, o, tol_rel)
-        if found == 1:
-            pn = n + n2
+        if found != 1:
+            return dist
+        pn = n + n2
     elif feature >= 1:
-        pn = _fan_normal(mesh, surface, world_vertex, obj, idx[feature - 1], o)
+        v = idx[feature - 1]
+        if surface.vertex_open[surface.shape_vertex_start[s] + v] != 0:
+            return dist
+        pn = _fan_normal(mesh, surface, world_vertex, obj, v, o)
     if wp.dot(p - c, pn) < wp.float64(0.0):
         return -dist
     return dist
@@ -392,24 +418,31 @@ def _surface_at(
     """The surface of ``obj`` across the line ``m + t d`` where triangle ``tri`` meets the other
     (``sup``: :func:`_support`): ``(kind, n1, w1, reach1, n2, w2, reach2)``, two rays ``w`` from
     ``m`` across the line with the normals of their faces and how far each face reaches along
-    its ray (the second 0 on an open edge)."""
+    its ray (the second 0 on an open edge). Nothing is behind a two-sided face, an open edge, or
+    an edge whose neighbour has no side (:data:`SURFACE_OPEN`)."""
+    thin = surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[obj]] + tri] != 0
     if sup < 0:
         w = wp.normalize(wp.cross(n, d))
-        return SURFACE_SHEET, n, w, _reach(x0, x1, x2, m, w), n, -w, _reach(x0, x1, x2, m, -w)
+        kind = SURFACE_SHEET
+        if thin:
+            kind = SURFACE_OPEN
+        return kind, n, w, _reach(x0, x1, x2, m, w), n, -w, _reach(x0, x1, x2, m, -w)
     w1, r1 = _across(_pick(x0, x1, x2, (sup + 2) % 3), m, d)
     found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, sup, o, tol_rel)
-    if found == 0:
+    if found != 1:  # a boundary, or a neighbour without a side (degenerate, two-sided)
         return SURFACE_OPEN, n, w1, r1, n, -w1, wp.float64(0.0)
-    if found == 2:  # a degenerate neighbour: the flat continuation of this face
-        return SURFACE_FOLD, n, w1, r1, n, -w1, r1
     w2, r2 = _across(y, m, d)
+    if thin:
+        return SURFACE_OPEN, n, w1, r1, n2, w2, r2
     return SURFACE_FOLD, n, w1, r1, n2, w2, r2
 
 
 @wp.func
-def _enters(kind: int, n1: wp.vec3d, n2: wp.vec3d, w2: wp.vec3d, ray: wp.vec3d, reach: wp.float64, eps: wp.float64):
-    """Whether a face reaching ``reach`` along ``ray`` goes more than ``eps`` behind the surface."""
-    return reach * _behind(kind, n1, n2, w2, ray) > eps
+def _enters(kind: int, n1: wp.vec3d, n2: wp.vec3d, w2: wp.vec3d, ray: wp.vec3d, reach: wp.float64,
+            extent: wp.float64, eps: wp.float64):
+    """Whether a face reaching ``reach`` along ``ray`` goes more than ``eps`` behind the surface,
+    seen within ``extent`` (the size of the surface's triangle: farther, its plane says nothing)."""
+    return wp.min(reach, extent) * _behind(kind, n1, n2, w2, ray) > eps
 
 
 @wp.func
@@ -429,10 +462,13 @@ def _verdict(
     ib: wp.vec3i,
     nb: wp.vec3d,
     o: wp.vec3d,
+    size_a: wp.float64,
+    size_b: wp.float64,
     eps: wp.float64,
     tol_rel: wp.float64,
 ) -> bool:
-    """Whether the surfaces of two non-degenerate intersecting triangles cross there (module docstring)."""
+    """Whether the surfaces of two non-degenerate intersecting triangles cross there (module
+    docstring); ``size_a``, ``size_b`` their longest edges."""
     zero = wp.float64(0.0)
     da0 = _snap(wp.dot(nb, a0 - b0), eps)
     da1 = _snap(wp.dot(nb, a1 - b0), eps)
@@ -441,7 +477,9 @@ def _verdict(
     db1 = _snap(wp.dot(na, b1 - a0), eps)
     db2 = _snap(wp.dot(na, b2 - a0), eps)
     if da0 == zero and da1 == zero and da2 == zero and db0 == zero and db1 == zero and db2 == zero:
-        return wp.dot(na, nb) > zero and _coplanar_area(a0, a1, a2, b0, b1, b2, na, eps)
+        thin = surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[c[0]]] + c[1]] != 0 or (
+            surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[c[2]]] + c[3]] != 0)
+        return not thin and wp.dot(na, nb) > zero and _coplanar_area(a0, a1, a2, b0, b1, b2, na, eps)
     sup_a = _support(da0, da1, da2)
     sup_b = _support(db0, db1, db2)
     if sup_a == -2 or sup_b == -2:
@@ -459,18 +497,32 @@ def _verdict(
                                                    sup_a, m, d, o, tol_rel)
     kb, nb1, wb1, rb1, nb2, wb2, rb2 = _surface_at(mesh, surface, world_vertex, c[2], c[3], ib, b0, b1, b2, nb,
                                                    sup_b, m, d, o, tol_rel)
-    return (_enters(kb, nb1, nb2, wb2, wa1, ra1, eps) or _enters(kb, nb1, nb2, wb2, wa2, ra2, eps)
-            or _enters(ka, na1, na2, wa2, wb1, rb1, eps) or _enters(ka, na1, na2, wa2, wb2, rb2, eps))
+    return (_enters(kb, nb1, nb2, wb2, wa1, ra1, size_b, eps) or _enters(kb, nb1, nb2, wb2, wa2, ra2, size_b, eps)
+            or _enters(ka, na1, na2, wa2, wb1, rb1, size_a, eps) or _enters(ka, na1, na2, wa2, wb2, rb2, size_a, eps))
+
+
+@wp.func
+def _max_abs(x: wp.vec3d):
+    return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
 
 
 @wp.func
 def _centred_pair(
-    mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], c: wp.vec4i, tol_rel: wp.float64
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    c: wp.vec4i,
+    tol_rel: wp.float64,
+    rounding: wp.float64,
 ):
     """Row ``c``'s triangles in float64 relative to their centroid ``o``, their local vertex ids,
-    unit normals (out of their objects) and degeneracy, and the absolute tolerance ``eps``."""
+    unit normals (out of their objects) and degeneracy, their longest edges, and the absolute
+    tolerance ``eps``: ``tol_rel`` times the smaller triangle's longest edge, at least ``rounding``
+    times the largest coordinate (what the world vertices' precision resolves there)."""
     a0, a1, a2, ia = _local_triangle(mesh, world_vertex, c[0], c[1], wp.vec3d())
     b0, b1, b2, ib = _local_triangle(mesh, world_vertex, c[2], c[3], wp.vec3d())
+    big = wp.max(wp.max(wp.max(_max_abs(a0), _max_abs(a1)), wp.max(_max_abs(a2), _max_abs(b0))),
+                 wp.max(_max_abs(b1), _max_abs(b2)))
     o = (a0 + a1 + a2 + b0 + b1 + b2) / wp.float64(6.0)
     a0 = a0 - o
     a1 = a1 - o
@@ -478,13 +530,14 @@ def _centred_pair(
     b0 = b0 - o
     b1 = b1 - o
     b2 = b2 - o
-    longest = wp.max(wp.max(wp.max(wp.length(a1 - a0), wp.length(a2 - a1)), wp.length(a0 - a2)),
-                     wp.max(wp.max(wp.length(b1 - b0), wp.length(b2 - b1)), wp.length(b0 - b2)))
+    size_a = wp.max(wp.max(wp.length(a1 - a0), wp.length(a2 - a1)), wp.length(a0 - a2))
+    size_b = wp.max(wp.max(wp.length(b1 - b0), wp.length(b2 - b1)), wp.length(b0 - b2))
     na, degenerate_a = _unit_normal(a0, a1, a2, tol_rel)
     nb, degenerate_b = _unit_normal(b0, b1, b2, tol_rel)
     na = na * surface.shape_side[mesh.instance_shape[c[0]]]
     nb = nb * surface.shape_side[mesh.instance_shape[c[2]]]
-    return a0, a1, a2, ia, na, degenerate_a, b0, b1, b2, ib, nb, degenerate_b, o, tol_rel * longest
+    eps = wp.max(tol_rel * wp.min(size_a, size_b), rounding * big)
+    return a0, a1, a2, ia, na, degenerate_a, b0, b1, b2, ib, nb, degenerate_b, o, size_a, size_b, eps
 
 
 @wp.kernel
@@ -494,6 +547,7 @@ def _crossing_kernel(
     world_vertex: wp.array[Any],
     pair: wp.array[wp.vec4i],
     tol_rel: wp.float64,
+    rounding: wp.float64,
     # Outputs
     crossing: wp.array[wp.int32],
     eps_out: wp.array[wp.float64],
@@ -506,7 +560,8 @@ def _crossing_kernel(
     depth pass's tree walk starts) with its world vertex index (first ``tri_a``'s, then ``tri_b``'s)."""
     k = wp.tid()
     c = pair[k]
-    a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, eps = _centred_pair(mesh, surface, world_vertex, c, tol_rel)
+    a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, size_a, size_b, eps = _centred_pair(
+        mesh, surface, world_vertex, c, tol_rel, rounding)
     base_a = mesh.instance_vertex_start[c[0]]
     base_b = mesh.instance_vertex_start[c[2]]
     for i in range(3):
@@ -520,7 +575,8 @@ def _crossing_kernel(
         vertex[k, 3 + i] = base_b + ib[i]
     hit = 0
     if not dega and not degb:
-        if _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, eps, tol_rel):
+        if _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, size_a, size_b, eps,
+                    tol_rel):
             hit = 1
     crossing[k] = hit
     eps_out[k] = eps
@@ -529,6 +585,11 @@ def _crossing_kernel(
 
 _CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
+
+ROUNDING_ULPS = 8.0
+"""What the world vertices' precision resolves, in units in the last place of the largest
+coordinate of a pair: a crossing must go deeper than that (float32 at 1,000 units from the
+origin: 1e-3), besides the tolerance relative to the triangles (:func:`_centred_pair`)."""
 
 TREE_STACK = 64
 """Nodes a nearest-point query keeps to visit (:func:`_depth_tree_kernel`): a balanced tree's depth
@@ -557,17 +618,16 @@ def _nearer(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int,
 
 @wp.func
 def _side_at(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
-             p: wp.vec3d):
+             p: wp.vec3d, tol_rel: wp.float64):
     """-1 when ``p`` lies behind the surface of ``obj`` at its nearest point, on triangle ``tri``
     (the closest feature's pseudo-normal), else 1."""
     if tri < 0:
         return wp.float64(1.0)
     zero = wp.vec3d()
     y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, tri, zero)
-    n, degenerate = _unit_normal(y0, y1, y2, wp.float64(TOLERANCE))
+    n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
     n = n * surface.shape_side[mesh.instance_shape[obj]]
-    d = _signed_distance(mesh, surface, world_vertex, obj, tri, idx, y0, y1, y2, n, degenerate, zero,
-                         wp.float64(TOLERANCE), p)
+    d = _signed_distance(mesh, surface, world_vertex, obj, tri, idx, y0, y1, y2, n, degenerate, zero, tol_rel, p)
     if d < wp.float64(0.0):
         return wp.float64(-1.0)
     return wp.float64(1.0)
@@ -586,10 +646,10 @@ def _entry(pair: wp.array[wp.vec4i], vertex: wp.array2d[wp.int32], world_vertex:
 
 @wp.func
 def _entry_depth(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
-                 p: wp.vec3d, best: wp.float64, eps: wp.float64):
+                 p: wp.vec3d, best: wp.float64, eps: wp.float64, tol_rel: wp.float64):
     """How far ``p`` lies behind the surface of ``obj`` (``best`` from it, nearest on ``tri``), 0
     when in front or within ``eps``."""
-    if best > eps and _side_at(mesh, surface, world_vertex, obj, tri, p) < wp.float64(0.0):
+    if best > eps and _side_at(mesh, surface, world_vertex, obj, tri, p, tol_rel) < wp.float64(0.0):
         return best
     return wp.float64(0.0)
 
@@ -603,6 +663,7 @@ def _depth_all_kernel(
     crossing: wp.array[wp.int32],
     vertex: wp.array2d[wp.int32],
     eps: wp.array[wp.float64],
+    tol_rel: wp.float64,
     # Outputs
     depth: wp.array2d[wp.float64],
 ):
@@ -618,7 +679,7 @@ def _depth_all_kernel(
     count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
     for t in range(count):
         best, best_tri = _nearer(mesh, world_vertex, obj, t, p, best, best_tri)
-    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k])
+    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k], tol_rel)
 
 
 @wp.kernel
@@ -635,6 +696,7 @@ def _depth_tree_kernel(
     vertex: wp.array2d[wp.int32],
     distance: wp.array2d[wp.float64],
     eps: wp.array[wp.float64],
+    tol_rel: wp.float64,
     # Outputs
     depth: wp.array2d[wp.float64],
 ):
@@ -683,7 +745,7 @@ def _depth_tree_kernel(
             stack[top] = child[1]
             stack[top + 1] = child[0]
             top += 2
-    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k])
+    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k], tol_rel)
 
 
 _DEPTH_ALL = precision_overloads(_depth_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
@@ -727,6 +789,7 @@ class CrossingClassifier:
         self.scene = scene
         self.tolerance = float(tolerance)
         self.trees = trees if isinstance(trees, SceneBVH) else None
+        self.rounding = ROUNDING_ULPS * float(np.finfo(np.float32 if scene.precision == "float32" else np.float64).eps)
         self.surface = surface_topology(scene)
         self._capacity = 0
 
@@ -760,7 +823,7 @@ class CrossingClassifier:
         self._grow(m)
         scene = self.scene
         wp.launch(_CROSSING[scene.precision], dim=m,
-                  inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance],
+                  inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance, self.rounding],
                   outputs=[self._crossing, self._eps, self._local, self._distance, self._vertex], device=scene.device)
         crossing = self._crossing[:m].numpy().astype(bool)
         if not crossing.any():
@@ -771,10 +834,11 @@ class CrossingClassifier:
         if self.trees is not None:
             tree = self.trees
             inputs += [tree.tree, scene.world_vertex, scene.instance_pose, scene.instance_scale,
-                       tree.instance_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps]
+                       tree.instance_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps,
+                       self.tolerance]
             kernel = _DEPTH_TREE
         else:
-            inputs += [scene.world_vertex, pairs, self._crossing, self._vertex, self._eps]
+            inputs += [scene.world_vertex, pairs, self._crossing, self._vertex, self._eps, self.tolerance]
             kernel = _DEPTH_ALL
         wp.launch(kernel[scene.precision], dim=(m, 6), inputs=inputs, outputs=[self._entry_depth], device=d)
         depth = self._entry_depth[:m].numpy().max(axis=1)
