@@ -62,7 +62,16 @@ import numpy as np
 import warp as wp
 
 from .bvh import SceneBVH, TreeView
-from .narrow_phase import TOLERANCE, _common_part, _pick, _plane_section, _snap, _unit_normal, crossing_depth
+from .narrow_phase import (
+    TOLERANCE,
+    _common_part,
+    _max_edge,
+    _pick,
+    _plane_section,
+    _snap,
+    _unit_normal,
+    crossing_depth,
+)
 from .precision import precision_overloads
 from .scene import MeshTopology, mesh_triangle
 
@@ -530,8 +539,8 @@ def _centred_pair(
     b0 = b0 - o
     b1 = b1 - o
     b2 = b2 - o
-    size_a = wp.max(wp.max(wp.length(a1 - a0), wp.length(a2 - a1)), wp.length(a0 - a2))
-    size_b = wp.max(wp.max(wp.length(b1 - b0), wp.length(b2 - b1)), wp.length(b0 - b2))
+    size_a = _max_edge(a0, a1, a2)
+    size_b = _max_edge(b0, b1, b2)
     na, degenerate_a = _unit_normal(a0, a1, a2, tol_rel)
     nb, degenerate_b = _unit_normal(b0, b1, b2, tol_rel)
     na = na * surface.shape_side[mesh.instance_shape[c[0]]]
