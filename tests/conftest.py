@@ -36,3 +36,10 @@ def device(request):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def message_lines(err: str) -> list[str]:
+    """A command's own stderr lines: less blank lines, Warp's native CUDA-driver notice, and the
+    notice that kernels are being compiled (a cold kernel cache, as on a fresh machine)."""
+    return [line for line in err.strip().splitlines()
+            if line.strip() and not line.startswith("Warp CUDA") and "compiling kernels" not in line]

@@ -17,7 +17,7 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom  # noqa: E402
 from usd_stages import define_mesh, grid, mixed_stage, prism  # noqa: E402
 
-from conftest import DEFAULT_DEVICE  # noqa: E402
+from conftest import DEFAULT_DEVICE, message_lines  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -26,12 +26,6 @@ def run_cli(capsys, args):
     rc = cli.main(args)
     captured = capsys.readouterr()
     return rc, captured
-
-
-def message_lines(err: str) -> list[str]:
-    """The lines of a command's stderr, less the notice that kernels are being compiled (a cold
-    kernel cache, as on a fresh machine)."""
-    return [line for line in err.strip().splitlines() if line.strip() and "compiling kernels" not in line]
 
 
 def listing(folder) -> dict:

@@ -10,14 +10,9 @@ import pytest
 
 from warp_ccd import cli
 
-from conftest import DEFAULT_DEVICE
+from conftest import DEFAULT_DEVICE, message_lines
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def message_lines(err: str) -> list[str]:
-    """stderr lines of the command itself (Warp's native CUDA-driver notice is not ours)."""
-    return [line for line in err.strip().splitlines() if line.strip() and not line.startswith("Warp CUDA")]
 
 
 def test_demo_writes_usd_and_png_and_prints_a_summary(tmp_path, device, capsys):

@@ -22,6 +22,7 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
 from usd_stages import define_mesh, fan, grid, mixed_stage, prism, world_polygon_meshes  # noqa: E402
 
+from conftest import message_lines  # noqa: E402
 from oracles import triangle_pairs_fcl  # noqa: E402
 
 NUM_FRAMES = 24
@@ -93,11 +94,6 @@ def deepest_by_pair(report, frame):
         key = tuple(sorted((report.object_path[a], report.object_path[b])))
         out[key] = max(out.get(key, 0.0), d)
     return out
-
-
-def message_lines(err: str) -> list[str]:
-    """stderr lines of the command itself (Warp's CUDA-driver notice is not ours)."""
-    return [line for line in err.strip().splitlines() if line.strip() and not line.startswith("Warp CUDA")]
 
 
 # ---------------------------------------------------------------------------------------------
