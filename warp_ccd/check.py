@@ -318,19 +318,14 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     from tqdm import tqdm
 
     from .pipeline import CollisionPipeline
-    from .usd_import import UsdMeshImport, missing_layers, open_stage, stage_time_codes
+    from .usd_import import UsdMeshImport, open_stage, require_layers, stage_time_codes
 
     if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
             or not np.isfinite(min_depth) or min_depth < 0:
         raise ValueError(f"min_depth must be a finite number >= 0, got {min_depth!r}")
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
-    missing = missing_layers(stage)
-    if missing and not allow_missing:
-        root = stage.GetRootLayer()
-        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
-        raise ValueError(f"{root.realPath or root.identifier}: cannot open {missing[0]}{more}, which the stage "
-                         "uses as a sublayer, reference or payload")
+    missing = require_layers(stage, allow_missing)
     times = stage_time_codes(stage, frames)
     opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,

@@ -323,7 +323,7 @@ def _run_check(args) -> int:
     quiet_warp()
     init_warp()
     from .check import check_usd, prepare_overlay
-    from .usd_import import layer_files, missing_layers, open_stage
+    from .usd_import import layer_files, missing_layers, open_stage, require_layers
 
     t = time.perf_counter()
     try:
@@ -332,10 +332,7 @@ def _run_check(args) -> int:
         # A layer the stage uses (or one it names but cannot open) is an input too.
         _refuse_overwriting([(f"a layer of {args.stage}", p) for p in layer_files(stage)]
                             + [(f"an asset {args.stage} uses", p) for p in missing], outputs)
-        if missing and not args.allow_missing:
-            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
-            raise ValueError(f"{args.stage}: cannot open {missing[0]}{more}, a sublayer, reference or payload "
-                             "of the stage (--allow-missing checks the stage without it)")
+        require_layers(stage, args.allow_missing, missing)
         device = resolve_device(args.device)
     except ValueError as exc:
         raise fail(str(exc)) from None

@@ -67,7 +67,7 @@ from .precision import PrecisionWarning, coordinate_message, needed_precision, s
 from .scene import Scene, _matrix_to_quat
 from .shapes import MeshSet
 
-__all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "stage_time_codes"]
+__all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "require_layers", "stage_time_codes"]
 
 SIMILARITY_TOLERANCE = 1e-5
 """Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
@@ -195,6 +195,29 @@ def missing_layers(stage) -> list[str]:
             if path and not resolver.Resolve(path):
                 found.add(path)
     return sorted(found)
+
+
+def require_layers(stage, allow_missing: bool = False, missing: list[str] | None = None) -> list[str]:
+    """:func:`missing_layers` of a stage, an error unless they may be left out.
+
+    Args:
+        stage: a ``Usd.Stage``.
+        allow_missing: check the stage without them (else a ValueError).
+        missing: the stage's :func:`missing_layers`, when already known.
+
+    Returns:
+        The missing layers' asset paths.
+
+    Raises:
+        ValueError: naming the stage and the first of them, unless ``allow_missing``.
+    """
+    missing = missing_layers(stage) if missing is None else missing
+    if missing and not allow_missing:
+        root = stage.GetRootLayer()
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise ValueError(f"{root.realPath or root.identifier}: cannot open {missing[0]}{more}, a sublayer, reference "
+                         "or payload of the stage (--allow-missing, allow_missing=True, checks it without)")
+    return missing
 
 
 def layer_files(stage) -> list[str]:
