@@ -6,7 +6,7 @@ For each scene (``--cases`` of ``TRIANGLES:N``, a ``--triangles`` spec of the sc
 an object count), for each ``--max-registers`` (the heavy kernels compiled with at most that many
 registers a thread), each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and
 ``--threads-per-sm`` (:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``,
-``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd.mid_phase.MidPhaseBVH.num_blocks`
+``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd.stages.mid_phase.MidPhaseBVH.num_blocks`
 on CUDA), after ``--warmup`` frames: ``--frames``
 frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
 a synchronisation before and after (``frame``), then as many timed stage by stage
@@ -29,20 +29,20 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd import mid_phase, narrow_phase
+from warp_ccd.stages import mid_phase, narrow_phase
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
-from warp_ccd.bvh import OBJECT_BOUNDS
-from warp_ccd.cli_common import quiet_warp, resolve_device
-from warp_ccd.mid_phase import EXPAND_THREADS_PER_SM
+from warp_ccd.cli.common import quiet_warp, resolve_device
+from warp_ccd.geometry.precision import PRECISIONS
 from warp_ccd.pipeline import STAGES, CollisionPipeline
-from warp_ccd.precision import PRECISIONS
-from warp_ccd.scene import Scene
+from warp_ccd.scene.scene import Scene
+from warp_ccd.stages.bvh import OBJECT_BOUNDS
+from warp_ccd.stages.mid_phase import EXPAND_THREADS_PER_SM
 
 DT = 1.0 / 60.0
 
 
 def _bounds(text: str) -> str | int:
-    """``--bounds`` value: a name of :data:`~warp_ccd.bvh.OBJECT_BOUNDS` or a vertex count."""
+    """``--bounds`` value: a name of :data:`~warp_ccd.stages.bvh.OBJECT_BOUNDS` or a vertex count."""
     if text in OBJECT_BOUNDS:
         return text
     if text.isdigit():

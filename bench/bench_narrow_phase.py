@@ -29,10 +29,10 @@ import warp as wp
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
 import warp_ccd as wc  # noqa: E402
-from warp_ccd import narrow_phase  # noqa: E402
+from warp_ccd.stages import narrow_phase  # noqa: E402
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
-from warp_ccd.cli_common import resolve_device  # noqa: E402
-from warp_ccd.precision import precision_types  # noqa: E402
+from warp_ccd.cli.common import resolve_device  # noqa: E402
+from warp_ccd.geometry.precision import precision_types  # noqa: E402
 
 import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
 

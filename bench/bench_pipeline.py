@@ -20,7 +20,7 @@ from pathlib import Path
 
 from warp_ccd.bench.scaling import build_parser
 from warp_ccd.bench.scaling import main as bench_main
-from warp_ccd.cli_common import resolve_device
+from warp_ccd.cli.common import resolve_device
 
 PROG = "bench_pipeline.py"
 DEFAULTS = ["--triangles", "80", "1280", "--peers", "builtin", "--objects", "100", "1000", "3000"]

@@ -5,12 +5,12 @@ Two stages, written first (not timed as part of the check) into a temporary fold
 * **rigid**: ``--rigid`` prims (default 10,000), each an ``Xform`` with a time-sampled
   ``translate`` and ``orient`` at every frame and a static uniform ``scale``, over a ``Mesh`` of a
   polyhedron (4-20 faces, its own copy of the points: shapes are shared by content); the motion
-  of :meth:`Scene.random <warp_ccd.scene.Scene.random>` (inclined ellipses with spin).
+  of :meth:`Scene.random <warp_ccd.scene.scene.Scene.random>` (inclined ellipses with spin).
 * **deforming**: ``--deforming`` meshes (default 100) of 10,000 triangles (latitude-longitude
   spheres of 4,900 quads and 200 pole triangles), whose ``points`` are time-sampled at every
   frame (a wobble of the surface), each on an ellipse, dense enough that some overlap.
 
-For each, :func:`~warp_ccd.check.check_usd` runs over ``--frames`` time codes and reports its
+For each, :func:`~warp_ccd.usd.check.check_usd` runs over ``--frames`` time codes and reports its
 seconds: ``read`` (open, traverse, topology, every frame's transforms), ``build`` (scene,
 trees, pipeline), ``set`` (moving the scene to each frame: poses, or reading and copying the
 deforming points), ``detect`` (the pipeline's frames) and ``classify`` (depths, USD faces, the
@@ -34,8 +34,8 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.check import check_usd
-from warp_ccd.scene import Scene
+from warp_ccd.scene.scene import Scene
+from warp_ccd.usd.check import check_usd
 
 
 def _git_commit() -> str:

@@ -1,4 +1,4 @@
-"""Benchmark: writing a USD animation of many rigid objects (``warp_ccd.usd.UsdAnimationWriter``).
+"""Benchmark: writing a USD animation of many rigid objects (``warp_ccd.usd.export.UsdAnimationWriter``).
 
 Measures the writer alone: ``add_frame`` for every frame plus ``close`` (building the stage's time
 samples, then writing the file and renaming it). Moving the scene between frames is timed
@@ -29,7 +29,7 @@ TARGET_S = 3.0
 
 def export_once(scene, flags: np.ndarray, path: str, aabb: bool) -> dict:
     """Writes ``flags.shape[0]`` frames of ``scene`` to ``path``; returns the timings in seconds."""
-    from warp_ccd.usd import UsdAnimationWriter
+    from warp_ccd.usd.export import UsdAnimationWriter
 
     t0 = time.perf_counter()
     writer = UsdAnimationWriter(path, scene, fps=60, aabb=aabb)
@@ -71,7 +71,7 @@ def main(argv=None) -> int:
         parser.error("counts must be positive")
 
     wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
-    from warp_ccd.scene import Scene
+    from warp_ccd.scene.scene import Scene
 
     rng = np.random.default_rng(0)
     flags = rng.random((args.num_frames, args.num_objects)) < 0.1

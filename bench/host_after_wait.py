@@ -43,9 +43,9 @@ import numpy as np
 import warp as wp
 
 from warp_ccd.bench.scaling import environment, write_json
-from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene import Scene
+from warp_ccd.scene.scene import Scene
 
 DT = 1.0 / 60.0
 METHODS = ("sleep", "spin", "sync")

@@ -10,10 +10,11 @@ import argparse
 import ctypes
 import sys
 
-from warp_ccd import broad_phase, bvh, mid_phase, motion, narrow_phase, scene
 from warp_ccd.bench.scaling import environment, write_json
-from warp_ccd.cli_common import quiet_warp, resolve_device
+from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
+from warp_ccd.scene import motion, scene
+from warp_ccd.stages import broad_phase, bvh, mid_phase, narrow_phase
 
 # CUfunction_attribute values (CUDA driver API).
 _ATTRIBUTES = {"max_threads_per_block": 0, "shared_bytes": 1, "local_bytes": 3, "registers": 4}

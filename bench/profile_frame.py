@@ -30,10 +30,10 @@ import warp as wp
 
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
 from warp_ccd.bench.timing import detect_frames
-from warp_ccd.cli_common import quiet_warp, resolve_device
-from warp_ccd.frame import MODES
+from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene import Scene
+from warp_ccd.scene.scene import Scene
+from warp_ccd.stages.frame import MODES
 
 DT = 1.0 / 60.0
 KINDS = {wp.TIMING_KERNEL: "kernel", wp.TIMING_KERNEL_BUILTIN: "kernel (warp)", wp.TIMING_MEMCPY: "copy",

@@ -179,14 +179,14 @@ def verdicts(precision: str, device, swap: bool = False) -> dict:
     each pair's triangles in the other order)."""
     import warp as wp
 
-    from warp_ccd.narrow_phase import (
+    from warp_ccd.geometry.precision import precision_types
+    from warp_ccd.stages.narrow_phase import (
         CONTACT_SEGMENT,
         NARROW_METHODS,
         TOLERANCE,
         tri_tri_batch_kernel,
         tri_tri_segment_batch_kernel,
     )
-    from warp_ccd.precision import precision_types
 
     ta, tb = awkward_pairs(precision)
     if swap:

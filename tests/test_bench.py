@@ -19,8 +19,8 @@ from warp_ccd.bench.compare import (
 )
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
 from warp_ccd.bench.timing import MODES, CountedFrame, StageTimes
-from warp_ccd.broad_phase import find_pairs
-from warp_ccd.buffers import CounterRead, GrowableBuffer, reserve_slot
+from warp_ccd.stages.broad_phase import find_pairs
+from warp_ccd.stages.buffers import CounterRead, GrowableBuffer, reserve_slot
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",
@@ -133,7 +133,7 @@ def test_mixed_meshes_are_valid_and_of_real_sizes(device):
     counts = sorted(len(t) for _, t in meshes)
     assert counts[0] == 120 and counts[-1] == 12640 and len(counts) == 7
     for v, t in meshes:
-        wc.shapes.validate_mesh(v, t)
+        wc.scene.shapes.validate_mesh(v, t)
         assert abs(np.linalg.norm(v, axis=1).max() - 1.0) < 1e-6
     scene = wc.Scene.random(8, seed=1, shapes=meshes, device=device)
     assert scene.num_shapes == 7 and wc.CollisionPipeline(scene).detect().num_objects == 8

@@ -5,7 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.broad_phase import ALL_PAIRS_MAX, NXN_MAX_BOXES, make_broad_phase
+from warp_ccd.stages.broad_phase import ALL_PAIRS_MAX, NXN_MAX_BOXES, make_broad_phase
 
 from oracles import box_pairs_numpy
 
@@ -118,7 +118,7 @@ def test_equals_numpy(device, method, dist):
 
 def test_sap_key_bits():
     """16-bit keys (two radix passes) up to 16,384 boxes, wider keys above, never past 31 bits."""
-    from warp_ccd.broad_phase import SMALL_SCENE_BOXES, sap_key_bits
+    from warp_ccd.stages.broad_phase import SMALL_SCENE_BOXES, sap_key_bits
 
     assert sap_key_bits(2) == sap_key_bits(1000) == sap_key_bits(SMALL_SCENE_BOXES) == (8, 8)
     assert sum(sap_key_bits(SMALL_SCENE_BOXES + 1)) > 16
@@ -146,7 +146,7 @@ def test_tiny_counts(device, n):
 def pairs_from_capacity_one(bp, wlo, whi, device):
     """Runs ``bp`` from a pair buffer of capacity 1 (and its own buffers as they are) until every
     buffer holds its items, growing them as the counters ask; returns ``(sorted pairs, runs)``."""
-    from warp_ccd.buffers import CounterRead, GrowableBuffer
+    from warp_ccd.stages.buffers import CounterRead, GrowableBuffer
 
     pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
     counters = CounterRead([pairs, *bp.counters], device)
@@ -271,7 +271,7 @@ def test_sap_statistics_last_block(device):
     frame after frame (moving boxes), the sweep axis is that of greatest variance of the centres,
     the grid starts at the lowest box, every accumulator is empty again after the frame, and the
     pairs are the numpy truth."""
-    from warp_ccd.aabb import BOX_EMPTY
+    from warp_ccd.geometry.box import BOX_EMPTY
 
     rng = np.random.default_rng(5)
     n = 9000  # three blocks on the CPU, 36 on CUDA

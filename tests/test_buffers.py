@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_ccd.buffers import CounterRead, GrowableBuffer, reserve_slot, upper_bound
-from warp_ccd.frame import CountedFrame
+from warp_ccd.stages.buffers import CounterRead, GrowableBuffer, reserve_slot, upper_bound
+from warp_ccd.stages.frame import CountedFrame
 
 
 @wp.kernel

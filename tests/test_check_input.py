@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd import cli
-from warp_ccd.check import check_usd
-from warp_ccd.precision import PrecisionWarning, needed_precision, triangle_size
-from warp_ccd.usd_import import MAX_FRAMES, UsdMeshImport, stage_time_codes
+from warp_ccd.cli import commands as cli
+from warp_ccd.geometry.precision import PrecisionWarning, needed_precision, triangle_size
+from warp_ccd.usd.check import check_usd
+from warp_ccd.usd.importer import MAX_FRAMES, UsdMeshImport, stage_time_codes
 
 from conftest import DEFAULT_DEVICE
 

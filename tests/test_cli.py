@@ -8,7 +8,7 @@ import types
 import numpy as np
 import pytest
 
-from warp_ccd import cli
+from warp_ccd.cli import commands as cli
 
 from conftest import DEFAULT_DEVICE, message_lines
 
@@ -97,7 +97,7 @@ def test_unwritable_out_fails_before_the_run(tmp_path, capsys):
 
 
 def test_interrupt_leaves_no_file(tmp_path, capsys, monkeypatch):
-    from warp_ccd import usd
+    from warp_ccd.usd import export as usd
 
     out = tmp_path / "x.usd"
     out.write_bytes(b"previous")

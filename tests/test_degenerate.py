@@ -13,8 +13,14 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.narrow_phase import CONTACT_NONE, CONTACT_SEGMENT, NARROW_METHODS, TOLERANCE, tri_tri_segment_batch_kernel
-from warp_ccd.precision import precision_types
+from warp_ccd.geometry.precision import precision_types
+from warp_ccd.stages.narrow_phase import (
+    CONTACT_NONE,
+    CONTACT_SEGMENT,
+    NARROW_METHODS,
+    TOLERANCE,
+    tri_tri_segment_batch_kernel,
+)
 
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test

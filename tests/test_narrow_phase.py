@@ -5,9 +5,9 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.buffers import GrowableBuffer
-from warp_ccd.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
-from warp_ccd.precision import precision_types
+from warp_ccd.geometry.precision import precision_types
+from warp_ccd.stages.buffers import GrowableBuffer
+from warp_ccd.stages.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
 
 from oracles import intersect_tri_tri_f64
 

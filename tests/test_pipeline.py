@@ -123,7 +123,7 @@ def test_whole_object_pairs_deforming(device):
 
 def test_whole_object_pairs_default_by_scene_size():
     """Whole-object pairs by default up to WHOLE_OBJECTS_MAX objects, trees for every pair above."""
-    from warp_ccd.mid_phase import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
+    from warp_ccd.stages.mid_phase import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
 
     bvh = wc.SceneBVH(wc.Scene.random(50, seed=0))
     assert wc.MidPhaseBVH(bvh).whole_triangles_max == WHOLE_TRIANGLES_MAX

@@ -238,8 +238,8 @@ def test_precision_validation():
 
 def test_counters_do_not_wrap(device):
     """Counters are int64: past 2**31 items a stage raises OverflowError instead of wrapping."""
-    from warp_ccd.broad_phase import BroadPhaseNxN
-    from warp_ccd.buffers import CounterRead, GrowableBuffer
+    from warp_ccd.stages.broad_phase import BroadPhaseNxN
+    from warp_ccd.stages.buffers import CounterRead, GrowableBuffer
 
     lo = np.zeros((4, 3), np.float32)
     hi = np.ones((4, 3), np.float32)

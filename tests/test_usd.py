@@ -16,7 +16,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.usd import COLOR_COLLIDING, COLOR_FREE, UsdAnimationWriter, validate_stage_path
+from warp_ccd.usd.export import COLOR_COLLIDING, COLOR_FREE, UsdAnimationWriter, validate_stage_path
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, UsdValidation  # noqa: E402

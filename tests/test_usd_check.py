@@ -13,10 +13,10 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 import warp_ccd as wc
-from warp_ccd import cli
-from warp_ccd.check import COLOR_PENETRATING, check_usd
-from warp_ccd.narrow_phase import pair_crossing_depth
-from warp_ccd.usd_import import UsdMeshImport, stage_time_codes
+from warp_ccd.cli import commands as cli
+from warp_ccd.stages.narrow_phase import pair_crossing_depth
+from warp_ccd.usd.check import COLOR_PENETRATING, check_usd
+from warp_ccd.usd.importer import UsdMeshImport, stage_time_codes
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402

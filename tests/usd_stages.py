@@ -177,7 +177,7 @@ def world_polygon_meshes(stage, time) -> dict:
 
     Returns:
         ``{object path: (world vertices (n, 3) float64, triangles (m, 3) int32, USD face of each triangle)}``,
-        named as :class:`warp_ccd.usd_import.UsdMeshImport` names its objects. Guides, invisible
+        named as :class:`warp_ccd.usd.importer.UsdMeshImport` names its objects. Guides, invisible
         prims and a PointInstancer's prototypes (drawn through the instancer only) are left out.
     """
     from pxr import Usd, UsdGeom

@@ -10,17 +10,17 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
 """
 
-from .broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
-from .bvh import SceneBVH
-from .bvh_build import build_tree
-from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .motion import EllipseMotion
-from .narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
 from .pipeline import CollisionPipeline, CollisionResult, collide
 from .preview import render_frame, save_preview
-from .scene import Scene
-from .shapes import SHAPES, icosphere, shape, validate_mesh
-from .usd import UsdAnimationWriter
+from .scene.motion import EllipseMotion
+from .scene.scene import Scene
+from .scene.shapes import SHAPES, icosphere, shape, validate_mesh
+from .stages.broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
+from .stages.bvh import SceneBVH
+from .stages.bvh_build import build_tree
+from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
+from .stages.narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
+from .usd.export import UsdAnimationWriter
 
 __version__ = "0.1.0"
 

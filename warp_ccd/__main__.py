@@ -1,4 +1,4 @@
-"""``python -m warp_ccd``: the ``warp-ccd`` command (see :mod:`warp_ccd.cli`)."""
+"""``python -m warp_ccd``: the ``warp-ccd`` command (see :mod:`warp_ccd.cli.commands`)."""
 
 import sys
 

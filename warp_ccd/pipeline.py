@@ -2,11 +2,11 @@
 
 :class:`CollisionPipeline` owns one object of each stage and calls their methods in order on the
 scene's device; each stage launches its own work and exposes the buffers with counters it writes
-(``counters``). All those counters live in one block (:class:`~warp_ccd.buffers.CounterRead`):
+(``counters``). All those counters live in one block (:class:`~warp_ccd.stages.buffers.CounterRead`):
 the frame starts by zeroing it (one memset) and ends by copying it to pinned host memory (one
 small kernel) and waiting once; between stages the host reads nothing. On CUDA the whole
 frame, optionally with the scene's motion, is a captured graph replayed each frame
-(:class:`~warp_ccd.frame.CountedFrame`). A counter that passed its buffer's capacity makes that
+(:class:`~warp_ccd.stages.frame.CountedFrame`). A counter that passed its buffer's capacity makes that
 buffer grow and the frame run again (then the graph is captured anew), so no pair is ever dropped.
 """
 
@@ -19,14 +19,14 @@ from functools import cached_property
 import numpy as np
 import warp as wp
 
-from .aabb import InstanceBounds
-from .broad_phase import make_broad_phase
-from .buffers import CounterRead, GrowableBuffer
-from .bvh import LEAF_SIZE_MAX, SceneBVH
-from .frame import CountedFrame, FrameCache, frame_mode
-from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .narrow_phase import TOLERANCE, NarrowPhase
-from .scene import Scene
+from .scene.scene import Scene
+from .stages.bounds import InstanceBounds
+from .stages.broad_phase import make_broad_phase
+from .stages.buffers import CounterRead, GrowableBuffer
+from .stages.bvh import LEAF_SIZE_MAX, SceneBVH
+from .stages.frame import CountedFrame, FrameCache, frame_mode
+from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
+from .stages.narrow_phase import TOLERANCE, NarrowPhase
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
@@ -201,7 +201,7 @@ class CollisionPipeline:
         mid_phase: ``"bvh"`` (default: tree-vs-tree traversal) or ``"all_pairs"`` (reference:
             every triangle pair of each object pair).
         narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
-        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.narrow_phase`).
+        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.stages.narrow_phase`).
         timings: when True, synchronise after each stage and report ms per stage (frames are then
             launched eagerly).
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
@@ -209,13 +209,13 @@ class CollisionPipeline:
         leaf_size: triangles per tree leaf (``bvh`` mid phase; default :data:`RIGID_LEAF_SIZE`, or
             :data:`DEFORMING_LEAF_SIZE` in a scene with deforming objects).
         cut_depth: least level of the tree cut whose boxes make a big rigid object's box for the
-            broad phase (``bvh`` mid phase; ``object_bounds``, :class:`~warp_ccd.bvh.SceneBVH`).
+            broad phase (``bvh`` mid phase; ``object_bounds``, :class:`~warp_ccd.stages.bvh.SceneBVH`).
         separating_axes: the traversal's box test (``bvh`` mid phase): 6 (default), the box around
             one object's box in the other's space, both ways round; 3, one way (see
-            :mod:`warp_ccd.mid_phase`).
+            :mod:`warp_ccd.stages.mid_phase`).
         object_bounds: a rigid object's box for the broad phase (``bvh`` mid phase): ``"auto"``
             (default), ``"vertices"``, ``"tree"``, or the most vertices of an object whose box comes
-            from its vertices (see :class:`~warp_ccd.bvh.SceneBVH`).
+            from its vertices (see :class:`~warp_ccd.stages.bvh.SceneBVH`).
         segments: also compute the intersection segment of each triangle pair
             (:attr:`CollisionResult.segments`).
         containment: also report objects wholly inside another (winding number of one vertex,
@@ -226,15 +226,15 @@ class CollisionPipeline:
             it grows; default four per object).
         rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
             vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
-            <warp_ccd.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
+            <warp_ccd.stages.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
             the results are the same, the traversal faster); 0 (default) never.
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
-            scene's :class:`~warp_ccd.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid phase,
-            else an :class:`~warp_ccd.aabb.InstanceBounds`.
+            scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid phase,
+            else an :class:`~warp_ccd.stages.bounds.InstanceBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
-        counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer with a counter the
+        counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
         rebuilds: tree rebuilds so far (``rebuild_every``).
@@ -372,7 +372,7 @@ class CollisionPipeline:
 
         Args:
             advance: when given, first moves the scene by this many seconds as
-                :meth:`Scene.advance <warp_ccd.scene.Scene.advance>` does, in the same frame (on
+                :meth:`Scene.advance <warp_ccd.scene.scene.Scene.advance>` does, in the same frame (on
                 CUDA the same graph: one launch for motion and detection).
 
         Returns:
@@ -448,7 +448,7 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         ValueError / TypeError: naming the bad mesh or transform and the problem; a ValueError
             too where the coordinates are too far from the origin for ``precision`` at the
             triangles' size (float32: beyond about ``8.4e3`` times the typical triangle, use
-            ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd.scene.Scene.from_meshes>`).
+            ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd.scene.scene.Scene.from_meshes>`).
     """
     scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:

@@ -103,7 +103,7 @@ def mesh_triangle_indices(scene) -> tuple[np.ndarray, np.ndarray]:
     """Flat triangle list over all objects of a scene, into its concatenated world vertices.
 
     Args:
-        scene: a :class:`~warp_ccd.scene.Scene`.
+        scene: a :class:`~warp_ccd.scene.scene.Scene`.
 
     Returns:
         ``(indices (3 * T,) int32, triangle_object (T,) int32)``: vertex indices into
@@ -147,7 +147,7 @@ class PreviewRenderer:
     ``margin``, stays in the image.
 
     Args:
-        scene: a :class:`~warp_ccd.scene.Scene`; its world vertices are read at each :meth:`render`.
+        scene: a :class:`~warp_ccd.scene.scene.Scene`; its world vertices are read at each :meth:`render`.
         width, height: image size in pixels.
         fov: vertical field of view in degrees.
         view_direction: ``(3,)`` direction from the scene centre towards the camera.
@@ -270,7 +270,7 @@ def render_frame(scene, colliding=None, width: int = 640, height: int = 480, dev
     """Renders the scene's current frame (a one-off :class:`PreviewRenderer`).
 
     Args:
-        scene: a :class:`~warp_ccd.scene.Scene`.
+        scene: a :class:`~warp_ccd.scene.scene.Scene`.
         colliding: ``(N,)`` bool flags or a :class:`~warp_ccd.pipeline.CollisionResult`; None: none.
         width, height: image size in pixels.
         device: Warp device of the ray casting (default: the scene's).

@@ -44,7 +44,7 @@
    difference is charged to whichever method an independent arbiter (Warp's float64 test on the
    scaled pair) finds wrong; ``warp_ccd_nxn`` must find the very same triangle pairs and as many
    broad-phase pairs; ``newton_sap`` the same box pairs as this package's
-   :class:`~warp_ccd.broad_phase.BroadPhaseSAP` on the same boxes, each differing pair judged by
+   :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP` on the same boxes, each differing pair judged by
    an exact overlap test in numpy. A peer found wrong is a finding: its rows are marked ``*``
    (``peer_wrong`` in the JSON). A difference charged to ``warp_ccd`` is a mismatch: the command
    ends with status 3 after everything is written.
@@ -84,12 +84,12 @@ import numpy as np
 import warp as wp
 
 from .. import __version__
-from ..broad_phase import find_pairs, make_broad_phase
-from ..buffers import GrowableBuffer
-from ..cli_common import CliError, OneLineParser, quiet_warp, resolve_device
+from ..cli.common import CliError, OneLineParser, quiet_warp, resolve_device
 from ..output import PendingFile, check_output_path
 from ..pipeline import CollisionPipeline
-from ..scene import Scene
+from ..scene.scene import Scene
+from ..stages.broad_phase import find_pairs, make_broad_phase
+from ..stages.buffers import GrowableBuffer
 from .compare import PairCheck, box_overlap_truth, compare_exact, compare_triangle_pairs
 from .peers import FclPipeline, NewtonBroadPhaseSAP, PeerUnavailable, WarpMeshPipeline
 from .timing import MODES, ModeFrames, StageTimes, run_stages, synced_ms
@@ -293,7 +293,7 @@ class BroadPhaseMethod:
         return box_overlap_truth(*self.source.object_boxes())
 
     def reference_box_pairs(self) -> np.ndarray:
-        """``(K, 2)`` pairs of this package's :class:`~warp_ccd.broad_phase.BroadPhaseSAP` on the same boxes."""
+        """``(K, 2)`` pairs of this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP` on the same boxes."""
         lower, upper = self.source.object_boxes()
         pairs = GrowableBuffer(wp.vec2i, self.pairs.capacity, self.device, "reference box pairs")
         count = find_pairs(make_broad_phase("sap", device=self.device), lower, upper, pairs)
@@ -430,7 +430,7 @@ def measure_pipeline_memory(scene: Scene, frames: int = 2) -> dict:
 
 
 def parse_triangles(spec: str) -> tuple[str, tuple | None]:
-    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
+    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
     or ``"icosphereL"`` -> icosphere level L; ``"mixed"`` -> meshes of the sizes of real assets, 120
     to 12,640 triangles (:mod:`warp_ccd.bench.meshes`).
 

@@ -1,6 +1,6 @@
 """A frame of device work and its one counter read: launched from Python, or replayed as a CUDA graph.
 
-A frame is: reset every counter of a :class:`~warp_ccd.buffers.CounterRead` (one memset), enqueue
+A frame is: reset every counter of a :class:`~warp_ccd.stages.buffers.CounterRead` (one memset), enqueue
 the work (kernels that stop at device-side counters; launch sizes are capacities), copy the
 counters into pinned host memory (one small kernel: the pinned block is mapped into the device's
 address space), wait once. On CUDA the three are captured once in a graph (``wp.ScopedCapture``)
@@ -11,7 +11,7 @@ When a counter passed its buffer's capacity, the buffer grows (new storage), the
 eagerly (which also sizes any scratch that follows the buffers' capacities) and the next frame is
 captured anew: a graph is captured only right after an eager run, and replayed only while none of
 the frame's buffers got new storage since (:attr:`CounterRead.generation
-<warp_ccd.buffers.CounterRead.generation>`, one integer to compare). Nothing is dropped.
+<warp_ccd.stages.buffers.CounterRead.generation>`, one integer to compare). Nothing is dropped.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ class CountedFrame:
         launch: enqueues the frame's work on the reader's device; reads nothing on the host and
             allocates nothing once it has run eagerly with the buffers' current storage (it is
             captured in graph mode). The counters of ``counter_read`` are reset before it.
-        counter_read: the :class:`~warp_ccd.buffers.CounterRead` of every buffer the frame fills.
+        counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` of every buffer the frame fills.
         mode: ``"eager"`` or ``"graph"`` (CUDA only).
 
     Attributes:
@@ -135,7 +135,7 @@ class FrameCache:
     the scene's step, the box arrays); a caller with ever new keys starts over past ``limit``.
 
     Args:
-        counter_read: the :class:`~warp_ccd.buffers.CounterRead` every frame reads.
+        counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` every frame reads.
         mode: ``"eager"`` or ``"graph"``.
         limit: most frames kept.
 

@@ -40,8 +40,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .aabb import vertex_bounds
-from .output import PendingFile, check_output_path
+from ..geometry.box import vertex_bounds
+from ..output import PendingFile, check_output_path
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -145,7 +145,7 @@ def _usd_box_polyline_kernel(
 
 
 class UsdAnimationWriter:
-    """Writes the animation of a :class:`~warp_ccd.scene.Scene` to a USD file, frame by frame.
+    """Writes the animation of a :class:`~warp_ccd.scene.scene.Scene` to a USD file, frame by frame.
 
     The destination is checked here, before any simulation runs; the file appears at ``path``
     only when :meth:`close` succeeds (use the writer as a context manager: on an exception the

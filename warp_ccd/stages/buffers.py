@@ -4,7 +4,7 @@ A kernel that emits items reserves a slot with :func:`reserve_slot` (an atomic a
 counter) and writes only while the slot is below the capacity; the counter keeps counting past it,
 in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 (:class:`CounterRead`): if one passed its capacity, that buffer grows and the frame runs again
-(:class:`~warp_ccd.frame.CountedFrame`), so no item is ever dropped silently.
+(:class:`~warp_ccd.stages.frame.CountedFrame`), so no item is ever dropped silently.
 
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
 protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),

@@ -1,14 +1,14 @@
 """Bounding-volume trees: built once per shape (median split); rigid objects use their shape's tree
 as it is, deforming objects refit their own every frame.
 
-Build (kernels, all shapes at once: :mod:`warp_ccd.bvh_build`): the root holds all triangles;
+Build (kernels, all shapes at once: :mod:`warp_ccd.stages.bvh_build`): the root holds all triangles;
 each node with more than ``leaf_size`` triangles is split at the median of its triangles'
 centroids along the longest axis of its bounds, so the tree is balanced with
 ``ceil(log2(m / leaf_size)) + 1`` levels. The layout follows from the triangle counts alone (one
 thread per node); the triangle order from three centroid-sorted lists per shape, partitioned
 level by level over all shapes, small subtrees finished one thread each.
 
-Stored flat, topology shared by every instance of a shape (:class:`~warp_ccd.bvh_build.ShapeTree`
+Stored flat, topology shared by every instance of a shape (:class:`~warp_ccd.stages.bvh_build.ShapeTree`
 is one shape's tree on the host):
 
 * nodes in breadth-first order (a node's children are on the next level; level ``d`` of a
@@ -22,9 +22,9 @@ of the object's *box space*:
 
 * **rigid objects** share their shape's boxes, in shape space (the shape's own vertices, before
   scale and pose), computed once when the trees are built and never refit. The traversal
-  (:mod:`warp_ccd.mid_phase`) tests one object's boxes against the other's under the pair's
+  (:mod:`warp_ccd.stages.mid_phase`) tests one object's boxes against the other's under the pair's
   relative transform, as FCL does; the broad phase's object box is the union of the shape's cut
-  boxes (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
+  boxes (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
   vertices (one thread an object either way; by default the vertices of objects of up to 64,
   whose cuts are fewer, bigger boxes, and the cut of bigger ones, whose cuts are many small ones).
 * **deforming objects** (``scene.instance_deforming_np``) have boxes of their own, in world space,
@@ -48,17 +48,17 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .aabb import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
+from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
+from ..geometry.precision import precision_overloads
+from ..scene.scene import MeshTopology
 from .buffers import upper_bound
 from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, packed_upload
-from .precision import precision_overloads
-from .scene import MeshTopology
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 LEAF_SIZE_MAX = 256
 """Most triangles per leaf: a traversal thread emits up to 4 leaf pairs of ``leaf_size**2`` rows at
-once and its block of 256 counts them in int32 (:func:`~warp_ccd.buffers.block_reserve`)."""
+once and its block of 256 counts them in int32 (:func:`~warp_ccd.stages.buffers.block_reserve`)."""
 
 OBJECT_BOUNDS = {"auto": 64, "tree": -1, "vertices": 2**31 - 1}
 """How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
@@ -85,9 +85,9 @@ class TreeView:
     triangle order per shape, box slots per object.
 
     Shape ``s`` has layout ``l = shape_layout[s]`` (a tree's layout depends on its triangle count
-    alone, :mod:`warp_ccd.bvh_build`): its nodes are ``layout_node_start[l] + local id``, its
+    alone, :mod:`warp_ccd.stages.bvh_build`): its nodes are ``layout_node_start[l] + local id``, its
     leaves (local ids) ``leaf_node[layout_leaf_start[l]:layout_leaf_start[l + 1]]`` and its two
-    cuts (subtrees that partition the leaves, :meth:`~warp_ccd.bvh_build.ShapeTree.cut`), at the
+    cuts (subtrees that partition the leaves, :meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`), at the
     layout's cut depth and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
     layout_cut_start[2 l + deep + 1]]``; its triangle order starts at ``shape_tri_order_start[s]``;
     the boxes of object ``i`` (its box space: its shape's for a rigid object, the world for a
@@ -116,7 +116,7 @@ def triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], margin_rel:
     """``(lower, upper)`` float32 box in the world of triangle ``tri`` of an object whose shape's
     triangles start at ``tri_start`` (in ``mesh.shape_triangle``) and whose world vertices at
     ``vertex_start``, padded by ``margin_rel`` times its longest edge (the narrow phase's tolerance)
-    and rounded outward: a leaf's box, or a triangle's in a whole-object pair (:mod:`warp_ccd.mid_phase`)."""
+    and rounded outward: a leaf's box, or a triangle's in a whole-object pair (:mod:`warp_ccd.stages.mid_phase`)."""
     idx = mesh.shape_triangle[tri_start + tri]
     a = world_vertex[vertex_start + idx[0]]
     b = world_vertex[vertex_start + idx[1]]
@@ -208,7 +208,7 @@ def _refit_level_kernel(
 ):
     """One thread per (object, node of this level): leaf box from triangles, else children union.
     Items laid out by layout (:func:`_layout_item`), ``level_count`` nodes of the level per object;
-    the level's nodes are ``level_first ..`` in every tree (:meth:`~warp_ccd.bvh_build.TreeSizes.level`)."""
+    the level's nodes are ``level_first ..`` in every tree (:meth:`~warp_ccd.stages.bvh_build.TreeSizes.level`)."""
     _b, inst, k = _layout_item(wp.tid(), block_start, level_count, layout_instance, layout_instance_start)
     _refit_node(mesh, world_vertex, tree, mesh.instance_shape[inst], inst, level_first + k, margin_rel,
                 instance_lower, instance_upper)
@@ -361,7 +361,7 @@ class _RefitPlan:
     Args:
         instances: ``(K,)`` ids of the objects to refit.
         instance_shape: ``(N,)`` shape of every object of the topology the launches take.
-        build: the :class:`~warp_ccd.bvh_build.TreeBuild` (layouts, their sizes and inner-node lists).
+        build: the :class:`~warp_ccd.stages.bvh_build.TreeBuild` (layouts, their sizes and inner-node lists).
         small_max_nodes: trees of at most this many nodes are refit leaves-then-inner-nodes, the
             others level by level.
         device: Warp device.
@@ -441,18 +441,18 @@ class SceneBVH:
     every frame for deforming ones, and every object's box for the broad phase.
 
     Args:
-        scene: the :class:`~warp_ccd.scene.Scene`.
+        scene: the :class:`~warp_ccd.scene.scene.Scene`.
         leaf_size: largest number of triangles per leaf.
         margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
             tolerance, so that tree culling never rejects a pair the narrow phase accepts).
         instance_refit_max_nodes: deforming objects of shapes with at most this many nodes are refit
             in two launches, leaves then inner nodes (an inner node reads all its leaves); bigger
             trees level by level, one thread per node.
-        cut_depth: least level of each tree's cut (:meth:`~warp_ccd.bvh_build.ShapeTree.cut`),
+        cut_depth: least level of each tree's cut (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`),
             whose boxes under the pose make a big rigid object's box (``object_bounds``); big
             trees cut deeper, so that a cut's subtrees hold about ``cut_triangles`` triangles at
-            most (:meth:`~warp_ccd.bvh_build.TreeSizes.cut_depth`).
-        cut_triangles: see ``cut_depth`` (:data:`~warp_ccd.bvh_build.CUT_TRIANGLES`).
+            most (:meth:`~warp_ccd.stages.bvh_build.TreeSizes.cut_depth`).
+        cut_triangles: see ``cut_depth`` (:data:`~warp_ccd.stages.bvh_build.CUT_TRIANGLES`).
         object_bounds: a rigid object's box for the broad phase, one thread an object:
             ``"vertices"`` the box of its world vertices (tight; a thread reads them all);
             ``"tree"`` the union of its shape's cut boxes under its pose (a few boxes; loose where
@@ -460,12 +460,12 @@ class SceneBVH:
             of up to :data:`OBJECT_BOUNDS` ``["auto"]`` vertices, the tree of bigger ones; an integer
             ``n``, the vertices of objects of up to ``n`` vertices (0: ``"tree"``).
         small_subtree: largest subtree one thread of the build finishes alone (default: see
-            :class:`~warp_ccd.bvh_build.TreeBuild`).
+            :class:`~warp_ccd.stages.bvh_build.TreeBuild`).
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (float32, world), written by :meth:`refit`.
         tree: the :class:`TreeView` struct for kernels.
-        build: the :class:`~warp_ccd.bvh_build.TreeBuild` that made the trees (device arrays).
+        build: the :class:`~warp_ccd.stages.bvh_build.TreeBuild` that made the trees (device arrays).
         instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
         num_levels: levels of the deepest tree (the root alone: 1).

@@ -1,4 +1,4 @@
-"""USD import: the meshes of a stage as a :class:`~warp_ccd.scene.Scene`, at each time code asked for.
+"""USD import: the meshes of a stage as a :class:`~warp_ccd.scene.scene.Scene`, at each time code asked for.
 
 :class:`UsdMeshImport` traverses the stage once and reads, per mesh, its topology and points, and
 per object its world transform at every time code asked for:
@@ -12,7 +12,7 @@ per object its world transform at every time code asked for:
 * **Triangles.** Polygons are fanned (``n - 2`` triangles from a face of ``n`` vertices; faces in
   ``holeIndices`` are left out), wound so that their normals point out of the object: a
   ``leftHanded`` mesh, or one whose points a mirror was baked into, is wound the other way round
-  (penetrating or touching is decided by the sides of surfaces, :mod:`~warp_ccd.crossing`);
+  (penetrating or touching is decided by the sides of surfaces, :mod:`~warp_ccd.stages.crossing`);
   :attr:`UsdMeshImport.triangle_face` maps every triangle of the
   scene back to its USD face index. Faces of fewer than 3 vertices, indices outside the points,
   ``holeIndices`` that are not face indices, non-finite points and animated topology are errors
@@ -27,9 +27,9 @@ per object its world transform at every time code asked for:
   the linear part at the first time code), and the object moves rigidly from there while the
   rest of its transform stays a rotation and a uniform scale.
 * **Precision.** Where float32 cannot resolve the coordinates of every time code read at the
-  triangles' size (:func:`~warp_ccd.precision.needed_precision`: coordinates beyond about
+  triangles' size (:func:`~warp_ccd.geometry.precision.needed_precision`: coordinates beyond about
   ``8.4e3`` times the typical triangle), the scene is float64 instead, with a
-  :class:`~warp_ccd.precision.PrecisionWarning`; beyond what float64 resolves (``4.5e12`` times)
+  :class:`~warp_ccd.geometry.precision.PrecisionWarning`; beyond what float64 resolves (``4.5e12`` times)
   or float32's range, a ValueError names the prim. Deforming points are read frame by frame and
   checked as they come (:meth:`UsdMeshImport.set_frame` raises).
 * **Rigid or deforming.** An object is deforming when its points are time-sampled, or when its
@@ -63,9 +63,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from .precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
-from .scene import Scene, _matrix_to_quat
-from .shapes import MeshSet
+from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
+from ..scene.scene import Scene, _matrix_to_quat
+from ..scene.shapes import MeshSet
 
 __all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "require_layers", "stage_time_codes"]
 
@@ -82,7 +82,7 @@ worker processes, each opening the file and reading a share of the time codes.""
 
 def _run_pose_workers(tasks: list, progress: bool = False) -> list:
     """Runs :func:`_pose_worker` on each task in a process of its own (``python -m
-    warp_ccd.usd_import TASK OUT``: nothing of the caller's ``__main__`` is imported again); with
+    warp_ccd.usd.importer TASK OUT``: nothing of the caller's ``__main__`` is imported again); with
     ``progress``, a bar on stderr counts the time codes of the workers done."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
@@ -91,7 +91,7 @@ def _run_pose_workers(tasks: list, progress: bool = False) -> list:
             src, dst = os.path.join(folder, f"task{i}.pkl"), os.path.join(folder, f"out{i}.pkl")
             with open(src, "wb") as fh:
                 pickle.dump(task, fh)
-            procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd_import", src, dst], env=env,
+            procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd.importer", src, dst], env=env,
                                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True), dst))
         results = []
         bar = tqdm(total=sum(len(task[2]) for task in tasks), desc="reading transforms", unit="time code",
@@ -441,7 +441,7 @@ def _finite_poses(matrix: np.ndarray, bake: np.ndarray):
 
 
 class UsdMeshImport:
-    """A stage's meshes, read once, as a :class:`~warp_ccd.scene.Scene` that can be set to each time code.
+    """A stage's meshes, read once, as a :class:`~warp_ccd.scene.scene.Scene` that can be set to each time code.
 
     Example::
 
@@ -460,7 +460,7 @@ class UsdMeshImport:
         include_invisible: also read invisible prims.
         include_purposes: also read prims of these purposes (``"guide"``, ``"proxy"``).
         device: Warp device of the scene.
-        precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.Scene`); float32
+        precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.scene.Scene`); float32
             becomes float64 where the coordinates need it (see the module docstring).
         workers: processes that read the transforms of animated prims of a stage saved in a file
             (each opens the file and takes a share of the time codes). Default: the CPU count
@@ -471,7 +471,7 @@ class UsdMeshImport:
     Attributes:
         stage: the ``Usd.Stage``.
         times: ``(F,)`` float64 time codes.
-        scene: the :class:`~warp_ccd.scene.Scene`, at ``times[0]`` until :meth:`set_frame`.
+        scene: the :class:`~warp_ccd.scene.scene.Scene`, at ``times[0]`` until :meth:`set_frame`.
         frame: index of the time code the scene was last set to.
         object_path: ``N`` names: the mesh prim's path, or ``"<instancer>[<i>]<mesh path in the
             prototype>"`` for a PointInstancer's instance ``i``.
@@ -482,9 +482,9 @@ class UsdMeshImport:
         skipped: ``(path, reason)`` of the meshes left out (no faces, invisible, purpose).
         max_coordinate: the largest ``|coordinate|`` of any world vertex over the time codes
             (deforming points: at the first one), scene units.
-        triangle_size: the typical triangle size (:func:`~warp_ccd.precision.triangle_size`).
+        triangle_size: the typical triangle size (:func:`~warp_ccd.geometry.precision.triangle_size`).
         precision_note: why the scene is float64 though float32 was asked for, or None (also
-            given as a :class:`~warp_ccd.precision.PrecisionWarning`).
+            given as a :class:`~warp_ccd.geometry.precision.PrecisionWarning`).
         seconds: wall time of ``read`` (opening, traversal, topology, transforms at every time
             code) and ``build`` (the scene on its device, the first frame).
 
@@ -868,9 +868,10 @@ class UsdMeshImport:
 
     def _choose_precision(self, packed: MeshSet, shape_of: np.ndarray, poses: np.ndarray, scale: np.ndarray,
                           precision: str) -> str:
-        """The scene's precision: ``precision``, or float64 (with a :class:`~warp_ccd.precision.PrecisionWarning`)
-        where float32 does not resolve the coordinates of every time code read at the triangles'
-        size (:func:`~warp_ccd.precision.needed_precision`); sets :attr:`max_coordinate`,
+        """The scene's precision: ``precision``, or float64 (with a
+        :class:`~warp_ccd.geometry.precision.PrecisionWarning`) where float32 does not resolve the
+        coordinates of every time code read at the triangles' size
+        (:func:`~warp_ccd.geometry.precision.needed_precision`); sets :attr:`max_coordinate`,
         :attr:`triangle_size` and :attr:`precision_note`.
 
         Args:
@@ -1030,7 +1031,7 @@ class UsdMeshImport:
         return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
 
 
-if __name__ == "__main__":  # a worker of _run_pose_workers: python -m warp_ccd.usd_import TASK OUT
+if __name__ == "__main__":  # a worker of _run_pose_workers: python -m warp_ccd.usd.importer TASK OUT
     with open(sys.argv[1], "rb") as _task:
         _result = _pose_worker(pickle.load(_task))
     with open(sys.argv[2], "wb") as _out:

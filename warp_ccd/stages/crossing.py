@@ -1,6 +1,6 @@
 """Penetrating or touching: whether two surfaces cross where their triangles meet, and how deep.
 
-The exact test (:mod:`~warp_ccd.narrow_phase`) finds every pair of closed triangles that meet.
+The exact test (:mod:`~warp_ccd.stages.narrow_phase`) finds every pair of closed triangles that meet.
 Whether two *surfaces* pass through each other is a question about the surfaces, not about how
 they are cut into triangles: a crate standing on a floor touches it wherever the floor's grid
 lines fall, and a crate sunk into it crosses it wherever they fall. This module decides it from
@@ -50,7 +50,7 @@ open edge or vertex lies beyond the surface's rim, not behind it. A vertex pokin
 face has depth ``h`` however the face is cut; a crate sunk ``h`` into a floor, ``h``. Where the
 surfaces cross with no vertex behind the other (two sheets crossing between their vertices,
 flush faces), the depth is the pair's local crossing depth
-(:func:`~warp_ccd.narrow_phase.crossing_depth`) capped by the object pair's deepest vertex, at
+(:func:`~warp_ccd.stages.narrow_phase.crossing_depth`) capped by the object pair's deepest vertex, at
 least the tolerance: a crossing never has depth 0.
 """
 
@@ -61,6 +61,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from ..geometry.precision import precision_overloads
+from ..scene.scene import MeshTopology, mesh_triangle
 from .bvh import SceneBVH, TreeView
 from .narrow_phase import (
     TOLERANCE,
@@ -72,8 +74,6 @@ from .narrow_phase import (
     _unit_normal,
     crossing_depth,
 )
-from .precision import precision_overloads
-from .scene import MeshTopology, mesh_triangle
 
 __all__ = ["CrossingClassifier", "SurfaceTopology", "shape_sides", "surface_topology"]
 
@@ -113,7 +113,7 @@ def surface_topology(scene) -> SurfaceTopology:
     """Neighbours across edges and vertex fans of all the scene's shapes, built at once (numpy).
 
     Args:
-        scene: a :class:`~warp_ccd.scene.Scene`.
+        scene: a :class:`~warp_ccd.scene.scene.Scene`.
 
     Returns:
         The :class:`SurfaceTopology` on the scene's device.
@@ -609,7 +609,7 @@ _NodeStack = wp.types.vector(length=TREE_STACK, dtype=wp.int32)
 BOX_SLACK = 2.0**-15
 """Relative slack of a node box's distance in a nearest-point query, in units of ``|t| + |p - t|``
 (pose translation ``t``, query point ``p``): covers the rounding of world vertices computed from
-poses (the mid phase's :data:`~warp_ccd.bvh.WORLD_ERROR_ULPS` in float32) and of the query point
+poses (the mid phase's :data:`~warp_ccd.stages.bvh.WORLD_ERROR_ULPS` in float32) and of the query point
 taken to the box space."""
 
 
@@ -791,9 +791,9 @@ class CrossingClassifier:
     def __init__(self, scene, *, tolerance: float = TOLERANCE, trees=None):
         """
         Args:
-            scene: the :class:`~warp_ccd.scene.Scene` whose pairs will be classified.
+            scene: the :class:`~warp_ccd.scene.scene.Scene` whose pairs will be classified.
             tolerance: the exact test's relative tolerance.
-            trees: the pipeline's :class:`~warp_ccd.bvh.SceneBVH` (``CollisionPipeline.boxes``), or None.
+            trees: the pipeline's :class:`~warp_ccd.stages.bvh.SceneBVH` (``CollisionPipeline.boxes``), or None.
         """
         self.scene = scene
         self.tolerance = float(tolerance)

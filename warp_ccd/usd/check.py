@@ -1,12 +1,12 @@
 """Checking a USD animation for interpenetration, frame by frame (``warp-ccd check``).
 
-:func:`check_usd` reads a stage once (:class:`~warp_ccd.usd_import.UsdMeshImport`), runs the
+:func:`check_usd` reads a stage once (:class:`~warp_ccd.usd.importer.UsdMeshImport`), runs the
 collision pipeline at every time code asked for, and returns a :class:`CheckReport`: per frame,
 the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross.
 
 **Touching is not penetrating.** Objects resting on each other touch every frame, and the exact
 test reports their triangle pairs (triangles are closed sets). Each reported pair is classified
-from the surfaces around it (:mod:`~warp_ccd.crossing`): the surfaces *cross* where one enters
+from the surfaces around it (:mod:`~warp_ccd.stages.crossing`): the surfaces *cross* where one enters
 the region behind the other (their insides overlap), and only *touch* where they meet face to
 face, edge on edge, edge or vertex on a face. That verdict is a property of the surfaces, not of
 how they are cut into triangles. A crossing pair's depth is how far a vertex of either triangle
@@ -32,10 +32,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .crossing import CrossingClassifier
-from .narrow_phase import TOLERANCE
-from .output import PendingFile, check_output_path
-from .usd import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
+from ..output import PendingFile, check_output_path
+from ..stages.crossing import CrossingClassifier
+from ..stages.narrow_phase import TOLERANCE
+from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 
 __all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
 
@@ -92,8 +92,8 @@ class CheckReport:
             ``classify`` (depths, USD faces, the report's rows).
         skipped: ``(path, reason)`` of the meshes left out.
         missing: the sublayers, references and payloads that could not be opened (checked
-            without them; see :func:`~warp_ccd.usd_import.missing_layers`).
-        source: the :class:`~warp_ccd.usd_import.UsdMeshImport` (its scene is at the last frame).
+            without them; see :func:`~warp_ccd.usd.importer.missing_layers`).
+        source: the :class:`~warp_ccd.usd.importer.UsdMeshImport` (its scene is at the last frame).
     """
 
     stage: str
@@ -289,14 +289,14 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 
     Args:
         stage_or_path: a ``Usd.Stage`` or a USD file path.
-        frames: time codes (see :func:`~warp_ccd.usd_import.stage_time_codes`; default: every
+        frames: time codes (see :func:`~warp_ccd.usd.importer.stage_time_codes`; default: every
             integer time code of the stage's range).
         prims: prim paths or patterns to check (default: the whole stage).
         device: Warp device (default: Warp's preferred device).
         precision: ``"float32"`` or ``"float64"``; float32 becomes float64, with a
-            :class:`~warp_ccd.precision.PrecisionWarning` (``report.source.precision_note``), where
+            :class:`~warp_ccd.geometry.precision.PrecisionWarning` (``report.source.precision_note``), where
             the coordinates are too far from the origin for it at the triangles' size
-            (:func:`~warp_ccd.precision.needed_precision`).
+            (:func:`~warp_ccd.geometry.precision.needed_precision`).
         min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
         count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
         segments: keep the intersection segments (for the report and the overlay).
@@ -311,14 +311,14 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         The :class:`CheckReport`.
 
     Raises:
-        ValueError: naming the file or prim: see :class:`~warp_ccd.usd_import.UsdMeshImport`; or
+        ValueError: naming the file or prim: see :class:`~warp_ccd.usd.importer.UsdMeshImport`; or
             a sublayer, reference or payload cannot be opened (unless ``allow_missing``).
     """
     import warp as wp
     from tqdm import tqdm
 
-    from .pipeline import CollisionPipeline
-    from .usd_import import UsdMeshImport, open_stage, require_layers, stage_time_codes
+    from ..pipeline import CollisionPipeline
+    from .importer import UsdMeshImport, open_stage, require_layers, stage_time_codes
 
     if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
             or not np.isfinite(min_depth) or min_depth < 0:
@@ -399,7 +399,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
     """
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
-    from .usd_import import layer_files
+    from .importer import layer_files
 
     full, ext = validate_stage_path(out_path)
     imp = report.source

@@ -1,6 +1,6 @@
 """What the ``warp-ccd`` subcommands share: one-line argument errors, exit codes, device names.
 
-:mod:`warp_ccd.cli` (``demo``) and :mod:`warp_ccd.bench` (``bench``) both import from here, and
+:mod:`warp_ccd.cli.commands` (``demo``) and :mod:`warp_ccd.bench` (``bench``) both import from here, and
 neither imports the other at module level.
 """
 
@@ -95,7 +95,7 @@ def uncached_modules(device, names) -> list[str] | None:
 
     Args:
         device: a Warp device.
-        names: Python module names whose Warp kernels will run (``"warp_ccd.narrow_phase"``).
+        names: Python module names whose Warp kernels will run (``"warp_ccd.stages.narrow_phase"``).
 
     Returns:
         The names to be compiled, or None when that cannot be told (kernel caching off, or a Warp

@@ -5,7 +5,7 @@ Subcommands:
 * ``demo``: a seeded random scene of polyhedra in motion, collision detection every frame, the
   animation written to USD (colliding objects in colour), optionally a preview image or GIF, and
   a summary of what was found and how long each stage took.
-* ``check``: every interpenetration in a USD animation, frame by frame (:mod:`warp_ccd.check`): a
+* ``check``: every interpenetration in a USD animation, frame by frame (:mod:`warp_ccd.usd.check`): a
   summary table, optionally a JSON report, a USD overlay and a picture of the worst frame. Exit
   status 0 when nothing penetrates, 1 when something does (or, with ``--count-touching``,
   touches), 2 when the input or the arguments are bad, 3 on an internal error, so that it can
@@ -28,7 +28,7 @@ import time
 import traceback
 import warnings
 
-from .cli_common import (
+from .common import (
     EXIT_ERROR,
     EXIT_FINDINGS,
     EXIT_INTERNAL,
@@ -47,8 +47,9 @@ __all__ = ["main"]
 
 PROG = "warp-ccd"
 
-CHECK_KERNEL_MODULES = ("warp_ccd.scene", "warp_ccd.bvh_build", "warp_ccd.bvh", "warp_ccd.broad_phase",
-                        "warp_ccd.mid_phase", "warp_ccd.narrow_phase", "warp_ccd.buffers", "warp_ccd.crossing")
+CHECK_KERNEL_MODULES = ("warp_ccd.scene.scene", "warp_ccd.stages.bvh_build", "warp_ccd.stages.bvh",
+                        "warp_ccd.stages.broad_phase", "warp_ccd.stages.mid_phase", "warp_ccd.stages.narrow_phase",
+                        "warp_ccd.stages.buffers", "warp_ccd.stages.crossing")
 """The modules whose Warp kernels ``check`` runs (``warp_ccd.preview`` too with ``--preview``)."""
 
 _DASH_VALUE = re.compile(r"-\.?\d")
@@ -190,8 +191,8 @@ def _join_dash_values(argv: list[str]) -> list[str]:
 
 
 def _run_demo(args) -> int:
-    from .preview import validate_preview_path
-    from .usd import validate_stage_path
+    from ..preview import validate_preview_path
+    from ..usd.export import validate_stage_path
 
     # Every check that can fail does so before the simulation starts.
     try:
@@ -210,10 +211,10 @@ def _run_demo(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from .pipeline import CollisionPipeline
-    from .preview import PreviewRenderer, save_preview
-    from .scene import Scene
-    from .usd import UsdAnimationWriter
+    from ..pipeline import CollisionPipeline
+    from ..preview import PreviewRenderer, save_preview
+    from ..scene.scene import Scene
+    from ..usd.export import UsdAnimationWriter
 
     try:
         device = resolve_device(args.device)
@@ -301,15 +302,15 @@ def _run_check(args) -> int:
         for i, output in enumerate(outputs):
             _refuse_overwriting([(f"the {flag} file", path) for flag, path in outputs[:i]], [output])
         if args.report is not None:
-            from .output import check_output_path
+            from ..output import check_output_path
 
             check_output_path(args.report, (".json",), "report")
         if args.usd_out is not None:
-            from .usd import validate_stage_path
+            from ..usd.export import validate_stage_path
 
             validate_stage_path(args.usd_out)
         if args.preview is not None:
-            from .preview import validate_preview_path
+            from ..preview import validate_preview_path
 
             if validate_preview_path(args.preview)[1] != ".png":
                 raise ValueError(f"cannot write {args.preview}: the preview of a check is one picture (use .png)")
@@ -322,8 +323,8 @@ def _run_check(args) -> int:
         raise fail("usd-core is not installed (pip install usd-core)") from None
     quiet_warp()
     init_warp()
-    from .check import check_usd, prepare_overlay
-    from .usd_import import layer_files, missing_layers, open_stage, require_layers
+    from ..usd.check import check_usd, prepare_overlay
+    from ..usd.importer import layer_files, missing_layers, open_stage, require_layers
 
     t = time.perf_counter()
     try:
@@ -344,7 +345,7 @@ def _run_check(args) -> int:
     if uncached_modules(device, modules):
         print(f"{PROG} check: compiling kernels for {device} (not in Warp's kernel cache yet; later runs "
               "reuse them)...", file=sys.stderr, flush=True)
-    from .precision import PrecisionWarning
+    from ..geometry.precision import PrecisionWarning
 
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -378,7 +379,7 @@ def _run_check(args) -> int:
         if args.preview is not None:
             import numpy as np
 
-            from .preview import PreviewRenderer, prepare_preview
+            from ..preview import PreviewRenderer, prepare_preview
 
             worst = report.worst_frame
             imp = report.source
@@ -388,7 +389,7 @@ def _run_check(args) -> int:
             picture = PreviewRenderer(imp.scene, 640, 480).render(colliding)
             pending.append(prepare_preview([picture], args.preview))
             lines.append(f"  preview: {{}} (time {report.frames[worst].time:g})")
-        from .output import commit_all
+        from ..output import commit_all
 
         written = commit_all(pending)
     except BaseException as exc:
@@ -415,7 +416,7 @@ def _refuse_overwriting(inputs, outputs) -> None:
         inputs: ``(what, path)`` of the files that must not be written.
         outputs: ``(option, path)`` of the destinations.
     """
-    from .output import same_file
+    from ..output import same_file
 
     for flag, out in outputs:
         for what, path in inputs:

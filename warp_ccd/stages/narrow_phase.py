@@ -76,9 +76,9 @@ from typing import Any
 
 import warp as wp
 
+from ..geometry.precision import PRECISIONS, precision_overloads, precision_types
+from ..scene.scene import MeshTopology, mesh_triangle
 from .buffers import GrowableBuffer, reserve_slot, used_count
-from .precision import PRECISIONS, precision_overloads, precision_types
-from .scene import MeshTopology, mesh_triangle
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -1050,7 +1050,7 @@ def pair_crossing_depth(scene, pairs: wp.array, tolerance: float = TOLERANCE, ou
     """:func:`crossing_depth` of triangle pairs of a scene, on its device.
 
     Args:
-        scene: the :class:`~warp_ccd.scene.Scene` (its world vertices as they are now).
+        scene: the :class:`~warp_ccd.scene.scene.Scene` (its world vertices as they are now).
         pairs: ``(M,)`` ``wp.vec4i`` rows ``(obj_a, tri_a, obj_b, tri_b)`` on the scene's device
             (a result's ``device_triangle_pairs``).
         tolerance: relative tolerance of the triangle test.
@@ -1101,18 +1101,18 @@ class NarrowPhase:
         device: Warp device.
 
     Attributes:
-        hits: :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec4i`` rows
+        hits: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec4i`` rows
             ``(obj_a, tri_a, obj_b, tri_b)``.
-        touch: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
+        touch: with ``method="moller"``, the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of the
             candidates that do not cross and may touch (step 4, tested two threads a row by a
             second kernel; else None), with ``touch_flag``, ``(touch.capacity,)`` int32.
-        rare: with ``method="moller"``, the :class:`~warp_ccd.buffers.GrowableBuffer` of the
+        rare: with ``method="moller"``, the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of the
             candidates with a degenerate triangle or coplanar triangles (tested whole by a third
             kernel; else None).
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
         segment: ``(hits.capacity, 2)`` end points (the scene's vector type) of each hit's
             segment (NaN for coplanar contacts), or None without ``segments``.
-        contained: :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i`` rows
+        contained: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec2i`` rows
             ``(inner, outer)``, or None without ``containment``.
     """
 
@@ -1150,7 +1150,7 @@ class NarrowPhase:
         segments and the containment pairs when asked for (host reads nothing).
 
         Args:
-            scene: the :class:`~warp_ccd.scene.Scene` (its world vertices now).
+            scene: the :class:`~warp_ccd.scene.scene.Scene` (its world vertices now).
             candidates: ``wp.vec4i`` candidate triangle pairs.
             object_pairs, object_lower, object_upper: the broad phase's object pairs and the
                 ``(N,)`` object boxes it saw (needed with ``containment``).

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .precision import precision_overloads, precision_types
+from ..geometry.precision import precision_overloads, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 

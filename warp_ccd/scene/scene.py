@@ -17,7 +17,7 @@ Kernels find a triangle's world vertices with :func:`mesh_triangle` from the ind
 :class:`MeshTopology` struct, the same at both precisions) and ``world_vertex`` (``wp.vec3`` or
 ``wp.vec3d``), a separate generic argument.
 
-Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd.motion.EllipseMotion`,
+Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd.scene.motion.EllipseMotion`,
 ``set_transforms`` / ``set_poses`` for rigid objects placed by the caller, and writing
 ``world_vertex`` directly (``set_world_vertices`` or a kernel of one's own) for deforming meshes.
 """
@@ -30,8 +30,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .motion import EllipseMotion, advance_time
-from .precision import (
+from ..geometry.precision import (
     coordinate_message,
     needed_precision,
     precision_overloads,
@@ -39,6 +38,7 @@ from .precision import (
     shape_radius,
     triangle_size,
 )
+from .motion import EllipseMotion, advance_time
 from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
 
@@ -187,7 +187,7 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
 
 def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | None, precision: str) -> None:
     """Raises ValueError when ``precision`` does not resolve the scene's world vertices at its
-    triangles' size (:func:`~warp_ccd.precision.needed_precision`), naming the mesh with the
+    triangles' size (:func:`~warp_ccd.geometry.precision.needed_precision`), naming the mesh with the
     largest coordinate.
 
     Args:
@@ -224,7 +224,7 @@ class Scene:
 
     Args:
         shapes: sequence of ``(vertices (n, 3), triangles (m, 3))`` meshes, each validated, or a
-            :class:`~warp_ccd.shapes.MeshSet` that :func:`~warp_ccd.shapes.validate_meshes` returned.
+            :class:`~warp_ccd.scene.shapes.MeshSet` that :func:`~warp_ccd.scene.shapes.validate_meshes` returned.
         instance_shape: ``(N,)`` shape id of each object.
         instance_scale: ``(N,)`` uniform scale of each object (default 1).
         poses: ``(N, 7)`` rows ``(px, py, pz, qx, qy, qz, qw)`` (default identity).
@@ -232,7 +232,7 @@ class Scene:
         deforming: True when the caller writes every object's world vertices
             (:meth:`set_world_vertices`), False (default) when poses place them all, or an ``(N,)``
             bool mask of the objects whose vertices the caller writes (the others stay rigid: their
-            trees are never refit, see :mod:`warp_ccd.bvh`).
+            trees are never refit, see :mod:`warp_ccd.stages.bvh`).
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` (default) or ``"float64"``: type of shape vertices, poses and
             world vertices, and of the exact triangle test. Object and node boxes stay float32,
@@ -240,7 +240,7 @@ class Scene:
 
     Attributes:
         scalar_type, vec3_type, transform_type: the Warp types of its precision
-            (:func:`~warp_ccd.precision.precision_types`).
+            (:func:`~warp_ccd.geometry.precision.precision_types`).
         topology: the :class:`MeshTopology` struct kernels take beside ``world_vertex``.
         time_device: ``(1,)`` float64, the motion's time on the device (see :attr:`time`).
     """
@@ -369,7 +369,7 @@ class Scene:
         Args:
             num_objects: ``N >= 0``.
             seed: random seed (same seed, same scene).
-            shapes: shape names (see :func:`warp_ccd.shapes.shape`) or ``(vertices, triangles)``
+            shapes: shape names (see :func:`warp_ccd.scene.shapes.shape`) or ``(vertices, triangles)``
                 meshes, chosen uniformly; each is scaled to the object's radius (a mesh as given,
                 so give meshes of radius about 1).
             density: volume fraction of bounding spheres, in ``(0, 1)``.
@@ -421,7 +421,7 @@ class Scene:
         Raises:
             ValueError: a bad mesh or transform (naming it), or world vertices too far from the
                 origin for ``precision`` at the triangles' size (naming the mesh with the largest
-                coordinate; :func:`~warp_ccd.precision.needed_precision`): float32 beyond about
+                coordinate; :func:`~warp_ccd.geometry.precision.needed_precision`): float32 beyond about
                 ``8.4e3`` times the typical triangle size (use ``precision="float64"``), float64
                 beyond ``4.5e12`` times, either beyond ``3.4e38``. Only the vertices as given are
                 checked, not later poses.
@@ -458,7 +458,7 @@ class Scene:
     @classmethod
     def from_usd(cls, stage_or_path, *, prims=None, time=None, device=None, precision: str = "float32",
                  **options) -> "Scene":
-        """A scene of the meshes of a USD stage, at one time code (see :class:`~warp_ccd.usd_import.UsdMeshImport`).
+        """A scene of the meshes of a USD stage, at one time code (see :class:`~warp_ccd.usd.importer.UsdMeshImport`).
 
         Every ``UsdGeom.Mesh`` under ``prims`` (instance proxies and PointInstancer instances
         included; invisible, guide and proxy prims left out) is one object, polygons fanned into
@@ -474,12 +474,12 @@ class Scene:
             device: Warp device.
             precision: ``"float32"`` or ``"float64"``.
             **options: ``times``, ``include_invisible``, ``include_purposes`` of
-                :class:`~warp_ccd.usd_import.UsdMeshImport`.
+                :class:`~warp_ccd.usd.importer.UsdMeshImport`.
 
         Raises:
-            ValueError: naming the file or the prim at fault (see :class:`~warp_ccd.usd_import.UsdMeshImport`).
+            ValueError: naming the file or the prim at fault (see :class:`~warp_ccd.usd.importer.UsdMeshImport`).
         """
-        from .usd_import import UsdMeshImport
+        from ..usd.importer import UsdMeshImport
 
         if time is not None:
             if "times" in options:
@@ -498,7 +498,7 @@ class Scene:
     def pose_world_vertices(self) -> None:
         """Computes every object's world vertices from the shapes, scales and poses (one kernel),
         deforming or not: for a scene that mixes both, whose caller then overwrites the deforming
-        objects' vertices (as :class:`~warp_ccd.usd_import.UsdMeshImport` does)."""
+        objects' vertices (as :class:`~warp_ccd.usd.importer.UsdMeshImport` does)."""
         if self.num_world_vertices == 0:
             return
         wp.launch(

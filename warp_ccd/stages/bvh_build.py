@@ -45,8 +45,8 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from ..geometry.precision import precision_overloads
 from .buffers import upper_bound
-from .precision import precision_overloads
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})

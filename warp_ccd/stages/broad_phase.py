@@ -1,7 +1,7 @@
 """Broad phase: which pairs of axis-aligned boxes overlap.
 
 Two implementations behind one interface (``launch(lower, upper, pairs)`` writes pairs ``(a, b)``,
-``a < b``, into a :class:`~warp_ccd.buffers.GrowableBuffer` of ``wp.vec2i``, and ``counters`` lists
+``a < b``, into a :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec2i``, and ``counters`` lists
 the buffers of its own whose counters the caller checks after it; boxes are closed, so touching
 boxes overlap):
 
@@ -20,7 +20,7 @@ Sweep and prune, as run on the device each frame:
    one axis alone is not enough at scale: with boxes spread over a volume the number of boxes
    overlapping one box along one axis grows like N^(2/3); per grid cell it stays constant.
 3. Every box is entered in each cell it covers (usually 1 to 4), in slots that its block of
-   threads reserves with one atomic add (:func:`~warp_ccd.buffers.block_reserve`; the sort puts
+   threads reserves with one atomic add (:func:`~warp_ccd.stages.buffers.block_reserve`; the sort puts
    the entries in order, so no count and scan are needed). A box covering
    more than ``max_cells_per_box`` cells (a huge box among small ones) is not entered in the
    grid; it goes to a short list tested against all boxes instead (O(N) per huge box).
@@ -49,7 +49,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .aabb import BOX_EMPTY, boxes_overlap
+from ..geometry.box import BOX_EMPTY, boxes_overlap
 from .buffers import (
     ITEM_LIST_SIZE,
     CounterRead,
@@ -108,7 +108,7 @@ class BroadPhase:
     """What both broad phases share: running alone, frame after frame (:meth:`find_pairs`).
 
     A subclass implements ``launch(lower, upper, pairs)`` and ``counters``. :meth:`find_pairs`
-    owns the pair buffer and one :class:`~warp_ccd.frame.CountedFrame` per box arrays: each call
+    owns the pair buffer and one :class:`~warp_ccd.stages.frame.CountedFrame` per box arrays: each call
     is one frame with one counter read, replayed as a CUDA graph on CUDA (``graph``), so a user of
     the broad phase alone gets the pipeline's frame.
 
@@ -557,7 +557,7 @@ def _sap_sweep_kernel(
     pair_count: wp.array[wp.int64],
 ):
     """Thread ``t``: sorted entry ``t`` sweeps its cell, its block reserves the pairs found with
-    one atomic add (an entry's first :data:`~warp_ccd.buffers.ITEM_LIST_SIZE`; any more take one
+    one atomic add (an entry's first :data:`~warp_ccd.stages.buffers.ITEM_LIST_SIZE`; any more take one
     atomic each); box ``t`` is tested against the big boxes."""
     block, lane = wp.tid()
     t = block * wp.block_dim() + lane
@@ -626,7 +626,7 @@ class BroadPhaseSAP(BroadPhase):
     def _resize(self, n: int) -> None:
         """Scratch for ``n`` boxes. It only grows: a captured frame holds its pointers, so a frame of
         fewer boxes uses the larger scratch, and new scratch marks the frames reading the entries
-        stale (:meth:`~warp_ccd.buffers.GrowableBuffer.mark_stale`)."""
+        stale (:meth:`~warp_ccd.stages.buffers.GrowableBuffer.mark_stale`)."""
         if n > self._scratch_boxes:
             d = self.device
             self._scratch_boxes = n
@@ -700,7 +700,7 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -
 
     Resets ``pairs``, launches, reads the counters of ``pairs`` and of the broad phase's own
     ``counters`` with one synchronisation, grows what overflowed and launches again if needed
-    (an eager :class:`~warp_ccd.frame.CountedFrame`).
+    (an eager :class:`~warp_ccd.stages.frame.CountedFrame`).
 
     Args:
         broad: an object with ``launch(lower, upper, pairs)`` (and ``counters``, when it writes

@@ -1,10 +1,10 @@
 """Mid phase: candidate triangle pairs of candidate object pairs.
 
 Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
-:class:`~warp_ccd.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
+:class:`~warp_ccd.stages.buffers.GrowableBuffer` (``candidates``), for the narrow phase.
 
 * :class:`MidPhaseBVH` (default): a simultaneous descent of the two objects' trees
-  (:mod:`warp_ccd.bvh`), level by level for every object pair at once: a first kernel writes each
+  (:mod:`warp_ccd.stages.bvh`), level by level for every object pair at once: a first kernel writes each
   pair's :class:`TreePair` (its trees' starts, the maps between the two box spaces and their
   paddings), then each level is one launch over the *front*, the node pairs whose boxes overlap:
   each opens both nodes (a leaf stays itself) and tests the two to four pairs of children; pairs
@@ -13,7 +13,7 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   tree's levels bound the launches, so a frame is a fixed sequence of kernels (a CUDA graph);
   each launch is a fixed grid whose threads stride over the level's node pairs (its count on the
   device), and each round a block reserves its front slots and its rows with one atomic add each
-  (:func:`~warp_ccd.buffers.block_reserve`). Every node pair is one short step, all of a level's
+  (:func:`~warp_ccd.stages.buffers.block_reserve`). Every node pair is one short step, all of a level's
   independent, so no thread walks a big pair alone, and an object pair whose boxes overlap but
   whose trees do not costs a few tests at level 0. The front is a buffer with a capacity and a
   counter (its largest level's count), grown as any other.
@@ -25,7 +25,7 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   traversal is latency, a few microseconds a launch a level; a scene of such objects alone
   launches no traversal at all.
 
-  The boxes are tested in ``a``'s box space (:mod:`warp_ccd.bvh`: a rigid object's shape space, a
+  The boxes are tested in ``a``'s box space (:mod:`warp_ccd.stages.bvh`: a rigid object's shape space, a
   deforming object's world): ``b``'s box under the pair's relative transform, the box around it
   (three axes, ``a``'s), then ``a``'s box in ``b``'s space (``b``'s three axes): a separating-axis
   test of the two oriented boxes on six of their fifteen axes (``separating_axes=3``: the first
@@ -44,7 +44,9 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .aabb import boxes_overlap
+from ..geometry.box import boxes_overlap
+from ..geometry.precision import precision_overloads
+from ..scene.scene import MeshTopology
 from .buffers import (
     BLOCK_DIM,
     GrowableBuffer,
@@ -54,8 +56,6 @@ from .buffers import (
     used_count,
 )
 from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, triangle_box_at
-from .precision import precision_overloads
-from .scene import MeshTopology
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -386,7 +386,7 @@ def _expand_kernel(
     (objects of at most ``whole_max`` triangles, :func:`_whole_pair_kernel`).
 
     ``num_blocks`` blocks stride over the entries; each round a block reserves its threads' front
-    slots and rows with one atomic add each (:func:`~warp_ccd.buffers.block_reserve`). The front's
+    slots and rows with one atomic add each (:func:`~warp_ccd.stages.buffers.block_reserve`). The front's
     counter (``front_peak``) keeps the largest level's count, against the front's capacity."""
     block, lane = wp.tid()
     width = wp.block_dim()
@@ -474,7 +474,7 @@ def _is_whole_pair(instance_triangle_start: wp.array[wp.int32], a: int, b: int, 
 def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, big: int, i: int, small: int,
                m_small: int):
     """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes of triangle
-    ``i`` of ``big`` and ``j`` of ``small`` overlap (:func:`~warp_ccd.bvh.triangle_box_at`, the
+    ``i`` of ``big`` and ``j`` of ``small`` overlap (:func:`~warp_ccd.stages.bvh.triangle_box_at`, the
     trees' leaf boxes)."""
     big_start = topology.shape_triangle_start[topology.instance_shape[big]]
     lo, hi = triangle_box_at(topology, world_vertex, margin_rel, big_start, topology.instance_vertex_start[big], i)
@@ -525,7 +525,7 @@ def _whole_pair_kernel(
     round; ``num_blocks`` blocks stride over the stored pairs). For a pair of objects of at most
     ``whole_max`` triangles each, thread ``l`` takes triangles ``l, l + lanes, ...`` of the larger
     object and tests each one's world box against every triangle's of the smaller
-    (:func:`_whole_row`); the block reserves the rows (:func:`~warp_ccd.buffers.block_reserve`) and
+    (:func:`_whole_row`); the block reserves the rows (:func:`~warp_ccd.stages.buffers.block_reserve`) and
     each thread writes its hits (a thread with more than one triangle tests the later ones again).
     Other pairs are left to the trees."""
     block, lane = wp.tid()
@@ -575,7 +575,7 @@ class MidPhaseBVH:
     overlapping node pairs (see module docs).
 
     Args:
-        bvh: the scene's :class:`~warp_ccd.bvh.SceneBVH` (refit before each launch).
+        bvh: the scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (refit before each launch).
         capacity: initial capacity of the candidate buffer (it grows).
         front_capacity: initial capacity of each level's front of node pairs (it grows; default
             four per object).
@@ -584,8 +584,8 @@ class MidPhaseBVH:
         device: Warp device.
 
     Attributes:
-        candidates: the :class:`~warp_ccd.buffers.GrowableBuffer` of candidate rows.
-        front: the :class:`~warp_ccd.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
+        candidates: the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of candidate rows.
+        front: the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
             b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
             counter holds the largest level's count.
         num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
@@ -604,7 +604,7 @@ class MidPhaseBVH:
         whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up
             to 256): an attribute, checked when set and read at each launch.
 
-    The front's :meth:`~warp_ccd.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
+    The front's :meth:`~warp_ccd.stages.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
     """
 
