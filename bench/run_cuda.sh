@@ -58,17 +58,17 @@ for part in $parts; do
             >> "$log" 2>&1
         tail -n 15 "$log" ;;
     resources)
-        step python3 bench/kernel_resources.py --device "$device" --out "$out/kernel_resources_$tag.json" ;;
+        step python3 -m warp_ccd.bench.kernel_resources --device "$device" --out "$out/kernel_resources_$tag.json" ;;
     stages)
-        step python3 bench/frame_stages.py --device "$device" --cases $staged --frames $((frames * 2)) \
+        step python3 -m warp_ccd.bench.frame_stages --device "$device" --cases $staged --frames $((frames * 2)) \
             --out "$out/frame_stages_$tag.json"
-        step python3 bench/frame_stages.py --device "$device" --cases $staged_big --variants default trees whole \
+        step python3 -m warp_ccd.bench.frame_stages --device "$device" --cases $staged_big --variants default trees whole \
             --frames $((frames / 2)) --replays 10 --out "$out/frame_stages_big_$tag.json" ;;
     profile)
-        step python3 bench/profile_frame.py --device "$device" --objects $profiled --frames $((frames * 5)) \
+        step python3 -m warp_ccd.bench.profile_frame --device "$device" --objects $profiled --frames $((frames * 5)) \
             --out "$out/profile_$tag.json" ;;
     narrow)
-        step python3 bench/bench_narrow_phase.py --device "$device" --objects $narrow \
+        step python3 -m warp_ccd.bench.narrow_phase --device "$device" --objects $narrow \
             --out "$out/narrow_phase_$tag.json" ;;
     scaling)
         step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles poly 80 --frames $frames \
@@ -76,27 +76,27 @@ for part in $parts; do
         step python3 -m warp_ccd.bench --device "$device" --objects $mixed --triangles mixed --frames $frames \
             --warmup 3 --peers builtin --out "$out/scaling_mixed_$tag.json" --plot "$out/scaling_mixed_$tag.png" ;;
     boxes)
-        step python3 bench/bench_box_tests.py --device "$device" --cases $boxcases --frames $((frames / 2)) \
+        step python3 -m warp_ccd.bench.box_tests --device "$device" --cases $boxcases --frames $((frames / 2)) \
             --out "$out/box_tests_$tag.json" ;;
     deforming)
-        step python3 bench/bench_deforming.py --device "$device" --objects $deforming --level $level \
+        step python3 -m warp_ccd.bench.deforming --device "$device" --objects $deforming --level $level \
             --frames $((frames / 2)) --out "$out/deforming_$tag.json" ;;
     spheres)
         step python3 -m warp_ccd.bench --device "$device" --objects $spheres --triangles 1280 --frames $frames \
             --warmup 3 --peers builtin,fcl --out "$out/scaling1280_$tag.json" --plot "$out/scaling1280_$tag.png" ;;
     broad)
-        step python3 bench/bench_broad_phase.py --device "$device" --n $boxes --newton-max 1000000 \
+        step python3 -m warp_ccd.bench.broad_phase --device "$device" --n $boxes --newton-max 1000000 \
             --frames $((frames / 2)) --out "$out/broad_phase_$tag.json" ;;
     build)
-        step python3 bench/bench_build.py --device "$device" --cases $builds --small $small --repeats $((frames / 2)) \
+        step python3 -m warp_ccd.bench.build --device "$device" --cases $builds --small $small --repeats $((frames / 2)) \
             --rebuild "$rebuild" --profile "$out/build_profile_$tag.txt" --out "$out/build_$tag.json" ;;
     host)
-        step python3 bench/host_breakdown.py --device "$device" --objects $hosted --triangles 80 --frames $frames \
+        step python3 -m warp_ccd.bench.host_breakdown --device "$device" --objects $hosted --triangles 80 --frames $frames \
             --out "$out/host_breakdown_$tag.json"
-        step python3 bench/host_after_wait.py --device "$device" --waits $waits \
+        step python3 -m warp_ccd.bench.host_after_wait --device "$device" --waits $waits \
             --out "$out/host_after_wait_$tag.json" ;;
     usd)
-        step python3 bench/bench_usd_check.py --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
+        step python3 -m warp_ccd.bench.usd_check --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
             "host, usd)" >&2

@@ -49,7 +49,7 @@ def scenes(precision: str, device) -> dict:
         radius = rng.uniform(0.5, 1.5, n)
         side = ((4.0 / 3.0) * np.pi * np.sum(radius**3) / density) ** (1.0 / 3.0)
         poses = np.concatenate([rng.uniform(-side / 2, side / 2, (n, 3)), _unit_quaternions(rng, n)], axis=1)
-        out[name] = wc.Scene(meshes, rng.integers(0, len(meshes), n), instance_scale=radius, poses=poses,
+        out[name] = wc.Scene(meshes, rng.integers(0, len(meshes), n), object_scale=radius, poses=poses,
                              device=device, precision=precision)
     big = wc.icosphere(3)
     cube_v, cube_t = wc.shape("cube")

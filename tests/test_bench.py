@@ -29,10 +29,7 @@ HAS_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
 
 
 def load_script(name):
-    spec = importlib.util.spec_from_file_location(name, os.path.join(ROOT, "bench", f"{name}.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return importlib.import_module(f"warp_ccd.bench.{name}")
 
 
 def test_bench_end_to_end(device, tmp_path, capsys):
@@ -199,7 +196,7 @@ def test_stage_times_best_of_modes():
 
 
 def test_broad_phase_peers_agree(device):
-    script = load_script("bench_broad_phase")
+    script = load_script("broad_phase")
     lo, hi = script.random_boxes(3000, overlaps=2.0, seed=1)
     lower = wp.array(lo, dtype=wp.vec3, device=device)
     upper = wp.array(hi, dtype=wp.vec3, device=device)
@@ -222,14 +219,14 @@ def test_broad_phase_peers_agree(device):
 
 
 def test_bench_scripts_run(device, tmp_path, capsys):
-    broad = load_script("bench_broad_phase")
+    broad = load_script("broad_phase")
     out = tmp_path / "broad.json"
     assert broad.main(["--device", device, "--n", "300", "3000", "--frames", "1", "--warmup", "1",
                        "--out", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert {"device", "date", "rows", "checks"} <= set(doc) and doc["ok"]
     assert {r["method"] for r in doc["rows"]} >= {"sap", "nxn", "warp_bvh", "warp_bvh_refit"}
-    pipeline = load_script("bench_pipeline")
+    pipeline = load_script("pipeline")
     out = tmp_path / "pipeline.json"
     assert pipeline.main(["--device", device, "--objects", "20", "--triangles", "80", "--frames", "1",
                           "--warmup", "1", "--no-memory", "--out", str(out), "--plot", str(tmp_path / "p.png")]) == 0
@@ -242,14 +239,14 @@ def test_bench_scripts_run(device, tmp_path, capsys):
     rows = json.loads(out.read_text())["rows"]
     assert [r["variant"] for r in rows] == ["plain", "again"]
     assert all(0 <= r["min"]["host"] <= r["median"]["host"] and r["median"]["wait"] >= 0 for r in rows)
-    boxes = load_script("bench_box_tests")
+    boxes = load_script("box_tests")
     out = tmp_path / "boxes.json"
     assert boxes.main(["--device", device, "--cases", "poly:60", "--axes", "3", "6", "--bounds", "auto", "tree",
                        "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
     rows = json.loads(out.read_text())["rows"]
     assert {(r["separating_axes"], r["object_bounds"]) for r in rows} == {(3, "auto"), (3, "tree"), (6, "auto"),
                                                                           (6, "tree")}
-    deforming = load_script("bench_deforming")
+    deforming = load_script("deforming")
     out = tmp_path / "deforming.json"
     assert deforming.main(["--device", device, "--objects", "40", "--level", "1", "--leaf-sizes", "1", "4",
                            "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0

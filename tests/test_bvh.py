@@ -72,14 +72,14 @@ def refit_contains(scene, bvh):
     sv = scene.shape_vertex.numpy()
     lo = bvh.tree.node_lower.numpy()
     hi = bvh.tree.node_upper.numpy()
-    start = bvh.tree.instance_node_start.numpy()
-    deforming = scene.instance_deforming_np
+    start = bvh.tree.object_node_start.numpy()
+    deforming = scene.object_deforming_np
     for i in range(scene.num_objects):
-        s = scene.instance_shape_np[i]
+        s = scene.object_shape_np[i]
         tr = bvh.shape_tree(s)
         base = start[i]
         tri = scene.shape_meshes[s][1]
-        vs = wv[scene.instance_vertex_start_np[i]:] if deforming[i] else sv[scene.shape_vertex_start_np[s]:]
+        vs = wv[scene.object_vertex_start_np[i]:] if deforming[i] else sv[scene.shape_vertex_start_np[s]:]
         for node in range(tr.num_nodes):
             left, right = tr.node_child[node]
             if left >= 0:
@@ -89,7 +89,7 @@ def refit_contains(scene, bvh):
                 s0, c0 = tr.node_triangle[node]
                 p = vs[tri[tr.tri_order[s0 : s0 + c0]].ravel()]
                 assert (lo[base + node] <= p.min(0)).all() and (p.max(0) <= hi[base + node]).all()
-        mine = wv[scene.instance_vertex_start_np[i]:scene.instance_vertex_start_np[i + 1]]
+        mine = wv[scene.object_vertex_start_np[i]:scene.object_vertex_start_np[i + 1]]
         assert (bvh.lower.numpy()[i] <= mine.min(0)).all() and (mine.max(0) <= bvh.upper.numpy()[i]).all()
     # a deforming object's root is its object box
     own = np.nonzero(deforming)[0]
@@ -205,12 +205,12 @@ def test_refit_paths_agree(device):
     rigid = mixed_scene(device, n=25, seed=6)
     rigid.advance(0.3)
     scene = deforming_copy(rigid)
-    per_level = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=0)
-    per_instance = SceneBVH(scene, margin_rel=1e-5, instance_refit_max_nodes=10**9)
+    per_level = SceneBVH(scene, margin_rel=1e-5, object_refit_max_nodes=0)
+    per_instance = SceneBVH(scene, margin_rel=1e-5, object_refit_max_nodes=10**9)
     mixed = SceneBVH(scene, margin_rel=1e-5)
-    assert per_level.refit_plan.small_instance.shape[0] == 0
-    assert per_instance.refit_plan.small_instance.shape[0] == 25
-    assert 0 < mixed.refit_plan.small_instance.shape[0] < 25
+    assert per_level.refit_plan.small_object.shape[0] == 0
+    assert per_instance.refit_plan.small_object.shape[0] == 25
+    assert 0 < mixed.refit_plan.small_object.shape[0] < 25
     for bvh in (per_level, per_instance, mixed):
         bvh.refit(scene)
     ref = per_level.tree.node_lower.numpy(), per_level.tree.node_upper.numpy(), per_level.lower.numpy()
@@ -225,7 +225,7 @@ def test_rigid_trees_are_shared_and_never_refit(device):
     """Rigid objects keep one tree per shape, in shape space: its boxes do not change as they move."""
     scene = mixed_scene(device, n=30, seed=7)
     pipe = wc.CollisionPipeline(scene)
-    shapes = np.unique(scene.instance_shape_np)
+    shapes = np.unique(scene.object_shape_np)
     assert pipe.boxes.num_node_slots == sum(pipe.boxes.shape_tree(s).num_nodes for s in shapes)
     before = pipe.boxes.tree.node_lower.numpy().copy(), pipe.boxes.tree.node_upper.numpy().copy()
     for _ in range(2):
@@ -264,7 +264,7 @@ def test_object_bounds_by_vertex_count(device):
         res = pipe.detect()
         boxes[bounds] = pipe.boxes.lower.numpy(), pipe.boxes.upper.numpy()
         pairs[bounds] = res.copy().triangle_pairs
-    counts = np.diff(scene.instance_vertex_start_np)
+    counts = np.diff(scene.object_vertex_start_np)
     small = counts <= 100
     assert small.any() and (~small).any()
     for k in range(2):
@@ -289,9 +289,9 @@ def test_rigid_and_deforming_objects_share_one_traversal(device):
     mask = np.arange(30) % 2 == 1
     scene = deforming_copy(rigid, mask)
     pipe = wc.CollisionPipeline(scene)
-    assert pipe.boxes.rigid_instance.shape[0] == 15
+    assert pipe.boxes.rigid_object.shape[0] == 15
     world = scene.world_vertex.numpy()
-    start = scene.instance_vertex_start_np
+    start = scene.object_vertex_start_np
     moved = 0
     for k in range(3):
         v = world.copy()
@@ -313,9 +313,9 @@ def test_poses_whose_quaternions_are_not_unit(device):
     that very map."""
     scene = mixed_scene(device, n=30, seed=10)
     scene.advance(0.4)
-    poses = scene.instance_pose.numpy().astype(np.float64)
+    poses = scene.object_pose.numpy().astype(np.float64)
     poses[:, 3:] *= 1.0 + 9e-4 * np.cos(np.arange(30))[:, None]
-    moved = wc.Scene(scene.shapes, scene.instance_shape_np, instance_scale=scene.instance_scale_np, poses=poses,
+    moved = wc.Scene(scene.shapes, scene.object_shape_np, object_scale=scene.object_scale_np, poses=poses,
                      device=device)
     got = wc.CollisionPipeline(moved).detect()
     ref = wc.CollisionPipeline(moved, mid_phase="all_pairs").detect()
@@ -329,9 +329,9 @@ def test_poses_far_from_the_origin(device, precision):
     pose, which the traversal's paddings bound; it finds what the reference (world boxes) finds."""
     scene = mixed_scene(device, n=30, seed=11)
     scene.advance(0.4)
-    poses = scene.instance_pose.numpy().astype(np.float64)
+    poses = scene.object_pose.numpy().astype(np.float64)
     poses[:, :3] += [3e4, -2e4, 1e4]
-    moved = wc.Scene(scene.shapes, scene.instance_shape_np, instance_scale=scene.instance_scale_np, poses=poses,
+    moved = wc.Scene(scene.shapes, scene.object_shape_np, object_scale=scene.object_scale_np, poses=poses,
                      device=device, precision=precision)
     got = wc.CollisionPipeline(moved).detect()
     ref = wc.CollisionPipeline(moved, mid_phase="all_pairs").detect()

@@ -198,7 +198,7 @@ def test_from_meshes_shares_only_the_same_arrays():
     a, b = wc.shape("cube"), wc.shape("tetrahedron")
     copy = (a[0].copy(), a[1])
     scene = wc.Scene.from_meshes([b, a, b, copy, a])
-    assert scene.num_shapes == 3 and scene.instance_shape_np.tolist() == [0, 1, 0, 2, 1]
+    assert scene.num_shapes == 3 and scene.object_shape_np.tolist() == [0, 1, 0, 2, 1]
     assert np.array_equal(scene.shape_meshes[2][0], copy[0])
 
 

@@ -429,7 +429,7 @@ def test_segment_of_crossing_triangles(device, precision):
         (lambda s: wc.Scene.random(5, seed=-1), "seed"),
         (lambda s: s.advance("a"), "dt"),
         (lambda s: s.advance(None), "dt"),
-        (lambda s: wc.Scene([wc.shape("cube")], [0.7, 0.2]), "instance_shape"),
+        (lambda s: wc.Scene([wc.shape("cube")], [0.7, 0.2]), "object_shape"),
         (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[0, 0, 0, 0, 0, 0, 3]]), "poses: row 0"),
         (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[np.nan, 0, 0, 0, 0, 0, 1]]), "poses: row 0"),
     ],
@@ -461,7 +461,7 @@ def test_detect_with_advance_is_advance_then_detect(device):
         two.advance(0.05)
         _same_frame(got, split.detect())
         assert one.time == two.time and one.time_device.numpy()[0] == one.time
-    assert np.array_equal(one.instance_pose.numpy(), two.instance_pose.numpy())
+    assert np.array_equal(one.object_pose.numpy(), two.object_pose.numpy())
 
 
 def test_graph_and_eager_frames_agree_over_100_frames(device):

@@ -34,8 +34,8 @@ def record_run(path, device, *, num_objects=60, aabb=False, seed=3):
             scene.advance(1 / 60)
             res = pipe.detect()
             writer.add_frame(frame, res)
-            record["pose"].append(scene.instance_pose.numpy().reshape(-1, 7).copy())
-            record["scale"].append(scene.instance_scale.numpy().copy())
+            record["pose"].append(scene.object_pose.numpy().reshape(-1, 7).copy())
+            record["scale"].append(scene.object_scale.numpy().copy())
             record["colliding"].append(res.colliding.copy())
             record["world"].append(scene.world_vertex.numpy().copy())
     return scene, record
@@ -94,7 +94,7 @@ def test_rigid_stage_metadata_and_layout(rigid_run):
         np.testing.assert_array_equal(np.asarray(mesh.GetPointsAttr().Get()), v)
         np.testing.assert_array_equal(np.asarray(mesh.GetFaceVertexIndicesAttr().Get()), tri.reshape(-1))
         assert mesh.GetSubdivisionSchemeAttr().Get() == UsdGeom.Tokens.none
-    np.testing.assert_array_equal(np.asarray(inst.GetProtoIndicesAttr().Get()), scene.instance_shape_np)
+    np.testing.assert_array_equal(np.asarray(inst.GetProtoIndicesAttr().Get()), scene.object_shape_np)
 
     for attr in (inst.GetPositionsAttr(), inst.GetOrientationsAttr(), inst.GetScalesAttr(), inst.GetExtentAttr()):
         assert attr.GetNumTimeSamples() == NUM_FRAMES, attr.GetName()
@@ -138,9 +138,9 @@ def test_rigid_stage_matches_every_frame(rigid_run):
         world = record["world"][frame]
         for i in range(0, n, 7):
             m = np.array(xforms[i])
-            local = proto_points[scene.instance_shape_np[i]]
+            local = proto_points[scene.object_shape_np[i]]
             got = np.c_[local, np.ones(len(local))] @ m
-            a, b = scene.instance_vertex_start_np[i], scene.instance_vertex_start_np[i + 1]
+            a, b = scene.object_vertex_start_np[i], scene.object_vertex_start_np[i + 1]
             np.testing.assert_allclose(got[:, :3], world[a:b], atol=5e-3 * max(1.0, float(record["scale"][frame][i])))
 
         # The instancer's extent holds every world vertex.
@@ -170,7 +170,7 @@ def test_aabb_wireframes_match_world_bounds(tmp_path, device):
     counts = np.asarray(curves.GetCurveVertexCountsAttr().Get())
     assert counts.sum() == 16 * scene.num_objects
     assert curves.GetPointsAttr().GetNumTimeSamples() == NUM_FRAMES
-    start = scene.instance_vertex_start_np
+    start = scene.object_vertex_start_np
     for frame in (0, NUM_FRAMES - 1):
         pts = np.asarray(curves.GetPointsAttr().Get(Usd.TimeCode(frame))).reshape(scene.num_objects, 16, 3)
         world = record["world"][frame]

@@ -129,7 +129,7 @@ def test_import_matches_independent_world_meshes(mixed, device):
     # Shapes: instance proxies of one prototype share one, so do the instancer's instances of
     # one prototype; everything else (the non-uniformly scaled prism included) has its own.
     groups = {}
-    for path, s in zip(imp.object_path, scene.instance_shape_np.tolist()):
+    for path, s in zip(imp.object_path, scene.object_shape_np.tolist()):
         groups.setdefault(s, set()).add(path)
     shared = [{"/World/RefA/Left", "/World/RefB/Left"}, {"/World/RefA/Right", "/World/RefB/Right"}, set(CUBES),
               set(TETS)]
@@ -139,7 +139,7 @@ def test_import_matches_independent_world_meshes(mixed, device):
     # The non-uniform scale is baked into that shape: the points times diag(2, 1, 0.5).
     stretched = imp.object_path.index("/World/Stretched")
     points = np.asarray(prism(5, radius=0.5, height=1.0)[0], np.float32).astype(np.float64)
-    np.testing.assert_allclose(scene.shape_meshes[scene.instance_shape_np[stretched]][0], points * [2.0, 1.0, 0.5],
+    np.testing.assert_allclose(scene.shape_meshes[scene.object_shape_np[stretched]][0], points * [2.0, 1.0, 0.5],
                                rtol=0, atol=1e-6)
 
     # Point instances: named instancer[i]/..., with their prototype mesh, instancer and index.

@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from .scene.scene import Scene
-from .stages.bounds import InstanceBounds
+from .stages.bounds import ObjectBounds
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
 from .stages.bvh import LEAF_SIZE_MAX, SceneBVH
@@ -34,14 +34,14 @@ RIGID_LEAF_SIZE = 1
 """Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 4.3 / 1.65 /
 1.03 / 0.44 ms at 10^6 polyhedra / 10^5 80-triangle / 10^4 1,280-triangle / 10^3 mixed objects
 with leaves of 1, against 5.5 / 2.3 / 1.39 / 0.48 with leaves of 2 and 7.7 / 3.4 / 1.93 / 0.57
-with 4 (``bench/bench_box_tests.py``, ``bench/results/box_tests_sweep_cuda0.json``): the level by
+with 4 (``warp_ccd/bench/box_tests.py``, ``bench/results/box_tests_sweep_cuda0.json``): the level by
 level descent tests node pairs at memory speed, and a leaf pair's boxes are its triangles' boxes,
 so that fewer pairs reach the exact test (half as many as with leaves of 2)."""
 
 DEFORMING_LEAF_SIZE = 4
 """Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
 a quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair
-(``bench/bench_deforming.py``)."""
+(``warp_ccd/bench/deforming.py``)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
@@ -232,7 +232,7 @@ class CollisionPipeline:
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
             scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid phase,
-            else an :class:`~warp_ccd.stages.bounds.InstanceBounds`.
+            else an :class:`~warp_ccd.stages.bounds.ObjectBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
         counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
@@ -305,7 +305,7 @@ class CollisionPipeline:
             self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
                                    front_capacity=front_capacity, separating_axes=separating_axes, device=d)
         else:
-            self.boxes = InstanceBounds(n, device=d, margin_rel=tolerance)
+            self.boxes = ObjectBounds(n, device=d, margin_rel=tolerance)
             self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
         self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
                                   capacity=hit_capacity or max(256, 4 * n), segments=segments,

@@ -1,7 +1,7 @@
 """Preview images: a scene's frame ray-cast by a Warp kernel, colliding objects in colour.
 
 All world triangles of the frame form one ``wp.Mesh`` (its points are the scene's world vertices,
-its indices a flat global triangle list built once from the shapes and the instance offsets); the
+its indices a flat global triangle list built once from the shapes and the object offsets); the
 mesh's BVH is refit every frame. One thread per pixel casts a primary ray with
 ``wp.mesh_query_ray``; the hit triangle's owner object picks the colour (grey when free, red-orange
 when colliding), shaded with Lambert's law under a key light and a fill light, plus ambient; rays
@@ -113,7 +113,7 @@ def mesh_triangle_indices(scene) -> tuple[np.ndarray, np.ndarray]:
     if n == 0:
         return np.zeros(0, np.int32), np.zeros(0, np.int32)
     shape_tri = [np.asarray(t, np.int64) for _, t in scene.shape_meshes]
-    inst = np.asarray(scene.instance_shape_np, np.int64)
+    inst = np.asarray(scene.object_shape_np, np.int64)
     counts = np.array([len(shape_tri[s]) for s in inst], np.int64)
     # Local triangles of every object, gathered per object without a loop over objects.
     cat = np.concatenate(shape_tri)
@@ -122,7 +122,7 @@ def mesh_triangle_indices(scene) -> tuple[np.ndarray, np.ndarray]:
     first = np.concatenate([[0], np.cumsum(counts)])[:-1]
     local = np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(first, counts)
     tri = cat[shape_start[inst][triangle_object] + local]
-    tri = tri + np.asarray(scene.instance_vertex_start_np, np.int64)[triangle_object][:, None]
+    tri = tri + np.asarray(scene.object_vertex_start_np, np.int64)[triangle_object][:, None]
     return tri.reshape(-1).astype(np.int32), triangle_object.astype(np.int32)
 
 

@@ -383,7 +383,7 @@ def compare_triangle_pairs(scene: Scene, reference: str, reference_rows, peer: s
     """
     ref = sorted_rows(reference_rows, 4)
     got = sorted_rows(peer_rows, 4)
-    tstart = scene.instance_triangle_start_np.astype(np.int64)
+    tstart = scene.object_triangle_start_np.astype(np.int64)
 
     def global_keys(rows):
         ga = tstart[rows[:, 0]] + rows[:, 1]

@@ -66,7 +66,7 @@ class PeerUnavailable(RuntimeError):
 def scene_triangle_vertex_index(scene: Scene, triangles=None) -> np.ndarray:
     """Global vertex indices of scene triangles given by global id (default: all, in order).
 
-    Global triangle ``g = scene.instance_triangle_start_np[i] + t`` is local triangle ``t`` of
+    Global triangle ``g = scene.object_triangle_start_np[i] + t`` is local triangle ``t`` of
     object ``i``; its vertices are rows of ``scene.world_vertex``.
 
     Args:
@@ -82,10 +82,10 @@ def scene_triangle_vertex_index(scene: Scene, triangles=None) -> np.ndarray:
     if g.size == 0:
         return np.zeros((0, 3), np.int32)
     shape_tri = np.concatenate([t for _, t in scene.shape_meshes]).astype(np.int64)
-    inst = np.searchsorted(scene.instance_triangle_start_np, g, side="right") - 1
-    local = g - scene.instance_triangle_start_np[inst]
-    shape_start = scene.shape_triangle_start_np[scene.instance_shape_np[inst]]
-    tri = shape_tri[shape_start + local] + scene.instance_vertex_start_np[inst][:, None]
+    inst = np.searchsorted(scene.object_triangle_start_np, g, side="right") - 1
+    local = g - scene.object_triangle_start_np[inst]
+    shape_start = scene.shape_triangle_start_np[scene.object_shape_np[inst]]
+    tri = shape_tri[shape_start + local] + scene.object_vertex_start_np[inst][:, None]
     return tri.astype(np.int32)
 
 
@@ -104,8 +104,8 @@ def _mesh_triangle_pairs_kernel(
     mesh: wp.uint64,
     point: wp.array[wp.vec3],
     index: wp.array[wp.int32],
-    triangle_instance: wp.array[wp.int32],
-    instance_triangle_start: wp.array[wp.int32],
+    triangle_object: wp.array[wp.int32],
+    object_triangle_start: wp.array[wp.int32],
     hit_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
@@ -123,12 +123,12 @@ def _mesh_triangle_pairs_kernel(
     a2 = point[index[3 * t + 2]]
     lo = wp.min(wp.min(a0, a1), a2)
     hi = wp.max(wp.max(a0, a1), a2)
-    obj = triangle_instance[t]
+    obj = triangle_object[t]
     query = wp.mesh_query_aabb(mesh, lo, hi)
     f = int(0)
     while wp.mesh_query_next(query, f):
         if f > t:
-            obj_f = triangle_instance[f]
+            obj_f = triangle_object[f]
             if obj_f != obj:
                 b0 = point[index[3 * f]]
                 b1 = point[index[3 * f + 1]]
@@ -136,8 +136,8 @@ def _mesh_triangle_pairs_kernel(
                 if wp.intersect_tri_tri(a0, a1, a2, b0, b1, b2) != 0:
                     slot = reserve_slot(hit_count, hit_capacity)
                     if slot >= 0:
-                        hit[slot] = wp.vec4i(obj, t - instance_triangle_start[obj],
-                                             obj_f, f - instance_triangle_start[obj_f])
+                        hit[slot] = wp.vec4i(obj, t - object_triangle_start[obj],
+                                             obj_f, f - object_triangle_start[obj_f])
 
 
 class WarpMeshPipeline:
@@ -159,8 +159,8 @@ class WarpMeshPipeline:
         n = scene.num_objects
         tri = scene_triangle_vertex_index(scene)
         self.index = wp.array(tri.reshape(-1), dtype=wp.int32, device=d)
-        counts = np.diff(scene.instance_triangle_start_np)
-        self.triangle_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), counts), dtype=wp.int32, device=d)
+        counts = np.diff(scene.object_triangle_start_np)
+        self.triangle_object = wp.array(np.repeat(np.arange(n, dtype=np.int32), counts), dtype=wp.int32, device=d)
         self.mesh = wp.Mesh(points=scene.world_vertex, indices=self.index, bvh_constructor=constructor)
         self.hits = GrowableBuffer(wp.vec4i, capacity or max(256, 4 * n), d, "built-in triangle pairs")
 
@@ -175,8 +175,8 @@ class WarpMeshPipeline:
         wp.launch(
             _mesh_triangle_pairs_kernel,
             dim=self.scene.num_triangles,
-            inputs=[self.mesh.id, self.scene.world_vertex, self.index, self.triangle_instance,
-                    self.scene.instance_triangle_start, self.hits.capacity],
+            inputs=[self.mesh.id, self.scene.world_vertex, self.index, self.triangle_object,
+                    self.scene.object_triangle_start, self.hits.capacity],
             outputs=[self.hits.data, self.hits.count],
             device=self.device,
         )
@@ -237,9 +237,9 @@ class FclPipeline:
         self.objects = []
         self._object_of = {}
         for i in range(scene.num_objects):
-            v, t = scene.shape_meshes[scene.instance_shape_np[i]]
+            v, t = scene.shape_meshes[scene.object_shape_np[i]]
             # Scale in float32 first, as the scene's world-vertex kernel does.
-            v = (v * np.float32(scene.instance_scale_np[i])).astype(np.float64)
+            v = (v * np.float32(scene.object_scale_np[i])).astype(np.float64)
             model = fcl.BVHModel()
             model.beginModel(len(v), len(t))
             model.addSubModel(v, t.astype(np.int64))
@@ -254,7 +254,7 @@ class FclPipeline:
 
     def _set_transforms(self) -> None:
         fcl = self._fcl
-        pose = self.scene.instance_pose.numpy().astype(np.float64).reshape(-1, 7)  # (px, py, pz, qx, qy, qz, qw)
+        pose = self.scene.object_pose.numpy().astype(np.float64).reshape(-1, 7)  # (px, py, pz, qx, qy, qz, qw)
         quat_wxyz = pose[:, [6, 3, 4, 5]]
         for (_, obj), p, q in zip(self.objects, pose[:, :3], quat_wxyz):
             obj.setTransform(fcl.Transform(q, p))

@@ -114,7 +114,7 @@ def shape_radius(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
 
 
 def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
-                  triangle_start: np.ndarray, instance_shape: np.ndarray, instance_scale=None) -> float:
+                  triangle_start: np.ndarray, object_shape: np.ndarray, object_scale=None) -> float:
     """The scene's typical triangle size: the median, over its objects' triangles, of each
     triangle's longest edge (each shape's median taken once, times each object's scale).
 
@@ -123,8 +123,8 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
     Args:
         vertices: ``(V, 3)`` shape vertices; ``triangles``: ``(T, 3)`` shape-local indices.
         vertex_start, triangle_start: ``(S + 1,)`` offsets of each shape.
-        instance_shape: ``(N,)`` shape of each object.
-        instance_scale: ``(N,)`` uniform scale of each object (default 1).
+        object_shape: ``(N,)`` shape of each object.
+        object_scale: ``(N,)`` uniform scale of each object (default 1).
 
     Returns:
         The size (scene units), 0.0 when no triangle has a size.
@@ -132,7 +132,7 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
     tri = np.asarray(triangles, np.int64)
     tstart = np.asarray(triangle_start, np.int64)
     vstart = np.asarray(vertex_start, np.int64)
-    inst = np.asarray(instance_shape, np.int64)
+    inst = np.asarray(object_shape, np.int64)
     if not len(tri) or not inst.size:
         return 0.0
     tcount = np.diff(tstart)
@@ -152,7 +152,7 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
     median = np.zeros(len(tcount))
     has = count > 0
     median[has] = longest[keep][order][first[has] + (count[has] - 1) // 2]
-    scale = np.ones(inst.size) if instance_scale is None else np.asarray(instance_scale, np.float64)
+    scale = np.ones(inst.size) if object_scale is None else np.asarray(object_scale, np.float64)
     size = median[inst] * scale
     weight = count[inst]
     use = (size > 0.0) & (weight > 0)

@@ -45,7 +45,7 @@ def _motion_pose_kernel(
     motion_spin: wp.array[wp.vec2],
     motion_base: wp.array[wp.quat],
     # Outputs
-    instance_pose: wp.array[Any],
+    object_pose: wp.array[Any],
 ):
     """One thread per object: pose at ``time_now[0] + time_step`` (added in float64, as the host
     adds), computed in the type of ``scalar`` (float32 or float64; its value is unused) like the
@@ -62,11 +62,11 @@ def _motion_pose_kernel(
     angle = type(time)(spin[0]) * time + type(time)(spin[1])
     spin_axis = type(local)(motion_spin_axis[i])
     rot = wp.quat_from_axis_angle(spin_axis, angle) * wp.quaternion(motion_base[i], dtype=type(time))
-    instance_pose[i] = wp.transformation(pos, wp.normalize(rot), dtype=type(time))
+    object_pose[i] = wp.transformation(pos, wp.normalize(rot), dtype=type(time))
 
 
 _MOTION_POSE = precision_overloads(_motion_pose_kernel, lambda s, v, q, t: {
-    "scalar": s, "motion_centre": wp.array[v], "instance_pose": wp.array[t]})
+    "scalar": s, "motion_centre": wp.array[v], "object_pose": wp.array[t]})
 
 
 def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -140,13 +140,13 @@ class EllipseMotion:
             precision=precision,
         )
 
-    def launch(self, time, instance_pose: wp.array, step: float = 0.0) -> None:
-        """Writes the poses of all objects at ``time + step`` (seconds) into ``instance_pose`` ``(N,)``.
+    def launch(self, time, object_pose: wp.array, step: float = 0.0) -> None:
+        """Writes the poses of all objects at ``time + step`` (seconds) into ``object_pose`` ``(N,)``.
 
         Args:
             time: a number, or a ``wp.array`` of one float64 on this device (read by the kernel:
                 the launch can be captured in a CUDA graph and replayed as the time changes).
-            instance_pose: ``(N,)`` poses to write.
+            object_pose: ``(N,)`` poses to write.
             step: seconds added to ``time`` (in float64) before the poses are computed.
         """
         if not isinstance(time, wp.array):
@@ -169,7 +169,7 @@ class EllipseMotion:
                 self.motion_spin,
                 self.motion_base,
             ],
-            outputs=[instance_pose],
+            outputs=[object_pose],
             device=self.device,
         )
 

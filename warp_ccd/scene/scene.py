@@ -1,17 +1,17 @@
-"""Scenes: shapes stored once, instances by shape id, world vertices on one device.
+"""Scenes: shapes stored once, objects by shape id, world vertices on one device.
 
 Data layout (struct of arrays, all on ``scene.device``):
 
 * Shapes: local vertices of all shapes concatenated (``shape_vertex``), triangles as local vertex
   indices (``shape_triangle``), and ``shape_vertex_start`` / ``shape_triangle_start`` offsets
   (``S + 1`` entries each).
-* Instances (objects): ``instance_shape`` (shape id), ``instance_scale`` (uniform scale),
-  ``instance_pose`` (``wp.transform``), ``instance_vertex_start`` and ``instance_triangle_start``
-  (``N + 1`` entries each). A triangle is identified by ``(instance, local triangle id)``; its
-  global id is ``instance_triangle_start[instance] + local id``. Triangles are never copied per
-  instance.
-* World vertices of all instances concatenated (``world_vertex``, ``V`` entries), with
-  ``vertex_instance`` giving the owner of each.
+* Objects: ``object_shape`` (shape id), ``object_scale`` (uniform scale),
+  ``object_pose`` (``wp.transform``), ``object_vertex_start`` and ``object_triangle_start``
+  (``N + 1`` entries each). A triangle is identified by ``(object, local triangle id)``; its
+  global id is ``object_triangle_start[object] + local id``. Triangles are never copied per
+  object.
+* World vertices of all objects concatenated (``world_vertex``, ``V`` entries), with
+  ``vertex_object`` giving the owner of each.
 
 Kernels find a triangle's world vertices with :func:`mesh_triangle` from the index arrays (the
 :class:`MeshTopology` struct, the same at both precisions) and ``world_vertex`` (``wp.vec3`` or
@@ -51,22 +51,22 @@ __all__ = ["MeshTopology", "Scene", "mesh_triangle", "transforms_to_poses"]
 
 @wp.struct
 class MeshTopology:
-    """Which world vertices make triangle ``(instance, local id)``: everything but the vertices
+    """Which world vertices make triangle ``(object, local id)``: everything but the vertices
     themselves, which kernels take as a separate ``world_vertex`` array of either precision."""
 
     shape_triangle: wp.array[wp.vec3i]
     shape_triangle_start: wp.array[wp.int32]
-    instance_shape: wp.array[wp.int32]
-    instance_vertex_start: wp.array[wp.int32]
-    instance_triangle_start: wp.array[wp.int32]
+    object_shape: wp.array[wp.int32]
+    object_vertex_start: wp.array[wp.int32]
+    object_triangle_start: wp.array[wp.int32]
 
 
 @wp.func
-def mesh_triangle(topology: MeshTopology, world_vertex: wp.array[Any], instance: int, tri: int):
-    """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``instance``."""
-    s = topology.instance_shape[instance]
+def mesh_triangle(topology: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int):
+    """World positions ``(a, b, c)`` of local triangle ``tri`` of object ``obj``."""
+    s = topology.object_shape[obj]
     idx = topology.shape_triangle[topology.shape_triangle_start[s] + tri]
-    base = topology.instance_vertex_start[instance]
+    base = topology.object_vertex_start[obj]
     return (
         world_vertex[base + idx[0]],
         world_vertex[base + idx[1]],
@@ -78,24 +78,24 @@ def mesh_triangle(topology: MeshTopology, world_vertex: wp.array[Any], instance:
 def _world_vertex_kernel(
     shape_vertex: wp.array[Any],
     shape_vertex_start: wp.array[wp.int32],
-    instance_shape: wp.array[wp.int32],
-    instance_scale: wp.array[wp.float32],
-    instance_pose: wp.array[Any],
-    instance_vertex_start: wp.array[wp.int32],
-    vertex_instance: wp.array[wp.int32],
+    object_shape: wp.array[wp.int32],
+    object_scale: wp.array[wp.float32],
+    object_pose: wp.array[Any],
+    object_vertex_start: wp.array[wp.int32],
+    vertex_object: wp.array[wp.int32],
     # Outputs
     world_vertex: wp.array[Any],
 ):
     """One thread per world vertex: ``pose * (scale * local vertex)``."""
     v = wp.tid()
-    i = vertex_instance[v]
-    local = v - instance_vertex_start[i]
-    p = shape_vertex[shape_vertex_start[instance_shape[i]] + local]
-    world_vertex[v] = wp.transform_point(instance_pose[i], p * type(p[0])(instance_scale[i]))
+    i = vertex_object[v]
+    local = v - object_vertex_start[i]
+    p = shape_vertex[shape_vertex_start[object_shape[i]] + local]
+    world_vertex[v] = wp.transform_point(object_pose[i], p * type(p[0])(object_scale[i]))
 
 
 _WORLD_VERTEX = precision_overloads(_world_vertex_kernel, lambda s, v, q, t: {
-    "shape_vertex": wp.array[v], "instance_pose": wp.array[t], "world_vertex": wp.array[v]})
+    "shape_vertex": wp.array[v], "object_pose": wp.array[t], "world_vertex": wp.array[v]})
 
 
 @wp.kernel
@@ -218,15 +218,15 @@ def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | No
 
 
 class Scene:
-    """Shapes, instances, poses and world vertices of ``N`` objects on one device.
+    """Shapes, objects, poses and world vertices of ``N`` objects on one device.
 
     Most users build scenes with :meth:`random` or :meth:`from_meshes`.
 
     Args:
         shapes: sequence of ``(vertices (n, 3), triangles (m, 3))`` meshes, each validated, or a
             :class:`~warp_ccd.scene.shapes.MeshSet` that :func:`~warp_ccd.scene.shapes.validate_meshes` returned.
-        instance_shape: ``(N,)`` shape id of each object.
-        instance_scale: ``(N,)`` uniform scale of each object (default 1).
+        object_shape: ``(N,)`` shape id of each object.
+        object_scale: ``(N,)`` uniform scale of each object (default 1).
         poses: ``(N, 7)`` rows ``(px, py, pz, qx, qy, qz, qw)`` (default identity).
         motion: optional :class:`EllipseMotion`; then :meth:`advance` moves the objects.
         deforming: True when the caller writes every object's world vertices
@@ -248,9 +248,9 @@ class Scene:
     def __init__(
         self,
         shapes: Sequence,
-        instance_shape,
+        object_shape,
         *,
-        instance_scale=None,
+        object_scale=None,
         poses=None,
         motion: EllipseMotion | None = None,
         deforming=False,
@@ -270,31 +270,31 @@ class Scene:
             packed = validate_meshes(list(shapes), kind="shape", dtype=fdtype)
         self.shapes = packed
         num_shapes = len(packed)
-        inst = np.asarray(instance_shape)
+        inst = np.asarray(object_shape)
         if inst.ndim != 1 or (inst.size and not np.issubdtype(inst.dtype, np.integer)):
             raise ValueError(
-                f"instance_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
+                f"object_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
         inst = inst.astype(np.int64)
         if inst.size and (inst.min() < 0 or inst.max() >= num_shapes):
-            raise ValueError(f"instance_shape: ids must lie in [0, {num_shapes}), got {inst.min()}..{inst.max()}")
+            raise ValueError(f"object_shape: ids must lie in [0, {num_shapes}), got {inst.min()}..{inst.max()}")
         n = inst.size
         self.num_objects = n
         self.num_shapes = num_shapes
         mask = np.asarray(deforming)
         if mask.dtype != bool or mask.shape not in ((), (n,)):
             raise ValueError(f"deforming: expected a bool or ({n},) bools, got {mask.dtype} {mask.shape}")
-        self.instance_deforming_np = np.broadcast_to(mask, (n,)).copy()
+        self.object_deforming_np = np.broadcast_to(mask, (n,)).copy()
         """``(N,)`` bool: the objects whose world vertices the caller writes."""
-        self.deforming = bool(self.instance_deforming_np.any()) or (mask.ndim == 0 and bool(mask))
+        self.deforming = bool(self.object_deforming_np.any()) or (mask.ndim == 0 and bool(mask))
         self.motion = motion
         if motion is not None and motion.num_objects != n:
             raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
         if motion is not None and motion.precision != precision:
             raise ValueError(f"motion: precision {motion.precision}, scene {precision}")
 
-        scale = np.ones(n, np.float32) if instance_scale is None else np.asarray(instance_scale, np.float32)
+        scale = np.ones(n, np.float32) if object_scale is None else np.asarray(object_scale, np.float32)
         if scale.shape != (n,) or not np.isfinite(scale).all() or (scale <= 0).any():
-            raise ValueError(f"instance_scale: expected ({n},) finite positive values")
+            raise ValueError(f"object_scale: expected ({n},) finite positive values")
         if poses is None:
             poses = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float64), (n, 1))
         poses = np.asarray(poses, fdtype)
@@ -304,23 +304,23 @@ class Scene:
         if bad.any():
             raise ValueError(f"poses: row {int(np.argmax(bad))} is not finite or its quaternion is not unit")
 
-        # Host-side topology (static): offsets of shapes and instances.
+        # Host-side topology (static): offsets of shapes and objects.
         shape_nv = np.diff(packed.vertex_start)
         shape_nt = np.diff(packed.triangle_start)
         self.shape_vertex_start_np = packed.vertex_start.astype(np.int32)
         self.shape_triangle_start_np = packed.triangle_start.astype(np.int32)
-        self.instance_shape_np = inst.astype(np.int32)
+        self.object_shape_np = inst.astype(np.int32)
         inst_nv = shape_nv[inst] if n else np.zeros(0, np.int64)
         inst_nt = shape_nt[inst] if n else np.zeros(0, np.int64)
         vstart = np.concatenate([[0], np.cumsum(inst_nv)])
         tstart = np.concatenate([[0], np.cumsum(inst_nt)])
         if vstart[-1] >= 2**31 or tstart[-1] >= 2**31:
             raise ValueError(f"scene too large: {vstart[-1]} vertices, {tstart[-1]} triangles (limit 2**31 - 1)")
-        self.instance_vertex_start_np = vstart.astype(np.int32)
-        self.instance_triangle_start_np = tstart.astype(np.int32)
+        self.object_vertex_start_np = vstart.astype(np.int32)
+        self.object_triangle_start_np = tstart.astype(np.int32)
         self.num_world_vertices = int(vstart[-1])
         self.num_triangles = int(tstart[-1])
-        self.instance_scale_np = scale
+        self.object_scale_np = scale
 
         d = self.device
         vec3 = self.vec3_type
@@ -328,23 +328,23 @@ class Scene:
         self.shape_triangle = wp.array(packed.triangles, dtype=wp.vec3i, device=d)
         self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
         self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
-        self.instance_shape = wp.array(self.instance_shape_np, dtype=wp.int32, device=d)
-        self.instance_scale = wp.array(scale, dtype=wp.float32, device=d)
-        self.instance_pose = wp.array(poses, dtype=self.transform_type, device=d)
-        self.instance_vertex_start = wp.array(self.instance_vertex_start_np, dtype=wp.int32, device=d)
-        self.instance_triangle_start = wp.array(self.instance_triangle_start_np, dtype=wp.int32, device=d)
-        self.vertex_instance = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
+        self.object_shape = wp.array(self.object_shape_np, dtype=wp.int32, device=d)
+        self.object_scale = wp.array(scale, dtype=wp.float32, device=d)
+        self.object_pose = wp.array(poses, dtype=self.transform_type, device=d)
+        self.object_vertex_start = wp.array(self.object_vertex_start_np, dtype=wp.int32, device=d)
+        self.object_triangle_start = wp.array(self.object_triangle_start_np, dtype=wp.int32, device=d)
+        self.vertex_object = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
         self.world_vertex = wp.zeros(self.num_world_vertices, dtype=vec3, device=d)
         self.topology = MeshTopology()
         self.topology.shape_triangle = self.shape_triangle
         self.topology.shape_triangle_start = self.shape_triangle_start
-        self.topology.instance_shape = self.instance_shape
-        self.topology.instance_vertex_start = self.instance_vertex_start
-        self.topology.instance_triangle_start = self.instance_triangle_start
+        self.topology.object_shape = self.object_shape
+        self.topology.object_vertex_start = self.object_vertex_start
+        self.topology.object_triangle_start = self.object_triangle_start
         self._time = 0.0
         self.time_device = wp.zeros(1, dtype=wp.float64, device=d)
         if motion is not None:
-            motion.launch(self.time_device, self.instance_pose)
+            motion.launch(self.time_device, self.object_pose)
         self.pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
 
     # ------------------------------------------------------------------ construction
@@ -400,7 +400,7 @@ class Scene:
         side = (volume / density) ** (1.0 / 3.0) if n else 1.0
         centre = rng.uniform(-0.5 * side, 0.5 * side, size=(n, 3))
         motion = EllipseMotion.random(rng, centre, radius, device=device, precision=precision)
-        scene = cls(meshes, inst, instance_scale=radius, motion=motion, device=device, precision=precision)
+        scene = cls(meshes, inst, object_scale=radius, motion=motion, device=device, precision=precision)
         return scene
 
     @classmethod
@@ -507,11 +507,11 @@ class Scene:
             inputs=[
                 self.shape_vertex,
                 self.shape_vertex_start,
-                self.instance_shape,
-                self.instance_scale,
-                self.instance_pose,
-                self.instance_vertex_start,
-                self.vertex_instance,
+                self.object_shape,
+                self.object_scale,
+                self.object_pose,
+                self.object_vertex_start,
+                self.vertex_object,
             ],
             outputs=[self.world_vertex],
             device=self.device,
@@ -559,7 +559,7 @@ class Scene:
         """The device's half of :meth:`advance`: poses at :attr:`time_device` ``+ dt``, the device
         time moved on by ``dt``, then the world vertices. Enqueues kernels only (capturable)."""
         if self.num_objects:
-            self.motion.launch(self.time_device, self.instance_pose, step=dt)
+            self.motion.launch(self.time_device, self.object_pose, step=dt)
         advance_time(self.time_device, dt)
         self.update_world_vertices()
 
@@ -568,7 +568,7 @@ class Scene:
         if self.deforming:
             raise ValueError("set_transforms: a deforming scene takes world vertices")
         poses = transforms_to_poses(transforms, self.num_objects)
-        self.instance_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
+        self.object_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
 
     def set_poses(self, poses: wp.array) -> None:
@@ -579,7 +579,7 @@ class Scene:
             raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} {t.__name__}")
         if poses.device != self.device:
             raise ValueError(f"set_poses: poses are on {poses.device}, the scene on {self.device}")
-        wp.copy(self.instance_pose, poses)
+        wp.copy(self.object_pose, poses)
         self.update_world_vertices()
 
     def set_world_vertices(self, vertices) -> None:
@@ -605,7 +605,7 @@ class Scene:
             raise ValueError(f"set_world_vertices: expected shape ({self.num_world_vertices}, 3), got {v.shape}")
         if not np.isfinite(v).all():
             bad = int(np.argmin(np.isfinite(v).all(axis=1)))
-            obj = int(np.searchsorted(self.instance_vertex_start_np, bad, side="right") - 1)
+            obj = int(np.searchsorted(self.object_vertex_start_np, bad, side="right") - 1)
             raise ValueError(f"set_world_vertices: vertex {bad} (object {obj}) is not finite")
         with np.errstate(over="ignore"):
             v = v.astype(np.float64 if self.precision == "float64" else np.float32)
@@ -637,6 +637,6 @@ class Scene:
         wv = self.world_vertex.numpy()
         out = []
         for i in range(self.num_objects):
-            v = wv[self.instance_vertex_start_np[i] : self.instance_vertex_start_np[i + 1]]
-            out.append((v, self.shape_meshes[self.instance_shape_np[i]][1]))
+            v = wv[self.object_vertex_start_np[i] : self.object_vertex_start_np[i + 1]]
+            out.append((v, self.shape_meshes[self.object_shape_np[i]][1]))
         return out

@@ -1,6 +1,6 @@
 """Object boxes: the refit stage of the all-pairs mid phase.
 
-:class:`InstanceBounds`: one thread per object takes the min/max of its world vertices, then pads
+:class:`ObjectBounds`: one thread per object takes the min/max of its world vertices, then pads
 the box by ``margin_rel`` times its diagonal, so that pairs the narrow phase calls touching (its
 tolerance is relative to the triangles' size, at most the box diagonal) are never culled by the
 broad phase. Cost O(V) work, O(max vertices per object) depth.
@@ -15,32 +15,32 @@ from ..geometry.precision import precision_overloads
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["InstanceBounds"]
+__all__ = ["ObjectBounds"]
 
 
 @wp.kernel
-def _instance_bounds_kernel(
+def _object_bounds_kernel(
     world_vertex: wp.array[Any],
-    instance_vertex_start: wp.array[wp.int32],
+    object_vertex_start: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
     """One thread per object: padded AABB of its world vertices (float32, rounded outward)."""
     i = wp.tid()
-    lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
+    lo, hi = vertex_bounds(world_vertex, object_vertex_start[i], object_vertex_start[i + 1])
     pad = margin_rel * wp.length(hi - lo)
     m = type(lo)(pad, pad, pad)
-    instance_lower[i] = box_lower32(lo - m)
-    instance_upper[i] = box_upper32(hi + m)
+    object_lower[i] = box_lower32(lo - m)
+    object_upper[i] = box_upper32(hi + m)
 
 
-_INSTANCE_BOUNDS = precision_overloads(_instance_bounds_kernel,
+_OBJECT_BOUNDS = precision_overloads(_object_bounds_kernel,
                                        lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
 
 
-class InstanceBounds:
+class ObjectBounds:
     """Owns ``lower`` / ``upper`` ``(N,)`` ``wp.vec3`` arrays of object boxes (scene units).
 
     Args:
@@ -61,13 +61,13 @@ class InstanceBounds:
         return []
 
     def refit(self, scene) -> None:
-        """Computes the boxes from ``scene.world_vertex`` and ``scene.instance_vertex_start``."""
+        """Computes the boxes from ``scene.world_vertex`` and ``scene.object_vertex_start``."""
         if self.lower.shape[0] == 0:
             return
         wp.launch(
-            _INSTANCE_BOUNDS[scene.precision],
+            _OBJECT_BOUNDS[scene.precision],
             dim=self.lower.shape[0],
-            inputs=[scene.world_vertex, scene.instance_vertex_start, scene.scalar_type(self.margin_rel)],
+            inputs=[scene.world_vertex, scene.object_vertex_start, scene.scalar_type(self.margin_rel)],
             outputs=[self.lower, self.upper],
             device=self.device,
         )

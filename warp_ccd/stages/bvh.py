@@ -8,7 +8,7 @@ centroids along the longest axis of its bounds, so the tree is balanced with
 thread per node); the triangle order from three centroid-sorted lists per shape, partitioned
 level by level over all shapes, small subtrees finished one thread each.
 
-Stored flat, topology shared by every instance of a shape (:class:`~warp_ccd.stages.bvh_build.ShapeTree`
+Stored flat, topology shared by every object of a shape (:class:`~warp_ccd.stages.bvh_build.ShapeTree`
 is one shape's tree on the host):
 
 * nodes in breadth-first order (a node's children are on the next level; level ``d`` of a
@@ -27,12 +27,12 @@ of the object's *box space*:
   boxes (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
   vertices (one thread an object either way; by default the vertices of objects of up to 64,
   whose cuts are fewer, bigger boxes, and the cut of bigger ones, whose cuts are many small ones).
-* **deforming objects** (``scene.instance_deforming_np``) have boxes of their own, in world space,
-  refit every frame from their world vertices: instances of small trees (up to 255 nodes:
-  polyhedra, 80-triangle spheres) in two launches, one thread per leaf of every such instance,
+* **deforming objects** (``scene.object_deforming_np``) have boxes of their own, in world space,
+  refit every frame from their world vertices: objects of small trees (up to 255 nodes:
+  polyhedra, 80-triangle spheres) in two launches, one thread per leaf of every such object,
   then one thread per inner node (the union of the leaf boxes of its subtree, a contiguous run of
   :attr:`TreeView.leaf_node`); bigger trees one launch per level, deepest first, one thread per
-  (instance, node). The root's box is the object's box.
+  (object, node). The root's box is the object's box.
 
 Leaf boxes are padded by the narrow phase's tolerance times their triangle's longest edge (in
 their own space: the padding scales with the object), so that the trees never reject a pair the
@@ -91,7 +91,7 @@ class TreeView:
     layout's cut depth and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
     layout_cut_start[2 l + deep + 1]]``; its triangle order starts at ``shape_tri_order_start[s]``;
     the boxes of object ``i`` (its box space: its shape's for a rigid object, the world for a
-    deforming one) are ``node_lower/upper[instance_node_start[i] + local id]``.
+    deforming one) are ``node_lower/upper[object_node_start[i] + local id]``.
     """
 
     shape_layout: wp.array[wp.int32]
@@ -105,7 +105,7 @@ class TreeView:
     layout_cut_start: wp.array[wp.int32]
     cut_node: wp.array[wp.int32]
     tri_order: wp.array[wp.int32]
-    instance_node_start: wp.array[wp.int32]
+    object_node_start: wp.array[wp.int32]
     node_lower: wp.array[wp.vec3]
     node_upper: wp.array[wp.vec3]
 
@@ -129,8 +129,8 @@ def triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], margin_rel:
 @wp.func
 def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri: int, margin_rel: Any):
     """:func:`triangle_box_at` of local triangle ``tri`` of object ``inst``."""
-    return triangle_box_at(mesh, world_vertex, margin_rel, mesh.shape_triangle_start[mesh.instance_shape[inst]],
-                           mesh.instance_vertex_start[inst], tri)
+    return triangle_box_at(mesh, world_vertex, margin_rel, mesh.shape_triangle_start[mesh.object_shape[inst]],
+                           mesh.object_vertex_start[inst], tri)
 
 
 @wp.func
@@ -142,13 +142,13 @@ def _refit_node(
     inst: int,
     node: int,
     margin_rel: Any,
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
-    """Box of ``node`` (local id in shape ``s``) of instance ``inst``: from its triangles (leaf,
+    """Box of ``node`` (local id in shape ``s``) of object ``inst``: from its triangles (leaf,
     padded by the tolerance) or its children's boxes; the root's box is the object's box."""
     shape_node = tree.layout_node_start[tree.shape_layout[s]] + node
-    slot = tree.instance_node_start[inst] + node
+    slot = tree.object_node_start[inst] + node
     child = tree.node_child[shape_node]
     lo = wp.vec3(0.0)
     hi = wp.vec3(0.0)
@@ -162,14 +162,14 @@ def _refit_node(
             lo = wp.min(lo, tri_lo)
             hi = wp.max(hi, tri_hi)
     else:
-        base_slot = tree.instance_node_start[inst]
+        base_slot = tree.object_node_start[inst]
         lo = wp.min(tree.node_lower[base_slot + child[0]], tree.node_lower[base_slot + child[1]])
         hi = wp.max(tree.node_upper[base_slot + child[0]], tree.node_upper[base_slot + child[1]])
     tree.node_lower[slot] = lo
     tree.node_upper[slot] = hi
     if node == 0:
-        instance_lower[inst] = lo
-        instance_upper[inst] = hi
+        object_lower[inst] = lo
+        object_upper[inst] = hi
 
 
 @wp.func
@@ -177,18 +177,18 @@ def _layout_item(
     t: int,
     block_start: wp.array[wp.int32],
     block_count: wp.array[wp.int32],
-    layout_instance: wp.array[wp.int32],
-    layout_instance_start: wp.array[wp.int32],
+    layout_object: wp.array[wp.int32],
+    layout_object_start: wp.array[wp.int32],
 ):
     """Flat work item ``t`` of a launch whose items are laid out layout by layout: block ``b`` (one
     per tree layout with objects in the launch) owns items ``block_start[b] .. block_start[b + 1]``,
-    ``block_count[b]`` per object, its objects ``layout_instance[layout_instance_start[b]:
-    layout_instance_start[b + 1]]``. Returns ``(block, object, index of the item within its
+    ``block_count[b]`` per object, its objects ``layout_object[layout_object_start[b]:
+    layout_object_start[b + 1]]``. Returns ``(block, object, index of the item within its
     object)``: one search over the few layouts, not over the objects or shapes."""
     b = upper_bound(block_start, 0, block_start.shape[0], t) - 1  # last b with block_start[b] <= t
     local = t - block_start[b]
     cnt = block_count[b]
-    return b, layout_instance[layout_instance_start[b] + local / cnt], local % cnt
+    return b, layout_object[layout_object_start[b] + local / cnt], local % cnt
 
 
 @wp.kernel
@@ -199,19 +199,19 @@ def _refit_level_kernel(
     block_start: wp.array[wp.int32],
     level_count: wp.array[wp.int32],
     level_first: int,
-    layout_instance: wp.array[wp.int32],
-    layout_instance_start: wp.array[wp.int32],
+    layout_object: wp.array[wp.int32],
+    layout_object_start: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
     """One thread per (object, node of this level): leaf box from triangles, else children union.
     Items laid out by layout (:func:`_layout_item`), ``level_count`` nodes of the level per object;
     the level's nodes are ``level_first ..`` in every tree (:meth:`~warp_ccd.stages.bvh_build.TreeSizes.level`)."""
-    _b, inst, k = _layout_item(wp.tid(), block_start, level_count, layout_instance, layout_instance_start)
-    _refit_node(mesh, world_vertex, tree, mesh.instance_shape[inst], inst, level_first + k, margin_rel,
-                instance_lower, instance_upper)
+    _b, inst, k = _layout_item(wp.tid(), block_start, level_count, layout_object, layout_object_start)
+    _refit_node(mesh, world_vertex, tree, mesh.object_shape[inst], inst, level_first + k, margin_rel,
+                object_lower, object_upper)
 
 
 @wp.kernel
@@ -222,19 +222,19 @@ def _refit_small_leaf_kernel(
     block_start: wp.array[wp.int32],
     block_count: wp.array[wp.int32],
     block_layout: wp.array[wp.int32],
-    layout_instance: wp.array[wp.int32],
-    layout_instance_start: wp.array[wp.int32],
+    layout_object: wp.array[wp.int32],
+    layout_object_start: wp.array[wp.int32],
     margin_rel: Any,
     # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
     """One thread per leaf of each object of a small tree: the leaf's box from its triangles. Items
     laid out by layout (:func:`_layout_item`), ``block_count`` leaves per object."""
-    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_instance, layout_instance_start)
+    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_object, layout_object_start)
     node = tree.leaf_node[tree.layout_leaf_start[block_layout[b]] + k]
-    _refit_node(mesh, world_vertex, tree, mesh.instance_shape[inst], inst, node, margin_rel, instance_lower,
-                instance_upper)
+    _refit_node(mesh, world_vertex, tree, mesh.object_shape[inst], inst, node, margin_rel, object_lower,
+                object_upper)
 
 
 @wp.kernel
@@ -243,23 +243,23 @@ def _refit_small_inner_kernel(
     block_start: wp.array[wp.int32],
     block_count: wp.array[wp.int32],
     block_layout: wp.array[wp.int32],
-    layout_instance: wp.array[wp.int32],
-    layout_instance_start: wp.array[wp.int32],
+    layout_object: wp.array[wp.int32],
+    layout_object_start: wp.array[wp.int32],
     layout_inner_start: wp.array[wp.int32],
     inner_node: wp.array[wp.int32],
     # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
     """One thread per inner node of each object of a small tree, after the leaves: the union of the
     boxes of the leaves of its subtree (the same bits as the union of its children's). Items laid
     out by layout (:func:`_layout_item`), ``block_count`` inner nodes per object."""
-    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_instance, layout_instance_start)
+    b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_object, layout_object_start)
     layout = block_layout[b]
     node = inner_node[layout_inner_start[layout] + k]
     leaves = tree.node_leaf[tree.layout_node_start[layout] + node]
     leaf_base = tree.layout_leaf_start[layout]
-    slot = tree.instance_node_start[inst]
+    slot = tree.object_node_start[inst]
     lo = wp.vec3(BOX_EMPTY)
     hi = wp.vec3(-BOX_EMPTY)
     for j in range(leaves[0], leaves[0] + leaves[1]):
@@ -269,8 +269,8 @@ def _refit_small_inner_kernel(
     tree.node_lower[slot + node] = lo
     tree.node_upper[slot + node] = hi
     if node == 0:
-        instance_lower[inst] = lo
-        instance_upper[inst] = hi
+        object_lower[inst] = lo
+        object_upper[inst] = hi
 
 
 _REFIT_LEVEL, _REFIT_SMALL_LEAF = (
@@ -296,42 +296,42 @@ def box_radius(lo: wp.vec3, hi: wp.vec3) -> float:
 @wp.kernel
 def _rigid_bounds_kernel(
     tree: TreeView,
-    rigid_instance: wp.array[wp.int32],
-    instance_shape: wp.array[wp.int32],
-    instance_pose: wp.array[Any],
-    instance_scale: wp.array[wp.float32],
+    rigid_object: wp.array[wp.int32],
+    object_shape: wp.array[wp.int32],
+    object_pose: wp.array[Any],
+    object_scale: wp.array[wp.float32],
     world_vertex: wp.array[Any],
-    instance_vertex_start: wp.array[wp.int32],
+    object_vertex_start: wp.array[wp.int32],
     vertices_max: int,
     margin_rel: Any,
     world_eps: Any,
     # Outputs
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
 ):
     """One thread per rigid object: the box of its world vertices (padded by ``margin_rel`` times
     its diagonal) when it has at most ``vertices_max``; else the union of its shape's cut boxes
     under its scale and pose (each box's centre moved, its half extent through the rotation's
     absolute values), padded by the rounding bound ``world_eps * (|t| + scale * r)``
     (:data:`WORLD_ERROR_ULPS`). Float32 corners, rounded outward."""
-    i = rigid_instance[wp.tid()]
-    v0 = instance_vertex_start[i]
-    v1 = instance_vertex_start[i + 1]
+    i = rigid_object[wp.tid()]
+    v0 = object_vertex_start[i]
+    v1 = object_vertex_start[i + 1]
     if v1 - v0 <= vertices_max:
         lo, hi = vertex_bounds(world_vertex, v0, v1)
         pad = margin_rel * wp.length(hi - lo)
         m = type(lo)(pad, pad, pad)
-        instance_lower[i] = box_lower32(lo - m)
-        instance_upper[i] = box_upper32(hi + m)
+        object_lower[i] = box_lower32(lo - m)
+        object_upper[i] = box_upper32(hi + m)
         return
-    pose = instance_pose[i]
+    pose = object_pose[i]
     t = wp.transform_get_translation(pose)
     rot = wp.quat_to_matrix(wp.transform_get_rotation(pose))
     rot_abs = abs_matrix(rot)
     half = type(world_eps)(0.5)
-    s = type(world_eps)(instance_scale[i])
-    layout = tree.shape_layout[instance_shape[i]]
-    base = tree.instance_node_start[i]
+    s = type(world_eps)(object_scale[i])
+    layout = tree.shape_layout[object_shape[i]]
+    base = tree.object_node_start[i]
     lo = type(t)(type(world_eps)(BOX_EMPTY))
     hi = -lo
     for k in range(tree.layout_cut_start[2 * layout], tree.layout_cut_start[2 * layout + 1]):
@@ -346,12 +346,12 @@ def _rigid_bounds_kernel(
     at = wp.abs(t)
     pad = world_eps * (wp.max(wp.max(at[0], at[1]), at[2]) + s * r)
     p = type(t)(pad, pad, pad)
-    instance_lower[i] = box_lower32(lo - p)
-    instance_upper[i] = box_upper32(hi + p)
+    object_lower[i] = box_lower32(lo - p)
+    object_upper[i] = box_upper32(hi + p)
 
 
 _RIGID_BOUNDS = precision_overloads(_rigid_bounds_kernel, lambda s, v, q, t: {
-    "instance_pose": wp.array[t], "world_vertex": wp.array[v], "margin_rel": s, "world_eps": s})
+    "object_pose": wp.array[t], "world_vertex": wp.array[v], "margin_rel": s, "world_eps": s})
 
 
 class _RefitPlan:
@@ -359,20 +359,20 @@ class _RefitPlan:
     objects of their own), as launches prepared on the host.
 
     Args:
-        instances: ``(K,)`` ids of the objects to refit.
-        instance_shape: ``(N,)`` shape of every object of the topology the launches take.
+        objects: ``(K,)`` ids of the objects to refit.
+        object_shape: ``(N,)`` shape of every object of the topology the launches take.
         build: the :class:`~warp_ccd.stages.bvh_build.TreeBuild` (layouts, their sizes and inner-node lists).
         small_max_nodes: trees of at most this many nodes are refit leaves-then-inner-nodes, the
             others level by level.
         device: Warp device.
     """
 
-    def __init__(self, instances: np.ndarray, instance_shape: np.ndarray, build: TreeBuild, small_max_nodes: int,
+    def __init__(self, objects: np.ndarray, object_shape: np.ndarray, build: TreeBuild, small_max_nodes: int,
                  device):
         self.device = device
         self.build = build
-        instances = np.asarray(instances, np.int64)
-        layout = build.shape_layout[instance_shape[instances]]
+        objects = np.asarray(objects, np.int64)
+        layout = build.shape_layout[object_shape[objects]]
         lsizes = build.layout_sizes  # a tree's shape depends on its layout (triangle count) alone
         small = (lsizes.num_nodes <= small_max_nodes)[layout]
 
@@ -391,12 +391,12 @@ class _RefitPlan:
             return int(block[-1]), block, np.maximum(per_member, 1)
 
         # Small trees: their leaves, then their inner nodes, one launch each for every such object.
-        used, order, start = group(instances[small], layout[small])
+        used, order, start = group(objects[small], layout[small])
         self.num_small_leaves, leaf_block, leaf_count = blocks(lsizes.num_leaves[used], np.diff(start))
         self.num_small_inner, inner_block, inner_count = blocks(lsizes.num_inner[used], np.diff(start))
         arrays = [leaf_block, leaf_count, inner_block, inner_count, used, order, start]
         # The others level by level, deepest first (the nodes of level d are the same ids in every tree).
-        used_big, order_big, start_big = group(instances[~small], layout[~small])
+        used_big, order_big, start_big = group(objects[~small], layout[~small])
         arrays += [order_big, start_big]
         depth = int(lsizes.num_levels[used_big].max()) if len(used_big) else 0
         self.level_items, self.level_first = [], []
@@ -408,8 +408,8 @@ class _RefitPlan:
             arrays += [block, per]
         views = packed_upload(arrays, device)  # one copy for all
         (self.small_leaf_block, self.small_leaf_count, self.small_inner_block, self.small_inner_count,
-         self.small_layout, self.small_instance, self.small_instance_start, self.big_instance,
-         self.big_instance_start) = views[:9]
+         self.small_layout, self.small_object, self.small_object_start, self.big_object,
+         self.big_object_start) = views[:9]
         self.levels = [tuple(views[9 + 2 * k: 11 + 2 * k]) for k in range(depth)]  # (block_start, level_count)
 
     def launch(self, topology: MeshTopology, vertices: wp.array, tree: TreeView, margin, precision: str,
@@ -417,7 +417,7 @@ class _RefitPlan:
         """Refits the boxes of the plan's objects from ``vertices`` (``topology``'s), small trees
         first, then the others deepest level first; roots also into ``lower`` / ``upper``."""
         d = self.device
-        small = [self.small_layout, self.small_instance, self.small_instance_start]
+        small = [self.small_layout, self.small_object, self.small_object_start]
         if self.num_small_leaves:
             wp.launch(_REFIT_SMALL_LEAF[precision], dim=self.num_small_leaves,
                       inputs=[topology, vertices, tree, self.small_leaf_block, self.small_leaf_count, *small, margin],
@@ -431,8 +431,8 @@ class _RefitPlan:
             if self.level_items[k]:
                 block, count = self.levels[k]
                 wp.launch(_REFIT_LEVEL[precision], dim=self.level_items[k],
-                          inputs=[topology, vertices, tree, block, count, self.level_first[k], self.big_instance,
-                                  self.big_instance_start, margin],
+                          inputs=[topology, vertices, tree, block, count, self.level_first[k], self.big_object,
+                                  self.big_object_start, margin],
                           outputs=[lower, upper], device=d)
 
 
@@ -445,7 +445,7 @@ class SceneBVH:
         leaf_size: largest number of triangles per leaf.
         margin_rel: leaf padding relative to the triangle's longest edge (the narrow phase's
             tolerance, so that tree culling never rejects a pair the narrow phase accepts).
-        instance_refit_max_nodes: deforming objects of shapes with at most this many nodes are refit
+        object_refit_max_nodes: deforming objects of shapes with at most this many nodes are refit
             in two launches, leaves then inner nodes (an inner node reads all its leaves); bigger
             trees level by level, one thread per node.
         cut_depth: least level of each tree's cut (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`),
@@ -466,7 +466,7 @@ class SceneBVH:
         lower, upper: ``(N,)`` object AABBs (float32, world), written by :meth:`refit`.
         tree: the :class:`TreeView` struct for kernels.
         build: the :class:`~warp_ccd.stages.bvh_build.TreeBuild` that made the trees (device arrays).
-        instance_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
+        object_deforming: ``(N,)`` int32 device flags, 1 for a deforming object.
         num_node_slots: node boxes stored: the shapes of rigid objects once, each deforming object.
         num_levels: levels of the deepest tree (the root alone: 1).
         max_triangles, min_triangles: triangles of the largest and of the smallest object's mesh.
@@ -474,7 +474,7 @@ class SceneBVH:
             (from ``object_bounds``).
     """
 
-    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, instance_refit_max_nodes: int = 255,
+    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
                  small_subtree: int | None = None):
         if not 1 <= leaf_size <= LEAF_SIZE_MAX:
@@ -504,8 +504,8 @@ class SceneBVH:
         sizes = build.sizes
         num_shapes = scene.num_shapes
         n = scene.num_objects
-        inst_shape = scene.instance_shape_np
-        deforming = scene.instance_deforming_np
+        inst_shape = scene.object_shape_np
+        deforming = scene.object_deforming_np
         nodes = sizes.num_nodes
         # Slots: the shapes of rigid objects first (shape space), then each deforming object's.
         has_rigid = np.zeros(num_shapes, bool)
@@ -527,14 +527,14 @@ class SceneBVH:
         np.minimum.at(first, inst_shape[deforming], np.nonzero(deforming)[0])
         world_start = np.full(num_shapes, -1, np.int64)
         has = first < n
-        world_start[has] = scene.instance_vertex_start_np[first[has]]
+        world_start[has] = scene.object_vertex_start_np[first[has]]
         self._shape_world_start = wp.array(world_start.astype(np.int32), dtype=wp.int32, device=d)
 
-        self.rigid_instance = wp.array(np.nonzero(~deforming)[0].astype(np.int32), dtype=wp.int32, device=d)
-        self.instance_deforming = wp.array(deforming.astype(np.int32), dtype=wp.int32, device=d)
-        self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, build, instance_refit_max_nodes, d)
+        self.rigid_object = wp.array(np.nonzero(~deforming)[0].astype(np.int32), dtype=wp.int32, device=d)
+        self.object_deforming = wp.array(deforming.astype(np.int32), dtype=wp.int32, device=d)
+        self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, build, object_refit_max_nodes, d)
         self._shape_plan = _RefitPlan(np.nonzero(has_rigid)[0], np.arange(num_shapes), build,
-                                      instance_refit_max_nodes, d)
+                                      object_refit_max_nodes, d)
 
         def view(node_start):
             tv = TreeView()
@@ -549,7 +549,7 @@ class SceneBVH:
             tv.layout_cut_start = build.layout_cut_start_device
             tv.cut_node = build.cut_node
             tv.tri_order = build.tri_order
-            tv.instance_node_start = wp.array(node_start.astype(np.int32), dtype=wp.int32, device=d)
+            tv.object_node_start = wp.array(node_start.astype(np.int32), dtype=wp.int32, device=d)
             tv.node_lower = self._node_lower
             tv.node_upper = self._node_upper
             return tv
@@ -561,9 +561,9 @@ class SceneBVH:
         self._shape_topology = MeshTopology()
         for name in ("shape_triangle", "shape_triangle_start"):
             setattr(self._shape_topology, name, getattr(scene, name))
-        self._shape_topology.instance_shape = wp.array(np.arange(num_shapes, dtype=np.int32), device=d)
-        self._shape_topology.instance_vertex_start = scene.shape_vertex_start
-        self._shape_topology.instance_triangle_start = scene.shape_triangle_start
+        self._shape_topology.object_shape = wp.array(np.arange(num_shapes, dtype=np.int32), device=d)
+        self._shape_topology.object_vertex_start = scene.shape_vertex_start
+        self._shape_topology.object_triangle_start = scene.shape_triangle_start
         self._shape_lower = wp.zeros(num_shapes, dtype=wp.vec3, device=d)
         self._shape_upper = wp.zeros(num_shapes, dtype=wp.vec3, device=d)
         self.lower = wp.zeros(n, dtype=wp.vec3, device=d)
@@ -599,10 +599,10 @@ class SceneBVH:
         margin = scene.scalar_type(self.margin_rel)
         self.refit_plan.launch(scene.topology, scene.world_vertex, self.tree, margin, scene.precision, self.lower,
                                self.upper)
-        if self.rigid_instance.shape[0]:
+        if self.rigid_object.shape[0]:
             eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
-            wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_instance.shape[0],
-                      inputs=[self.tree, self.rigid_instance, scene.instance_shape, scene.instance_pose,
-                              scene.instance_scale, scene.world_vertex, scene.instance_vertex_start,
+            wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_object.shape[0],
+                      inputs=[self.tree, self.rigid_object, scene.object_shape, scene.object_pose,
+                              scene.object_scale, scene.world_vertex, scene.object_vertex_start,
                               self.bounds_vertices_max, margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
                       outputs=[self.lower, self.upper], device=self.device)

@@ -205,7 +205,7 @@ def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, nu
 def _local_triangle(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, o: wp.vec3d):
     """Triangle ``tri`` of object ``obj`` in float64, relative to ``o``, and its local vertex ids."""
     x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
-    s = mesh.instance_shape[obj]
+    s = mesh.object_shape[obj]
     idx = mesh.shape_triangle[mesh.shape_triangle_start[s] + tri]
     return wp.vec3d(x0) - o, wp.vec3d(x1) - o, wp.vec3d(x2) - o, idx
 
@@ -225,7 +225,7 @@ def _neighbour(
     """The triangle across edge ``k`` of ``tri``: ``(found, normal oriented as the triangle's, its
     vertex off the edge)``; ``found`` 1, or 0 on a boundary or non-manifold edge, 2 for a
     degenerate or two-sided neighbour (no side)."""
-    s = mesh.instance_shape[obj]
+    s = mesh.object_shape[obj]
     nbr = surface.neighbour[mesh.shape_triangle_start[s] + tri][k]
     if nbr < 0:
         return 0, wp.vec3d(), wp.vec3d()
@@ -289,7 +289,7 @@ def _fan_normal(
     mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, v: int, o: wp.vec3d
 ):
     """Angle-weighted normal of the fan of local vertex ``v`` of object ``obj`` (not normalised)."""
-    s = mesh.instance_shape[obj]
+    s = mesh.object_shape[obj]
     g = surface.shape_vertex_start[s] + v
     acc = wp.vec3d()
     for f in range(surface.fan_start[g], surface.fan_start[g + 1]):
@@ -336,7 +336,7 @@ def _signed_distance(
     lies beyond the surface's rim, not behind it)."""
     c, feature = _closest_on_triangle(p, x0, x1, x2)
     dist = wp.length(p - c)
-    s = mesh.instance_shape[obj]
+    s = mesh.object_shape[obj]
     if degenerate or surface.two_sided[mesh.shape_triangle_start[s] + tri] != 0:
         return dist
     pn = n
@@ -429,7 +429,7 @@ def _surface_at(
     ``m`` across the line with the normals of their faces and how far each face reaches along
     its ray (the second 0 on an open edge). Nothing is behind a two-sided face, an open edge, or
     an edge whose neighbour has no side (:data:`SURFACE_OPEN`)."""
-    thin = surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[obj]] + tri] != 0
+    thin = surface.two_sided[mesh.shape_triangle_start[mesh.object_shape[obj]] + tri] != 0
     if sup < 0:
         w = wp.normalize(wp.cross(n, d))
         kind = SURFACE_SHEET
@@ -486,8 +486,8 @@ def _verdict(
     db1 = _snap(wp.dot(na, b1 - a0), eps)
     db2 = _snap(wp.dot(na, b2 - a0), eps)
     if da0 == zero and da1 == zero and da2 == zero and db0 == zero and db1 == zero and db2 == zero:
-        thin = surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[c[0]]] + c[1]] != 0 or (
-            surface.two_sided[mesh.shape_triangle_start[mesh.instance_shape[c[2]]] + c[3]] != 0)
+        thin = surface.two_sided[mesh.shape_triangle_start[mesh.object_shape[c[0]]] + c[1]] != 0 or (
+            surface.two_sided[mesh.shape_triangle_start[mesh.object_shape[c[2]]] + c[3]] != 0)
         return not thin and wp.dot(na, nb) > zero and _coplanar_area(a0, a1, a2, b0, b1, b2, na, eps)
     sup_a = _support(da0, da1, da2)
     sup_b = _support(db0, db1, db2)
@@ -543,8 +543,8 @@ def _centred_pair(
     size_b = _max_edge(b0, b1, b2)
     na, degenerate_a = _unit_normal(a0, a1, a2, tol_rel)
     nb, degenerate_b = _unit_normal(b0, b1, b2, tol_rel)
-    na = na * surface.shape_side[mesh.instance_shape[c[0]]]
-    nb = nb * surface.shape_side[mesh.instance_shape[c[2]]]
+    na = na * surface.shape_side[mesh.object_shape[c[0]]]
+    nb = nb * surface.shape_side[mesh.object_shape[c[2]]]
     eps = wp.max(tol_rel * wp.min(size_a, size_b), rounding * big)
     return a0, a1, a2, ia, na, degenerate_a, b0, b1, b2, ib, nb, degenerate_b, o, size_a, size_b, eps
 
@@ -571,8 +571,8 @@ def _crossing_kernel(
     c = pair[k]
     a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, size_a, size_b, eps = _centred_pair(
         mesh, surface, world_vertex, c, tol_rel, rounding)
-    base_a = mesh.instance_vertex_start[c[0]]
-    base_b = mesh.instance_vertex_start[c[2]]
+    base_a = mesh.object_vertex_start[c[0]]
+    base_b = mesh.object_vertex_start[c[2]]
     for i in range(3):
         p = _pick(a0, a1, a2, i)
         q = _pick(b0, b1, b2, i)
@@ -635,7 +635,7 @@ def _side_at(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.arra
     zero = wp.vec3d()
     y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, tri, zero)
     n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
-    n = n * surface.shape_side[mesh.instance_shape[obj]]
+    n = n * surface.shape_side[mesh.object_shape[obj]]
     d = _signed_distance(mesh, surface, world_vertex, obj, tri, idx, y0, y1, y2, n, degenerate, zero, tol_rel, p)
     if d < wp.float64(0.0):
         return wp.float64(-1.0)
@@ -685,7 +685,7 @@ def _depth_all_kernel(
     p, obj = _entry(pair, vertex, world_vertex, k, i)
     best = wp.float64(1.0e300)
     best_tri = int(-1)
-    count = mesh.instance_triangle_start[obj + 1] - mesh.instance_triangle_start[obj]
+    count = mesh.object_triangle_start[obj + 1] - mesh.object_triangle_start[obj]
     for t in range(count):
         best, best_tri = _nearer(mesh, world_vertex, obj, t, p, best, best_tri)
     depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k], tol_rel)
@@ -717,7 +717,7 @@ def _depth_tree_kernel(
         depth[k, i] = wp.float64(0.0)
         return
     p, obj = _entry(pair, vertex, world_vertex, k, i)
-    s = mesh.instance_shape[obj]
+    s = mesh.object_shape[obj]
     pb = p
     sc = wp.float64(1.0)
     slack = wp.float64(BOX_SLACK) * wp.length(p)
@@ -732,7 +732,7 @@ def _depth_tree_kernel(
     best = distance[k, i] * wp.float64(1.0 + 1.0e-9) + slack
     best_tri = int(-1)
     node_start = tree.layout_node_start[tree.shape_layout[s]]
-    slot_start = tree.instance_node_start[obj]
+    slot_start = tree.object_node_start[obj]
     tri_start = tree.shape_tri_order_start[s]
     zero = wp.vec3d()
     stack = _NodeStack()
@@ -842,8 +842,8 @@ class CrossingClassifier:
         inputs = [scene.topology, self.surface]
         if self.trees is not None:
             tree = self.trees
-            inputs += [tree.tree, scene.world_vertex, scene.instance_pose, scene.instance_scale,
-                       tree.instance_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps,
+            inputs += [tree.tree, scene.world_vertex, scene.object_pose, scene.object_scale,
+                       tree.object_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps,
                        self.tolerance]
             kernel = _DEPTH_TREE
         else:

@@ -166,25 +166,25 @@ def _map_between(rot_a: wp.mat33d, t_a: wp.vec3d, s_a: wp.float64, rot_b: wp.mat
 
 
 @wp.func
-def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose: wp.array[Any],
-               instance_scale: wp.array[wp.float32], instance_deforming: wp.array[wp.int32], world_eps: float,
+def _tree_pair(tree: TreeView, object_shape: wp.array[wp.int32], object_pose: wp.array[Any],
+               object_scale: wp.array[wp.float32], object_deforming: wp.array[wp.int32], world_eps: float,
                a: int, b: int) -> TreePair:
     """The :class:`TreePair` of objects ``a < b``."""
-    la = tree.shape_layout[instance_shape[a]]
-    lb = tree.shape_layout[instance_shape[b]]
+    la = tree.shape_layout[object_shape[a]]
+    lb = tree.shape_layout[object_shape[b]]
     r = TreePair()
     r.a = a
     r.b = b
     r.node_a_start = tree.layout_node_start[la]
     r.node_b_start = tree.layout_node_start[lb]
-    r.slot_a_start = tree.instance_node_start[a]
-    r.slot_b_start = tree.instance_node_start[b]
-    r.tri_a_start = tree.shape_tri_order_start[instance_shape[a]]
-    r.tri_b_start = tree.shape_tri_order_start[instance_shape[b]]
-    def_a = instance_deforming[a]
-    def_b = instance_deforming[b]
-    rot_a, t_a, s_a = _frame(instance_pose[a], instance_scale[a], def_a)
-    rot_b, t_b, s_b = _frame(instance_pose[b], instance_scale[b], def_b)
+    r.slot_a_start = tree.object_node_start[a]
+    r.slot_b_start = tree.object_node_start[b]
+    r.tri_a_start = tree.shape_tri_order_start[object_shape[a]]
+    r.tri_b_start = tree.shape_tri_order_start[object_shape[b]]
+    def_a = object_deforming[a]
+    def_b = object_deforming[b]
+    rot_a, t_a, s_a = _frame(object_pose[a], object_scale[a], def_a)
+    rot_b, t_b, s_b = _frame(object_pose[b], object_scale[b], def_b)
     r_a = wp.float64(box_radius(tree.node_lower[r.slot_a_start], tree.node_upper[r.slot_a_start]))
     r_b = wp.float64(box_radius(tree.node_lower[r.slot_b_start], tree.node_upper[r.slot_b_start]))
     # The world vertices' rounding (a rigid object's, from its pose; a deforming one's are given).
@@ -208,10 +208,10 @@ def _tree_pair(tree: TreeView, instance_shape: wp.array[wp.int32], instance_pose
 @wp.kernel(cuda_max_registers=PAIR_MAX_REGISTERS)
 def _pair_kernel(
     tree: TreeView,
-    instance_shape: wp.array[wp.int32],
-    instance_pose: wp.array[Any],
-    instance_scale: wp.array[wp.float32],
-    instance_deforming: wp.array[wp.int32],
+    object_shape: wp.array[wp.int32],
+    object_pose: wp.array[Any],
+    object_scale: wp.array[wp.float32],
+    object_deforming: wp.array[wp.int32],
     world_eps: float,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
@@ -231,12 +231,12 @@ def _pair_kernel(
     if k >= used_count(pair_count, pair_capacity):
         return
     p = pair[k]
-    r = _tree_pair(tree, instance_shape, instance_pose, instance_scale, instance_deforming, world_eps, p[0], p[1])
+    r = _tree_pair(tree, object_shape, object_pose, object_scale, object_deforming, world_eps, p[0], p[1])
     tree_pair[k] = r
     pair_rows[k] = wp.vec4i(r.a, r.b, r.tri_a_start, r.tri_b_start)
 
 
-_PAIR = precision_overloads(_pair_kernel, lambda s, v, q, t: {"instance_pose": wp.array[t]})
+_PAIR = precision_overloads(_pair_kernel, lambda s, v, q, t: {"object_pose": wp.array[t]})
 
 
 @wp.func
@@ -365,7 +365,7 @@ def _expand_kernel(
     front_in_count: wp.array[wp.int64],
     front_in_capacity: int,
     roots: int,
-    instance_triangle_start: wp.array[wp.int32],
+    object_triangle_start: wp.array[wp.int32],
     whole_max: int,
     num_blocks: int,
     front_capacity: int,
@@ -423,7 +423,7 @@ def _expand_kernel(
             xa1 = na
             xb0 = nb
             xb1 = nb
-            if roots == 0 or (not _is_whole_pair(instance_triangle_start, r.a, r.b, whole_max)
+            if roots == 0 or (not _is_whole_pair(object_triangle_start, r.a, r.b, whole_max)
                               and _overlap(tree, r, na, nb, axes)):
                 if ca[0] < 0 and cb[0] < 0:
                     k00 = CHILD_LEAF  # two roots that are leaves
@@ -462,11 +462,11 @@ def _expand_kernel(
 
 
 @wp.func
-def _is_whole_pair(instance_triangle_start: wp.array[wp.int32], a: int, b: int, whole_max: int) -> bool:
+def _is_whole_pair(object_triangle_start: wp.array[wp.int32], a: int, b: int, whole_max: int) -> bool:
     """Whether objects ``a`` and ``b`` have at most ``whole_max`` triangles each (a whole-object
     pair, :func:`_whole_pair_kernel`, not the trees')."""
-    ma = instance_triangle_start[a + 1] - instance_triangle_start[a]
-    mb = instance_triangle_start[b + 1] - instance_triangle_start[b]
+    ma = object_triangle_start[a + 1] - object_triangle_start[a]
+    mb = object_triangle_start[b + 1] - object_triangle_start[b]
     return ma <= whole_max and mb <= whole_max
 
 
@@ -476,10 +476,10 @@ def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: 
     """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes of triangle
     ``i`` of ``big`` and ``j`` of ``small`` overlap (:func:`~warp_ccd.stages.bvh.triangle_box_at`, the
     trees' leaf boxes)."""
-    big_start = topology.shape_triangle_start[topology.instance_shape[big]]
-    lo, hi = triangle_box_at(topology, world_vertex, margin_rel, big_start, topology.instance_vertex_start[big], i)
-    tri_start = topology.shape_triangle_start[topology.instance_shape[small]]
-    vertex_start = topology.instance_vertex_start[small]
+    big_start = topology.shape_triangle_start[topology.object_shape[big]]
+    lo, hi = triangle_box_at(topology, world_vertex, margin_rel, big_start, topology.object_vertex_start[big], i)
+    tri_start = topology.shape_triangle_start[topology.object_shape[small]]
+    vertex_start = topology.object_vertex_start[small]
     hits = wp.int64(0)
     count = int(0)
     for j in range(m_small):
@@ -544,9 +544,9 @@ def _whole_pair_kernel(
             p = pair[k]
             a = p[0]
             b = p[1]
-            if _is_whole_pair(topology.instance_triangle_start, a, b, whole_max):
-                ma = topology.instance_triangle_start[a + 1] - topology.instance_triangle_start[a]
-                mb = topology.instance_triangle_start[b + 1] - topology.instance_triangle_start[b]
+            if _is_whole_pair(topology.object_triangle_start, a, b, whole_max):
+                ma = topology.object_triangle_start[a + 1] - topology.object_triangle_start[a]
+                mb = topology.object_triangle_start[b + 1] - topology.object_triangle_start[b]
                 big = wp.where(ma >= mb, a, b)
                 small = wp.where(ma >= mb, b, a)
                 m_big = wp.max(ma, mb)
@@ -692,8 +692,8 @@ class MidPhaseBVH:
         if self.bvh.max_triangles <= whole:
             return  # every pair is a whole-object pair
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity,
-                  inputs=[tree, scene.instance_shape, scene.instance_pose, scene.instance_scale,
-                          self.bvh.instance_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
+                  inputs=[tree, scene.object_shape, scene.object_pose, scene.object_scale,
+                          self.bvh.object_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
                           pairs.capacity],
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
@@ -705,7 +705,7 @@ class MidPhaseBVH:
                 _expand_kernel, dim=[blocks],
                 inputs=[tree, self._tree_pair, self._pair_rows, halves[(level + 1) % 2],
                         pairs.count if roots else self._level_views[level], slots, int(roots),
-                        scene.instance_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes],
+                        scene.object_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes],
                 outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
 
@@ -715,7 +715,7 @@ def _all_pairs_count_kernel(
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
-    instance_triangle_start: wp.array[wp.int32],
+    object_triangle_start: wp.array[wp.int32],
     # Outputs
     pair_work: wp.array[wp.int64],
 ):
@@ -725,8 +725,8 @@ def _all_pairs_count_kernel(
         pair_work[k] = wp.int64(0)
         return
     p = pair[k]
-    ma = instance_triangle_start[p[0] + 1] - instance_triangle_start[p[0]]
-    mb = instance_triangle_start[p[1] + 1] - instance_triangle_start[p[1]]
+    ma = object_triangle_start[p[0] + 1] - object_triangle_start[p[0]]
+    mb = object_triangle_start[p[1] + 1] - object_triangle_start[p[1]]
     pair_work[k] = wp.int64(ma) * wp.int64(mb)
 
 
@@ -735,7 +735,7 @@ def _all_pairs_write_kernel(
     pair: wp.array[wp.vec2i],
     pair_work: wp.array[wp.int64],
     pair_work_end: wp.array[wp.int64],
-    instance_triangle_start: wp.array[wp.int32],
+    object_triangle_start: wp.array[wp.int32],
     candidate_capacity: int,
     # Outputs
     candidate: wp.array[wp.vec4i],
@@ -752,7 +752,7 @@ def _all_pairs_write_kernel(
     lo = upper_bound(pair_work_end, 0, num_slots, wp.int64(c))  # the pair whose block holds c
     p = pair[lo]
     local = wp.int64(c) - (pair_work_end[lo] - pair_work[lo])
-    mb = wp.int64(instance_triangle_start[p[1] + 1] - instance_triangle_start[p[1]])
+    mb = wp.int64(object_triangle_start[p[1] + 1] - object_triangle_start[p[1]])
     candidate[c] = wp.vec4i(p[0], int(local / mb), p[1], int(local % mb))
 
 
@@ -807,10 +807,10 @@ class MidPhaseAllPairs:
             self._work = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
             self._work_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
         wp.launch(_all_pairs_count_kernel, dim=pairs.capacity,
-                  inputs=[pairs.data, pairs.count, pairs.capacity, scene.instance_triangle_start],
+                  inputs=[pairs.data, pairs.count, pairs.capacity, scene.object_triangle_start],
                   outputs=[self._work], device=d)
         wp.utils.array_scan(self._work, self._work_end, inclusive=True)
         wp.launch(_all_pairs_write_kernel, dim=self.candidates.capacity,
-                  inputs=[pairs.data, self._work, self._work_end, scene.instance_triangle_start,
+                  inputs=[pairs.data, self._work, self._work_end, scene.object_triangle_start,
                           self.candidates.capacity],
                   outputs=[self.candidates.data, self.candidates.count], device=d)

@@ -110,8 +110,8 @@ MAX_REGISTERS = 128
 """Most registers a thread of the two kernels of Möller's test on CUDA: as compiled freely they take
 255 (with spills) and 164, so that an H100 multiprocessor holds 256 of their threads; at 128 it
 holds 512 and the frame at 10^6 polyhedra / 10^5 80-triangle objects took 3.33 / 1.32 ms against
-4.36 / 1.66 (at 64, 4.22 / 1.79: spills; ``bench/bench_box_tests.py --max-registers``,
-``bench/results/box_tests_registers_cuda0.json``, ``bench/kernel_resources.py``)."""
+4.36 / 1.66 (at 64, 4.22 / 1.79: spills; ``warp_ccd/bench/box_tests.py --max-registers``,
+``bench/results/box_tests_registers_cuda0.json``, ``warp_ccd/bench/kernel_resources.py``)."""
 
 METHOD_MOLLER = wp.constant(0)
 """``method`` of :func:`tri_tri_test` and the kernels: Möller's test."""
@@ -700,8 +700,8 @@ def tri_tri_test(method: int, v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: A
 
 
 @wp.func
-def winding_number(mesh: MeshTopology, world_vertex: wp.array[Any], instance: int, num_triangles: int, p: Any):
-    """Generalised winding number of point ``p`` w.r.t. object ``instance``'s closed mesh.
+def winding_number(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, num_triangles: int, p: Any):
+    """Generalised winding number of point ``p`` w.r.t. object ``obj``'s closed mesh.
 
     Sum of the solid angles of its triangles seen from ``p`` over 4 pi (Van Oosterom and
     Strackee's formula): about 1 inside, 0 outside, with no special cases for rays through
@@ -709,7 +709,7 @@ def winding_number(mesh: MeshTopology, world_vertex: wp.array[Any], instance: in
     """
     total = type(p[0])(0.0)
     for t in range(num_triangles):
-        a, b, c = mesh_triangle(mesh, world_vertex, instance, t)
+        a, b, c = mesh_triangle(mesh, world_vertex, obj, t)
         a = a - p
         b = b - p
         c = c - p
@@ -934,8 +934,8 @@ def _segment_kernel(
 def _containment_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
-    instance_lower: wp.array[wp.vec3],
-    instance_upper: wp.array[wp.vec3],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
@@ -954,9 +954,9 @@ def _containment_kernel(
     for side in range(2):
         inner = p[side]
         outer = p[1 - side]
-        point = world_vertex[mesh.instance_vertex_start[inner]]
-        if _point_in_box(wp.vec3(point), instance_lower[outer], instance_upper[outer]):
-            m = mesh.instance_triangle_start[outer + 1] - mesh.instance_triangle_start[outer]
+        point = world_vertex[mesh.object_vertex_start[inner]]
+        if _point_in_box(wp.vec3(point), object_lower[outer], object_upper[outer]):
+            m = mesh.object_triangle_start[outer + 1] - mesh.object_triangle_start[outer]
             if winding_number(mesh, world_vertex, outer, m, point) > type(point[0])(0.5):
                 slot = reserve_slot(contained_count, contained_capacity)
                 if slot >= 0:

@@ -115,7 +115,7 @@ def _extent(lower: np.ndarray, upper: np.ndarray):
 @wp.kernel
 def _usd_box_polyline_kernel(
     world_vertex: wp.array[wp.vec3],
-    instance_vertex_start: wp.array[wp.int32],
+    object_vertex_start: wp.array[wp.int32],
     box_path_corner: wp.array[wp.int32],
     # Outputs
     bounds_lower: wp.array[wp.vec3],
@@ -127,7 +127,7 @@ def _usd_box_polyline_kernel(
     ``box_path_corner`` holds 16 corner numbers ``4*x + 2*y + z``; ``box_point`` has ``16 * N`` entries.
     """
     i = wp.tid()
-    lo, hi = vertex_bounds(world_vertex, instance_vertex_start[i], instance_vertex_start[i + 1])
+    lo, hi = vertex_bounds(world_vertex, object_vertex_start[i], object_vertex_start[i + 1])
     bounds_lower[i] = lo
     bounds_upper[i] = hi
     for k in range(16):
@@ -182,7 +182,7 @@ class UsdAnimationWriter:
         if not isinstance(meters_per_unit, (int, float, np.number)) or not np.isfinite(meters_per_unit) \
                 or meters_per_unit <= 0:
             raise ValueError(f"meters_per_unit must be a positive number, got {meters_per_unit!r}")
-        for name in ("instance_pose", "instance_scale", "world_vertex", "shape_meshes"):
+        for name in ("object_pose", "object_scale", "world_vertex", "shape_meshes"):
             if not hasattr(scene, name):
                 raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         from pxr import Usd  # here, not at close(): a missing usd-core fails before any simulation
@@ -202,8 +202,8 @@ class UsdAnimationWriter:
         self._palette = np.array([COLOR_FREE, COLOR_COLLIDING], dtype=np.float32)
         self._box_point = None
 
-        self._instance_shape = np.asarray(scene.instance_shape_np, dtype=np.int32)
-        self._vertex_start = np.asarray(scene.instance_vertex_start_np, dtype=np.int64)
+        self._object_shape = np.asarray(scene.object_shape_np, dtype=np.int32)
+        self._vertex_start = np.asarray(scene.object_vertex_start_np, dtype=np.int64)
         # Bounding radius of each shape (local units), for a cheap conservative instancer extent.
         self._shape_radius = np.array(
             [float(np.linalg.norm(v, axis=1).max()) if len(v) else 0.0 for v, _ in scene.shape_meshes],
@@ -251,7 +251,7 @@ class UsdAnimationWriter:
             self._meshes = []
             self._mesh_colors = []
             for i in range(self.num_objects):
-                tri = scene.shape_meshes[self._instance_shape[i]][1]
+                tri = scene.shape_meshes[self._object_shape[i]][1]
                 mesh = define_mesh(f"/World/Objects/object_{i:0{width}d}", None, tri)
                 color = mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant)
                 self._meshes.append(mesh)
@@ -264,7 +264,7 @@ class UsdAnimationWriter:
                 mesh = define_mesh(f"/World/Objects/Prototypes/shape_{k}", np.asarray(v, np.float32), t)
                 targets.append(mesh.GetPath())
             inst.CreatePrototypesRel().SetTargets(targets)
-            inst.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(self._instance_shape))
+            inst.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(self._object_shape))
             self._positions = inst.CreatePositionsAttr()
             self._orientations = inst.CreateOrientationsAttr()
             self._scales = inst.CreateScalesAttr()
@@ -293,8 +293,8 @@ class UsdAnimationWriter:
             self._segment_counts = marks.CreateCurveVertexCountsAttr()
             self._segment_points = marks.CreatePointsAttr()
             self._segment_extent = marks.CreateExtentAttr()
-            radius = self._shape_radius[self._instance_shape]
-            widths = radius * self.scene.instance_scale_np if self.num_objects else [1.0]
+            radius = self._shape_radius[self._object_shape]
+            widths = radius * self.scene.object_scale_np if self.num_objects else [1.0]
             marks.CreateWidthsAttr(Vt.FloatArray([max(float(np.median(widths)) * 0.03, 1e-6)]))
             marks.SetWidthsInterpolation(UsdGeom.Tokens.constant)
 
@@ -346,8 +346,8 @@ class UsdAnimationWriter:
     def _write_instancer(self, time, colors: np.ndarray) -> None:
         from pxr import Vt
 
-        pose = self.scene.instance_pose.numpy().reshape(-1, 7)
-        scale = self.scene.instance_scale.numpy().astype(np.float32).reshape(-1)
+        pose = self.scene.object_pose.numpy().reshape(-1, 7)
+        scale = self.scene.object_scale.numpy().astype(np.float32).reshape(-1)
         position = np.ascontiguousarray(pose[:, :3], dtype=np.float32)
         # wp.transform stores (x, y, z, w), the memory layout of GfQuath (imaginary, then real).
         orientation = np.ascontiguousarray(pose[:, 3:7], dtype=np.float16)
@@ -356,7 +356,7 @@ class UsdAnimationWriter:
         self._scales.Set(Vt.Vec3fArray.FromNumpy(np.repeat(scale[:, None], 3, axis=1)), time)
         self._colors.Set(Vt.Vec3fArray.FromNumpy(colors), time)
         if self.num_objects:
-            reach = (self._shape_radius[self._instance_shape] * scale)[:, None]
+            reach = (self._shape_radius[self._object_shape] * scale)[:, None]
             self._instancer_extent.Set(_extent((position - reach).min(axis=0), (position + reach).max(axis=0)), time)
 
     def _write_meshes(self, time, world: np.ndarray, colors: np.ndarray) -> None:
@@ -385,7 +385,7 @@ class UsdAnimationWriter:
         wp.launch(
             _usd_box_polyline_kernel,
             dim=n,
-            inputs=[scene.world_vertex32(), scene.instance_vertex_start, self._box_corner],
+            inputs=[scene.world_vertex32(), scene.object_vertex_start, self._box_corner],
             outputs=[self._box_lower, self._box_upper, self._box_point],
             device=d,
         )

@@ -22,7 +22,7 @@ per object its world transform at every time code asked for:
   prototype, a PointInstancer's instances of one prototype, and meshes whose points and
   triangles are byte for byte the same.
 * **Transforms.** A world transform ``M`` (USD's row-vector convention, ``p_world = p M``) whose
-  linear part is a rotation times a uniform scale becomes a pose and ``instance_scale``. One with
+  linear part is a rotation times a uniform scale becomes a pose and ``object_scale``. One with
   a non-uniform scale, a shear or a reflection is baked into a shape of its own (the points times
   the linear part at the first time code), and the object moves rigidly from there while the
   rest of its transform stays a rotation and a uniform scale.
@@ -334,7 +334,7 @@ class _Instancer:
 
     path: str
     schema: object
-    instance_index: np.ndarray  # (I,) USD indices of the instances kept (mask at the first time code)
+    object_index: np.ndarray  # (I,) USD indices of the instances kept (mask at the first time code)
     proto_index: np.ndarray  # (I,) prototype of each kept instance
     slots: list = field(default_factory=list)  # (prototype, mesh data index, mesh prim, prototype root prim)
     varying: bool = False
@@ -352,7 +352,7 @@ def _check_orientations(rec: _Instancer, code) -> None:
         if value is None or len(value) == 0:
             continue
         q = np.asarray(value, np.float64).reshape(-1, 4)
-        kept = rec.instance_index[rec.instance_index < len(q)]
+        kept = rec.object_index[rec.object_index < len(q)]
         norm = np.linalg.norm(q[kept], axis=1)
         bad = ~np.isfinite(norm) | (norm < ZERO_QUATERNION)
         if bad.any():
@@ -725,7 +725,7 @@ class UsdMeshImport:
                 if len(self._meshes[k].triangles) == 0:
                     self.skipped.append((str(p.GetPath()), "no faces"))
                     continue
-                which = rec.instance_index[rec.proto_index == proto]
+                which = rec.object_index[rec.proto_index == proto]
                 suffix = str(p.GetPath())[len(str(root.GetParent().GetPath()).rstrip("/")):]
                 obj_mesh.append(np.full(which.size, k))
                 obj_path.append([f"{rec.path}[{i}]{suffix}" for i in which.tolist()])
@@ -860,7 +860,7 @@ class UsdMeshImport:
         self._anim_poses = self._anim_poses.astype(fdtype, copy=False)
         self.seconds = {"read": time.perf_counter() - self._start}
         start = time.perf_counter()
-        self.scene = Scene(packed, shape_of, instance_scale=scale, poses=poses,
+        self.scene = Scene(packed, shape_of, object_scale=scale, poses=poses,
                            deforming=np.arange(n) >= self._num_rigid, device=device, precision=precision)
         self.scene.usd = self
         self.set_frame(0)
@@ -956,7 +956,7 @@ class UsdMeshImport:
             xforms = rec.schema.ComputeInstanceTransformsAtTime(
                 code, code, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)
             xforms = np.asarray(xforms, np.float64).reshape(-1, 4, 4)
-            if xforms.shape[0] <= int(rec.instance_index.max(initial=-1)):
+            if xforms.shape[0] <= int(rec.object_index.max(initial=-1)):
                 raise ValueError(f"prim {rec.path}: {xforms.shape[0]} instance transforms at time "
                                  f"{code.GetValue():g}, fewer than its instances")
             world = np.asarray(cache.GetLocalToWorldTransform(rec.schema.GetPrim()), np.float64)
@@ -983,10 +983,10 @@ class UsdMeshImport:
         a, b = self._num_static, self._num_rigid
         if b > a:
             dtype = np.float64 if scene.precision == "float64" else np.float32
-            scene.instance_pose[a:b].assign(self._anim_poses[frame].astype(dtype))
+            scene.object_pose[a:b].assign(self._anim_poses[frame].astype(dtype))
             if self._scale_varies:
-                scene.instance_scale[a:b].assign(self._anim_scale[frame].astype(np.float32))
-                scene.instance_scale_np[a:b] = self._anim_scale[frame]
+                scene.object_scale[a:b].assign(self._anim_scale[frame].astype(np.float32))
+                scene.object_scale_np[a:b] = self._anim_scale[frame]
         scene.pose_world_vertices()
         if b < scene.num_objects:
             code = self._codes[frame]
@@ -1002,7 +1002,7 @@ class UsdMeshImport:
                     p = read[k] = self._meshes[k].points_at(code)
                 parts.append(p @ matrix[d, :3, :3] + matrix[d, 3, :3])
             world = np.concatenate(parts)
-            start = int(scene.instance_vertex_start_np[b])
+            start = int(scene.object_vertex_start_np[b])
             self._check_deforming_reach(world, start, frame)
             scene.world_vertex[start:].assign(world.astype(np.float64 if scene.precision == "float64" else np.float32))
         self.frame = int(frame)
@@ -1020,14 +1020,14 @@ class UsdMeshImport:
         if needed == "float32" or (needed == "float64" and precision == "float64"):
             return
         v = int(np.argmax(np.abs(world).max(axis=1))) + start
-        i = int(np.searchsorted(self.scene.instance_vertex_start_np, v, side="right") - 1)
+        i = int(np.searchsorted(self.scene.object_vertex_start_np, v, side="right") - 1)
         hint = ": check it in float64 (precision='float64', --precision float64)" if needed else ""
         raise ValueError(f"prim {self.object_path[i]} at time {self.times[frame]:g}: "
                          f"{coordinate_message(reach, self.triangle_size, precision if needed else 'float64')}{hint}")
 
     def faces(self, objects: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """USD face indices of local triangles ``triangles`` of objects ``objects`` (same shapes, int32)."""
-        s = self.scene.instance_shape_np[objects]
+        s = self.scene.object_shape_np[objects]
         return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
 
 

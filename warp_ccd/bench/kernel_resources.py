@@ -1,7 +1,7 @@
 """Registers, local memory (spills) and resident threads per multiprocessor of the frame's kernels
 on a CUDA device: what bounds the occupancy of each (``cuFuncGetAttribute`` on the loaded kernels).
 
-    PYTHONPATH=. python bench/kernel_resources.py --device cuda:0 --out bench/results/kernel_resources_cuda0.json
+    python -m warp_ccd.bench.kernel_resources --device cuda:0 --out bench/results/kernel_resources_cuda0.json
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ report's rows); per frame in ms. On the rigid stage python-fcl (the same scene's
 ``BVHModel`` each, its dynamic AABB tree, contacts on) runs every ``--fcl-every``-th frame as a
 peer, timed (update + collide), with its object pairs compared with ours (touching included).
 
-    PYTHONPATH=. python bench/bench_usd_check.py --device cuda:0 --out bench/results/usd_check_cuda0.json
+    python -m warp_ccd.bench.usd_check --device cuda:0 --out bench/results/usd_check_cuda0.json
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 
     scene = Scene.random(num_objects, seed=seed, device=device)
     poses = np.empty((num_frames, num_objects, 7))
     for f in range(num_frames):
-        poses[f] = scene.instance_pose.numpy()
+        poses[f] = scene.object_pose.numpy()
         scene.advance(1 / 24)
     layer = Sdf.Layer.CreateNew(path)
     frames = [float(f) for f in range(num_frames)]
@@ -69,14 +69,14 @@ def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 
             prim.specifier, prim.typeName = Sdf.SpecifierDef, "Xform"
             translate = Sdf.AttributeSpec(prim, "xformOp:translate", Sdf.ValueTypeNames.Double3)
             orient = Sdf.AttributeSpec(prim, "xformOp:orient", Sdf.ValueTypeNames.Quatf)
-            s = float(scene.instance_scale_np[i])
+            s = float(scene.object_scale_np[i])
             Sdf.AttributeSpec(prim, "xformOp:scale", Sdf.ValueTypeNames.Float3).default = Gf.Vec3f(s, s, s)
             Sdf.AttributeSpec(prim, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
                               variability=Sdf.VariabilityUniform).default = names
             for f, (p, q) in enumerate(zip(poses[:, i, :3].tolist(), poses[:, i, 3:].tolist())):
                 layer.SetTimeSample(translate.path, frames[f], Gf.Vec3d(*p))
                 layer.SetTimeSample(orient.path, frames[f], Gf.Quatf(q[3], q[0], q[1], q[2]))
-            v, t = scene.shape_meshes[scene.instance_shape_np[i]]
+            v, t = scene.shape_meshes[scene.object_shape_np[i]]
             mesh = Sdf.CreatePrimInLayer(layer, f"/World/obj_{i}/Geom")
             mesh.specifier, mesh.typeName = Sdf.SpecifierDef, "Mesh"
             Sdf.AttributeSpec(mesh, "points", Sdf.ValueTypeNames.Point3fArray).default = \

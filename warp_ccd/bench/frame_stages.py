@@ -21,7 +21,7 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"case", "tr
 "n_objects", "variant", "measure", "ms_min", "ms_median", "launches"}``: ``measure`` is
 ``frame``, ``host``, ``loop`` or ``upto_<stage>``.
 
-    PYTHONPATH=. python bench/frame_stages.py --device cuda:0 --cases poly:1000 poly:10000 \\
+    python -m warp_ccd.bench.frame_stages --device cuda:0 --cases poly:1000 poly:10000 \\
         --out bench/results/frame_stages_cuda0.json
 """
 

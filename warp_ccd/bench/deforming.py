@@ -23,7 +23,7 @@ triangle pairs on them are judged against ours as the scaling benchmark judges t
 (:func:`~warp_ccd.bench.compare.compare_triangle_pairs`: pairs near touching may differ, and every
 real difference is charged to the method an exact arbiter finds wrong).
 
-    PYTHONPATH=. python bench/bench_deforming.py --device cuda:0 --objects 1000 10000 \\
+    python -m warp_ccd.bench.deforming --device cuda:0 --objects 1000 10000 \\
         --out bench/results/deforming_cuda0.json
 """
 
@@ -49,7 +49,7 @@ DT = 1.0 / 60.0
 @wp.kernel
 def _deform_kernel(
     rest: wp.array[wp.vec3],
-    vertex_instance: wp.array[wp.int32],
+    vertex_object: wp.array[wp.int32],
     centre: wp.array[wp.vec3],
     phase: wp.array[wp.float32],
     t: float,
@@ -58,7 +58,7 @@ def _deform_kernel(
 ):
     """One thread per vertex: breathing, a wobble and a drift of its object about its centre."""
     v = wp.tid()
-    i = vertex_instance[v]
+    i = vertex_object[v]
     c = centre[i]
     p = rest[v] - c
     ph = phase[i]
@@ -84,7 +84,7 @@ def deforming_scene(n: int, level: int, seed: int, device) -> tuple:
 
     def mover(t: float) -> None:
         wp.launch(_deform_kernel, dim=scene.num_world_vertices,
-                  inputs=[rest, scene.vertex_instance, centre, phase, float(t)], outputs=[scene.world_vertex],
+                  inputs=[rest, scene.vertex_object, centre, phase, float(t)], outputs=[scene.world_vertex],
                   device=device)
 
     return scene, mover

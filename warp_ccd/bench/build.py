@@ -26,7 +26,7 @@ Three parts, in one process on one device:
 Rows: ``{"method", "n_shapes", "triangles_per_shape", "ms_min", "ms_median"}`` under ``builds``;
 ``rebuild`` and ``one_shot`` rows say what they measured.
 
-    PYTHONPATH=. python bench/bench_build.py --device cuda:0 --out bench/results/build_cuda0.json
+    python -m warp_ccd.bench.build --device cuda:0 --out bench/results/build_cuda0.json
 """
 
 from __future__ import annotations

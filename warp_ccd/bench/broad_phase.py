@@ -29,8 +29,8 @@ each peer's differences from ``sap`` are judged by an exact overlap test in nump
 ``sap`` got wrong ends the run with status 3 (after the JSON is written); a peer's wrong pairs
 are a finding, reported in the table (``*``) and the JSON (``peer_wrong``).
 
-    PYTHONPATH=. python bench/bench_broad_phase.py                             # CPU: N = 1e3..1e5
-    PYTHONPATH=. python bench/bench_broad_phase.py --device cuda:0 --max-n 1e7  # N = 1e3..1e7
+    python -m warp_ccd.bench.broad_phase                             # CPU: N = 1e3..1e5
+    python -m warp_ccd.bench.broad_phase --device cuda:0 --max-n 1e7  # N = 1e3..1e7
 """
 
 from __future__ import annotations

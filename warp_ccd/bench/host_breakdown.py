@@ -12,7 +12,7 @@ and ``wp.synchronize_device`` are wrapped with timestamps, so each frame splits 
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"n", "shapes",
 "variant", "build_s", "median": {...}, "min": {...}}``.
 
-    PYTHONPATH=. python bench/host_breakdown.py --device cuda:0 --objects 1e6 --triangles poly 80 \\
+    python -m warp_ccd.bench.host_breakdown --device cuda:0 --objects 1e6 --triangles poly 80 \\
         --out bench/results/host_breakdown_cuda0.json
 """
 

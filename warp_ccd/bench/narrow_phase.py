@@ -13,7 +13,7 @@ both builds of the module (the option is switched and the module rebuilt in betw
   differ from those recorded on the CPU (``tests/data/narrow_phase_verdicts.npz``), and how many
   hits the scene frame has.
 
-    PYTHONPATH=. python bench/bench_narrow_phase.py --device cuda:0 --out bench/results/narrow_phase_cuda0.json
+    python -m warp_ccd.bench.narrow_phase --device cuda:0 --out bench/results/narrow_phase_cuda0.json
 """
 
 from __future__ import annotations
@@ -29,10 +29,10 @@ import warp as wp
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
 import warp_ccd as wc  # noqa: E402
-from warp_ccd.stages import narrow_phase  # noqa: E402
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
 from warp_ccd.cli.common import resolve_device  # noqa: E402
 from warp_ccd.geometry.precision import precision_types  # noqa: E402
+from warp_ccd.stages import narrow_phase  # noqa: E402
 
 import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
 

@@ -15,7 +15,7 @@ and the counts of the last frame: broad-phase pairs, the traversal front's large
 triangle pairs, those the exact test sent to its touch step, triangle pairs (the same for every
 combination: checked).
 
-    PYTHONPATH=. python bench/bench_box_tests.py --device cuda:0 --cases poly:1000000 80:100000 \\
+    python -m warp_ccd.bench.box_tests --device cuda:0 --cases poly:1000000 80:100000 \\
         --out bench/results/box_tests_cuda0.json
 """
 
@@ -29,12 +29,12 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.stages import mid_phase, narrow_phase
 from warp_ccd.bench.scaling import environment, parse_triangles, write_json
 from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.geometry.precision import PRECISIONS
 from warp_ccd.pipeline import STAGES, CollisionPipeline
 from warp_ccd.scene.scene import Scene
+from warp_ccd.stages import mid_phase, narrow_phase
 from warp_ccd.stages.bvh import OBJECT_BOUNDS
 from warp_ccd.stages.mid_phase import EXPAND_THREADS_PER_SM
 

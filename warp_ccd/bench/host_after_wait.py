@@ -28,7 +28,7 @@ The ``sync`` wait is as long as the kernel calibrated once at the start, about `
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"method",
 "wait_ms", "work", "us_min", "us_median", "cpu_us_median", "steal_ms"}``.
 
-    PYTHONPATH=. python bench/host_after_wait.py --device cuda:0 --out bench/results/host_after_wait_cuda0.json
+    python -m warp_ccd.bench.host_after_wait --device cuda:0 --out bench/results/host_after_wait_cuda0.json
 """
 
 from __future__ import annotations

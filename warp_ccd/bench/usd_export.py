@@ -8,8 +8,8 @@ small warm-up export first.
 
 Target: 10,000 objects x 240 frames in at most 3 s on a CPU (binary ``.usd``, no wireframes).
 
-    PYTHONPATH=. python bench/bench_usd_export.py
-    PYTHONPATH=. python bench/bench_usd_export.py --num-objects 1000 --num-frames 60 --format usda
+    python -m warp_ccd.bench.usd_export
+    python -m warp_ccd.bench.usd_export --num-objects 1000 --num-frames 60 --format usda
 """
 
 from __future__ import annotations

@@ -8,9 +8,9 @@ in the same run, triangle pairs compared and their differences classified, resul
 pipeline's own stages (refit of the bounds and trees, broad, mid, narrow), ``detect`` and
 ``total``. Every option of ``warp-ccd bench`` is accepted and overrides these defaults.
 
-    PYTHONPATH=. python bench/bench_pipeline.py
-    PYTHONPATH=. python bench/bench_pipeline.py --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6
-    PYTHONPATH=. python bench/bench_pipeline.py --peers builtin,fcl,nxn,newton
+    python -m warp_ccd.bench.pipeline
+    python -m warp_ccd.bench.pipeline --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6
+    python -m warp_ccd.bench.pipeline --peers builtin,fcl,nxn,newton
 """
 
 from __future__ import annotations

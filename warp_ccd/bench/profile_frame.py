@@ -16,7 +16,7 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"n_objects"
 "mode", "ms_min", "ms_median", "host_ms_median"}`` and ``activities`` of ``{"n_objects", "triangles",
 "name", "kind", "count", "ms"}``.
 
-    PYTHONPATH=. python bench/profile_frame.py --device cuda:0 --objects 1000 10000 \\
+    python -m warp_ccd.bench.profile_frame --device cuda:0 --objects 1000 10000 \\
         --out bench/results/profile_cuda0.json
 """
 
