@@ -37,6 +37,39 @@ def test_demo_writes_usd_and_png_and_prints_a_summary(tmp_path, device, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.usda", "preview.png"]
 
 
+def test_demo_segments_writes_the_intersection_segments_of_every_frame(tmp_path, capsys, monkeypatch):
+    # --segments: a curve of two points per finite intersection segment of each frame's result.
+    pxr = pytest.importorskip("pxr")
+    from warp_ccd import pipeline
+    from warp_ccd.usd.export import segment_points
+
+    seen = []
+    detect = pipeline.CollisionPipeline.detect
+
+    def recording_detect(self):
+        res = detect(self)
+        seen.append(segment_points(res.segments))
+        return res
+
+    monkeypatch.setattr(pipeline.CollisionPipeline, "detect", recording_detect)
+    out = tmp_path / "segments.usda"
+    rc = cli.main(["demo", "--num-objects", "40", "--num-frames", "3", "--device", DEFAULT_DEVICE,
+                   "--out", str(out), "--seed", "5", "--segments"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert len(seen) == 3
+    assert sum(len(p) for p in seen) > 0  # the scene has intersections to draw
+    stage = pxr.Usd.Stage.Open(str(out))
+    curves = pxr.UsdGeom.BasisCurves(stage.GetPrimAtPath("/World/Segments"))
+    assert curves
+    for frame, expected in enumerate(seen):
+        code = pxr.Usd.TimeCode(frame)
+        np.testing.assert_array_equal(np.asarray(curves.GetCurveVertexCountsAttr().Get(code)),
+                                      np.full(len(expected) // 2, 2))
+        np.testing.assert_array_equal(np.asarray(curves.GetPointsAttr().Get(code), np.float32).reshape(-1, 3),
+                                      expected)
+
+
 def test_demo_gif_has_one_image_per_frame(tmp_path, capsys):
     from PIL import Image
 

@@ -244,7 +244,7 @@ def _run_demo(args) -> int:
             for s, ms in (res.timings or {}).items():
                 stage_ms.setdefault(s, np.full(args.num_frames, np.nan))[frame] = ms
             t = time.perf_counter()
-            writer.add_frame(frame, colliding)
+            writer.add_frame(frame, res)  # its flags, and its segments with --segments
             export_s += time.perf_counter() - t
             if args.preview is not None and (gif or frame == args.num_frames - 1):
                 t = time.perf_counter()
