@@ -4,6 +4,7 @@ Imports nothing of the package, so every room may use it:
 
 * :class:`renamed_attribute`: a class attribute standing for a renamed one
   (``instance_shape = renamed_attribute("object_shape")``).
+* :func:`renamed_arguments`: a function's renamed keyword arguments, caught by its ``**renamed``.
 * :func:`module_aliases`: a module's ``__getattr__`` for renamed or moved module-level names
   (``__getattr__ = module_aliases(__name__, {"BroadPhaseNxN": "warp_ccd.stages.broad_phase:BroadPhaseAllPairs"})``).
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 import importlib
 import warnings
 
-__all__ = ["module_aliases", "renamed_attribute", "warn_renamed"]
+__all__ = ["module_aliases", "renamed_arguments", "renamed_attribute", "warn_renamed"]
 
 
 def warn_renamed(old: str, new: str, stacklevel: int = 3) -> None:
@@ -69,3 +70,26 @@ def module_aliases(module: str, aliases: dict[str, str]):
         return getattr(importlib.import_module(where), attr)
 
     return __getattr__
+
+
+def renamed_arguments(where: str, given: dict, renames: dict[str, str]) -> dict:
+    """Keyword arguments passed under old names, under their new names (each warns).
+
+    Args:
+        where: the function as the user calls it (``"Scene"``), for the messages.
+        given: the ``**renamed`` keyword arguments the function caught.
+        renames: old name -> new name.
+
+    Returns:
+        ``{new name: value}``.
+
+    Raises:
+        TypeError: for a name that is neither a parameter nor an old name, as Python would.
+    """
+    out = {}
+    for old, value in given.items():
+        if old not in renames:
+            raise TypeError(f"{where}() got an unexpected keyword argument {old!r}")
+        warn_renamed(f"{where}({old}=...)", f"{where}({renames[old]}=...)", stacklevel=4)
+        out[renames[old]] = value
+    return out

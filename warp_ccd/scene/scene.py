@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._deprecated import renamed_arguments, renamed_attribute
 from ..geometry.precision import (
     coordinate_message,
     needed_precision,
@@ -248,7 +249,7 @@ class Scene:
     def __init__(
         self,
         shapes: Sequence,
-        object_shape,
+        object_shape=None,
         *,
         object_scale=None,
         poses=None,
@@ -256,7 +257,15 @@ class Scene:
         deforming=False,
         device=None,
         precision: str = "float32",
+        **renamed,
     ):
+        if renamed:  # instance_shape / instance_scale, as they were called until 0.1
+            given = renamed_arguments("Scene", renamed, {"instance_shape": "object_shape",
+                                                          "instance_scale": "object_scale"})
+            object_shape = given.get("object_shape", object_shape)
+            object_scale = given.get("object_scale", object_scale)
+        if object_shape is None:
+            raise TypeError("Scene() missing 1 required argument: 'object_shape'")
         self.scalar_type, self.vec3_type, _, self.transform_type = precision_types(precision)
         self.device = wp.get_device(device)
         self.precision = precision
@@ -640,3 +649,16 @@ class Scene:
             v = wv[self.object_vertex_start_np[i] : self.object_vertex_start_np[i + 1]]
             out.append((v, self.shape_meshes[self.object_shape_np[i]][1]))
         return out
+
+    # Names of 0.1 ("instance" for what is now called an object everywhere), kept one release.
+    instance_shape = renamed_attribute("object_shape")
+    instance_shape_np = renamed_attribute("object_shape_np")
+    instance_scale = renamed_attribute("object_scale")
+    instance_scale_np = renamed_attribute("object_scale_np")
+    instance_pose = renamed_attribute("object_pose")
+    instance_vertex_start = renamed_attribute("object_vertex_start")
+    instance_vertex_start_np = renamed_attribute("object_vertex_start_np")
+    instance_triangle_start = renamed_attribute("object_triangle_start")
+    instance_triangle_start_np = renamed_attribute("object_triangle_start_np")
+    instance_deforming_np = renamed_attribute("object_deforming_np")
+    vertex_instance = renamed_attribute("vertex_object")

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._deprecated import renamed_arguments
 from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..scene.scene import MeshTopology
@@ -476,7 +477,10 @@ class SceneBVH:
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
-                 small_subtree: int | None = None):
+                 small_subtree: int | None = None, **renamed):
+        if renamed:  # instance_refit_max_nodes, as it was called until 0.1
+            object_refit_max_nodes = renamed_arguments("SceneBVH", renamed, {
+                "instance_refit_max_nodes": "object_refit_max_nodes"})["object_refit_max_nodes"]
         if not 1 <= leaf_size <= LEAF_SIZE_MAX:
             raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
         if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
