@@ -340,3 +340,18 @@ def test_segment_markers(tmp_path, device):
     with pytest.raises(ValueError, match="segments=True"):
         with wc.UsdAnimationWriter(tmp_path / "x.usd", scene, segments=True) as writer:
             writer.add_frame(0, wc.CollisionPipeline(scene).detect())
+
+
+def test_writer_reads_every_private_attribute_it_stores():
+    # A private attribute that the writer sets and never reads is dead state.
+    import ast
+    import inspect
+
+    from warp_ccd.usd import export
+
+    tree = ast.parse(inspect.getsource(export))
+    stored, read = set(), set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "self":
+            (stored if isinstance(node.ctx, ast.Store) else read).add(node.attr)
+    assert sorted(a for a in stored - read if a.startswith("_")) == []

@@ -272,7 +272,6 @@ class UsdAnimationWriter:
             self._colors = UsdGeom.PrimvarsAPI(inst).CreatePrimvar(
                 "displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex
             )
-            self._instancer = inst
 
         if self.aabb:
             curves = UsdGeom.BasisCurves.Define(stage, "/World/Bounds")
@@ -284,7 +283,6 @@ class UsdAnimationWriter:
             self._bounds_extent = curves.CreateExtentAttr()
             self._bounds_widths = curves.CreateWidthsAttr()
             curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
-            self._curves = curves
 
         if self.segments:
             marks = UsdGeom.BasisCurves.Define(stage, "/World/Segments")
