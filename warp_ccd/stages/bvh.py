@@ -52,8 +52,8 @@ from .._deprecated import renamed_arguments
 from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..scene.scene import MeshTopology
-from .buffers import upper_bound
-from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild, packed_upload
+from .buffers import packed_upload, upper_bound
+from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 

@@ -46,14 +46,13 @@ import numpy as np
 import warp as wp
 
 from ..geometry.precision import precision_overloads
-from .buffers import upper_bound
+from .buffers import packed_upload, upper_bound
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["CUT_DEPTH_MAX", "CUT_TRIANGLES", "INSERTION_SORT_MAX", "SMALL_SUBTREE", "ShapeTree", "TreeBuild",
-           "TreeSizes", "build_tree", "centroid_keys",
-           "packed_upload"]
+           "TreeSizes", "build_tree", "centroid_keys"]
 
 SMALL_SUBTREE = 8
 """Largest subtree (in triangles) that one thread finishes alone (:func:`_finish_kernel`) on CUDA;
@@ -152,15 +151,6 @@ def _distinct(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     present = np.zeros(top + 1, np.bool_)
     present[m] = True
     return (np.cumsum(present) - 1)[m], np.flatnonzero(present)
-
-
-def packed_upload(arrays: list, device) -> list:
-    """Integer numpy arrays to int32 device arrays with one copy: views of one upload."""
-    lengths = [len(a) for a in arrays]
-    block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
-    ends = np.cumsum(lengths)
-    return [block[int(e - k):int(e)] if k else wp.empty(0, dtype=wp.int32, device=device)
-            for e, k in zip(ends, lengths)]
 
 
 # ---------------------------------------------------------------------------------------------- reference
