@@ -1,7 +1,7 @@
 """Example USD Check
 
 Shows ``warp-ccd check`` on an animation a user might bring: it writes a small USD stage, checks
-every frame for interpenetration with :func:`warp_ccd.usd.check.check_usd`, and prints the report.
+every frame for interpenetration with :func:`warp_ccd.usd.check_usd`, and prints the report.
 
 The stage (``--stage-path``, a ``.usda`` you can open in usdview) holds:
 
@@ -31,7 +31,7 @@ import tempfile
 
 import numpy as np
 
-from warp_ccd.usd.check import check_usd
+from warp_ccd.usd import check_usd
 
 
 def prism(sides: int, radius: float, height: float):

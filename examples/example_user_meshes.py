@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.usd.export import UsdAnimationWriter
+from warp_ccd.usd import UsdAnimationWriter
 
 
 def rotation_y(angle):

@@ -20,7 +20,8 @@ import warp_ccd as wc
 from warp_ccd.cli import commands as cli
 from warp_ccd.geometry.precision import PrecisionWarning, needed_precision, triangle_size
 from warp_ccd.usd.check import check_usd
-from warp_ccd.usd.importer import MAX_FRAMES, UsdMeshImport, stage_time_codes
+from warp_ccd.usd.importer import UsdMeshImport
+from warp_ccd.usd.stage import MAX_FRAMES, stage_time_codes
 
 from conftest import DEFAULT_DEVICE
 

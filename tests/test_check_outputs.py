@@ -253,7 +253,7 @@ def test_missing_reference_is_an_error_unless_allowed(missing_ref, tmp_path, cap
 
 def test_missing_layers_and_check_usd_allow_missing(missing_ref, layered, tmp_path):
     from warp_ccd.usd.check import check_usd
-    from warp_ccd.usd.importer import missing_layers, open_stage
+    from warp_ccd.usd.stage import missing_layers, open_stage
 
     sub = tmp_path / "withsub.usda"
     stage = new_stage(sub)

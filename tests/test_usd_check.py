@@ -16,7 +16,8 @@ import warp_ccd as wc
 from warp_ccd.cli import commands as cli
 from warp_ccd.stages.narrow_phase import pair_crossing_depth
 from warp_ccd.usd.check import COLOR_PENETRATING, check_usd
-from warp_ccd.usd.importer import UsdMeshImport, stage_time_codes
+from warp_ccd.usd.importer import UsdMeshImport, scene_from_usd
+from warp_ccd.usd.stage import stage_time_codes
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
@@ -557,7 +558,7 @@ def test_deforming_mesh_going_bad_later_names_the_prim(device, kind, words):
 
 def test_missing_and_unreadable_files(tmp_path):
     missing = tmp_path / "missing.usda"
-    for call in (lambda p: UsdMeshImport(p), lambda p: check_usd(p), lambda p: wc.Scene.from_usd(p)):
+    for call in (lambda p: UsdMeshImport(p), lambda p: check_usd(p), lambda p: scene_from_usd(p)):
         with pytest.raises(ValueError, match="missing.usda"):
             call(missing)
     garbage = tmp_path / "x.usd"
@@ -779,11 +780,11 @@ def test_cli_options_select_what_is_checked(tmp_path, capsys, mixed_file):
 
 
 # ---------------------------------------------------------------------------------------------
-# 9. Scene.from_usd
+# 9. scene_from_usd
 
 
 def test_scene_from_usd_matches_import(mixed_file, device):
-    scene = wc.Scene.from_usd(mixed_file, time=5, device=device)
+    scene = scene_from_usd(mixed_file, time=5, device=device)
     imp = UsdMeshImport(mixed_file, times=[0.0, 5.0, 9.0], device=device)
     imp.set_frame(1)
     assert scene.usd.object_path == imp.object_path
@@ -793,7 +794,7 @@ def test_scene_from_usd_matches_import(mixed_file, device):
     want = world_polygon_meshes(stage, 5.0)
     every = np.concatenate([v for v, _, _ in want.values()])
     size = float(np.linalg.norm(every.max(axis=0) - every.min(axis=0)))
-    double = wc.Scene.from_usd(str(mixed_file), time=5, device=device, precision="float64")
+    double = scene_from_usd(str(mixed_file), time=5, device=device, precision="float64")
     assert double.precision == "float64" and double.world_vertex.dtype == wp.vec3d
     assert double.usd.object_path == imp.object_path
     for i, (v, t) in enumerate(double.world_meshes()):
@@ -804,7 +805,7 @@ def test_scene_from_usd_matches_import(mixed_file, device):
         np.testing.assert_array_equal(t, want[path][1])
     np.testing.assert_allclose(double.world_vertex.numpy(), scene.world_vertex.numpy(), rtol=0, atol=1e-6 * size)
     with pytest.raises(ValueError, match="time"):
-        wc.Scene.from_usd(mixed_file, time=5, times=[0, 5])
+        scene_from_usd(mixed_file, time=5, times=[0, 5])
     report = check_usd(mixed_file, frames=[5.0], precision="float64", count_touching=True, device=device)
     single = check_usd(mixed_file, frames=[5.0], count_touching=True, device=device)
     assert path_pairs(report.object_path, report.frames[0].object_pairs) == \

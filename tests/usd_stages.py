@@ -1,6 +1,6 @@
 """USD stages for the tests, built with ``pxr``, and their world meshes computed independently.
 
-:func:`mixed_stage` holds one of everything ``Scene.from_usd`` reads: rigid prims moved by
+:func:`mixed_stage` holds one of everything ``scene_from_usd`` reads: rigid prims moved by
 time-sampled transforms under nested (scaled) parents, a non-uniform scale, a deforming mesh,
 a PointInstancer with two prototypes, instanceable references of one prototype, polygons of 4 to
 8 sides with a hole, a resting box that only touches the floor, and prims that must be skipped

@@ -324,7 +324,7 @@ def _run_check(args) -> int:
     quiet_warp()
     init_warp()
     from ..usd.check import check_usd, prepare_overlay
-    from ..usd.importer import layer_files, missing_layers, open_stage, require_layers
+    from ..usd.stage import layer_files, missing_layers, open_stage, require_layers
 
     t = time.perf_counter()
     try:

@@ -47,7 +47,7 @@ from .shapes import shape as _named_shape
 # bits on every device (the narrow phase's verdicts then agree too).
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["MeshTopology", "Scene", "mesh_triangle", "transforms_to_poses"]
+__all__ = ["MeshTopology", "Scene", "matrix_to_quat", "mesh_triangle", "transforms_to_poses"]
 
 
 @wp.struct
@@ -106,8 +106,15 @@ def _vertex_to_float32_kernel(src: wp.array[wp.vec3d], dst: wp.array[wp.vec3]):
     dst[v] = wp.vec3(src[v])
 
 
-def _matrix_to_quat(r: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(N, 3, 3)`` to unit quaternions ``(N, 4)`` as ``(x, y, z, w)``."""
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """Rotation matrices to unit quaternions.
+
+    Args:
+        r: ``(N, 3, 3)`` rotation matrices acting on column vectors (``p' = r p``).
+
+    Returns:
+        ``(N, 4)`` float64 unit quaternions ``(x, y, z, w)`` (Warp's order, as in ``wp.transform``).
+    """
     r = np.asarray(r, dtype=np.float64)
     n = r.shape[0]
     q = np.empty((n, 4))
@@ -179,7 +186,7 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
         raise ValueError(f"transform {i}: not rigid (reflection, determinant {det[i]:.3g})")
     out = np.empty((num_objects, 7), np.float64)
     out[:, :3] = m[:, :3, 3]
-    out[:, 3:] = _matrix_to_quat(r)
+    out[:, 3:] = matrix_to_quat(r)
     with np.errstate(over="ignore"):
         if not np.isfinite(out.astype(np.float32)).all():
             raise ValueError("transforms: translations overflow float32")
@@ -463,38 +470,6 @@ class Scene:
         _check_coordinates(packed, np.asarray(inst, np.int64), poses, precision)
         return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
                    precision=precision)
-
-    @classmethod
-    def from_usd(cls, stage_or_path, *, prims=None, time=None, device=None, precision: str = "float32",
-                 **options) -> "Scene":
-        """A scene of the meshes of a USD stage, at one time code (see :class:`~warp_ccd.usd.importer.UsdMeshImport`).
-
-        Every ``UsdGeom.Mesh`` under ``prims`` (instance proxies and PointInstancer instances
-        included; invisible, guide and proxy prims left out) is one object, polygons fanned into
-        triangles, placed by its world transform. ``scene.usd`` holds the import: object names
-        (``scene.usd.object_path``), the USD face of every triangle (``scene.usd.faces``), and
-        ``scene.usd.set_frame(k)`` for the other time codes of ``options["times"]``.
-
-        Args:
-            stage_or_path: a ``Usd.Stage`` or a USD file path.
-            prims: prim paths or ``fnmatch`` patterns (default: the whole stage).
-            time: the time code (default: the stage's start time code, or 0 without a time range);
-                or pass ``times=[...]`` to prepare several and move with ``scene.usd.set_frame``.
-            device: Warp device.
-            precision: ``"float32"`` or ``"float64"``.
-            **options: ``times``, ``include_invisible``, ``include_purposes`` of
-                :class:`~warp_ccd.usd.importer.UsdMeshImport`.
-
-        Raises:
-            ValueError: naming the file or the prim at fault (see :class:`~warp_ccd.usd.importer.UsdMeshImport`).
-        """
-        from ..usd.importer import UsdMeshImport
-
-        if time is not None:
-            if "times" in options:
-                raise ValueError("from_usd: give time or times, not both")
-            options["times"] = [time]
-        return UsdMeshImport(stage_or_path, prims=prims, device=device, precision=precision, **options).scene
 
     # ------------------------------------------------------------------ motion
     def update_world_vertices(self) -> None:

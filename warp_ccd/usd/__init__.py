@@ -1,1 +1,34 @@
-"""warp_ccd.usd."""
+"""USD in and out: read a stage's meshes as a scene, check an animation for interpenetration, write one.
+
+>>> from warp_ccd import usd
+>>> scene = usd.scene_from_usd("anim.usd", time=12)               # the meshes of one time code
+>>> report = usd.check_usd("anim.usd", frames=slice(0, 100))      # what penetrates, frame by frame
+>>> usd.write_overlay(report, "overlay.usda")                     # a layer that colours it
+>>> with usd.UsdAnimationWriter("out.usd", scene) as writer:      # a simulation, frame by frame
+...     writer.add_frame(0, pipe.detect())
+
+Modules: :mod:`~warp_ccd.usd.importer` (:class:`UsdMeshImport`: a stage read once, set to each time
+code), :mod:`~warp_ccd.usd.stage` (opening a stage, its layers and time codes),
+:mod:`~warp_ccd.usd.meshes` (a mesh prim as triangles), :mod:`~warp_ccd.usd.poses` (world matrices as
+poses and scales), :mod:`~warp_ccd.usd.workers` (the
+processes that read transforms in parallel), :mod:`~warp_ccd.usd.check` (:func:`check_usd` and its
+overlay), :mod:`~warp_ccd.usd.export` (:class:`UsdAnimationWriter`). ``pxr`` (usd-core) is imported
+inside functions only: importing this package works without it.
+"""
+
+from .check import CheckReport, FrameContacts, check_usd, write_overlay
+from .export import UsdAnimationWriter
+from .importer import UsdMeshImport, scene_from_usd
+from .stage import open_stage, stage_time_codes
+
+__all__ = [
+    "CheckReport",
+    "FrameContacts",
+    "UsdAnimationWriter",
+    "UsdMeshImport",
+    "check_usd",
+    "open_stage",
+    "scene_from_usd",
+    "stage_time_codes",
+    "write_overlay",
+]

@@ -92,7 +92,7 @@ class CheckReport:
             ``classify`` (depths, USD faces, the report's rows).
         skipped: ``(path, reason)`` of the meshes left out.
         missing: the sublayers, references and payloads that could not be opened (checked
-            without them; see :func:`~warp_ccd.usd.importer.missing_layers`).
+            without them; see :func:`~warp_ccd.usd.stage.missing_layers`).
         source: the :class:`~warp_ccd.usd.importer.UsdMeshImport` (its scene is at the last frame).
     """
 
@@ -289,7 +289,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 
     Args:
         stage_or_path: a ``Usd.Stage`` or a USD file path.
-        frames: time codes (see :func:`~warp_ccd.usd.importer.stage_time_codes`; default: every
+        frames: time codes (see :func:`~warp_ccd.usd.stage.stage_time_codes`; default: every
             integer time code of the stage's range).
         prims: prim paths or patterns to check (default: the whole stage).
         device: Warp device (default: Warp's preferred device).
@@ -318,7 +318,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     from tqdm import tqdm
 
     from ..pipeline import CollisionPipeline
-    from .importer import UsdMeshImport, open_stage, require_layers, stage_time_codes
+    from .importer import UsdMeshImport
+    from .stage import open_stage, require_layers, stage_time_codes
 
     if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
             or not np.isfinite(min_depth) or min_depth < 0:
@@ -399,7 +400,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
     """
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
-    from .importer import layer_files
+    from .stage import layer_files
 
     full, ext = validate_stage_path(out_path)
     imp = report.source

@@ -45,17 +45,17 @@ read once. Poses of every time code are read and decomposed up front (numpy over
 per-object Python beyond the lookups), which is where an animated transform that does not stay a
 similarity is found. Objects are ordered static rigid, animated rigid, then deforming, so that a
 frame copies two contiguous pose slices and one contiguous tail of world vertices.
+
+:func:`scene_from_usd` is the short way to the scene of one time code. The stage is opened by
+:mod:`~warp_ccd.usd.stage`, meshes are read and fanned by :mod:`~warp_ccd.usd.meshes`, world matrices
+become poses in :mod:`~warp_ccd.usd.poses`, and the worker processes are :mod:`~warp_ccd.usd.workers`.
 """
 
 from __future__ import annotations
 
 import fnmatch
-import hashlib
 import os
-import pickle
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -64,268 +64,18 @@ import numpy as np
 from tqdm import tqdm
 
 from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
-from ..scene.scene import Scene, _matrix_to_quat
+from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
+from .meshes import MeshData, read_mesh
+from .poses import finite_matrix_poses, matrix_poses, similarity_split
+from .stage import MAX_FRAMES, open_stage
+from .workers import run_pose_workers
 
-__all__ = ["UsdMeshImport", "layer_files", "missing_layers", "open_stage", "require_layers", "stage_time_codes"]
-
-SIMILARITY_TOLERANCE = 1e-5
-"""Relative tolerance within which a transform's linear part counts as a rotation times a uniform scale."""
-
-MAX_FRAMES = 10**6
-"""The most time codes one read takes (every one is looked up, and its poses kept, up front)."""
+__all__ = ["PARALLEL_LOOKUPS", "UsdMeshImport", "scene_from_usd"]
 
 PARALLEL_LOOKUPS = 200_000
 """Transform lookups (animated prims times time codes) from which a file's transforms are read by
 worker processes, each opening the file and reading a share of the time codes."""
-
-
-def _run_pose_workers(tasks: list, progress: bool = False) -> list:
-    """Runs :func:`_pose_worker` on each task in a process of its own (``python -m
-    warp_ccd.usd.importer TASK OUT``: nothing of the caller's ``__main__`` is imported again); with
-    ``progress``, a bar on stderr counts the time codes of the workers done."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
-        procs = []
-        for i, task in enumerate(tasks):
-            src, dst = os.path.join(folder, f"task{i}.pkl"), os.path.join(folder, f"out{i}.pkl")
-            with open(src, "wb") as fh:
-                pickle.dump(task, fh)
-            procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd.importer", src, dst], env=env,
-                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True), dst))
-        results = []
-        bar = tqdm(total=sum(len(task[2]) for task in tasks), desc="reading transforms", unit="time code",
-                   leave=False, disable=not progress or None, file=sys.stderr)
-        for (proc, dst), task in zip(procs, tasks):
-            _, err = proc.communicate()
-            bar.update(len(task[2]))
-            if proc.returncode != 0:
-                last = err.strip().splitlines()[-1] if err.strip() else f"exit status {proc.returncode}"
-                raise ValueError(f"reading transforms in a worker process failed: {last}")
-            with open(dst, "rb") as fh:
-                results.append(pickle.load(fh))
-        bar.close()
-    return results
-
-
-def _pose_worker(task):
-    """Worker process: opens ``path`` and decomposes the world transforms of ``prim_paths`` at
-    ``times`` relative to ``bake``. Returns ``(poses (F, P, 7), scale (F, P), ok (P,), finite (F, P))``."""
-    path, prim_paths, times, bake = task
-    from pxr import Usd, UsdGeom
-
-    stage = Usd.Stage.Open(path)
-    prims = [stage.GetPrimAtPath(p) for p in prim_paths]
-    poses = np.empty((len(times), len(prims), 7))
-    scale = np.empty((len(times), len(prims)))
-    finite = np.empty((len(times), len(prims)), bool)
-    ok = np.ones(len(prims), bool)
-    for f, t in enumerate(times):
-        cache = UsdGeom.XformCache(Usd.TimeCode(float(t)))
-        m = np.array([cache.GetLocalToWorldTransform(p) for p in prims], np.float64).reshape(-1, 4, 4)
-        finite[f], poses[f], scale[f], good = _finite_poses(m, bake)
-        ok &= good
-    return poses, scale, ok, finite
-
-
-def open_stage(stage_or_path):
-    """A ``Usd.Stage`` from a stage or a file path.
-
-    Raises:
-        ValueError: the file is missing or USD cannot open it (the message names the path).
-    """
-    from pxr import Sdf, Usd
-
-    if isinstance(stage_or_path, Usd.Stage):
-        return stage_or_path
-    try:
-        path = os.fsdecode(os.fspath(stage_or_path))
-    except TypeError:
-        raise ValueError(f"stage: expected a Usd.Stage or a file path, got {type(stage_or_path).__name__}") from None
-    if os.path.isdir(path):
-        raise ValueError(f"cannot read {path}: it is a directory, not a USD file")
-    if not os.path.isfile(path):
-        raise ValueError(f"cannot read {path}: no such file")
-    if not os.access(path, os.R_OK):
-        raise ValueError(f"cannot read {path}: permission denied")
-    try:
-        loaded = Sdf.Layer.Find(path)
-        if loaded is not None:
-            loaded.Reload()  # a layer still open from an earlier read: the file as it is now
-        stage = Usd.Stage.Open(path)
-    except Exception as exc:  # pxr.Tf.ErrorException
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"cannot read {path}: not a USD file USD can open ({first})") from None
-    if stage is None:
-        raise ValueError(f"cannot read {path}: not a USD file USD can open")
-    return stage
-
-
-def missing_layers(stage) -> list[str]:
-    """The sublayers, references and payloads of a stage that could not be opened.
-
-    USD opens a stage whose sublayer, reference or payload files are missing (it prints a
-    warning and composes the stage without them); this lists those files, as composition
-    reported them (``Usd.Stage.GetCompositionErrors``; muted layers are not listed).
-
-    Args:
-        stage: a ``Usd.Stage``.
-
-    Returns:
-        Their asset paths (absolute where USD made them so), sorted, each once.
-    """
-    import re
-
-    from pxr import Ar, Pcp
-
-    if hasattr(stage, "GetCompositionErrors"):
-        kinds = (Pcp.ErrorType_InvalidAssetPath, Pcp.ErrorType_InvalidSublayerPath)
-        found = set()
-        for error in stage.GetCompositionErrors():
-            if error.errorType in kinds:
-                match = re.search(r"@([^@]+)@", str(error))
-                found.add(match.group(1) if match else str(error).strip())
-        return sorted(found)
-    # Older USD: every composition arc of the layers in use that does not resolve.
-    resolver = Ar.GetResolver()
-    found = set()
-    for layer in stage.GetUsedLayers():
-        for asset in layer.GetCompositionAssetDependencies():
-            path = layer.ComputeAbsolutePath(asset) if not layer.anonymous else asset
-            if path and not resolver.Resolve(path):
-                found.add(path)
-    return sorted(found)
-
-
-def require_layers(stage, allow_missing: bool = False, missing: list[str] | None = None) -> list[str]:
-    """:func:`missing_layers` of a stage, an error unless they may be left out.
-
-    Args:
-        stage: a ``Usd.Stage``.
-        allow_missing: check the stage without them (else a ValueError).
-        missing: the stage's :func:`missing_layers`, when already known.
-
-    Returns:
-        The missing layers' asset paths.
-
-    Raises:
-        ValueError: naming the stage and the first of them, unless ``allow_missing``.
-    """
-    missing = missing_layers(stage) if missing is None else missing
-    if missing and not allow_missing:
-        root = stage.GetRootLayer()
-        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
-        raise ValueError(f"{root.realPath or root.identifier}: cannot open {missing[0]}{more}, a sublayer, reference "
-                         "or payload of the stage (--allow-missing, allow_missing=True, checks it without)")
-    return missing
-
-
-def layer_files(stage) -> list[str]:
-    """The files of every layer a stage uses: its root layer, sublayers, references, payloads and
-    value clips (a layer inside a ``.usdz`` package as the package), resolved through symbolic links.
-
-    Args:
-        stage: a ``Usd.Stage``.
-
-    Returns:
-        Absolute real paths, sorted, each once (anonymous layers have none).
-    """
-    from pxr import Ar
-
-    found = set()
-    for layer in stage.GetUsedLayers():
-        path = layer.realPath
-        if not path:
-            continue
-        if Ar.IsPackageRelativePath(path):
-            path = Ar.SplitPackageRelativePathOuter(path)[0]
-        found.add(os.path.realpath(path))
-    return sorted(found)
-
-
-def stage_time_codes(stage, frames=None) -> np.ndarray:
-    """The time codes to check.
-
-    Args:
-        stage: a ``Usd.Stage``.
-        frames: ``None`` (every integer time code of the stage's authored range; ``[0]`` when it
-            has none), a number, a sequence of numbers, or ``(start, end)`` / ``(start, end, step)``
-            given as a ``slice`` (``end`` included; a missing ``start`` or ``end`` is the stage's).
-
-    Returns:
-        ``(F,)`` float64 time codes, increasing, at most :data:`MAX_FRAMES` of them.
-
-    Raises:
-        ValueError: an empty, non-finite or decreasing range, a step <= 0, times outside the
-            stage's authored range, a stage range whose start is after its end (when the frames
-            come from it), or more than :data:`MAX_FRAMES` time codes.
-    """
-    has_range = stage.HasAuthoredTimeCodeRange()
-    lo, hi = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
-    layer = stage.GetRootLayer()
-    name = layer.realPath or layer.identifier
-    reversed_range = has_range and hi < lo
-    from_stage = frames is None or (isinstance(frames, slice) and (frames.start is None or frames.stop is None))
-    if reversed_range and from_stage:
-        raise ValueError(f"{name}: its startTimeCode {lo:g} is after its endTimeCode {hi:g}; choose the time codes "
-                         "with frames (--frames START:END[:STEP])")
-    if frames is None:
-        if not has_range:
-            return np.zeros(1)
-        frames = slice(lo, hi, 1.0)
-    if isinstance(frames, slice):
-        start = lo if frames.start is None else frames.start
-        end = hi if frames.stop is None else frames.stop
-        step = 1.0 if frames.step is None else frames.step
-        try:
-            start, end, step = float(start), float(end), float(step)
-        except (TypeError, ValueError):
-            raise ValueError(f"frames: expected numbers, got {frames!r}") from None
-        if not np.isfinite([start, end, step]).all() or step <= 0 or end < start:
-            raise ValueError(f"frames: need start <= end and step > 0, got {start:g}:{end:g}:{step:g}")
-        count = np.floor((end - start) / step + 1e-9) + 1
-        if count > MAX_FRAMES:
-            raise ValueError(f"{name}: {count:.0f} time codes in {start:g}..{end:g} (step {step:g}), more than "
-                             f"{MAX_FRAMES} at once; choose fewer with frames (--frames START:END[:STEP])")
-        times = start + step * np.arange(int(count))
-    else:
-        try:
-            times = np.atleast_1d(np.asarray(frames, dtype=np.float64))
-        except (TypeError, ValueError):
-            raise ValueError(f"frames: expected numbers, got {frames!r}") from None
-        if times.ndim != 1 or times.size == 0 or not np.isfinite(times).all():
-            raise ValueError(f"frames: expected finite time codes, got {frames!r}")
-        if (np.diff(times) <= 0).any():
-            raise ValueError("frames: time codes must increase")
-        if times.size > MAX_FRAMES:
-            raise ValueError(f"frames: {times.size} time codes, more than {MAX_FRAMES} at once")
-    if has_range and not reversed_range and (times[0] < lo - 1e-9 or times[-1] > hi + 1e-9):
-        raise ValueError(f"frames {times[0]:g}..{times[-1]:g} lie outside the stage's time range {lo:g}..{hi:g}")
-    return times
-
-
-@dataclass
-class _MeshData:
-    """One source of mesh data: a mesh prim, or a prototype's mesh shared by its instance proxies."""
-
-    path: str
-    points_attr: object
-    points: np.ndarray  # (n, 3) float64 at the first time code
-    triangles: np.ndarray  # (m, 3) int32
-    triangle_face: np.ndarray  # (m,) int32 USD face index of each triangle
-    deforming: bool  # points time-sampled
-    key: bytes = b""  # content hash, for sharing shapes
-
-    def points_at(self, time) -> np.ndarray:
-        if not self.deforming:
-            return self.points
-        p = np.asarray(self.points_attr.Get(time), dtype=np.float64).reshape(-1, 3)
-        if p.shape != self.points.shape:
-            raise ValueError(f"prim {self.path}: {len(p)} points at time {float(time.GetValue()):g}, "
-                             f"{len(self.points)} at the first time code (a changing vertex count is not supported)")
-        if not np.isfinite(p).all():
-            raise ValueError(f"prim {self.path}: non-finite points at time {float(time.GetValue()):g}")
-        return p
 
 
 @dataclass
@@ -362,90 +112,12 @@ def _check_orientations(rec: _Instancer, code) -> None:
                              f"{code.GetValue():g} (a rotation needs a nonzero quaternion)")
 
 
-def _fan(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, path: str, num_points: int):
-    """Fan triangulation of USD polygons, vectorised: ``(triangles (m, 3) int32, face (m,) int32)``."""
-    counts = np.asarray(counts, np.int64)
-    indices = np.asarray(indices, np.int64)
-    if counts.size and counts.min() < 3:
-        f = int(np.argmax(counts < 3))
-        raise ValueError(f"prim {path}: face {f} has {int(counts[f])} vertices (at least 3 needed)")
-    if counts.sum() != indices.size:
-        raise ValueError(f"prim {path}: faceVertexCounts sum to {int(counts.sum())}, "
-                         f"but faceVertexIndices has {indices.size} entries")
-    if indices.size and (indices.min() < 0 or indices.max() >= num_points):
-        k = int(np.argmax((indices < 0) | (indices >= num_points)))
-        raise ValueError(f"prim {path}: faceVertexIndices[{k}] = {int(indices[k])} is outside its {num_points} points")
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    keep = np.ones(counts.size, bool)
-    if holes.size:
-        bad = (holes < 0) | (holes >= counts.size)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise ValueError(f"prim {path}: holeIndices[{k}] = {int(holes[k])} is not a face index "
-                             f"(it has {counts.size} faces)")
-        keep[holes] = False
-    per_face = counts[keep] - 2
-    face = np.repeat(np.nonzero(keep)[0], per_face)
-    if face.size == 0:
-        return np.zeros((0, 3), np.int32), np.zeros(0, np.int32)
-    # k-th triangle of a face: (first, first + k + 1, first + k + 2)
-    first = start[face]
-    k = np.arange(face.size) - np.repeat(np.cumsum(per_face) - per_face, per_face)
-    tri = np.stack([indices[first], indices[first + k + 1], indices[first + k + 2]], axis=1)
-    return tri.astype(np.int32), face.astype(np.int32)
-
-
-def _similarity(linear: np.ndarray, tol: float = SIMILARITY_TOLERANCE):
-    """Splits ``(K, 3, 3)`` linear parts (row vectors) into ``scale * rotation`` where they are one.
-
-    Returns:
-        ``(scale (K,), rotation (K, 3, 3), ok (K,) bool)``; ``ok`` is False for a non-uniform
-        scale, a shear, a reflection or a (near) zero scale.
-    """
-    gram = linear @ linear.swapaxes(1, 2)
-    s2 = np.trace(gram, axis1=1, axis2=2) / 3.0
-    dev = np.abs(gram - s2[:, None, None] * np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(linear)
-    ok = (s2 > 1e-30) & (det > 0) & (dev <= tol * np.maximum(s2, 1e-300))
-    scale = np.sqrt(np.maximum(s2, 0.0))
-    rotation = linear / np.where(scale > 0, scale, 1.0)[:, None, None]
-    return scale, rotation, ok
-
-
-def _poses(matrix: np.ndarray, bake: np.ndarray):
-    """Poses and scales of world matrices relative to baked linear parts.
-
-    Args:
-        matrix: ``(K, 4, 4)`` world matrices (row vectors).
-        bake: ``(K, 3, 3)`` linear parts baked into the shapes (identity where nothing is baked).
-
-    Returns:
-        ``(poses (K, 7) float64 rows (p, q xyzw), scale (K,), ok (K,) bool)``: ``p_world =
-        transform_point(pose, scale * (p bake))`` where ``ok``.
-    """
-    rel = np.linalg.solve(bake, matrix[:, :3, :3])  # bake^-1 A: p A = (p bake) (bake^-1 A)
-    scale, rot, ok = _similarity(rel)
-    poses = np.empty((len(matrix), 7))
-    poses[:, :3] = matrix[:, 3, :3]
-    # Row-vector rotation R acts as R^T on column vectors (wp.transform_point).
-    rot = np.where(ok[:, None, None], rot, np.eye(3))
-    poses[:, 3:] = _matrix_to_quat(rot.swapaxes(1, 2)) if len(rot) else np.zeros((0, 4))
-    return poses, scale, ok
-
-
-def _finite_poses(matrix: np.ndarray, bake: np.ndarray):
-    """:func:`_poses` of the finite ``matrix`` rows (identity in place of the others): ``(finite (K,)
-    bool, poses, scale, ok)``; the caller names a prim whose transform is not finite."""
-    finite = np.isfinite(matrix).all(axis=(1, 2))
-    return (finite, *_poses(np.where(finite[:, None, None], matrix, np.eye(4)), bake))
-
-
 class UsdMeshImport:
     """A stage's meshes, read once, as a :class:`~warp_ccd.scene.scene.Scene` that can be set to each time code.
 
     Example::
 
-        imp = UsdMeshImport("anim.usd", times=stage_time_codes(stage))
+        imp = UsdMeshImport("anim.usd", times=stage_time_codes(open_stage("anim.usd")))
         pipe = CollisionPipeline(imp.scene)
         for k in range(len(imp.times)):
             imp.set_frame(k)
@@ -491,7 +163,7 @@ class UsdMeshImport:
     Raises:
         ValueError: naming the file or prim: a missing or unreadable file, a prim path that does
             not exist, patterns that match nothing, a stage without meshes, a bad mesh or
-            PointInstancer, more than :data:`MAX_FRAMES` time codes, or coordinates beyond float64
+            PointInstancer, more than :data:`~warp_ccd.usd.stage.MAX_FRAMES` time codes, or coordinates beyond float64
             at the triangles' size.
     """
 
@@ -516,7 +188,7 @@ class UsdMeshImport:
         if bad:
             raise ValueError(f"include_purposes: unknown purpose {sorted(bad)[0]!r} (use 'guide', 'proxy')")
         self.skipped: list[tuple[str, str]] = []
-        self._meshes: list[_MeshData] = []
+        self._meshes: list[MeshData] = []
         self._mesh_by_source: dict[str, int] = {}
         self._instancers: list[_Instancer] = []
         self._varying_xform: dict[str, bool] = {}
@@ -604,39 +276,12 @@ class UsdMeshImport:
 
     def _mesh_data(self, prim) -> int:
         """Index of the mesh data of ``prim`` (read once per prim, or per prototype for instance proxies)."""
-        from pxr import UsdGeom
-
         source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         key = str(source.GetPath())
         k = self._mesh_by_source.get(key)
         if k is not None:
             return k
-        name = str(prim.GetPath())
-        mesh = UsdGeom.Mesh(source)
-        t0 = self._codes[0]
-        for attr in (mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()):
-            if attr.ValueMightBeTimeVarying():
-                raise ValueError(f"prim {name}: animated topology ({attr.GetName()} is time-sampled) is not supported")
-        points_attr = mesh.GetPointsAttr()
-        raw = points_attr.Get(t0)
-        points = np.zeros((0, 3)) if raw is None else np.asarray(raw, dtype=np.float64).reshape(-1, 3)
-        counts = mesh.GetFaceVertexCountsAttr().Get(t0)
-        indices = mesh.GetFaceVertexIndicesAttr().Get(t0)
-        holes = mesh.GetHoleIndicesAttr().Get(t0)
-        counts = np.zeros(0, np.int64) if counts is None else np.asarray(counts)
-        indices = np.zeros(0, np.int64) if indices is None else np.asarray(indices)
-        holes = np.zeros(0, np.int64) if holes is None else np.asarray(holes, np.int64)
-        if not np.isfinite(points).all():
-            v = int(np.argmin(np.isfinite(points).all(axis=1)))
-            raise ValueError(f"prim {name}: point {v} is not finite")
-        tri, face = _fan(counts, indices, holes, name, len(points))
-        if mesh.GetOrientationAttr().Get(t0) == UsdGeom.Tokens.leftHanded:
-            tri = np.ascontiguousarray(tri[:, ::-1])  # wound right-handed: normals out of the object
-        deforming = points_attr.ValueMightBeTimeVarying()
-        digest = hashlib.blake2b(points.astype(np.float64).tobytes(), digest_size=16)
-        digest.update(tri.tobytes())
-        data = _MeshData(name, points_attr, points, tri, face, deforming, digest.digest())
-        self._meshes.append(data)
+        self._meshes.append(read_mesh(source, str(prim.GetPath()), self._codes[0]))
         self._mesh_by_source[key] = len(self._meshes) - 1
         return len(self._meshes) - 1
 
@@ -758,11 +403,11 @@ class UsdMeshImport:
             raise ValueError(f"prim {obj_path[int(np.argmin(finite))]}: its world transform is not finite")
         varying = np.nonzero(obj_varying)[0]
         lin0 = first[:, :3, :3]
-        _, _, similar0 = _similarity(lin0)
+        _, _, similar0 = similarity_split(lin0)
         singular = np.abs(np.linalg.det(lin0)) <= 1e-30
         bake = np.where((similar0 | singular)[:, None, None], np.eye(3), lin0)  # baked at the first time code
         deforming = np.array([self._meshes[k].deforming for k in obj_mesh.tolist()], bool)
-        poses0, scale0, ok0 = _poses(first, bake)
+        poses0, scale0, ok0 = matrix_poses(first, bake)
         deforming |= ~ok0
         var_poses = np.empty((len(self._codes), varying.size, 7))  # float64 until the precision is known
         var_scale = np.empty((len(self._codes), varying.size), np.float32)
@@ -774,7 +419,7 @@ class UsdMeshImport:
         bar = tqdm(total=len(self._codes), desc="reading transforms", unit="time code", leave=False,
                    disable=not (self._progress and rest.size) or None, file=sys.stderr)
         for f, code in enumerate(self._codes if rest.size else ()):
-            finite, var_poses[f, cols], var_scale[f, cols], ok = _finite_poses(
+            finite, var_poses[f, cols], var_scale[f, cols], ok = finite_matrix_poses(
                 first[rest] if f == 0 else self._matrices(code, rest), bake[rest])
             if not finite.all():
                 raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
@@ -928,7 +573,7 @@ class UsdMeshImport:
         paths = [str(self._prims[h].GetPath()) for h in self._obj_handle[objects].tolist()]
         chunks = [c for c in np.array_split(np.arange(len(self._codes)), workers) if c.size]
         tasks = [(layer.realPath, paths, self.times[c], bake) for c in chunks]
-        parts = _run_pose_workers(tasks, self._progress)
+        parts = run_pose_workers(tasks, self._progress)
         finite = np.concatenate([p[3] for p in parts])
         if not finite.all():
             f, k = np.unravel_index(int(np.argmin(finite)), finite.shape)
@@ -1031,8 +676,35 @@ class UsdMeshImport:
         return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
 
 
-if __name__ == "__main__":  # a worker of _run_pose_workers: python -m warp_ccd.usd.importer TASK OUT
-    with open(sys.argv[1], "rb") as _task:
-        _result = _pose_worker(pickle.load(_task))
-    with open(sys.argv[2], "wb") as _out:
-        pickle.dump(_result, _out)
+def scene_from_usd(stage_or_path, *, prims=None, time=None, device=None, precision: str = "float32",
+                   **options) -> Scene:
+    """A scene of the meshes of a USD stage, at one time code (see :class:`UsdMeshImport`).
+
+    Every ``UsdGeom.Mesh`` under ``prims`` (instance proxies and PointInstancer instances
+    included; invisible, guide and proxy prims left out) is one object, polygons fanned into
+    triangles, placed by its world transform. ``scene.usd`` holds the import: object names
+    (``scene.usd.object_path``), the USD face of every triangle (``scene.usd.faces``), and
+    ``scene.usd.set_frame(k)`` for the other time codes of ``options["times"]``.
+
+    Args:
+        stage_or_path: a ``Usd.Stage`` or a USD file path.
+        prims: prim paths or ``fnmatch`` patterns (default: the whole stage).
+        time: the time code (default: the stage's start time code, or 0 without a time range);
+            or pass ``times=[...]`` to prepare several and move with ``scene.usd.set_frame``.
+        device: Warp device.
+        precision: ``"float32"`` or ``"float64"``.
+        **options: ``times``, ``include_invisible``, ``include_purposes``, ``workers``, ``progress``
+            of :class:`UsdMeshImport`.
+
+    Returns:
+        The :class:`~warp_ccd.scene.scene.Scene`, with the import as ``scene.usd``.
+
+    Raises:
+        ValueError: naming the file or the prim at fault (see :class:`UsdMeshImport`); ``time``
+            and ``times`` both given.
+    """
+    if time is not None:
+        if "times" in options:
+            raise ValueError("scene_from_usd: give time or times, not both")
+        options["times"] = [time]
+    return UsdMeshImport(stage_or_path, prims=prims, device=device, precision=precision, **options).scene
