@@ -58,7 +58,11 @@ for part in $parts; do
             >> "$log" 2>&1
         tail -n 15 "$log" ;;
     resources)
-        step python3 -m warp_ccd.bench.kernel_resources --device "$device" --out "$out/kernel_resources_$tag.json" ;;
+        if [ "$device" = cpu ]; then
+            echo "run_cuda.sh: resources skipped: registers and spills are a CUDA device's" >&2
+        else
+            step python3 -m warp_ccd.bench.kernel_resources --device "$device" --out "$out/kernel_resources_$tag.json"
+        fi ;;
     stages)
         step python3 -m warp_ccd.bench.frame_stages --device "$device" --cases $staged --frames $((frames * 2)) \
             --out "$out/frame_stages_$tag.json"

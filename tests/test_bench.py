@@ -2,14 +2,15 @@
 
 import importlib.util
 import json
-import os
 
 import numpy as np
 import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench import scaling as bench
+from warp_ccd.bench import box_tests, deforming, host_breakdown, methods, scaling
+from warp_ccd.bench import broad_phase as broad_phase_bench
+from warp_ccd.bench import pipeline as pipeline_bench
 from warp_ccd.bench.compare import (
     box_overlap_truth,
     classify_triangle_pairs,
@@ -17,25 +18,24 @@ from warp_ccd.bench.compare import (
     compare_triangle_pairs,
     triangle_distance,
 )
+from warp_ccd.bench.memory import _tracker_peak
+from warp_ccd.bench.meshes import parse_triangles
+from warp_ccd.bench.methods import device_modes
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
 from warp_ccd.bench.timing import MODES, CountedFrame, StageTimes
+from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
 from warp_ccd.stages.broad_phase import find_pairs
 from warp_ccd.stages.buffers import CounterRead, GrowableBuffer, reserve_slot
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",
             "triangle_pairs"}
 HAS_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
 
 
-def load_script(name):
-    return importlib.import_module(f"warp_ccd.bench.{name}")
-
-
 def test_bench_end_to_end(device, tmp_path, capsys):
     out = tmp_path / "results.json"
     plot = tmp_path / "scaling.png"
-    status = bench.main(["--device", device, "--objects", "30", "150", "--triangles", "poly", "80",
+    status = scaling.main(["--device", device, "--objects", "30", "150", "--triangles", "poly", "80",
                          "--frames", "2", "--warmup", "1", "--out", str(out), "--plot", str(plot)])
     text = capsys.readouterr().out
     assert status == 0, text
@@ -65,7 +65,7 @@ def test_bench_end_to_end(device, tmp_path, capsys):
 @pytest.mark.parametrize("argv", [["--triangles", "81"], ["--peers", "builtin,bullet"], ["--objects", "1"],
                                   ["--device", "tpu:7"], ["--out", "results.txt"]])
 def test_bench_bad_arguments(argv, capsys):
-    assert bench.main(argv) == 2
+    assert scaling.main(argv) == EXIT_USAGE
     err = capsys.readouterr().err
     assert "error" in err and len(err.strip().splitlines()) == 1  # one line, no usage dump
 
@@ -73,24 +73,24 @@ def test_bench_bad_arguments(argv, capsys):
 def test_bench_exit_status_on_mismatch_and_peer_failure(device, monkeypatch, capsys):
     argv = ["--device", device, "--objects", "40",
             "--triangles", "poly", "--frames", "1", "--warmup", "0", "--peers", "builtin", "--no-memory"]
-    real = bench.compare_triangle_pairs
+    real = methods.compare_triangle_pairs
 
     def disagreeing(*args, **kwargs):
         check = real(*args, **kwargs)
         check.mismatches.append("made up for the test")
         return check
 
-    monkeypatch.setattr(bench, "compare_triangle_pairs", disagreeing)
-    assert bench.main(argv) == bench.EXIT_MISMATCH
+    monkeypatch.setattr(methods, "compare_triangle_pairs", disagreeing)
+    assert scaling.main(argv) == EXIT_INTERNAL
     captured = capsys.readouterr()
     assert "VERDICT 40 objects, triangles poly: MISMATCH" in captured.out and "MISMATCH" in captured.err
-    monkeypatch.setattr(bench, "compare_triangle_pairs", real)
+    monkeypatch.setattr(methods, "compare_triangle_pairs", real)
 
     def broken(self):
         raise RuntimeError("peer broke")
 
     monkeypatch.setattr(WarpMeshPipeline, "query", broken)
-    assert bench.main(argv) == bench.EXIT_OK  # a peer that breaks is reported, not failed
+    assert scaling.main(argv) == EXIT_OK  # a peer that breaks is reported, not failed
     captured = capsys.readouterr()
     assert "ERROR warp_builtin failed at frame 0: RuntimeError: peer broke" in captured.out
 
@@ -101,7 +101,7 @@ def test_bench_reports_a_wrong_peer_and_exits_zero(device, monkeypatch, tmp_path
     argv = ["--device", device, "--objects", "60", "--triangles", "poly", "--frames", "1", "--warmup", "0",
             "--peers", "builtin", "--no-memory", "--out", str(out)]
     monkeypatch.setattr(WarpMeshPipeline, "triangle_pairs", lambda self, count=None: np.zeros((0, 4), np.int32))
-    assert bench.main(argv) == bench.EXIT_OK
+    assert scaling.main(argv) == EXIT_OK
     text = capsys.readouterr().out
     assert "PEER WRONG: warp_builtin misses" in text and "VERDICT 60 objects, triangles poly: OK" in text
     assert "warp_builtin*" in text
@@ -114,19 +114,19 @@ def test_bench_reports_a_wrong_peer_and_exits_zero(device, monkeypatch, tmp_path
 
 
 def test_parse_triangles():
-    assert bench.parse_triangles("poly") == ("poly", None)
-    assert bench.parse_triangles("80") == ("80", ("icosphere1",))
-    assert bench.parse_triangles("1280") == ("1280", ("icosphere3",))
-    assert bench.parse_triangles("icosphere2") == ("320", ("icosphere2",))
+    assert parse_triangles("poly") == ("poly", None)
+    assert parse_triangles("80") == ("80", ("icosphere1",))
+    assert parse_triangles("1280") == ("1280", ("icosphere3",))
+    assert parse_triangles("icosphere2") == ("320", ("icosphere2",))
     with pytest.raises(ValueError):
-        bench.parse_triangles("100")
+        parse_triangles("100")
 
 
 def test_mixed_meshes_are_valid_and_of_real_sizes(device):
     """The ``mixed`` scene's meshes: radius 1, indices in range, 120 to 12,640 triangles, each the
     same arrays at every call, and a scene of them runs."""
-    label, meshes = bench.parse_triangles("mixed")
-    assert label == "mixed" and meshes is bench.parse_triangles("mixed")[1]
+    label, meshes = parse_triangles("mixed")
+    assert label == "mixed" and meshes is parse_triangles("mixed")[1]
     counts = sorted(len(t) for _, t in meshes)
     assert counts[0] == 120 and counts[-1] == 12640 and len(counts) == 7
     for v, t in meshes:
@@ -138,7 +138,7 @@ def test_mixed_meshes_are_valid_and_of_real_sizes(device):
 
 @pytest.mark.parametrize("mode", MODES)
 def test_builtin_peer_agrees_with_pipeline(device, mode):
-    if mode not in bench.device_modes(device):
+    if mode not in device_modes(device):
         pytest.skip(f"{mode} frames of the built-in peer need CUDA")
     scene = wc.Scene.random(300, seed=3, shapes=("icosphere1", "cube", "dodecahedron"), device=device)
     peer = WarpMeshPipeline(scene, capacity=1)  # grows on the first frame
@@ -167,7 +167,7 @@ def _emit_kernel(capacity: int, item: wp.array[wp.int32], count: wp.array[wp.int
 def test_counted_frame_grows_and_captures_again(device, mode):
     """A counter past its capacity grows the buffer and reruns the frame (captured again in graph mode),
     also when another user of the buffer grew it."""
-    if mode not in bench.device_modes(device):
+    if mode not in device_modes(device):
         pytest.skip(f"{mode} frames need CUDA")
     size = [50]
     buf = GrowableBuffer(wp.int32, 4, device, "items")
@@ -195,58 +195,53 @@ def test_stage_times_best_of_modes():
     assert st.has("detect") and st.has("motion") and not st.has("broad") and st.frames("detect") == 3
 
 
-def test_broad_phase_peers_agree(device):
-    script = load_script("broad_phase")
-    lo, hi = script.random_boxes(3000, overlaps=2.0, seed=1)
+@pytest.mark.parametrize("name", ["warp_bvh", "warp_bvh_refit", "newton_sap"])
+def test_broad_phase_peers_agree(device, name):
+    if name == "newton_sap":
+        try:
+            broad = NewtonBroadPhaseSAP(device=device)
+        except PeerUnavailable as exc:
+            pytest.skip(f"newton_sap: {exc}")
+    else:
+        broad = WarpBvhBroadPhase(device=device, refit=name == "warp_bvh_refit")
+    lo, hi = broad_phase_bench.random_boxes(3000, overlaps=2.0, seed=1)
     lower = wp.array(lo, dtype=wp.vec3, device=device)
     upper = wp.array(hi, dtype=wp.vec3, device=device)
     ref_pairs = GrowableBuffer(wp.vec2i, 16, device, "reference")
     n_ref = find_pairs(wc.BroadPhaseSAP(device=device), lower, upper, ref_pairs)
     ref = ref_pairs.numpy(n_ref)
     assert 2 * n_ref / 3000 > 1.0  # about the requested 2 overlaps per box
-    peers = {"warp_bvh": WarpBvhBroadPhase(device=device),
-             "warp_bvh_refit": WarpBvhBroadPhase(device=device, refit=True)}
-    try:
-        peers["newton_sap"] = NewtonBroadPhaseSAP(device=device)
-    except PeerUnavailable:
-        pass
-    for name, broad in peers.items():
-        pairs = GrowableBuffer(wp.vec2i, 16, device, name)
-        for _ in range(2):  # build, then rebuild or refit
-            count = find_pairs(broad, lower, upper, pairs)
-        check = compare_exact("sap", ref, name, pairs.numpy(count), "box pairs")
-        assert check.ok, check.mismatches
+    pairs = GrowableBuffer(wp.vec2i, 16, device, name)
+    for _ in range(2):  # build, then rebuild or refit
+        count = find_pairs(broad, lower, upper, pairs)
+    check = compare_exact("sap", ref, name, pairs.numpy(count), "box pairs")
+    assert check.ok, check.mismatches
 
 
 def test_bench_scripts_run(device, tmp_path, capsys):
-    broad = load_script("broad_phase")
     out = tmp_path / "broad.json"
-    assert broad.main(["--device", device, "--n", "300", "3000", "--frames", "1", "--warmup", "1",
+    assert broad_phase_bench.main(["--device", device, "--n", "300", "3000", "--frames", "1", "--warmup", "1",
                        "--out", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert {"device", "date", "rows", "checks"} <= set(doc) and doc["ok"]
     assert {r["method"] for r in doc["rows"]} >= {"sap", "nxn", "warp_bvh", "warp_bvh_refit"}
-    pipeline = load_script("pipeline")
     out = tmp_path / "pipeline.json"
-    assert pipeline.main(["--device", device, "--objects", "20", "--triangles", "80", "--frames", "1",
+    assert pipeline_bench.main(["--device", device, "--objects", "20", "--triangles", "80", "--frames", "1",
                           "--warmup", "1", "--no-memory", "--out", str(out), "--plot", str(tmp_path / "p.png")]) == 0
     doc = json.loads(out.read_text())
     assert {r["method"] for r in doc["rows"]} == {"warp_ccd", "warp_builtin"}
-    breakdown = load_script("host_breakdown")
     out = tmp_path / "host.json"
-    assert breakdown.main(["--device", device, "--objects", "40", "--triangles", "poly", "--frames", "2",
+    assert host_breakdown.main(["--device", device, "--objects", "40", "--triangles", "poly", "--frames", "2",
                            "--out", str(out)]) == 0
     rows = json.loads(out.read_text())["rows"]
     assert [r["variant"] for r in rows] == ["plain", "again"]
     assert all(0 <= r["min"]["host"] <= r["median"]["host"] and r["median"]["wait"] >= 0 for r in rows)
-    boxes = load_script("box_tests")
     out = tmp_path / "boxes.json"
-    assert boxes.main(["--device", device, "--cases", "poly:60", "--axes", "3", "6", "--bounds", "auto", "tree",
+    assert box_tests.main(["--device", device, "--cases", "poly:60", "--axes", "3", "6", "--bounds", "auto", "tree",
                        "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
     rows = json.loads(out.read_text())["rows"]
     assert {(r["separating_axes"], r["object_bounds"]) for r in rows} == {(3, "auto"), (3, "tree"), (6, "auto"),
                                                                           (6, "tree")}
-    deforming = load_script("deforming")
     out = tmp_path / "deforming.json"
     assert deforming.main(["--device", device, "--objects", "40", "--level", "1", "--leaf-sizes", "1", "4",
                            "--frames", "1", "--warmup", "1", "--out", str(out)]) == 0
@@ -328,7 +323,7 @@ def test_compare_exact_charges_the_method_the_truth_finds_wrong():
 def test_tracker_peak_parse():
     text = ("Allocation Tracking Report\n  Total allocations:\n    cpu              46 (364.29 KB)\n"
             "  Peak usage:\n    cpu              348.27 KB\n    cuda:0           1.50 GB\n  Live allocations:\n")
-    assert bench._tracker_peak(text, "cpu") == int(348.27 * 1024)
-    assert bench._tracker_peak(text, "cuda:0") == int(1.5 * 1024**3)
-    assert bench._tracker_peak(text, "cuda:1") is None
-    assert bench._tracker_peak("nothing", "cpu") is None
+    assert _tracker_peak(text, "cpu") == int(348.27 * 1024)
+    assert _tracker_peak(text, "cuda:0") == int(1.5 * 1024**3)
+    assert _tracker_peak(text, "cuda:1") is None
+    assert _tracker_peak("nothing", "cpu") is None

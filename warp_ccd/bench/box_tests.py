@@ -29,7 +29,8 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.scaling import environment, parse_triangles, write_json
+from warp_ccd.bench.meshes import parse_triangles
+from warp_ccd.bench.report import environment, write_json
 from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.geometry.precision import PRECISIONS
 from warp_ccd.pipeline import STAGES, CollisionPipeline

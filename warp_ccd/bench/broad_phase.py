@@ -26,7 +26,7 @@ the buffers, load the kernels and capture the graphs; only the ``--frames`` afte
 
 The benchmark judges this package, not its peers: ``nxn`` must give exactly ``sap``'s pairs, and
 each peer's differences from ``sap`` are judged by an exact overlap test in numpy. A pair that
-``sap`` got wrong ends the run with status 3 (after the JSON is written); a peer's wrong pairs
+``sap`` got wrong ends the run with status 3 (``EXIT_INTERNAL``, after the JSON is written); a peer's wrong pairs
 are a finding, reported in the table (``*``) and the JSON (``peer_wrong``).
 
     python -m warp_ccd.bench.broad_phase                             # CPU: N = 1e3..1e5
@@ -37,16 +37,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 import warp as wp
 
 from warp_ccd.bench.compare import box_overlap_truth, compare_exact
+from warp_ccd.bench.methods import device_modes
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
-from warp_ccd.bench.scaling import device_modes, environment, write_json
+from warp_ccd.bench.report import RESULTS, environment, write_json
 from warp_ccd.bench.timing import ModeFrames, StageTimes
-from warp_ccd.cli.common import resolve_device
+from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK, resolve_device
 from warp_ccd.stages.broad_phase import NXN_MAX_BOXES, BroadPhaseNxN, BroadPhaseSAP
 from warp_ccd.stages.buffers import GrowableBuffer
 
@@ -54,7 +54,6 @@ METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
 OURS = ("sap", "nxn")
 """This package's methods: they must agree exactly; the others are peers, judged by the truth."""
 REFERENCE = "sap"
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def random_boxes(num_boxes: int, overlaps: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -235,9 +234,9 @@ def main(argv: list[str] | None = None) -> int:
                          "rows": rows, "checks": checks, "notes": notes, "ok": ok})
     print(f"results written to {out}")
     if not ok:
-        print("bench_broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)
-        return 3
-    return 0
+        print("warp_ccd.bench.broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)
+        return EXIT_INTERNAL
+    return EXIT_OK
 
 
 if __name__ == "__main__":

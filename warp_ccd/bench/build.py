@@ -41,7 +41,7 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.scaling import environment, write_json
+from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import synced_ms
 from warp_ccd.cli.common import resolve_device
 from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild, build_tree

@@ -37,8 +37,9 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.compare import compare_triangle_pairs
+from warp_ccd.bench.methods import DevicePeerMethod
 from warp_ccd.bench.peers import WarpMeshPipeline
-from warp_ccd.bench.scaling import DevicePeerMethod, environment, write_json
+from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import synced_ms
 from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import STAGES

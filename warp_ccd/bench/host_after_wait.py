@@ -42,7 +42,7 @@ import types
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.scaling import environment, write_json
+from warp_ccd.bench.report import environment, write_json
 from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene.scene import Scene

@@ -10,7 +10,7 @@ import argparse
 import ctypes
 import sys
 
-from warp_ccd.bench.scaling import environment, write_json
+from warp_ccd.bench.report import environment, write_json
 from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene import motion, scene

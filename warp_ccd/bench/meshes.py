@@ -1,6 +1,7 @@
-"""Meshes of the sizes of real assets, made procedurally (seeded), for the scaling benchmark's
-``mixed`` scene: objects drawn from a scanned-statue-like blob, a smaller animal-like blob, an open
-cloth sheet and a few CAD and drone parts, from 120 to about 12,700 triangles.
+"""The shapes of the benchmarks' scenes: the ``--triangles`` specs (:func:`parse_triangles`), and meshes
+of the sizes of real assets, made procedurally (seeded), for the scaling benchmark's ``mixed`` scene:
+objects drawn from a scanned-statue-like blob, a smaller animal-like blob, an open cloth sheet and a
+few CAD and drone parts, from 120 to about 12,700 triangles.
 
 Every mesh is centred on its bounding box and scaled to radius 1 (its farthest vertex at distance
 1), in float32 with int32 triangles, and is the same at every call (:func:`real_mesh_set` caches).
@@ -12,7 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["REAL_MESHES", "real_mesh_set"]
+__all__ = ["REAL_MESHES", "parse_triangles", "real_mesh_set"]
 
 
 def _grid_triangles(rows: int, cols: int, wrap: bool) -> np.ndarray:
@@ -128,3 +129,32 @@ def real_mesh_set() -> tuple:
         t.setflags(write=False)
         out.append((v.astype(np.float32), t))
     return tuple(out)
+
+
+def parse_triangles(spec: str) -> tuple[str, tuple | None]:
+    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
+    or ``"icosphereL"`` -> icosphere level L; ``"mixed"`` -> meshes of the sizes of real assets, 120
+    to 12,640 triangles (:func:`real_mesh_set`).
+
+    Returns:
+        ``(label, shapes)``: ``shapes`` for :meth:`Scene.random` (None: its default polyhedra).
+
+    Raises:
+        ValueError: an unknown spec.
+    """
+    text = str(spec).strip().lower()
+    if text == "poly":
+        return "poly", None
+    if text == "mixed":
+        return "mixed", real_mesh_set()
+    if text.startswith("icosphere") and text[len("icosphere"):].isdigit():
+        level = int(text[len("icosphere"):])
+        return str(20 * 4**level), (f"icosphere{level}",)
+    if text.isdigit():
+        count = int(text)
+        for level in range(9):
+            if 20 * 4**level == count:
+                return text, (f"icosphere{level}",)
+    known = ", ".join(str(20 * 4**k) for k in range(6))
+    raise ValueError(f"--triangles: {spec!r} is neither 'poly', 'mixed' nor an icosphere's triangle count "
+                     f"({known}, ...)")

@@ -29,7 +29,8 @@ import warp as wp
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
 
 import warp_ccd as wc  # noqa: E402
-from warp_ccd.bench.scaling import environment, parse_triangles, write_json  # noqa: E402
+from warp_ccd.bench.meshes import parse_triangles  # noqa: E402
+from warp_ccd.bench.report import environment, write_json  # noqa: E402
 from warp_ccd.cli.common import resolve_device  # noqa: E402
 from warp_ccd.geometry.precision import precision_types  # noqa: E402
 from warp_ccd.stages import narrow_phase  # noqa: E402

@@ -4,9 +4,9 @@ A thin front end to :mod:`warp_ccd.bench` (the ``warp-ccd bench`` command) with 
 defaults: the scaling scene of icospheres of 80 triangles and of 1,280 triangles, Warp's
 built-in pipeline (``wp.Mesh`` refit, ``wp.mesh_query_aabb``, ``wp.intersect_tri_tri``) as the peer
 in the same run, triangle pairs compared and their differences classified, results in
-``bench/results/pipeline_<device>.json`` and ``.png``. Rows per stage: ``motion``, this
-pipeline's own stages (refit of the bounds and trees, broad, mid, narrow), ``detect`` and
-``total``. Every option of ``warp-ccd bench`` is accepted and overrides these defaults.
+``bench/results/pipeline_<device>.json`` and ``.png`` (under the working directory). Rows per
+stage: ``motion``, this pipeline's own stages (refit of the bounds and trees, broad, mid, narrow),
+``detect`` and ``total``. Every option of ``warp-ccd bench`` is accepted and overrides these defaults.
 
     python -m warp_ccd.bench.pipeline
     python -m warp_ccd.bench.pipeline --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6
@@ -16,20 +16,22 @@ pipeline's own stages (refit of the bounds and trees, broad, mid, narrow), ``det
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
+from warp_ccd.bench.report import RESULTS
 from warp_ccd.bench.scaling import build_parser
 from warp_ccd.bench.scaling import main as bench_main
-from warp_ccd.cli.common import resolve_device
+from warp_ccd.cli.common import CliError, resolve_device
 
-PROG = "bench_pipeline.py"
+PROG = "python -m warp_ccd.bench.pipeline"
 DEFAULTS = ["--triangles", "80", "1280", "--peers", "builtin", "--objects", "100", "1000", "3000"]
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = DEFAULTS + list(sys.argv[1:] if argv is None else argv)
-    args = build_parser(PROG).parse_args(argv)
+    try:
+        args = build_parser(PROG).parse_args(argv)
+    except CliError:
+        return bench_main(argv, prog=PROG)  # which reports the bad argument in one line
     try:
         tag = str(resolve_device(args.device)).replace(":", "")
     except ValueError:
