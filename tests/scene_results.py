@@ -5,9 +5,9 @@ Each scene is placed by poses computed here in numpy (no motion kernel: ``sin`` 
 round differently on each device), so that its world vertices, and everything after them, are the
 same bits on every device. The pipeline runs with several option sets, segments and containment
 on; recorded per run: the triangle pairs, their segments, the per-object flags and the
-containment pairs.
+containment pairs. :mod:`test_scene_results` judges the record itself by brute force in float64.
 
-Record them anew only after a deliberate change of semantics::
+Record them anew only after a deliberate change of semantics (and see that test pass)::
 
     python tests/scene_results.py --write
 """
@@ -24,7 +24,7 @@ RECORD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "scene
 OPTIONS = {
     "default": {},
     "edge_face": {"narrow_phase": "edge_face"},
-    "all_pairs_nxn": {"mid_phase": "all_pairs", "broad_phase": "nxn"},
+    "all_pairs_nxn": {"mid_phase": "all_pairs", "broad_phase": "all_pairs"},
     "leaf4": {"leaf_size": 4},
 }
 """Pipeline option sets, each run on every scene."""

@@ -11,7 +11,8 @@ import warp as wp
 from solids import Box, interiors_overlap, rotation, vertex_depth
 
 import warp_ccd as wc
-from warp_ccd.stages.crossing import CrossingClassifier, surface_topology
+from warp_ccd.stages.crossing import CrossingClassifier
+from warp_ccd.stages.surface import surface_topology
 
 
 def grid(n: int, size: float = 3.0, angle: float = 0.0, offset=(0.0, 0.0), z: float = 0.0, flip: bool = False):

@@ -14,13 +14,8 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.geometry.precision import precision_types
-from warp_ccd.stages.narrow_phase import (
-    CONTACT_NONE,
-    CONTACT_SEGMENT,
-    NARROW_METHODS,
-    TOLERANCE,
-    tri_tri_segment_batch_kernel,
-)
+from warp_ccd.geometry.triangle import CONTACT_NONE, CONTACT_SEGMENT, TOLERANCE, tri_tri_segment_batch_kernel
+from warp_ccd.stages.narrow_phase import NARROW_METHODS
 
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test

@@ -5,9 +5,11 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd import geometry
 from warp_ccd.geometry.precision import precision_types
+from warp_ccd.geometry.triangle import TOLERANCE, tri_tri_batch_kernel
 from warp_ccd.stages.buffers import GrowableBuffer
-from warp_ccd.stages.narrow_phase import NARROW_METHODS, TOLERANCE, tri_tri_batch_kernel
+from warp_ccd.stages.narrow_phase import NARROW_METHODS
 
 from oracles import intersect_tri_tri_f64
 
@@ -196,8 +198,8 @@ def _user_float64_kernel(tri_a: wp.array2d[wp.vec3d], tri_b: wp.array2d[wp.vec3d
     k = wp.tid()
     a0, a1, a2 = tri_a[k, 0], tri_a[k, 1], tri_a[k, 2]
     b0, b1, b2 = tri_b[k, 0], tri_b[k, 1], tri_b[k, 2]
-    out[k, 0] = wp.where(wc.tri_tri_moller(a0, a1, a2, b0, b1, b2, wp.float64(wc.TOLERANCE)), 1, 0)
-    out[k, 1] = wp.where(wc.tri_tri_edge_face(a0, a1, a2, b0, b1, b2, 1.0e-5), 1, 0)
+    out[k, 0] = wp.where(geometry.tri_tri_moller(a0, a1, a2, b0, b1, b2, wp.float64(geometry.TOLERANCE)), 1, 0)
+    out[k, 1] = wp.where(geometry.tri_tri_edge_face(a0, a1, a2, b0, b1, b2, 1.0e-5), 1, 0)
 
 
 def test_tests_called_from_a_user_kernel(device):

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import warp_ccd as wc
 from warp_ccd.cli import commands as cli
-from warp_ccd.stages.narrow_phase import pair_crossing_depth
+from warp_ccd.stages.crossing import pair_crossing_depth
 from warp_ccd.usd.check import COLOR_PENETRATING, check_usd
 from warp_ccd.usd.importer import UsdMeshImport, scene_from_usd
 from warp_ccd.usd.stage import stage_time_codes

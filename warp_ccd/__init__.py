@@ -10,6 +10,7 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
 """
 
+from .geometry import TOLERANCE, tri_tri_edge_face, tri_tri_moller
 from .pipeline import CollisionPipeline, CollisionResult, collide
 from .preview import render_frame, save_preview
 from .scene.motion import EllipseMotion
@@ -19,7 +20,7 @@ from .stages.broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
 from .stages.bvh import SceneBVH
 from .stages.bvh_build import build_tree
 from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .stages.narrow_phase import TOLERANCE, NarrowPhase, tri_tri_edge_face, tri_tri_moller
+from .stages.narrow_phase import NarrowPhase
 from .usd.export import UsdAnimationWriter
 
 __version__ = "0.1.0"

@@ -1,1 +1,55 @@
-"""warp_ccd.geometry."""
+"""Device functions for your own Warp kernels: the exact triangle tests and the box helpers.
+
+Import this module into a module of Warp kernels and call its functions inside them, on ``wp.vec3``
+or ``wp.vec3d`` vertices: the tests compute in the vertices' precision, with a tolerance relative to
+the triangles' size (semantics, tolerance and degenerate triangles: :mod:`warp_ccd.geometry.triangle`).
+Compile that module without floating-point contraction, for the same verdict on every device::
+
+    import warp as wp
+    from warp_ccd import geometry
+
+    wp.set_module_options({"fuse_fp": False})
+
+    @wp.kernel
+    def meet(a: wp.array2d[wp.vec3], b: wp.array2d[wp.vec3], hit: wp.array[wp.int32]):
+        k = wp.tid()
+        if geometry.tri_tri_moller(a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2], geometry.TOLERANCE):
+            hit[k] = 1
+
+Boxes are float32 ``wp.vec3`` corners: :func:`boxes_overlap` tests two closed boxes, :func:`box_lower32` /
+:func:`box_upper32` round a corner outward to float32, :func:`vertex_bounds` bounds a run of vertices.
+"""
+
+from .box import BOX_EMPTY, box_lower32, box_upper32, boxes_overlap, vertex_bounds
+from .triangle import (
+    CONTACT_AREA,
+    CONTACT_NONE,
+    CONTACT_SEGMENT,
+    METHOD_EDGE_FACE,
+    METHOD_MOLLER,
+    TOLERANCE,
+    crossing_depth,
+    tri_tri_edge_face,
+    tri_tri_moller,
+    tri_tri_segment,
+    tri_tri_test,
+)
+
+__all__ = [
+    "BOX_EMPTY",
+    "CONTACT_AREA",
+    "CONTACT_NONE",
+    "CONTACT_SEGMENT",
+    "METHOD_EDGE_FACE",
+    "METHOD_MOLLER",
+    "TOLERANCE",
+    "box_lower32",
+    "box_upper32",
+    "boxes_overlap",
+    "crossing_depth",
+    "tri_tri_edge_face",
+    "tri_tri_moller",
+    "tri_tri_segment",
+    "tri_tri_test",
+    "vertex_bounds",
+]

@@ -1,6 +1,6 @@
 """Penetrating or touching: whether two surfaces cross where their triangles meet, and how deep.
 
-The exact test (:mod:`~warp_ccd.stages.narrow_phase`) finds every pair of closed triangles that meet.
+The exact test (:mod:`~warp_ccd.geometry.triangle`) finds every pair of closed triangles that meet.
 Whether two *surfaces* pass through each other is a question about the surfaces, not about how
 they are cut into triangles: a crate standing on a floor touches it wherever the floor's grid
 lines fall, and a crate sunk into it crosses it wherever they fall. This module decides it from
@@ -40,7 +40,9 @@ Nothing lies behind what has no side: a degenerate triangle (a sliver, a segment
 pairs only touch, the surfaces' crossings are decided at its neighbours), a *two-sided* face (one
 listed twice, as assets draw both sides of a sheet), an open boundary, a non-manifold edge, or a
 fold whose neighbour is degenerate or two-sided. Closed shapes wound inside out are turned round
-(:func:`shape_sides`); open ones are taken as wound.
+(:func:`~warp_ccd.stages.surface.shape_sides`); open ones are taken as wound. The surfaces' topology
+(neighbours across edges, vertex fans, two-sided faces, sides) and the side of a point at its
+nearest feature come from :mod:`~warp_ccd.stages.surface`.
 
 **Depth** of a crossing pair: how far a vertex of either triangle lies behind the other object's
 surface, its distance to the nearest point of all that object's triangles (found down the
@@ -50,8 +52,9 @@ open edge or vertex lies beyond the surface's rim, not behind it. A vertex pokin
 face has depth ``h`` however the face is cut; a crate sunk ``h`` into a floor, ``h``. Where the
 surfaces cross with no vertex behind the other (two sheets crossing between their vertices,
 flush faces), the depth is the pair's local crossing depth
-(:func:`~warp_ccd.stages.narrow_phase.crossing_depth`) capped by the object pair's deepest vertex, at
-least the tolerance: a crossing never has depth 0.
+(:func:`~warp_ccd.geometry.triangle.crossing_depth`; of a scene's pairs, :func:`pair_crossing_depth`)
+capped by the object pair's deepest vertex, at least the tolerance: a crossing never has depth 0.
+
 """
 
 from __future__ import annotations
@@ -62,20 +65,22 @@ import numpy as np
 import warp as wp
 
 from ..geometry.precision import precision_overloads
-from ..scene.scene import MeshTopology, mesh_triangle
-from .bvh import SceneBVH, TreeView
-from .narrow_phase import (
-    TOLERANCE,
+from ..geometry.primitives import (
+    _closest_on_triangle,
     _common_part,
     _max_edge,
     _pick,
     _plane_section,
     _snap,
     _unit_normal,
-    crossing_depth,
 )
+from ..geometry.triangle import TOLERANCE, crossing_depth
+from ..scene.scene import MeshTopology, mesh_triangle
+from .bvh import SceneBVH, TreeView
+from .narrow_phase import _pair_triangles
+from .surface import SurfaceTopology, _local_triangle, _neighbour, _side_at, surface_topology
 
-__all__ = ["CrossingClassifier", "SurfaceTopology", "shape_sides", "surface_topology"]
+__all__ = ["CrossingClassifier", "pair_crossing_depth"]
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -85,274 +90,6 @@ SURFACE_FOLD = wp.constant(1)
 """A surface met along an edge with a neighbour across it: two rays, two normals."""
 SURFACE_OPEN = wp.constant(2)
 """A surface met along a boundary (or non-manifold) edge: one ray, nothing behind it."""
-
-
-@wp.struct
-class SurfaceTopology:
-    """Neighbours and vertex fans of every shape's triangles, for the sides of a surface.
-
-    ``neighbour[shape_triangle_start[s] + t][k]``: the local triangle across edge ``k`` (vertices
-    ``k``, ``k + 1``) of triangle ``t`` of shape ``s``, -1 on a boundary or non-manifold edge.
-    The fan of local vertex ``v`` of shape ``s``: local triangles ``fan[fan_start[g]:fan_start[g + 1]]``
-    with ``g = shape_vertex_start[s] + v``; ``vertex_open[g]`` 1 on a boundary. ``two_sided[t]`` (as
-    ``neighbour``) 1 for a triangle listed twice in its shape (a two-sided sheet: nothing behind it;
-    the edge joining it to its twin is open). ``shape_side[s]``: 1, or -1 for a closed solid wound
-    inside out (:func:`shape_sides`), which turns its normals the right way round.
-    """
-
-    neighbour: wp.array[wp.vec3i]
-    two_sided: wp.array[wp.int32]
-    vertex_open: wp.array[wp.int32]
-    shape_side: wp.array[wp.float64]
-    shape_vertex_start: wp.array[wp.int32]
-    fan_start: wp.array[wp.int32]
-    fan: wp.array[wp.int32]
-
-
-def surface_topology(scene) -> SurfaceTopology:
-    """Neighbours across edges and vertex fans of all the scene's shapes, built at once (numpy).
-
-    Args:
-        scene: a :class:`~warp_ccd.scene.scene.Scene`.
-
-    Returns:
-        The :class:`SurfaceTopology` on the scene's device.
-    """
-    tri_local = scene.shapes.triangles.astype(np.int64).reshape(-1, 3)
-    t_start = scene.shape_triangle_start_np.astype(np.int64)
-    v_start = scene.shape_vertex_start_np.astype(np.int64)
-    num_tri = len(tri_local)
-    tri_shape = np.repeat(np.arange(len(t_start) - 1), np.diff(t_start))
-    tri = tri_local + v_start[tri_shape][:, None]  # shape-vertex ids, unique over all shapes
-    num_vertices = int(v_start[-1])
-    # Edges k = (k, k + 1): a manifold edge is used by exactly two triangles.
-    e0 = tri.reshape(-1)
-    e1 = np.roll(tri, -1, axis=1).reshape(-1)
-    key = np.minimum(e0, e1) * max(num_vertices, 1) + np.maximum(e0, e1)
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    starts = np.ones(len(key), bool)
-    starts[1:] = sorted_key[1:] != sorted_key[:-1]
-    group = np.cumsum(starts) - 1
-    size = np.bincount(group)[group]
-    partner = np.full(len(key), -1, np.int64)
-    two = np.nonzero((size == 2) & starts)[0]
-    partner[order[two]] = order[two + 1]
-    partner[order[two + 1]] = order[two]
-    neighbour = np.where(partner >= 0, partner // 3, -1)
-    # Two-sided faces: a triangle listed twice (its twin reversed or not) is a sheet of no thickness.
-    by_corners = np.sort(tri, axis=1)
-    _, twin_group, twin_count = np.unique(by_corners, axis=0, return_inverse=True, return_counts=True)
-    two_sided = twin_count[twin_group.reshape(-1)] > 1
-    # A rim edge of a two-sided sheet joins the face to its own twin: an open edge, not a fold.
-    across = np.maximum(neighbour, 0)
-    own_twin = (neighbour >= 0) & (twin_group.reshape(-1)[across] == np.repeat(twin_group.reshape(-1), 3))
-    neighbour = np.where(own_twin, -1, neighbour)
-    open_edge = neighbour < 0
-    neighbour = np.where(neighbour >= 0, neighbour - t_start[tri_shape.repeat(3)], -1)
-    vertex_open = np.zeros(num_vertices, bool)
-    vertex_open[e0[open_edge]] = True
-    vertex_open[e1[open_edge]] = True
-    # Fans: the triangles at each shape vertex, as local triangle ids.
-    corner = tri.reshape(-1)
-    by_vertex = np.argsort(corner, kind="stable")
-    fan_start = np.zeros(num_vertices + 1, np.int64)
-    np.cumsum(np.bincount(corner, minlength=num_vertices), out=fan_start[1:])
-    fan = (by_vertex // 3) - t_start[tri_shape[by_vertex // 3]]
-    side = shape_sides(scene.shapes.vertices.reshape(-1, 3), tri, tri_shape, len(t_start) - 1, open_edge)
-    d = scene.device
-    s = SurfaceTopology()
-    s.neighbour = wp.array(neighbour.reshape(num_tri, 3).astype(np.int32), dtype=wp.vec3i, device=d)
-    s.two_sided = wp.array(two_sided.astype(np.int32), dtype=wp.int32, device=d)
-    s.vertex_open = wp.array(vertex_open.astype(np.int32), dtype=wp.int32, device=d)
-    s.shape_side = wp.array(side, dtype=wp.float64, device=d)
-    s.shape_vertex_start = scene.shape_vertex_start
-    s.fan_start = wp.array(fan_start.astype(np.int32), dtype=wp.int32, device=d)
-    s.fan = wp.array(fan.astype(np.int32), dtype=wp.int32, device=d)
-    return s
-
-
-def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, num_shapes: int,
-                open_edge: np.ndarray) -> np.ndarray:
-    """Which way each shape faces: -1 for a solid wound inside out, else 1.
-
-    A closed shape (no open edge) whose signed volume, its triangles' cones from its centroid, is
-    negative has its normals pointing in: it is turned round. Open surfaces (a floor, a cloth, a
-    terrain, a solid with a hole) are taken as wound: their volume says nothing of their side.
-
-    Args:
-        vertices: ``(V, 3)`` all shapes' vertices; tri: ``(T, 3)`` int64 indices into them.
-        tri_shape: ``(T,)`` shape of each triangle; num_shapes: how many shapes.
-        open_edge: ``(T * 3,)`` bool, edge ``k`` of triangle ``t`` at ``3 t + k`` is open.
-
-    Returns:
-        ``(num_shapes,)`` float64, 1 or -1.
-    """
-    v = np.asarray(vertices, np.float64)
-    counts = np.bincount(tri_shape, minlength=num_shapes).astype(np.float64)
-    centre = np.zeros((num_shapes, 3))
-    corners = v[tri].mean(axis=1)
-    for axis in range(3):
-        centre[:, axis] = np.bincount(tri_shape, corners[:, axis], minlength=num_shapes) / np.maximum(counts, 1)
-    x = v[tri] - centre[tri_shape][:, None, :]
-    volume = np.bincount(tri_shape, np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])),
-                         minlength=num_shapes)
-    open_edges = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.float64), minlength=num_shapes)
-    return np.where((volume < 0) & (open_edges == 0), -1.0, 1.0)
-
-
-@wp.func
-def _local_triangle(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, o: wp.vec3d):
-    """Triangle ``tri`` of object ``obj`` in float64, relative to ``o``, and its local vertex ids."""
-    x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
-    s = mesh.object_shape[obj]
-    idx = mesh.shape_triangle[mesh.shape_triangle_start[s] + tri]
-    return wp.vec3d(x0) - o, wp.vec3d(x1) - o, wp.vec3d(x2) - o, idx
-
-
-@wp.func
-def _neighbour(
-    mesh: MeshTopology,
-    surface: SurfaceTopology,
-    world_vertex: wp.array[Any],
-    obj: int,
-    tri: int,
-    idx: wp.vec3i,
-    k: int,
-    o: wp.vec3d,
-    tol_rel: wp.float64,
-):
-    """The triangle across edge ``k`` of ``tri``: ``(found, normal oriented as the triangle's, its
-    vertex off the edge)``; ``found`` 1, or 0 on a boundary or non-manifold edge, 2 for a
-    degenerate or two-sided neighbour (no side)."""
-    s = mesh.object_shape[obj]
-    nbr = surface.neighbour[mesh.shape_triangle_start[s] + tri][k]
-    if nbr < 0:
-        return 0, wp.vec3d(), wp.vec3d()
-    y0, y1, y2, jdx = _local_triangle(mesh, world_vertex, obj, nbr, o)
-    n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
-    if degenerate or surface.two_sided[mesh.shape_triangle_start[s] + nbr] != 0:
-        return 2, wp.vec3d(), wp.vec3d()
-    i0 = idx[k]
-    i1 = idx[(k + 1) % 3]
-    # Consistent orientation walks the shared edge the other way round.
-    same_way = (jdx[0] == i0 and jdx[1] == i1) or (jdx[1] == i0 and jdx[2] == i1) or (jdx[2] == i0 and jdx[0] == i1)
-    if same_way:
-        n = -n
-    n = n * surface.shape_side[s]
-    y = y0
-    if jdx[1] != i0 and jdx[1] != i1:
-        y = y1
-    if jdx[2] != i0 and jdx[2] != i1:
-        y = y2
-    return 1, n, y
-
-
-@wp.func
-def _closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d):
-    """Closest point of triangle ``abc`` to ``p`` and its feature: 0 the face, 1-3 vertex 0-2,
-    4-6 edge 0-2 (edge ``k`` joins vertices ``k`` and ``k + 1``). Ericson, Real-Time Collision
-    Detection, 5.1.5."""
-    zero = wp.float64(0.0)
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = wp.dot(ab, ap)
-    d2 = wp.dot(ac, ap)
-    if d1 <= zero and d2 <= zero:
-        return a, 1
-    bp = p - b
-    d3 = wp.dot(ab, bp)
-    d4 = wp.dot(ac, bp)
-    if d3 >= zero and d4 <= d3:
-        return b, 2
-    vc = d1 * d4 - d3 * d2
-    if vc <= zero and d1 >= zero and d3 <= zero:
-        return a + ab * (d1 / (d1 - d3)), 4
-    cp = p - c
-    d5 = wp.dot(ab, cp)
-    d6 = wp.dot(ac, cp)
-    if d6 >= zero and d5 <= d6:
-        return c, 3
-    vb = d5 * d2 - d1 * d6
-    if vb <= zero and d2 >= zero and d6 <= zero:
-        return a + ac * (d2 / (d2 - d6)), 6
-    va = d3 * d6 - d5 * d4
-    if va <= zero and (d4 - d3) >= zero and (d5 - d6) >= zero:
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), 5
-    denom = wp.float64(1.0) / (va + vb + vc)
-    return a + ab * (vb * denom) + ac * (vc * denom), 0
-
-
-@wp.func
-def _fan_normal(
-    mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, v: int, o: wp.vec3d
-):
-    """Angle-weighted normal of the fan of local vertex ``v`` of object ``obj`` (not normalised)."""
-    s = mesh.object_shape[obj]
-    g = surface.shape_vertex_start[s] + v
-    acc = wp.vec3d()
-    for f in range(surface.fan_start[g], surface.fan_start[g + 1]):
-        x0, x1, x2, idx = _local_triangle(mesh, world_vertex, obj, surface.fan[f], o)
-        n = wp.cross(x1 - x0, x2 - x0)
-        ln = wp.length(n)
-        # The fan triangle's edges from its corner at v.
-        e1 = x1 - x0
-        e2 = x2 - x0
-        if idx[1] == v:
-            e1 = x2 - x1
-            e2 = x0 - x1
-        if idx[2] == v:
-            e1 = x0 - x2
-            e2 = x1 - x2
-        l1 = wp.length(e1)
-        l2 = wp.length(e2)
-        if ln > wp.float64(0.0) and l1 > wp.float64(0.0) and l2 > wp.float64(0.0):
-            cosine = wp.clamp(wp.dot(e1, e2) / (l1 * l2), wp.float64(-1.0), wp.float64(1.0))
-            acc = acc + n * (wp.acos(cosine) / ln)
-    return acc * surface.shape_side[s]
-
-
-@wp.func
-def _signed_distance(
-    mesh: MeshTopology,
-    surface: SurfaceTopology,
-    world_vertex: wp.array[Any],
-    obj: int,
-    tri: int,
-    idx: wp.vec3i,
-    x0: wp.vec3d,
-    x1: wp.vec3d,
-    x2: wp.vec3d,
-    n: wp.vec3d,
-    degenerate: bool,
-    o: wp.vec3d,
-    tol_rel: wp.float64,
-    p: wp.vec3d,
-):
-    """Distance from ``p`` to triangle ``tri`` of ``obj``, negative when ``p`` lies behind the
-    surface there (by the pseudo-normal of the closest point's feature); positive where there is
-    no side: a degenerate or two-sided triangle, a closest point on an open edge or vertex (``p``
-    lies beyond the surface's rim, not behind it)."""
-    c, feature = _closest_on_triangle(p, x0, x1, x2)
-    dist = wp.length(p - c)
-    s = mesh.object_shape[obj]
-    if degenerate or surface.two_sided[mesh.shape_triangle_start[s] + tri] != 0:
-        return dist
-    pn = n
-    if feature >= 4:
-        found, n2, y = _neighbour(mesh, surface, world_vertex, obj, tri, idx, feature - 4, o, tol_rel)
-        if found != 1:
-            return dist
-        pn = n + n2
-    elif feature >= 1:
-        v = idx[feature - 1]
-        if surface.vertex_open[surface.shape_vertex_start[s] + v] != 0:
-            return dist
-        pn = _fan_normal(mesh, surface, world_vertex, obj, v, o)
-    if wp.dot(p - c, pn) < wp.float64(0.0):
-        return -dist
-    return dist
 
 
 @wp.func
@@ -626,23 +363,6 @@ def _nearer(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int,
 
 
 @wp.func
-def _side_at(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
-             p: wp.vec3d, tol_rel: wp.float64):
-    """-1 when ``p`` lies behind the surface of ``obj`` at its nearest point, on triangle ``tri``
-    (the closest feature's pseudo-normal), else 1."""
-    if tri < 0:
-        return wp.float64(1.0)
-    zero = wp.vec3d()
-    y0, y1, y2, idx = _local_triangle(mesh, world_vertex, obj, tri, zero)
-    n, degenerate = _unit_normal(y0, y1, y2, tol_rel)
-    n = n * surface.shape_side[mesh.object_shape[obj]]
-    d = _signed_distance(mesh, surface, world_vertex, obj, tri, idx, y0, y1, y2, n, degenerate, zero, tol_rel, p)
-    if d < wp.float64(0.0):
-        return wp.float64(-1.0)
-    return wp.float64(1.0)
-
-
-@wp.func
 def _entry(pair: wp.array[wp.vec4i], vertex: wp.array2d[wp.int32], world_vertex: wp.array[Any], k: int, i: int):
     """Vertex ``i`` of row ``k`` (0-2 of its first triangle, 3-5 of its second): its world position
     and the other object."""
@@ -760,6 +480,48 @@ def _depth_tree_kernel(
 _DEPTH_ALL = precision_overloads(_depth_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _DEPTH_TREE = precision_overloads(_depth_tree_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
                                                                           "pose": wp.array[t]})
+
+
+@wp.kernel
+def _crossing_depth_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    pair: wp.array[wp.vec4i],
+    tol_rel: wp.float64,
+    # Outputs
+    depth: wp.array[wp.float64],
+):
+    """One thread per triangle pair ``(obj_a, tri_a, obj_b, tri_b)``: :func:`crossing_depth`."""
+    k = wp.tid()
+    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, pair[k])
+    depth[k] = wp.float64(crossing_depth(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)))
+
+
+_CROSSING_DEPTH = precision_overloads(_crossing_depth_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+
+
+def pair_crossing_depth(scene, pairs: wp.array, tolerance: float = TOLERANCE, out: wp.array | None = None) -> wp.array:
+    """:func:`crossing_depth` of triangle pairs of a scene, on its device.
+
+    Args:
+        scene: the :class:`~warp_ccd.scene.scene.Scene` (its world vertices as they are now).
+        pairs: ``(M,)`` ``wp.vec4i`` rows ``(obj_a, tri_a, obj_b, tri_b)`` on the scene's device
+            (a result's ``device_triangle_pairs``).
+        tolerance: relative tolerance of the triangle test.
+        out: ``(>= M,)`` float64 array to write to (default: a new one).
+
+    Returns:
+        ``(M,)`` float64 depths, scene units (a view of ``out`` when given).
+    """
+    m = int(pairs.shape[0])
+    if m == 0:
+        return wp.zeros(0, dtype=wp.float64, device=scene.device)
+    if out is None or out.shape[0] < m:
+        out = wp.zeros(m, dtype=wp.float64, device=scene.device)
+    wp.launch(_CROSSING_DEPTH[scene.precision], dim=m,
+              inputs=[scene.topology, scene.world_vertex, pairs, float(tolerance)], outputs=[out],
+              device=scene.device)
+    return out[:m]
 
 
 def _segment_max(values: np.ndarray, keys: np.ndarray) -> np.ndarray:

@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry.triangle import TOLERANCE
 from ..output import PendingFile, check_output_path
 from ..stages.crossing import CrossingClassifier
-from ..stages.narrow_phase import TOLERANCE
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 
 __all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
