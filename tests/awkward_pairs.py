@@ -180,13 +180,13 @@ def verdicts(precision: str, device, swap: bool = False) -> dict:
     import warp as wp
 
     from warp_ccd.geometry.precision import precision_types
-    from warp_ccd.stages.narrow_phase import (
+    from warp_ccd.geometry.triangle import (
         CONTACT_SEGMENT,
-        NARROW_METHODS,
         TOLERANCE,
         tri_tri_batch_kernel,
         tri_tri_segment_batch_kernel,
     )
+    from warp_ccd.stages.narrow_phase import NARROW_METHODS
 
     ta, tb = awkward_pairs(precision)
     if swap:

@@ -32,6 +32,7 @@ import warp_ccd as wc  # noqa: E402
 from warp_ccd.bench.meshes import parse_triangles  # noqa: E402
 from warp_ccd.bench.report import environment, write_json  # noqa: E402
 from warp_ccd.cli.common import resolve_device  # noqa: E402
+from warp_ccd.geometry import triangle  # noqa: E402
 from warp_ccd.geometry.precision import precision_types  # noqa: E402
 from warp_ccd.stages import narrow_phase  # noqa: E402
 
@@ -60,7 +61,8 @@ def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
 
 
 def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
-    wp.set_module_options({"fuse_fp": fuse}, module=narrow_phase)
+    for module in (narrow_phase, triangle):  # the stage's kernels and the batch kernel
+        wp.set_module_options({"fuse_fp": fuse}, module=module)
     rows = []
     narrow = pipe.narrow
     candidates = pipe.mid.candidates
@@ -85,8 +87,8 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
         for method in awkward_pairs.METHODS:
 
             def batch(method=method):
-                wp.launch(narrow_phase.tri_tri_batch_kernel, dim=len(ta),
-                          inputs=[a, b, narrow_phase.NARROW_METHODS[method], wp.float64(narrow_phase.TOLERANCE)],
+                wp.launch(triangle.tri_tri_batch_kernel, dim=len(ta),
+                          inputs=[a, b, narrow_phase.NARROW_METHODS[method], wp.float64(triangle.TOLERANCE)],
                           outputs=[hit], device=device)
 
             lo, med = gpu_ms(batch, device, args.repeats)
@@ -118,7 +120,8 @@ def main(argv=None) -> int:
     rows = []
     for fuse in (False, True):  # the shipped build first, then with contraction
         rows += measure(fuse, args, device, scene, pipe)
-    wp.set_module_options({"fuse_fp": False}, module=narrow_phase)
+    for module in (narrow_phase, triangle):
+        wp.set_module_options({"fuse_fp": False}, module=module)
     print(f"narrow phase on {device} ({getattr(device, 'name', '')}): fuse_fp off (shipped) vs on")
     print(f"{'workload':<28}{'precision':<10}{'method':<11}{'pairs':>10}{'hits':>10}"
           f"{'ms off':>10}{'ms on':>10}{'on/off':>8}{'differ from CPU off / on':>28}")

@@ -54,7 +54,6 @@ surfaces cross with no vertex behind the other (two sheets crossing between thei
 flush faces), the depth is the pair's local crossing depth
 (:func:`~warp_ccd.geometry.triangle.crossing_depth`; of a scene's pairs, :func:`pair_crossing_depth`)
 capped by the object pair's deepest vertex, at least the tolerance: a crossing never has depth 0.
-
 """
 
 from __future__ import annotations
