@@ -64,12 +64,12 @@ import numpy as np
 from tqdm import tqdm
 
 from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
+from ..options import integer_option
 from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
 from .meshes import MeshData, read_mesh
 from .poses import finite_matrix_poses, matrix_poses, similarity_split
 from .stage import MAX_FRAMES, open_stage
-from .workers import run_pose_workers
 
 __all__ = ["PARALLEL_LOOKUPS", "UsdMeshImport", "scene_from_usd"]
 
@@ -573,6 +573,9 @@ class UsdMeshImport:
         paths = [str(self._prims[h].GetPath()) for h in self._obj_handle[objects].tolist()]
         chunks = [c for c in np.array_split(np.arange(len(self._codes)), workers) if c.size]
         tasks = [(layer.realPath, paths, self.times[c], bake) for c in chunks]
+        # Imported here, not with the package: ``python -m warp_ccd.usd.workers`` runs a module not imported yet.
+        from .workers import run_pose_workers
+
         parts = run_pose_workers(tasks, self._progress)
         finite = np.concatenate([p[3] for p in parts])
         if not finite.all():
@@ -622,8 +625,7 @@ class UsdMeshImport:
                 not finite, or reach beyond what the scene's precision resolves at that time
                 (naming the prim).
         """
-        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < len(self.times):
-            raise ValueError(f"set_frame: expected a frame index in [0, {len(self.times)}), got {frame!r}")
+        integer_option("set_frame: frame", frame, low=0, high=len(self.times) - 1)
         scene = self.scene
         a, b = self._num_static, self._num_rigid
         if b > a:
