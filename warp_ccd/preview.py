@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .options import integer_option
 from .output import PendingFile, check_output_path
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -162,9 +163,8 @@ class PreviewRenderer:
 
     def __init__(self, scene, width: int = 640, height: int = 480, *, fov: float = 40.0,
                  view_direction=(1.0, 0.75, 1.35), margin: float = 1.1, device=None):
-        if not isinstance(width, (int, np.integer)) or not isinstance(height, (int, np.integer)) \
-                or width < 1 or height < 1:
-            raise ValueError(f"image size must be positive integers, got {width!r} x {height!r}")
+        integer_option("width", width, low=1)
+        integer_option("height", height, low=1)
         if not 1.0 <= fov < 170.0:
             raise ValueError(f"fov must lie in [1, 170) degrees, got {fov!r}")
         self.scene = scene

@@ -39,6 +39,7 @@ from ..geometry.precision import (
     shape_radius,
     triangle_size,
 )
+from ..options import integer_option, number_option
 from .motion import EllipseMotion, advance_time
 from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
@@ -393,12 +394,9 @@ class Scene:
             device: Warp device.
             precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
         """
-        if isinstance(num_objects, bool) or not isinstance(num_objects, (int, np.integer)) or num_objects < 0:
-            raise ValueError(f"num_objects must be a non-negative integer, got {num_objects!r}")
-        if not isinstance(density, (int, float, np.number)) or not 0.0 < density < 1.0:
-            raise ValueError(f"density must lie in (0, 1), got {density!r}")
-        if isinstance(seed, bool) or not (seed is None or isinstance(seed, (int, np.integer)) and seed >= 0):
-            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        integer_option("num_objects", num_objects, low=0)
+        number_option("density", density, low=0.0, high=1.0, low_open=True, high_open=True)
+        integer_option("seed", seed, low=0, allow_none=True)
         try:
             lo, hi = (float(x) for x in size_range)
         except (TypeError, ValueError):
@@ -517,9 +515,7 @@ class Scene:
     def _seconds(dt, what: str = "advance: dt") -> float:
         if type(dt) is float and math.isfinite(dt):  # the common case, checked fast (host time of a frame)
             return dt
-        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.number)) or not np.isfinite(dt):
-            raise ValueError(f"{what} must be a finite number of seconds, got {dt!r}")
-        return float(dt)
+        return number_option(f"{what} (seconds)", dt)
 
     def advance(self, dt: float) -> None:
         """Moves time forward by ``dt`` seconds: poses, then world vertices, all in kernels."""

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..options import integer_option
+
 __all__ = [
     "SHAPES",
     "cube",
@@ -134,8 +136,7 @@ def icosphere(level: int = 1) -> tuple[np.ndarray, np.ndarray]:
     Returns:
         ``(vertices (n, 3) float32, triangles (20 * 4**level, 3) int32)``.
     """
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= 8:
-        raise ValueError(f"icosphere: level must be an integer in [0, 8], got {level!r}")
+    integer_option("icosphere: level", level, low=0, high=8)
     v, t = _icosahedron_raw()
     v = list(v / np.linalg.norm(v, axis=1, keepdims=True))
     t = [list(tri) for tri in t]

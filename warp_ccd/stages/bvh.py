@@ -51,6 +51,7 @@ import warp as wp
 from .._deprecated import renamed_arguments
 from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
+from ..options import integer_option, is_integer
 from ..scene.scene import MeshTopology
 from .buffers import packed_upload, upper_bound
 from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild
@@ -481,14 +482,11 @@ class SceneBVH:
         if renamed:  # instance_refit_max_nodes, as it was called until 0.1
             object_refit_max_nodes = renamed_arguments("SceneBVH", renamed, {
                 "instance_refit_max_nodes": "object_refit_max_nodes"})["object_refit_max_nodes"]
-        if not 1 <= leaf_size <= LEAF_SIZE_MAX:
-            raise ValueError(f"leaf_size must lie in [1, {LEAF_SIZE_MAX}], got {leaf_size}")
-        if isinstance(cut_depth, bool) or not isinstance(cut_depth, (int, np.integer)) or not 0 <= cut_depth <= 16:
-            raise ValueError(f"cut_depth must be an integer in [0, 16], got {cut_depth!r}")
+        integer_option("leaf_size", leaf_size, low=1, high=LEAF_SIZE_MAX)
+        integer_option("cut_depth", cut_depth, low=0, high=16)
         if isinstance(object_bounds, str) and object_bounds in OBJECT_BOUNDS:
             vertices_max = OBJECT_BOUNDS[object_bounds]
-        elif (not isinstance(object_bounds, (bool, str)) and isinstance(object_bounds, (int, np.integer))
-              and 0 <= object_bounds < 2**31):
+        elif is_integer(object_bounds) and 0 <= object_bounds < 2**31:
             vertices_max = int(object_bounds)
         else:
             raise ValueError(f"object_bounds must be one of {tuple(OBJECT_BOUNDS)} or a vertex count in "

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry.triangle import TOLERANCE
+from ..options import number_option
 from ..output import PendingFile, check_output_path
 from ..stages.crossing import CrossingClassifier
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
@@ -321,9 +322,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     from .importer import UsdMeshImport
     from .stage import open_stage, require_layers, stage_time_codes
 
-    if isinstance(min_depth, bool) or not isinstance(min_depth, (int, float, np.number)) \
-            or not np.isfinite(min_depth) or min_depth < 0:
-        raise ValueError(f"min_depth must be a finite number >= 0, got {min_depth!r}")
+    number_option("min_depth", min_depth, low=0.0)
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
     missing = require_layers(stage, allow_missing)

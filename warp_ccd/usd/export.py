@@ -41,6 +41,7 @@ import numpy as np
 import warp as wp
 
 from ..geometry.box import vertex_bounds
+from ..options import integer_option, number_option
 from ..output import PendingFile, check_output_path
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -175,13 +176,10 @@ class UsdAnimationWriter:
     def __init__(self, path, scene, *, fps: float = 60.0, aabb: bool = False, segments: bool = False,
                  up_axis: str = "Y", meters_per_unit: float = 1.0):
         self.path, self._ext = validate_stage_path(path)
-        if isinstance(fps, bool) or not isinstance(fps, (int, float, np.number)) or not np.isfinite(fps) or fps <= 0:
-            raise ValueError(f"fps must be a positive number, got {fps!r}")
+        number_option("fps", fps, low=0.0, low_open=True)
         if up_axis not in ("Y", "Z"):
             raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
-        if not isinstance(meters_per_unit, (int, float, np.number)) or not np.isfinite(meters_per_unit) \
-                or meters_per_unit <= 0:
-            raise ValueError(f"meters_per_unit must be a positive number, got {meters_per_unit!r}")
+        number_option("meters_per_unit", meters_per_unit, low=0.0, low_open=True)
         for name in ("object_pose", "object_scale", "world_vertex", "shape_meshes"):
             if not hasattr(scene, name):
                 raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
@@ -320,8 +318,7 @@ class UsdAnimationWriter:
         """
         if self.closed:
             raise ValueError("add_frame: the writer is closed")
-        if isinstance(frame_index, bool) or not isinstance(frame_index, (int, np.integer)) or frame_index < 0:
-            raise ValueError(f"add_frame: frame_index must be a non-negative integer, got {frame_index!r}")
+        integer_option("add_frame: frame_index", frame_index, low=0)
         from pxr import Sdf, Usd
 
         colliding = self._colliding(result)
