@@ -5,7 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.stages.broad_phase import ALL_PAIRS_MAX, NXN_MAX_BOXES, make_broad_phase
+from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, ALL_PAIRS_MAX, BroadPhaseAllPairs, make_broad_phase
 
 from oracles import box_pairs_numpy
 
@@ -84,7 +84,7 @@ DISTRIBUTIONS = {
 }
 
 
-SAP_PATHS = {"sweep": 0, "all_pairs": NXN_MAX_BOXES}
+SAP_PATHS = {"sweep": 0, "all_pairs": ALL_PAIRS_LIMIT}
 """``all_pairs_max`` of :class:`BroadPhaseSAP` that makes it sweep, or test all pairs, at any size
 (by default a small scene tests all pairs on CUDA and sweeps on the CPU)."""
 
@@ -102,7 +102,7 @@ def pairs_of(method: str, lo, hi, device) -> np.ndarray:
     return got[np.lexsort((got[:, 1], got[:, 0]))]
 
 
-@pytest.mark.parametrize("method", ["sap", "sap_sweep", "sap_all_pairs", "nxn"])
+@pytest.mark.parametrize("method", ["sap", "sap_sweep", "sap_all_pairs", "all_pairs"])
 @pytest.mark.parametrize("dist", sorted(DISTRIBUTIONS))
 def test_equals_numpy(device, method, dist):
     rng = np.random.default_rng(abs(hash(dist)) % 2**32)
@@ -138,7 +138,7 @@ def test_sap_either_side_of_16_bit_keys(device, n):
 def test_tiny_counts(device, n):
     rng = np.random.default_rng(n)
     lo, hi = boxes_random(rng, n, spread=0.1)
-    for method in ("sap", "sap_sweep", "sap_all_pairs", "nxn"):
+    for method in ("sap", "sap_sweep", "sap_all_pairs", "all_pairs"):
         got = pairs_of(method, lo.reshape(-1, 3), hi.reshape(-1, 3), device)
         assert np.array_equal(got.reshape(-1, 2), box_pairs_numpy(lo, hi).reshape(-1, 2))
 
@@ -170,7 +170,7 @@ def test_capacity_one_is_complete(device):
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
     for bp in (wc.BroadPhaseSAP(device=device, all_pairs_max=0), wc.BroadPhaseSAP(device=device, all_pairs_max=800),
-               wc.BroadPhaseNxN(device=device)):
+               BroadPhaseAllPairs(device=device)):
         for b in bp.counters:
             b._allocate(1)
         got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)
@@ -217,7 +217,7 @@ def test_bad_input(lower, upper, match):
         wc.broad_phase_pairs(lower, upper)
 
 
-@pytest.mark.parametrize("value", [-1, NXN_MAX_BOXES + 1, 2.5, True, "all"])
+@pytest.mark.parametrize("value", [-1, ALL_PAIRS_LIMIT + 1, 2.5, True, "all"])
 def test_bad_all_pairs_max(value):
     with pytest.raises(ValueError, match="all_pairs_max"):
         wc.BroadPhaseSAP(device="cpu", all_pairs_max=value)
@@ -241,11 +241,26 @@ def test_sap_all_pairs_below_the_limit(device):
 
 
 def test_unknown_method():
-    with pytest.raises(ValueError, match="'sap' or 'nxn'"):
+    with pytest.raises(ValueError, match=r"^broad phase method must be 'sap' or 'all_pairs' \(or 'nxn', an alias\), "
+                                         r"got 'bvh'$"):
         wc.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")
 
 
-@pytest.mark.parametrize("method", ["sap", "nxn"])
+def test_old_names():
+    """``"nxn"``, the all-pairs method's old name, is an alias; the old names of its class and limit
+    warn and reach the new ones."""
+    import warp_ccd.stages.broad_phase as broad_phase
+
+    assert type(make_broad_phase("nxn", device="cpu")) is BroadPhaseAllPairs
+    with pytest.warns(DeprecationWarning, match="BroadPhaseNxN is deprecated"):
+        assert broad_phase.BroadPhaseNxN is BroadPhaseAllPairs
+    with pytest.warns(DeprecationWarning, match="NXN_MAX_BOXES is deprecated"):
+        assert broad_phase.NXN_MAX_BOXES == ALL_PAIRS_LIMIT
+    with pytest.raises(AttributeError):
+        broad_phase.BroadPhaseN2  # noqa: B018
+
+
+@pytest.mark.parametrize("method", ["sap", "all_pairs"])
 def test_find_pairs_frame_after_frame(device, method):
     """A broad phase run alone, frame after frame (a CUDA graph on CUDA), finds the numpy truth as
     the boxes move and the pair buffer grows."""

@@ -238,15 +238,15 @@ def test_precision_validation():
 
 def test_counters_do_not_wrap(device):
     """Counters are int64: past 2**31 items a stage raises OverflowError instead of wrapping."""
-    from warp_ccd.stages.broad_phase import BroadPhaseNxN
+    from warp_ccd.stages.broad_phase import BroadPhaseAllPairs
     from warp_ccd.stages.buffers import CounterRead, GrowableBuffer
 
     lo = np.zeros((4, 3), np.float32)
     hi = np.ones((4, 3), np.float32)
     pairs = GrowableBuffer(wp.vec2i, 2, device, "pairs")
     pairs.count.assign(np.array([2**31 - 3], np.int64))  # as if 2**31 - 3 pairs came before
-    BroadPhaseNxN(device=device).launch(wp.array(lo, dtype=wp.vec3, device=device),
-                                        wp.array(hi, dtype=wp.vec3, device=device), pairs)
+    BroadPhaseAllPairs(device=device).launch(wp.array(lo, dtype=wp.vec3, device=device),
+                                             wp.array(hi, dtype=wp.vec3, device=device), pairs)
     counters = CounterRead([pairs], device)
     counters.enqueue()
     with pytest.raises(OverflowError, match="pairs"):

@@ -16,7 +16,8 @@ from .preview import render_frame, save_preview
 from .scene.motion import EllipseMotion
 from .scene.scene import Scene
 from .scene.shapes import SHAPES, icosphere, shape, validate_mesh
-from .stages.broad_phase import BroadPhaseNxN, BroadPhaseSAP, broad_phase_pairs
+from .stages.broad_phase import BroadPhaseAllPairs as BroadPhaseNxN
+from .stages.broad_phase import BroadPhaseSAP, broad_phase_pairs
 from .stages.bvh import SceneBVH
 from .stages.bvh_build import build_tree
 from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH

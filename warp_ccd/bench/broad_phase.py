@@ -10,7 +10,7 @@ within ``h_i + h_j`` on every axis, so a box expects ``(N - 1) * E[(2 (h_i + h_j
 Methods, in the same run on the same boxes, each frame in turn:
 
 * ``sap``: this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP`, the reference;
-* ``nxn``: this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseNxN`, for ``N <= --nxn-max``;
+* ``nxn``: this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseAllPairs`, for ``N <= --nxn-max``;
 * ``warp_bvh``: Warp's ``wp.Bvh`` over the boxes, rebuilt every frame, one ``wp.bvh_query_aabb``
   per box (:class:`~warp_ccd.bench.peers.WarpBvhBroadPhase`);
 * ``warp_bvh_refit``: the same tree only refit every frame (boxes do not move here, so this is
@@ -47,7 +47,7 @@ from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBr
 from warp_ccd.bench.report import RESULTS, environment, write_json
 from warp_ccd.bench.timing import ModeFrames, StageTimes
 from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK, resolve_device
-from warp_ccd.stages.broad_phase import NXN_MAX_BOXES, BroadPhaseNxN, BroadPhaseSAP
+from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, BroadPhaseAllPairs, BroadPhaseSAP
 from warp_ccd.stages.buffers import GrowableBuffer
 
 METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
@@ -74,7 +74,7 @@ def make_method(name: str, device):
     if name == "sap":
         return BroadPhaseSAP(device=device)
     if name == "nxn":
-        return BroadPhaseNxN(device=device)
+        return BroadPhaseAllPairs(device=device)
     if name == "warp_bvh":
         return WarpBvhBroadPhase(device=device)
     if name == "warp_bvh_refit":
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--methods", default=",".join(METHODS),
                         help="comma-separated subset of %(default)s (default: all)")
     parser.add_argument("--nxn-max", type=_count, default=None,
-                        help=f"largest N for nxn (default: 10000 on CPU, {NXN_MAX_BOXES} on CUDA)")
+                        help=f"largest N for nxn (default: 10000 on CPU, {ALL_PAIRS_LIMIT} on CUDA)")
     parser.add_argument("--newton-max", type=_count, default=None, help="largest N for newton_sap (default: all)")
     parser.add_argument("--frames", type=int, default=5, help="timed frames (default: %(default)s)")
     parser.add_argument("--warmup", type=int, default=2,
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     if args.nxn_max is None:
-        args.nxn_max = NXN_MAX_BOXES if device.is_cuda else 10000
+        args.nxn_max = ALL_PAIRS_LIMIT if device.is_cuda else 10000
     max_n = args.max_n or (1_000_000 if device.is_cuda else 100_000)
     if args.n is None and max_n < args.min_n:
         parser.error(f"--max-n {max_n} is below --min-n {args.min_n}")

@@ -280,7 +280,7 @@ def _make_peers(scene: Scene, peers: list, ours: PipelineMethod, args, notes: li
                 if n > limit:
                     notes.append(f"nxn skipped: {n} objects > --nxn-max-objects {limit}")
                     continue
-                methods.append(PipelineMethod("warp_ccd_nxn", scene, broad_phase="nxn"))
+                methods.append(PipelineMethod("warp_ccd_nxn", scene, broad_phase="all_pairs"))
             elif peer == "newton":
                 methods.append(BroadPhaseMethod("newton_sap", NewtonBroadPhaseSAP(device=device), ours, device))
         except PeerUnavailable as exc:

@@ -5,8 +5,9 @@ Two implementations behind one interface (``launch(lower, upper, pairs)`` writes
 the buffers of its own whose counters the caller checks after it; boxes are closed, so touching
 boxes overlap):
 
-* :class:`BroadPhaseNxN`, the reference: one thread per pair index ``k < N (N - 1) / 2``. O(N^2)
-  work, exact, limited to 65,536 boxes.
+* :class:`BroadPhaseAllPairs`, the reference (method ``"all_pairs"``; ``"nxn"``, its old name, is
+  an alias): one thread per pair index ``k < N (N - 1) / 2``. O(N^2) work, exact, limited to
+  :data:`ALL_PAIRS_LIMIT` boxes.
 * :class:`BroadPhaseSAP`, the default: sort-based sweep and prune on a grid (Liu et al. 2010).
 
 Sweep and prune, as run on the device each frame:
@@ -49,7 +50,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .._deprecated import module_aliases
 from ..geometry.box import BOX_EMPTY, boxes_overlap
+from ..options import integer_option
 from .buffers import (
     ITEM_LIST_SIZE,
     CounterRead,
@@ -65,11 +68,15 @@ from .frame import CountedFrame, FrameCache, frame_mode
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["BroadPhase", "BroadPhaseNxN", "BroadPhaseSAP", "broad_phase_pairs", "find_pairs", "make_broad_phase",
-           "sap_key_bits"]
+__all__ = ["ALL_PAIRS_LIMIT", "ALL_PAIRS_MAX", "BROAD_METHODS", "BroadPhase", "BroadPhaseAllPairs", "BroadPhaseSAP",
+           "broad_phase_pairs", "find_pairs", "make_broad_phase", "sap_key_bits"]
 
-NXN_MAX_BOXES = 65536
-"""The reference enumerates pair indices in int32: at most ``65536 * 65535 / 2 < 2**31`` pairs."""
+__getattr__ = module_aliases(__name__, {"BroadPhaseNxN": "warp_ccd.stages.broad_phase:BroadPhaseAllPairs",
+                                        "NXN_MAX_BOXES": "warp_ccd.stages.broad_phase:ALL_PAIRS_LIMIT"})
+
+ALL_PAIRS_LIMIT = 65536
+"""Most boxes of the all-pairs reference (and of :attr:`BroadPhaseSAP.all_pairs_max`): it enumerates
+pair indices in int32, at most ``65536 * 65535 / 2 < 2**31`` pairs."""
 
 ALL_PAIRS_MAX = 2048
 """Default :attr:`BroadPhaseSAP.all_pairs_max` on CUDA: up to this many boxes the sweep and prune
@@ -81,7 +88,7 @@ tests all pairs in one launch."""
 
 
 @wp.kernel
-def _nxn_kernel(
+def _all_pairs_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     pair_capacity: int,
@@ -154,7 +161,7 @@ class BroadPhase:
         return self.pairs.held()
 
 
-class BroadPhaseNxN(BroadPhase):
+class BroadPhaseAllPairs(BroadPhase):
     """Reference broad phase: tests all ``N (N - 1) / 2`` pairs, one thread each.
 
     Args:
@@ -168,13 +175,13 @@ class BroadPhaseNxN(BroadPhase):
         The caller resets ``pairs`` (or not, to append) and checks its counter afterwards.
         """
         n = lower.shape[0]
-        if n > NXN_MAX_BOXES:
-            raise ValueError(f"nxn broad phase: at most {NXN_MAX_BOXES} boxes, got {n}; use method='sap'")
+        if n > ALL_PAIRS_LIMIT:
+            raise ValueError(f"all_pairs broad phase: at most {ALL_PAIRS_LIMIT} boxes, got {n}; use method='sap'")
         num_pairs = n * (n - 1) // 2
         if num_pairs == 0:
             return
         wp.launch(
-            _nxn_kernel,
+            _all_pairs_kernel,
             dim=num_pairs,
             inputs=[lower, upper, pairs.capacity],
             outputs=[pairs.data, pairs.count],
@@ -593,7 +600,7 @@ class BroadPhaseSAP(BroadPhase):
             CUDA it uses one per 256 boxes up to that (a box per thread: each box more per thread
             adds a round trip to memory).
         all_pairs_max: up to this many boxes, every pair is tested in one launch instead
-            (:class:`BroadPhaseNxN`'s kernel): a few microseconds for a small scene, where the four
+            (:class:`BroadPhaseAllPairs`' kernel): a few microseconds for a small scene, where the four
             launches and the sort's fixed cost take tens. Default :data:`ALL_PAIRS_MAX` on CUDA, 0
             on the CPU (whose threads run one by one).
     """
@@ -603,10 +610,7 @@ class BroadPhaseSAP(BroadPhase):
         super().__init__(device=device, graph=graph)
         if all_pairs_max is None:
             all_pairs_max = ALL_PAIRS_MAX if self.device.is_cuda else 0
-        if isinstance(all_pairs_max, bool) or not isinstance(all_pairs_max, (int, np.integer)) \
-                or not 0 <= all_pairs_max <= NXN_MAX_BOXES:
-            raise ValueError(f"all_pairs_max must be an integer in [0, {NXN_MAX_BOXES}], got {all_pairs_max!r}")
-        self.all_pairs_max = int(all_pairs_max)
+        self.all_pairs_max = integer_option("all_pairs_max", all_pairs_max, low=0, high=ALL_PAIRS_LIMIT)
         self.cell_scale = float(cell_scale)
         self.max_cells_per_box = int(max_cells_per_box)
         self.stats_blocks = int(stats_blocks)
@@ -658,7 +662,7 @@ class BroadPhaseSAP(BroadPhase):
         self._resize(n)
         if n <= self.all_pairs_max:  # no grid entries: their counter stays as the frame's reset left it
             if n >= 2:
-                wp.launch(_nxn_kernel, dim=n * (n - 1) // 2, inputs=[lower, upper, pairs.capacity],
+                wp.launch(_all_pairs_kernel, dim=n * (n - 1) // 2, inputs=[lower, upper, pairs.capacity],
                           outputs=[pairs.data, pairs.count], device=self.device)
             return
         if n < 2:
@@ -686,13 +690,26 @@ class BroadPhaseSAP(BroadPhase):
                         outputs=[pairs.data, pairs.count], block_dim=width, device=d)
 
 
-def make_broad_phase(method: str, *, device=None, graph: bool | None = None):
-    """``"sap"`` -> :class:`BroadPhaseSAP`, ``"nxn"`` -> :class:`BroadPhaseNxN`."""
-    if method == "sap":
-        return BroadPhaseSAP(device=device, graph=graph)
-    if method == "nxn":
-        return BroadPhaseNxN(device=device, graph=graph)
-    raise ValueError(f"broad phase method must be 'sap' or 'nxn', got {method!r}")
+BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": BroadPhaseAllPairs}
+"""Broad-phase classes by method name (:func:`make_broad_phase`); ``"nxn"`` is the old name of
+``"all_pairs"``, kept as an alias."""
+
+
+def make_broad_phase(method: str, *, device=None, graph: bool | None = None) -> BroadPhase:
+    """The broad phase of a method name.
+
+    Args:
+        method: ``"sap"`` (:class:`BroadPhaseSAP`) or ``"all_pairs"`` (:class:`BroadPhaseAllPairs`,
+            the reference; ``"nxn"`` is an alias).
+        device: Warp device.
+        graph: as for :class:`BroadPhase`.
+
+    Raises:
+        ValueError: an unknown method (the message lists the known ones).
+    """
+    if not isinstance(method, str) or method not in BROAD_METHODS:
+        raise ValueError(f"broad phase method must be 'sap' or 'all_pairs' (or 'nxn', an alias), got {method!r}")
+    return BROAD_METHODS[method](device=device, graph=graph)
 
 
 def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> int:
@@ -743,7 +760,7 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
         lower: ``(N, 3)`` lower corners.
         upper: ``(N, 3)`` upper corners, ``upper >= lower``. Inputs that are not float32 are
             rounded outward to float32 (a pair may be added, never lost).
-        method: ``"sap"`` (default) or ``"nxn"`` (the reference).
+        method: ``"sap"`` (default) or ``"all_pairs"`` (the reference; ``"nxn"`` is an alias).
         device: Warp device (default: Warp's default device).
 
     Returns:
