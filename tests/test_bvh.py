@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.stages.bvh_build import build_tree, centroid_keys
+from warp_ccd.stages.bvh_reference import build_tree, centroid_keys
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 

@@ -38,10 +38,10 @@ def test_random_scene_matches_oracles(device, num_objects, seed):
 
 @pytest.mark.parametrize(
     "options",
-    [dict(broad_phase="nxn"), dict(narrow_phase="edge_face"), dict(mid_phase="all_pairs"),
+    [dict(broad_phase="all_pairs"), dict(narrow_phase="edge_face"), dict(mid_phase="all_pairs"),
      dict(pair_capacity=1, candidate_capacity=1, hit_capacity=1),
      dict(mid_phase="all_pairs", pair_capacity=1, candidate_capacity=1, hit_capacity=1)],
-    ids=["nxn", "edge_face", "all_pairs", "capacity_1", "all_pairs_capacity_1"],
+    ids=["broad_all_pairs", "edge_face", "all_pairs", "capacity_1", "all_pairs_capacity_1"],
 )
 def test_pipeline_options_agree(device, options):
     scene = wc.Scene.random(400, seed=5, device=device)
@@ -142,6 +142,119 @@ def test_bad_whole_triangles_max(value):
     for lanes in (0, 3, 512, 32.0, True):
         with pytest.raises(ValueError, match="whole_lanes"):
             mid.whole_lanes = lanes
+
+
+def test_stages_keep_their_contracts():
+    """Every stage the factories make, with either method, has what the frame relies on of its kind
+    (the protocols of :mod:`warp_ccd.stages.kinds`); the pipeline holds such stages."""
+    from warp_ccd import stages
+
+    scene = wc.Scene.random(6, seed=0)
+    built = {stages.BroadPhaseStage: [stages.make_broad_phase(m) for m in ("sap", "all_pairs")],
+             stages.NarrowPhaseStage: [stages.make_narrow_phase(m, 6, segments=True, containment=True)
+                                       for m in ("moller", "edge_face")]}
+    for method, (bounds, mid) in ((m, stages.make_mid_phase(m, scene)) for m in ("bvh", "all_pairs")):
+        built.setdefault(stages.BoundsStage, []).append(bounds)
+        built.setdefault(stages.MidPhaseStage, []).append(mid)
+        assert type(mid) is {"bvh": stages.MidPhaseBVH, "all_pairs": stages.MidPhaseAllPairs}[method]
+    classes = {type(stage) for kind in built.values() for stage in kind}
+    assert classes == {stages.ObjectBounds, stages.SceneBVH, stages.BroadPhaseSAP, stages.BroadPhaseAllPairs,
+                       stages.MidPhaseBVH, stages.MidPhaseAllPairs, stages.NarrowPhase}
+    for kind, made in built.items():
+        for stage in made:
+            assert isinstance(stage, kind), (type(stage).__name__, kind.__name__)
+    assert not isinstance(stages.make_broad_phase("sap"), stages.MidPhaseStage)  # no candidates
+    pipe = wc.CollisionPipeline(scene)
+    for stage, kind in ((pipe.boxes, stages.BoundsStage), (pipe.broad, stages.BroadPhaseStage),
+                        (pipe.mid, stages.MidPhaseStage), (pipe.narrow, stages.NarrowPhaseStage)):
+        assert isinstance(stage, kind)
+
+
+def test_factories_name_the_methods():
+    """An unknown method's error lists the known ones; each factory checks its own options."""
+    from warp_ccd import stages
+
+    scene = wc.Scene.random(4, seed=0)
+    with pytest.raises(ValueError, match=r"^mid_phase must be 'bvh' or 'all_pairs', got 'octree'$"):
+        stages.make_mid_phase("octree", scene)
+    with pytest.raises(ValueError, match=r"^narrow_phase must be one of \['edge_face', 'moller'\], got 'gjk'$"):
+        stages.make_narrow_phase("gjk", 4)
+    with pytest.raises(ValueError, match=r"^broad phase method must be 'sap' or 'all_pairs' \(or 'nxn', an alias\)"):
+        stages.make_broad_phase(["sap"])
+    with pytest.raises(ValueError, match=r"^leaf_size must be an integer in \[1, 256\], got 0$"):
+        stages.make_mid_phase("all_pairs", scene, leaf_size=0)  # checked with either method
+    with pytest.raises(ValueError, match=r"^front_capacity must be an integer >= 1 or None, got 0$"):
+        stages.make_mid_phase("bvh", scene, front_capacity=0)
+    with pytest.raises(ValueError, match=r"^tolerance must be a finite number in \[0, 0.1\), got 0.1$"):
+        stages.make_narrow_phase("moller", 4, tolerance=0.1)
+    with pytest.raises(ValueError, match=r"^hit_capacity must be an integer >= 1 or None, got 2.0$"):
+        stages.make_narrow_phase("moller", 4, hit_capacity=2.0)
+    with pytest.raises(ValueError, match=r"^rebuild_every must be 0 with the all_pairs mid phase \(no trees\), got 2$"):
+        wc.CollisionPipeline(scene, mid_phase="all_pairs", rebuild_every=2)
+    with pytest.raises(ValueError, match=r"^separating_axes must be an integer in \{3, 6\}, got 6.0$"):
+        wc.CollisionPipeline(scene, separating_axes=6.0)
+
+
+def test_mid_phases_share_whole_pair_options():
+    """Both mid phases take the whole-object pair options, checked alike (the all-pairs reference,
+    whose pairs are all whole, leaves them unused)."""
+    from warp_ccd.stages.mid_phase import WHOLE_LANES, MidPhase
+
+    mid = wc.MidPhaseAllPairs()
+    assert isinstance(mid, MidPhase) and isinstance(wc.MidPhaseBVH(wc.SceneBVH(wc.Scene.random(3))), MidPhase)
+    assert (mid.whole_triangles_max, mid.whole_lanes) == (0, WHOLE_LANES)
+    mid.whole_triangles_max, mid.whole_lanes = np.int64(12), np.int32(8)
+    assert (mid.whole_triangles_max, mid.whole_lanes) == (12, 8)
+    assert type(mid.whole_triangles_max) is int and type(mid.whole_lanes) is int
+    with pytest.raises(ValueError, match=r"^whole_triangles_max must be an integer in \[0, 64\], got 65$"):
+        mid.whole_triangles_max = 65
+    with pytest.raises(ValueError, match=r"^whole_lanes must be an integer in \{1, 2, 4, 8, 16, 32, 64, 128, 256\}, "
+                                         r"got 3$"):
+        mid.whole_lanes = 3
+
+
+@pytest.mark.parametrize(
+    "check, message",
+    [
+        (lambda o: o.integer_option("cut_depth", 17, low=0, high=16),
+         "cut_depth must be an integer in [0, 16], got 17"),
+        (lambda o: o.integer_option("n", True, low=0), "n must be an integer >= 0, got True"),
+        (lambda o: o.integer_option("n", np.bool_(True)), f"n must be an integer, got {np.bool_(True)!r}"),
+        (lambda o: o.integer_option("n", 3.0, high=4), "n must be an integer <= 4, got 3.0"),
+        (lambda o: o.integer_option("seed", -1, low=0, allow_none=True),
+         "seed must be an integer >= 0 or None, got -1"),
+        (lambda o: o.integer_option("icosphere: level", "1", low=0, high=8),
+         "icosphere: level must be an integer in [0, 8], got '1'"),
+        (lambda o: o.number_option("tolerance", -1e-9, low=0, high=0.1, high_open=True),
+         "tolerance must be a finite number in [0, 0.1), got -1e-09"),
+        (lambda o: o.number_option("density", 1.0, low=0, high=1, low_open=True, high_open=True),
+         "density must be a finite number in (0, 1), got 1.0"),
+        (lambda o: o.number_option("fps", 0, low=0, low_open=True), "fps must be a finite number > 0, got 0"),
+        (lambda o: o.number_option("dt", float("nan")), "dt must be a finite number, got nan"),
+        (lambda o: o.number_option("dt", 10**400), "dt must be a finite number, got " + str(10**400)),
+        (lambda o: o.number_option("dt", False), "dt must be a finite number, got False"),
+        (lambda o: o.number_option("dt", 1j), "dt must be a finite number, got 1j"),
+        (lambda o: o.number_option("x", 2, high=1), "x must be a finite number <= 1, got 2"),
+    ],
+)
+def test_option_messages(check, message):
+    """One message shape for every integer and real option: the name, what it allows, the value."""
+    from warp_ccd import options
+
+    with pytest.raises(ValueError) as err:
+        check(options)
+    assert str(err.value) == message
+
+
+def test_options_accept_numpy_scalars():
+    from warp_ccd.options import integer_option, is_integer, number_option
+
+    assert integer_option("n", np.int16(3), low=0) == 3 and type(integer_option("n", np.uint8(3))) is int
+    assert integer_option("n", None, allow_none=True) is None
+    assert integer_option("n", np.int64(6), choices=(3, 6)) == 6
+    assert number_option("x", np.float32(0.5), low=0, high=1) == 0.5 and type(number_option("x", 1)) is float
+    assert number_option("x", 0.0, low=0) == 0.0 and number_option("x", np.int64(2), high=2) == 2.0
+    assert is_integer(np.int8(1)) and not is_integer(True) and not is_integer(1.0)
 
 
 def test_timings(device):

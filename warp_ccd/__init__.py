@@ -19,7 +19,7 @@ from .scene.shapes import SHAPES, icosphere, shape, validate_mesh
 from .stages.broad_phase import BroadPhaseAllPairs as BroadPhaseNxN
 from .stages.broad_phase import BroadPhaseSAP, broad_phase_pairs
 from .stages.bvh import SceneBVH
-from .stages.bvh_build import build_tree
+from .stages.bvh_reference import build_tree
 from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
 from .stages.narrow_phase import NarrowPhase
 from .usd.export import UsdAnimationWriter

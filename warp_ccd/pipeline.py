@@ -19,14 +19,13 @@ from functools import cached_property
 import numpy as np
 import warp as wp
 
+from .geometry.triangle import TOLERANCE
+from .options import integer_option
 from .scene.scene import Scene
-from .stages.bounds import ObjectBounds
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
-from .stages.bvh import LEAF_SIZE_MAX, SceneBVH
 from .stages.frame import CountedFrame, FrameCache, frame_mode
-from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .stages.narrow_phase import TOLERANCE, NarrowPhase
+from .stages.kinds import make_mid_phase, make_narrow_phase
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]
 
@@ -197,7 +196,7 @@ class CollisionPipeline:
 
     Args:
         scene: the scene; its world vertices are read at each :meth:`detect`.
-        broad_phase: ``"sap"`` (default) or ``"nxn"`` (reference).
+        broad_phase: ``"sap"`` (default) or ``"all_pairs"`` (reference; ``"nxn"`` is an alias).
         mid_phase: ``"bvh"`` (default: tree-vs-tree traversal) or ``"all_pairs"`` (reference:
             every triangle pair of each object pair).
         narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
@@ -264,52 +263,30 @@ class CollisionPipeline:
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
-        if leaf_size is None:
-            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else RIGID_LEAF_SIZE
-        for name, value, minimum, maximum in (("leaf_size", leaf_size, 1, LEAF_SIZE_MAX),
-                                              ("pair_capacity", pair_capacity, 1, None),
-                                              ("candidate_capacity", candidate_capacity, 1, None),
-                                              ("hit_capacity", hit_capacity, 1, None),
-                                              ("front_capacity", front_capacity, 1, None)):
-            if value is None and name != "leaf_size":
-                continue
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum \
-                    or (maximum is not None and value > maximum):
-                bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
-                raise ValueError(f"{name} must be an integer {bounds}, got {value!r}")
-        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating, np.integer)) \
-                or not 0.0 <= float(tolerance) < 0.1:
-            raise ValueError(f"tolerance must be a number in [0, 0.1), got {tolerance!r}")
         mode = frame_mode(scene.device, False if graph is None and timings else graph)
         if graph and timings:
             raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
-        if mid_phase not in ("bvh", "all_pairs"):
-            raise ValueError(f"mid_phase must be 'bvh' or 'all_pairs', got {mid_phase!r}")
-        if isinstance(rebuild_every, bool) or not isinstance(rebuild_every, (int, np.integer)) or rebuild_every < 0 \
-                or (rebuild_every and mid_phase != "bvh"):
-            raise ValueError(f"rebuild_every must be an integer >= 0 (> 0 only with the bvh mid phase), "
-                             f"got {rebuild_every!r}")
+        self.rebuild_every = integer_option("rebuild_every", rebuild_every, low=0)
+        if self.rebuild_every and mid_phase == "all_pairs":
+            raise ValueError(f"rebuild_every must be 0 with the all_pairs mid phase (no trees), got {rebuild_every!r}")
+        pair_capacity = integer_option("pair_capacity", pair_capacity, low=1, allow_none=True)
+        if leaf_size is None:
+            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else RIGID_LEAF_SIZE
         self.scene = scene
-        self.device = scene.device
+        self.device = d = scene.device
         n = scene.num_objects
-        d = self.device
         self.timings = bool(timings)
         self.graph = mode == "graph"
         self.broad = make_broad_phase(broad_phase, device=d)
+        self.narrow = make_narrow_phase(narrow_phase, n, tolerance=tolerance, hit_capacity=hit_capacity,
+                                        segments=segments, containment=containment, device=d)
+        self.boxes, self.mid = make_mid_phase(
+            mid_phase, scene, leaf_size=leaf_size, margin_rel=self.narrow.tolerance, cut_depth=cut_depth,
+            separating_axes=separating_axes, object_bounds=object_bounds, candidate_capacity=candidate_capacity,
+            front_capacity=front_capacity, device=d)
         # One pair slot an object to start with (the scaling scenes hold 0.01-0.13 pairs an object; a
         # crowded frame grows it once): the mid phase keeps a TreePair of 136 bytes a slot beside it.
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, n), d, "broad-phase pairs")
-        if mid_phase == "bvh":
-            self.boxes = SceneBVH(scene, leaf_size=leaf_size, margin_rel=tolerance, cut_depth=cut_depth,
-                                  object_bounds=object_bounds)
-            self.mid = MidPhaseBVH(self.boxes, capacity=candidate_capacity or max(1024, 16 * n),
-                                   front_capacity=front_capacity, separating_axes=separating_axes, device=d)
-        else:
-            self.boxes = ObjectBounds(n, device=d, margin_rel=tolerance)
-            self.mid = MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=d)
-        self.narrow = NarrowPhase(n, method=narrow_phase, tolerance=tolerance,
-                                  capacity=hit_capacity or max(256, 4 * n), segments=segments,
-                                  containment=containment, device=d)
         stages = (self.boxes, self.broad, self.mid, self.narrow)
         buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
         # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
@@ -318,7 +295,6 @@ class CollisionPipeline:
         flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
-        self.rebuild_every = int(rebuild_every)
         self.rebuilds = 0
         self._detects = 0
         self._times = None

@@ -7,7 +7,7 @@ Three parts, in one process on one device:
   (:class:`~warp_ccd.stages.bvh_build.TreeBuild`, layout then triangle order, as ``SceneBVH`` does),
   against Warp's own device builds of the same triangles: one ``wp.Mesh`` (LBVH) for a single
   shape, a ``wp.Bvh`` (LBVH) over all triangle boxes grouped by shape for many; and the numpy
-  reference (:func:`~warp_ccd.stages.bvh_build.build_tree`, shape by shape) where it takes under a few
+  reference (:func:`~warp_ccd.stages.bvh_reference.build_tree`, shape by shape) where it takes under a few
   seconds. Wall time from the first launch to the device's end (what a user waits for), min and
   median over ``--repeats`` after a warm-up. ``--small`` adds rows of the kernels with other
   subtree sizes finished per thread; small shapes also get a row without the radix presort
@@ -44,7 +44,8 @@ import warp_ccd as wc
 from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import synced_ms
 from warp_ccd.cli.common import resolve_device
-from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild, build_tree
+from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild
+from warp_ccd.stages.bvh_reference import build_tree
 
 POLYHEDRA = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
 

@@ -1,1 +1,54 @@
-"""warp_ccd.stages."""
+"""The stages of a frame, in data-flow order, each a thin class over the kernels of its module:
+
+1. Bounds (:mod:`~warp_ccd.stages.bounds`, :mod:`~warp_ccd.stages.bvh`, trees built by
+   :mod:`~warp_ccd.stages.bvh_build`): :class:`ObjectBounds` (object boxes from world vertices)
+   or :class:`SceneBVH` (a tree per shape, deforming objects' trees refit; object boxes).
+2. Broad phase (:mod:`~warp_ccd.stages.broad_phase`): object pairs whose boxes overlap,
+   :class:`BroadPhaseSAP` (sweep and prune on a grid) or :class:`BroadPhaseAllPairs` (the reference).
+3. Mid phase (:mod:`~warp_ccd.stages.mid_phase`): candidate triangle pairs, :class:`MidPhaseBVH`
+   (tree against tree, with :class:`SceneBVH`) or :class:`MidPhaseAllPairs` (the reference, with
+   :class:`ObjectBounds`).
+4. Narrow phase (:mod:`~warp_ccd.stages.narrow_phase`): :class:`NarrowPhase`, the exact triangle test.
+
+What the frame relies on of each kind is a protocol (:class:`BoundsStage`, :class:`BroadPhaseStage`,
+:class:`MidPhaseStage`, :class:`NarrowPhaseStage`, in :mod:`~warp_ccd.stages.kinds`), and a factory
+makes each kind from a method name: :func:`make_broad_phase`, :func:`make_mid_phase` (the mid phase
+with its bounds stage), :func:`make_narrow_phase`. Beside them: :func:`broad_phase_pairs`, the
+broad phase of boxes given as numpy arrays, and :func:`build_tree`, one shape's tree on the host.
+The device buffers (:mod:`~warp_ccd.stages.buffers`) and the frame that runs the stages with one
+counter read (:mod:`~warp_ccd.stages.frame`) are shared by all.
+"""
+
+from .bounds import ObjectBounds
+from .broad_phase import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, make_broad_phase
+from .bvh import SceneBVH
+from .bvh_build import build_tree
+from .kinds import (
+    BoundsStage,
+    BroadPhaseStage,
+    MidPhaseStage,
+    NarrowPhaseStage,
+    make_mid_phase,
+    make_narrow_phase,
+)
+from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
+from .narrow_phase import NarrowPhase
+
+__all__ = [
+    "BoundsStage",
+    "BroadPhaseAllPairs",
+    "BroadPhaseSAP",
+    "BroadPhaseStage",
+    "MidPhaseAllPairs",
+    "MidPhaseBVH",
+    "MidPhaseStage",
+    "NarrowPhase",
+    "NarrowPhaseStage",
+    "ObjectBounds",
+    "SceneBVH",
+    "broad_phase_pairs",
+    "build_tree",
+    "make_broad_phase",
+    "make_mid_phase",
+    "make_narrow_phase",
+]

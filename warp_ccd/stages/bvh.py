@@ -8,7 +8,7 @@ centroids along the longest axis of its bounds, so the tree is balanced with
 thread per node); the triangle order from three centroid-sorted lists per shape, partitioned
 level by level over all shapes, small subtrees finished one thread each.
 
-Stored flat, topology shared by every object of a shape (:class:`~warp_ccd.stages.bvh_build.ShapeTree`
+Stored flat, topology shared by every object of a shape (:class:`~warp_ccd.stages.bvh_reference.ShapeTree`
 is one shape's tree on the host):
 
 * nodes in breadth-first order (a node's children are on the next level; level ``d`` of a
@@ -24,7 +24,7 @@ of the object's *box space*:
   scale and pose), computed once when the trees are built and never refit. The traversal
   (:mod:`warp_ccd.stages.mid_phase`) tests one object's boxes against the other's under the pair's
   relative transform, as FCL does; the broad phase's object box is the union of the shape's cut
-  boxes (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`) under the pose, or the box of its world
+  boxes (:meth:`~warp_ccd.stages.bvh_reference.ShapeTree.cut`) under the pose, or the box of its world
   vertices (one thread an object either way; by default the vertices of objects of up to 64,
   whose cuts are fewer, bigger boxes, and the cut of bigger ones, whose cuts are many small ones).
 * **deforming objects** (``scene.object_deforming_np``) have boxes of their own, in world space,
@@ -54,7 +54,8 @@ from ..geometry.precision import precision_overloads
 from ..options import integer_option, is_integer
 from ..scene.scene import MeshTopology
 from .buffers import packed_upload, upper_bound
-from .bvh_build import CUT_TRIANGLES, ShapeTree, TreeBuild
+from .bvh_build import CUT_TRIANGLES, TreeBuild
+from .bvh_reference import ShapeTree
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -89,7 +90,7 @@ class TreeView:
     Shape ``s`` has layout ``l = shape_layout[s]`` (a tree's layout depends on its triangle count
     alone, :mod:`warp_ccd.stages.bvh_build`): its nodes are ``layout_node_start[l] + local id``, its
     leaves (local ids) ``leaf_node[layout_leaf_start[l]:layout_leaf_start[l + 1]]`` and its two
-    cuts (subtrees that partition the leaves, :meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`), at the
+    cuts (subtrees that partition the leaves, :meth:`~warp_ccd.stages.bvh_reference.ShapeTree.cut`), at the
     layout's cut depth and one level deeper: ``cut_node[layout_cut_start[2 l + deep]:
     layout_cut_start[2 l + deep + 1]]``; its triangle order starts at ``shape_tri_order_start[s]``;
     the boxes of object ``i`` (its box space: its shape's for a rigid object, the world for a
@@ -450,7 +451,7 @@ class SceneBVH:
         object_refit_max_nodes: deforming objects of shapes with at most this many nodes are refit
             in two launches, leaves then inner nodes (an inner node reads all its leaves); bigger
             trees level by level, one thread per node.
-        cut_depth: least level of each tree's cut (:meth:`~warp_ccd.stages.bvh_build.ShapeTree.cut`),
+        cut_depth: least level of each tree's cut (:meth:`~warp_ccd.stages.bvh_reference.ShapeTree.cut`),
             whose boxes under the pose make a big rigid object's box (``object_bounds``); big
             trees cut deeper, so that a cut's subtrees hold about ``cut_triangles`` triangles at
             most (:meth:`~warp_ccd.stages.bvh_build.TreeSizes.cut_depth`).

@@ -46,6 +46,7 @@ import warp as wp
 
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
+from ..options import integer_option
 from ..scene.scene import MeshTopology
 from .buffers import (
     BLOCK_DIM,
@@ -59,7 +60,7 @@ from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, t
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
+__all__ = ["MidPhase", "MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
 
 EXPAND_THREADS_PER_SM = 1024
 """Most threads of an expansion launch per streaming multiprocessor on CUDA: the grid is fixed (so
@@ -99,6 +100,7 @@ of 256. On the H100 32 lanes (two triangles a thread for a dodecahedron) took 0.
 
 WHOLE_TRIANGLES_LIMIT = 64
 """Most triangles of an object in a whole-object pair: a thread's hits are the bits of an int64."""
+
 
 @wp.struct
 class TreePair:
@@ -570,7 +572,46 @@ def _whole_pair_kernel(
 _WHOLE = precision_overloads(_whole_pair_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
 
 
-class MidPhaseBVH:
+class MidPhase:
+    """What both mid phases share: the candidate buffer (``capacity``, it grows) of ``wp.vec4i`` rows
+    ``(obj_a, tri_a, obj_b, tri_b)``, and the options of whole-object pairs, checked when set (read
+    at each launch by :class:`MidPhaseBVH`, unused by :class:`MidPhaseAllPairs`, whose pairs are all
+    whole: one setting serves either).
+
+    Attributes:
+        whole_triangles_max: pairs of objects of at most this many triangles each skip the trees (at
+            most :data:`WHOLE_TRIANGLES_LIMIT`; 0, the default here: none): their triangles' world
+            boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`); a scene of
+            such objects alone launches no tree traversal.
+        whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up to 256).
+    """
+
+    def __init__(self, *, capacity: int = 4096, device=None):
+        self.device = wp.get_device(device)
+        self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
+        self.whole_triangles_max = 0
+        self.whole_lanes = WHOLE_LANES
+
+    @property
+    def whole_triangles_max(self) -> int:
+        """Pairs of objects of at most this many triangles each skip the trees (see the class docs)."""
+        return self._whole_triangles_max
+
+    @whole_triangles_max.setter
+    def whole_triangles_max(self, value: int) -> None:
+        self._whole_triangles_max = integer_option("whole_triangles_max", value, low=0, high=WHOLE_TRIANGLES_LIMIT)
+
+    @property
+    def whole_lanes(self) -> int:
+        """Threads per whole-object pair (see the class docs)."""
+        return self._whole_lanes
+
+    @whole_lanes.setter
+    def whole_lanes(self, value: int) -> None:
+        self._whole_lanes = integer_option("whole_lanes", value, choices=(1, 2, 4, 8, 16, 32, 64, 128, 256))
+
+
+class MidPhaseBVH(MidPhase):
     """Tree-vs-tree traversal over the broad phase's object pairs, level by level over the front of
     overlapping node pairs (see module docs).
 
@@ -581,10 +622,11 @@ class MidPhaseBVH:
             four per object).
         separating_axes: 6 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space
             and ``a``'s in ``b``'s; 3 the first alone (more candidates, less arithmetic a test).
+        whole_triangles_max: default :data:`WHOLE_TRIANGLES_MAX` up to :data:`WHOLE_OBJECTS_MAX` objects, else 0.
         device: Warp device.
 
     Attributes:
-        candidates: the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of candidate rows.
+        candidates, whole_triangles_max, whole_lanes: as in :class:`MidPhase`.
         front: the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of node pairs ``(pair, node a, node
             b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
             counter holds the largest level's count.
@@ -595,14 +637,6 @@ class MidPhaseBVH:
             CPU one block, of one thread that takes every node pair in turn unless
             ``wp.config.enable_cpu_blocks`` is set); a launch takes at most one thread per slot of
             its input (the pairs' capacity, the front's).
-        whole_triangles_max: pairs of objects of at most this many triangles each skip the trees
-            (default :data:`WHOLE_TRIANGLES_MAX` in a scene of at most :data:`WHOLE_OBJECTS_MAX`
-            objects, else 0; at most :data:`WHOLE_TRIANGLES_LIMIT`; 0: none): their
-            triangles' world boxes are tested pair by pair in one launch (:func:`_whole_pair_kernel`).
-            A scene of such objects alone launches no tree traversal. An attribute too, checked when
-            set and read at each launch.
-        whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up
-            to 256): an attribute, checked when set and read at each launch.
 
     The front's :meth:`~warp_ccd.stages.buffers.GrowableBuffer.held` and ``numpy()`` mean little: its
     storage is two halves, its counter the largest level's count.
@@ -610,13 +644,10 @@ class MidPhaseBVH:
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
                  separating_axes: int = 6, whole_triangles_max: int | None = None, device=None):
-        self.device = wp.get_device(device)
+        super().__init__(capacity=capacity, device=device)
         self.bvh = bvh
-        if separating_axes not in SEPARATING_AXES:
-            raise ValueError(f"separating_axes must be one of {SEPARATING_AXES}, got {separating_axes!r}")
-        self.separating_axes = separating_axes
+        self.separating_axes = integer_option("separating_axes", separating_axes, choices=SEPARATING_AXES)
         self.num_levels = max(1, bvh.num_levels - 1)
-        self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.front = GrowableBuffer(wp.vec3i, front_capacity or max(256, 4 * bvh.lower.shape[0]), self.device,
                                     "tree-pair front", factor=2)
         self.block_dim = block_dim_for(self.device)
@@ -624,7 +655,6 @@ class MidPhaseBVH:
         if whole_triangles_max is None:
             whole_triangles_max = WHOLE_TRIANGLES_MAX if bvh.lower.shape[0] <= WHOLE_OBJECTS_MAX else 0
         self.whole_triangles_max = whole_triangles_max
-        self.whole_lanes = WHOLE_LANES
         # Entries of each level's front: [0] unused (level 0 is the pairs), zeroed by the pair kernel.
         self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
         self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
@@ -635,30 +665,6 @@ class MidPhaseBVH:
         """The buffers with counters that :meth:`launch` resets and writes, whose counters the caller
         reads after it: the front (its largest level), then the candidates."""
         return [self.front, self.candidates]
-
-    @property
-    def whole_triangles_max(self) -> int:
-        """Pairs of objects of at most this many triangles each skip the trees (see the class docs)."""
-        return self._whole_triangles_max
-
-    @whole_triangles_max.setter
-    def whole_triangles_max(self, value: int) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                or not 0 <= value <= WHOLE_TRIANGLES_LIMIT:
-            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], got {value!r}")
-        self._whole_triangles_max = int(value)
-
-    @property
-    def whole_lanes(self) -> int:
-        """Threads per whole-object pair (see the class docs)."""
-        return self._whole_lanes
-
-    @whole_lanes.setter
-    def whole_lanes(self, value: int) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                or value not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
-            raise ValueError(f"whole_lanes must be a power of two up to 256, got {value!r}")
-        self._whole_lanes = int(value)
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
@@ -756,7 +762,7 @@ def _all_pairs_write_kernel(
     candidate[c] = wp.vec4i(p[0], int(local / mb), p[1], int(local % mb))
 
 
-class MidPhaseAllPairs:
+class MidPhaseAllPairs(MidPhase):
     """Reference mid phase: all triangle pairs of each broad-phase pair.
 
     Args:
@@ -765,8 +771,7 @@ class MidPhaseAllPairs:
     """
 
     def __init__(self, *, capacity: int = 4096, device=None):
-        self.device = wp.get_device(device)
-        self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
+        super().__init__(capacity=capacity, device=device)
         self._work = None
 
     @property
@@ -774,30 +779,6 @@ class MidPhaseAllPairs:
         """The buffers with counters that :meth:`launch` writes (the candidates, their counter set
         by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
-
-    @property
-    def whole_triangles_max(self) -> int:
-        """Pairs of objects of at most this many triangles each skip the trees (see the class docs)."""
-        return self._whole_triangles_max
-
-    @whole_triangles_max.setter
-    def whole_triangles_max(self, value: int) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                or not 0 <= value <= WHOLE_TRIANGLES_LIMIT:
-            raise ValueError(f"whole_triangles_max must be an integer in [0, {WHOLE_TRIANGLES_LIMIT}], got {value!r}")
-        self._whole_triangles_max = int(value)
-
-    @property
-    def whole_lanes(self) -> int:
-        """Threads per whole-object pair (see the class docs)."""
-        return self._whole_lanes
-
-    @whole_lanes.setter
-    def whole_lanes(self, value: int) -> None:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                or value not in (1, 2, 4, 8, 16, 32, 64, 128, 256):
-            raise ValueError(f"whole_lanes must be a power of two up to 256, got {value!r}")
-        self._whole_lanes = int(value)
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
