@@ -22,7 +22,7 @@ counter read (:mod:`~warp_ccd.stages.frame`) are shared by all.
 from .bounds import ObjectBounds
 from .broad_phase import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, make_broad_phase
 from .bvh import SceneBVH
-from .bvh_build import build_tree
+from .bvh_reference import build_tree
 from .kinds import (
     BoundsStage,
     BroadPhaseStage,
