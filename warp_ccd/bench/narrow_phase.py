@@ -7,11 +7,12 @@ both builds of the module (the option is switched and the module rebuilt in betw
 * **time**: the narrow-phase kernel (``NarrowPhase.launch``: exact test of every candidate triangle
   pair, hits appended) on the candidates of a real frame of the scaling scene (``--objects`` objects
   of ``--triangles`` triangles), and the batch kernel on the 10^5 near-degenerate pairs of
-  ``tests/awkward_pairs.py``; GPU time per launch from CUDA events (wall time on the CPU), min and
-  median over ``--repeats`` launches after a warm-up;
+  :mod:`warp_ccd.bench.awkward_pairs`; GPU time per launch from CUDA events (wall time on the CPU), min
+  and median over ``--repeats`` launches after a warm-up;
 * **verdicts**: how many of the near-degenerate pairs' verdicts (both tests, float32 and float64)
-  differ from those recorded on the CPU (``tests/data/narrow_phase_verdicts.npz``), and how many
-  hits the scene frame has.
+  differ from the CPU's with the shipped build (computed in the same run; the tests hold them
+  recorded, ``tests/data/narrow_phase_verdicts.npz``, and check that the CPU still gives them), and
+  how many hits the scene frame has.
 
     python -m warp_ccd.bench.narrow_phase --device cuda:0 --out bench/results/narrow_phase_cuda0.json
 """
@@ -19,24 +20,20 @@ both builds of the module (the option is switched and the module rebuilt in betw
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
 import numpy as np
 import warp as wp
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
-
-import warp_ccd as wc  # noqa: E402
-from warp_ccd.bench.meshes import parse_triangles  # noqa: E402
-from warp_ccd.bench.report import environment, write_json  # noqa: E402
-from warp_ccd.cli.common import resolve_device  # noqa: E402
-from warp_ccd.geometry import triangle  # noqa: E402
-from warp_ccd.geometry.precision import precision_types  # noqa: E402
-from warp_ccd.stages import narrow_phase  # noqa: E402
-
-import awkward_pairs  # noqa: E402  (tests/awkward_pairs.py: the near-degenerate pairs)
+import warp_ccd as wc
+from warp_ccd.bench.awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
+from warp_ccd.bench.meshes import parse_triangles
+from warp_ccd.bench.report import environment, write_json
+from warp_ccd.cli.common import quiet_warp, resolve_device
+from warp_ccd.geometry import triangle
+from warp_ccd.geometry.precision import precision_types
+from warp_ccd.stages import narrow_phase
 
 
 def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
@@ -60,9 +57,18 @@ def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
     return float(np.min(times)), float(np.median(times))
 
 
-def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
-    for module in (narrow_phase, triangle):  # the stage's kernels and the batch kernel
+def set_fuse_fp(fuse: bool) -> None:
+    """Builds the stage's kernels and the batch kernels with (``True``) or without floating-point
+    contraction; they are rebuilt at their next launch."""
+    for module in (narrow_phase, triangle):
         wp.set_module_options({"fuse_fp": fuse}, module=module)
+
+
+def measure(fuse: bool, args, device, scene, pipe, cpu: dict) -> list[dict]:
+    """Rows of one build of the narrow-phase module (``fuse_fp=fuse``): the scene frame's narrow phase,
+    then each precision and test on the near-degenerate pairs, their verdicts against ``cpu`` (per
+    precision, :func:`~warp_ccd.bench.awkward_pairs.verdicts` on the CPU with the shipped build)."""
+    set_fuse_fp(fuse)
     rows = []
     narrow = pipe.narrow
     candidates = pipe.mid.candidates
@@ -76,15 +82,13 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
     rows.append({"fuse_fp": fuse, "workload": f"scene {args.objects} x {args.triangles}", "precision": "float32",
                  "method": narrow.method, "pairs": int(candidates.count.numpy()[0]), "hits": hits,
                  "ms_min": lo, "ms_median": med})
-    reference = awkward_pairs.read_reference()
-    for precision in awkward_pairs.PRECISIONS:
-        same_inputs = awkward_pairs.inputs_digest(precision) == reference[f"{precision}_inputs_sha256"]
-        got = awkward_pairs.verdicts(precision, device)
-        ta, tb = awkward_pairs.awkward_pairs(precision)
+    for precision in PRECISIONS:
+        got = verdicts(precision, device)
+        ta, tb = awkward_pairs(precision)
         _, vec3, _, _ = precision_types(precision)
         a, b = wp.array(ta, dtype=vec3, device=device), wp.array(tb, dtype=vec3, device=device)
         hit = wp.zeros(len(ta), dtype=wp.int32, device=device)
-        for method in awkward_pairs.METHODS:
+        for method in METHODS:
 
             def batch(method=method):
                 wp.launch(triangle.tri_tri_batch_kernel, dim=len(ta),
@@ -92,12 +96,12 @@ def measure(fuse: bool, args, device, scene, pipe) -> list[dict]:
                           outputs=[hit], device=device)
 
             lo, med = gpu_ms(batch, device, args.repeats)
-            differ = int((got[method] != reference[f"{precision}_{method}"]).sum()) if same_inputs else None
+            differ = int((got[method] != cpu[precision][method]).sum())
             rows.append({"fuse_fp": fuse, "workload": "near-degenerate pairs", "precision": precision,
                          "method": method, "pairs": len(ta), "hits": int(got[method].sum()),
                          "verdicts_differing_from_cpu": differ,
-                         "segments_match_cpu": got["segment_sha256"] == reference[f"{precision}_segment_sha256"]
-                         if method == "moller" and same_inputs else None,
+                         "segments_match_cpu": got["segment_sha256"] == cpu[precision]["segment_sha256"]
+                         if method == "moller" else None,
                          "ms_min": lo, "ms_median": med})
     return rows
 
@@ -110,18 +114,19 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--out", default=None, help="JSON file (default: none)")
     args = parser.parse_args(argv)
-    wp.config.quiet = True
+    quiet_warp()
     device = resolve_device(args.device)
     label, shapes = parse_triangles(args.triangles)
     scene = wc.Scene.random(args.objects, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
     scene.advance(0.5)
     pipe = wc.CollisionPipeline(scene)
     pipe.detect()  # candidates of a real frame stay in pipe.mid.candidates
+    set_fuse_fp(False)  # the shipped build
+    cpu = {precision: verdicts(precision, "cpu") for precision in PRECISIONS}
     rows = []
     for fuse in (False, True):  # the shipped build first, then with contraction
-        rows += measure(fuse, args, device, scene, pipe)
-    for module in (narrow_phase, triangle):
-        wp.set_module_options({"fuse_fp": False}, module=module)
+        rows += measure(fuse, args, device, scene, pipe, cpu)
+    set_fuse_fp(False)
     print(f"narrow phase on {device} ({getattr(device, 'name', '')}): fuse_fp off (shipped) vs on")
     print(f"{'workload':<28}{'precision':<10}{'method':<11}{'pairs':>10}{'hits':>10}"
           f"{'ms off':>10}{'ms on':>10}{'on/off':>8}{'differ from CPU off / on':>28}")
