@@ -34,7 +34,7 @@ from typing import Protocol, runtime_checkable
 import warp as wp
 
 from ..geometry.triangle import TOLERANCE
-from ..options import integer_option, number_option
+from ..options import integer_option
 from .bounds import ObjectBounds
 from .buffers import GrowableBuffer
 from .bvh import LEAF_SIZE_MAX, SceneBVH
@@ -188,9 +188,9 @@ def make_narrow_phase(method: str, num_objects: int, *, tolerance: float = TOLER
         segments, containment, device: as for :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
 
     Raises:
-        ValueError: an unknown method (the message lists the known ones), or a bad option (naming it).
+        ValueError: an unknown method (the message lists the known ones), or a bad option (naming it;
+            the method and the tolerance are checked by the class).
     """
-    tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
     hit_capacity = integer_option("hit_capacity", hit_capacity, low=1, allow_none=True)
     return NarrowPhase(num_objects, method=method, tolerance=tolerance,
                        capacity=hit_capacity or max(256, 4 * num_objects), segments=segments,

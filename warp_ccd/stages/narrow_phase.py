@@ -50,6 +50,7 @@ from ..geometry.triangle import (
     tri_tri_moller,
     tri_tri_segment,
 )
+from ..options import number_option
 from ..scene.scene import MeshTopology, mesh_triangle
 from .buffers import GrowableBuffer, reserve_slot, used_count
 
@@ -372,8 +373,7 @@ class NarrowPhase:
                  capacity: int = 1024, segments: bool = False, containment: bool = False, device=None):
         if method not in NARROW_METHODS:
             raise ValueError(f"narrow_phase must be one of {sorted(NARROW_METHODS)}, got {method!r}")
-        if not 0.0 <= tolerance < 0.1:
-            raise ValueError(f"tolerance must lie in [0, 0.1), got {tolerance!r}")
+        number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
         self.device = wp.get_device(device)
         self.method = method
         self.tolerance = float(tolerance)
