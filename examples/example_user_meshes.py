@@ -70,8 +70,8 @@ class Example:
         self.time = 0.0
 
         # Rigid: meshes in local coordinates; the same tuple passed four times is one shape.
-        large = wc.icosphere(3)
-        small_v, small_t = wc.icosphere(2)
+        large = wc.scene.icosphere(3)
+        small_v, small_t = wc.scene.icosphere(2)
         small = (0.6 * small_v, small_t)
         self.num_small = 4
         meshes = [(1.5 * large[0], large[1])] + [small] * self.num_small
@@ -79,8 +79,8 @@ class Example:
         self.rigid_pipeline = wc.CollisionPipeline(self.rigid)
 
         # Deforming: vertices are given in world space, all objects concatenated, every frame.
-        self.sphere_vertices, sphere_triangles = wc.icosphere(3)
-        cube_v, cube_t = wc.shape("cube")
+        self.sphere_vertices, sphere_triangles = wc.scene.icosphere(3)
+        cube_v, cube_t = wc.scene.shape("cube")
         directions = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
         self.cube_vertices = np.concatenate([0.3 * cube_v + 1.3 * d for d in directions])
         cubes = [(0.3 * cube_v + 1.3 * d, cube_t) for d in directions]

@@ -45,14 +45,14 @@ def scenes(precision: str, device) -> dict:
     polyhedra = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
     for name, shapes, n, density in (("polyhedra", polyhedra, 300, 0.08),
                                      ("spheres", ("icosphere", "icosahedron"), 90, 0.1)):
-        meshes = [wc.shape(s) for s in shapes]
+        meshes = [wc.scene.shape(s) for s in shapes]
         radius = rng.uniform(0.5, 1.5, n)
         side = ((4.0 / 3.0) * np.pi * np.sum(radius**3) / density) ** (1.0 / 3.0)
         poses = np.concatenate([rng.uniform(-side / 2, side / 2, (n, 3)), _unit_quaternions(rng, n)], axis=1)
         out[name] = wc.Scene(meshes, rng.integers(0, len(meshes), n), object_scale=radius, poses=poses,
                              device=device, precision=precision)
-    big = wc.icosphere(3)
-    cube_v, cube_t = wc.shape("cube")
+    big = wc.scene.icosphere(3)
+    cube_v, cube_t = wc.scene.shape("cube")
     small = (cube_v * 0.15, cube_t)
     n = 14
     q = _unit_quaternions(rng, n)

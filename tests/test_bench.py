@@ -208,7 +208,7 @@ def test_broad_phase_peers_agree(device, name):
     lower = wp.array(lo, dtype=wp.vec3, device=device)
     upper = wp.array(hi, dtype=wp.vec3, device=device)
     ref_pairs = GrowableBuffer(wp.vec2i, 16, device, "reference")
-    n_ref = find_pairs(wc.BroadPhaseSAP(device=device), lower, upper, ref_pairs)
+    n_ref = find_pairs(wc.stages.BroadPhaseSAP(device=device), lower, upper, ref_pairs)
     ref = ref_pairs.numpy(n_ref)
     assert 2 * n_ref / 3000 > 1.0  # about the requested 2 overlaps per box
     pairs = GrowableBuffer(wp.vec2i, 16, device, name)
@@ -281,7 +281,7 @@ def test_triangle_distance():
 
 
 def test_compare_triangle_pairs_verdicts(device):
-    cube = wc.shape("cube")
+    cube = wc.scene.shape("cube")
     meshes = [(cube[0] + np.float32([x, 0, 0]), cube[1]) for x in (0.0, 0.5, 5.0)]  # 0-1 overlap, 2 far away
     scene = wc.Scene.from_meshes(meshes, device=device)
     ours = wc.CollisionPipeline(scene).detect().triangle_pairs

@@ -57,7 +57,7 @@ def test_sap_in_blocks(device, blocks):
     hi[:40] = 4.0
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=0)
+    bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=0)
     bp._resize(len(lo))
     bp.entry._allocate(1)
     got, rounds = pairs_from_capacity_one(bp, wlo, whi, device)  # both buffers overflow first

@@ -96,7 +96,7 @@ def pairs_of(method: str, lo, hi, device) -> np.ndarray:
         return wc.broad_phase_pairs(lo, hi, method=method, device=device)
     if len(lo) < 2:
         return np.zeros((0, 2), np.int32)
-    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=SAP_PATHS[method[4:]])
+    bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=SAP_PATHS[method[4:]])
     got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
     got = got.numpy().reshape(-1, 2).astype(np.int32)
     return got[np.lexsort((got[:, 1], got[:, 0]))]
@@ -169,7 +169,8 @@ def test_capacity_one_is_complete(device):
     want = box_pairs_numpy(lo, hi)
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    for bp in (wc.BroadPhaseSAP(device=device, all_pairs_max=0), wc.BroadPhaseSAP(device=device, all_pairs_max=800),
+    for bp in (wc.stages.BroadPhaseSAP(device=device, all_pairs_max=0),
+               wc.stages.BroadPhaseSAP(device=device, all_pairs_max=800),
                BroadPhaseAllPairs(device=device)):
         for b in bp.counters:
             b._allocate(1)
@@ -185,7 +186,7 @@ def test_sap_grid_entries_grow(device):
     tiny_lo, tiny_hi = boxes_random(rng, 3000, spread=5.0, size=(0.005, 0.015))
     mid_lo, mid_hi = boxes_random(rng, 600, spread=5.0, size=(2.45, 2.55))
     lo, hi = np.concatenate([tiny_lo, mid_lo]), np.concatenate([tiny_hi, mid_hi])
-    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=0)
+    bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=0)
     bp._resize(len(lo))
     start = bp.entry.capacity  # the room it starts with
     got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
@@ -220,18 +221,18 @@ def test_bad_input(lower, upper, match):
 @pytest.mark.parametrize("value", [-1, ALL_PAIRS_LIMIT + 1, 2.5, True, "all"])
 def test_bad_all_pairs_max(value):
     with pytest.raises(ValueError, match="all_pairs_max"):
-        wc.BroadPhaseSAP(device="cpu", all_pairs_max=value)
+        wc.stages.BroadPhaseSAP(device="cpu", all_pairs_max=value)
 
 
 def test_sap_all_pairs_below_the_limit(device):
     """Up to ``all_pairs_max`` boxes the SAP tests every pair in one launch (no grid entries), above
     it sweeps; frame after frame with one broad phase, sizes either side of the limit, the pairs are
     the numpy truth; CUDA's default limit is :data:`ALL_PAIRS_MAX`, the CPU's 0."""
-    assert wc.BroadPhaseSAP(device="cpu").all_pairs_max == 0
+    assert wc.stages.BroadPhaseSAP(device="cpu").all_pairs_max == 0
     if wp.get_device(device).is_cuda:
-        assert wc.BroadPhaseSAP(device=device).all_pairs_max == ALL_PAIRS_MAX
+        assert wc.stages.BroadPhaseSAP(device=device).all_pairs_max == ALL_PAIRS_MAX
     rng = np.random.default_rng(17)
-    bp = wc.BroadPhaseSAP(device=device, all_pairs_max=400)
+    bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=400)
     for n in (400, 401, 2, 400):
         lo, hi = boxes_random(rng, n, spread=4.0, size=(0.2, 1.5))
         got = bp.find_pairs(wp.array(lo, dtype=wp.vec3, device=device), wp.array(hi, dtype=wp.vec3, device=device))
@@ -290,7 +291,7 @@ def test_sap_statistics_last_block(device):
 
     rng = np.random.default_rng(5)
     n = 9000  # three blocks on the CPU, 36 on CUDA
-    bp = wc.BroadPhaseSAP(device=device)
+    bp = wc.stages.BroadPhaseSAP(device=device)
     lower = wp.empty(n, dtype=wp.vec3, device=device)
     upper = wp.empty(n, dtype=wp.vec3, device=device)
     for stretch in ((40.0, 10.0, 10.0), (10.0, 10.0, 40.0), (10.0, 40.0, 10.0)):
@@ -315,7 +316,7 @@ def test_find_pairs_box_sets_of_different_sizes(device):
     CUDA): the scratch grows for the larger and serves the smaller, and each frame of either finds
     the numpy truth, also after the other grew the shared buffers."""
     rng = np.random.default_rng(21)
-    bp = wc.BroadPhaseSAP(device=device)
+    bp = wc.stages.BroadPhaseSAP(device=device)
     sets = []
     for n, spread in ((500, 6.0), (3000, 10.0), (5000, 6.0)):
         lo, hi = boxes_random(rng, n, spread=spread, size=(0.2, 1.5))

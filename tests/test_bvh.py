@@ -54,7 +54,7 @@ def test_build_invariants(mesh, leaf_size):
         v = rng.normal(size=(999, 3)).astype(np.float32)
         t = np.arange(999).reshape(-1, 3)
     else:
-        v, t = wc.shape(mesh)
+        v, t = wc.scene.shape(mesh)
     tree_invariants(build_tree(v, t, leaf_size), v, t, leaf_size)
 
 
@@ -171,7 +171,7 @@ def test_traversal_rounds_split_anywhere(device, num_blocks):
 
 def test_deforming_twisting_sphere(device):
     """A pulsating, twisting icosphere among rigid ones: refit alone keeps results exact."""
-    v, t = wc.icosphere(3)
+    v, t = wc.scene.icosphere(3)
     others = [(v * 0.6 + np.float32(c), t) for c in ([2.2, 0, 0], [0, -2.0, 0.3], [-1.5, 1.5, 0])]
     scene = wc.Scene.from_meshes([(v, t), *others], deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene)

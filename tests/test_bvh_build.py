@@ -110,10 +110,10 @@ def test_tree_sizes_match_the_reference():
 
 def test_scene_trees_are_the_reference(device):
     """SceneBVH builds every shape of a scene (float64 too) with the kernels: the reference's trees."""
-    shapes = [wc.shape(s) for s in ("tetrahedron", "cube", "icosahedron")] + [wc.icosphere(3)]
+    shapes = [wc.scene.shape(s) for s in ("tetrahedron", "cube", "icosahedron")] + [wc.scene.icosphere(3)]
     for precision in ("float32", "float64"):
         scene = wc.Scene(shapes, [0, 1, 2, 3, 3], device=device, precision=precision)
-        bvh = wc.SceneBVH(scene)
+        bvh = wc.stages.SceneBVH(scene)
         for s, (v, t) in enumerate(shapes):
             want, got = build_tree(v, t), bvh.shape_tree(s)
             assert np.array_equal(got.tri_order, want.tri_order) and np.array_equal(got.node_child, want.node_child)
@@ -122,7 +122,7 @@ def test_scene_trees_are_the_reference(device):
 def test_rebuild_sorts_the_moved_vertices(device):
     """After a deforming mesh moves, rebuild gives the tree of its new vertices (the layout stays) and
     the frame's pairs stay those of the reference mid phase."""
-    v, t = wc.icosphere(3)
+    v, t = wc.scene.icosphere(3)
     rng = np.random.default_rng(5)
     t = t[rng.permutation(len(t))]
     others = [(v * 0.5 + np.float32([1.2, 0, 0]), t), (v * 0.5 + np.float32([-1.0, 0.5, 0]), t)]
@@ -142,7 +142,7 @@ def test_rebuild_sorts_the_moved_vertices(device):
 
 def test_rebuild_every(device):
     """``rebuild_every=k`` rebuilds before every k-th frame; results equal a pipeline that never does."""
-    v, t = wc.icosphere(2)
+    v, t = wc.scene.icosphere(2)
     scene = wc.Scene.from_meshes([(v, t), (v + np.float32([1.5, 0, 0]), t)], deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene, rebuild_every=2)
     plain = wc.CollisionPipeline(scene)
@@ -172,7 +172,7 @@ BAD_MESHES = [
 @pytest.mark.parametrize("vertices, triangles, match", BAD_MESHES)
 def test_validate_meshes_names_the_bad_mesh(vertices, triangles, match):
     """The vectorised checks name the same mesh and problem as the per-mesh ones."""
-    good = wc.shape("cube")
+    good = wc.scene.shape("cube")
     meshes = [good, good, (vertices, triangles), good]
     with pytest.raises(ValueError, match=match) as vectorised:
         validate_meshes(meshes, labels=[3, 5, 8, 9])
@@ -186,7 +186,7 @@ def test_validate_meshes_names_the_bad_mesh(vertices, triangles, match):
 
 def test_validate_meshes_packs():
     rng = np.random.default_rng(0)
-    meshes = [soup(rng, m) for m in (1, 5, 3)] + [wc.shape("cube")]
+    meshes = [soup(rng, m) for m in (1, 5, 3)] + [wc.scene.shape("cube")]
     packed = validate_meshes(meshes, dtype=np.float64)
     assert len(packed) == 4 and packed.vertices.dtype == np.float64 and packed.triangles.dtype == np.int32
     for k, (v, t) in enumerate(meshes):
@@ -196,7 +196,7 @@ def test_validate_meshes_packs():
 
 
 def test_from_meshes_shares_only_the_same_arrays():
-    a, b = wc.shape("cube"), wc.shape("tetrahedron")
+    a, b = wc.scene.shape("cube"), wc.scene.shape("tetrahedron")
     copy = (a[0].copy(), a[1])
     scene = wc.Scene.from_meshes([b, a, b, copy, a])
     assert scene.num_shapes == 3 and scene.object_shape_np.tolist() == [0, 1, 0, 2, 1]
@@ -219,13 +219,13 @@ def test_one_shot_runs_its_frame_once(device, monkeypatch):
     scene = wc.Scene.random(1000, seed=2, device=device)
     scene.advance(0.3)
     assert len(wc.collide(scene.world_meshes(), device=device).object_pairs) > 0
-    v, t = wc.icosphere(4)
+    v, t = wc.scene.icosphere(4)
     meshes = [(v * rng.uniform(1, 2) + rng.uniform(-2, 2, 3).astype(np.float32), t) for _ in range(6)]
     assert len(wc.collide(meshes, device=device).object_pairs) > 0
     # Unit spheres on the even sites of a grid of spacing 1.9: each one's box overlaps those of its
     # twelve nearest neighbours (1.9 apart on two axes), far more box pairs than objects, but no two
     # spheres meet (2.69 apart).
-    v, t = wc.icosphere(1)
+    v, t = wc.scene.icosphere(1)
     sites = [(i, j, k) for i in range(5) for j in range(5) for k in range(5) if (i + j + k) % 2 == 0]
     meshes = [(v + 1.9 * np.array(c, np.float32), t) for c in sites]
     assert len(wc.collide(meshes, device=device).object_pairs) == 0
@@ -237,7 +237,7 @@ def test_validate_meshes_mixed_arrays():
     uint64 indices are fine, pairs may be any tuple type, and the first bad mesh is named."""
     from collections import namedtuple
 
-    cube = wc.shape("cube")
+    cube = wc.scene.shape("cube")
     with pytest.raises(ValueError, match="mesh 1: triangles must be integer"):
         validate_meshes([cube, (np.eye(3), np.array([[True, False, True]]))])
     with pytest.raises(ValueError, match="mesh 1: vertices must be real numbers"):
@@ -250,5 +250,5 @@ def test_validate_meshes_mixed_arrays():
         validate_meshes([([[1e39, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
                          ([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])])
     pair = namedtuple("Pair", "vertices triangles")
-    assert wc.Scene.from_meshes([pair(*cube), pair(*wc.shape("tetrahedron"))]).num_shapes == 2
+    assert wc.Scene.from_meshes([pair(*cube), pair(*wc.scene.shape("tetrahedron"))]).num_shapes == 2
     assert wc.Scene((m for m in [cube, cube]), [0, 1]).num_shapes == 2

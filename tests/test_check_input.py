@@ -219,7 +219,7 @@ def test_needed_precision_thresholds():
     assert needed_precision(3.5e38, 1e36) is None  # beyond float32's range: boxes are float32
     assert needed_precision(1e30, 0.0) == "float32"  # no triangle has a size: only the range counts
     # The typical size: the median longest edge over the objects' triangles (shapes times scales).
-    v, t = wc.shape("cube")  # longest edge 2 sqrt(2/3) = 1.633
+    v, t = wc.scene.shape("cube")  # longest edge 2 sqrt(2/3) = 1.633
     packed = wc.Scene.from_meshes([(v, t)] * 3).shapes
     args = packed.vertices, packed.triangles, packed.vertex_start, packed.triangle_start
     assert triangle_size(*args, [0, 0, 0]) == pytest.approx(1.6329931)

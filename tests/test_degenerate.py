@@ -308,7 +308,7 @@ def test_fan_triangulated_meshes_against_reference(device):
 def test_containment_with_sliver_faces(device):
     """The winding number of a closed mesh with zero-area triangles still tells inside from outside."""
     v, t = fan_box(half=2.0)
-    inner_v, inner_t = wc.shape("octahedron")
+    inner_v, inner_t = wc.scene.shape("octahedron")
     meshes = [(v, t), (inner_v * 0.5 + np.float32([0.3, -0.2, 0.1]), inner_t),
               (inner_v * 0.5 + np.float32([5.0, 0.0, 0.0]), inner_t)]
     res = wc.collide(meshes, device=device, containment=True)

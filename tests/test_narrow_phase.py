@@ -228,7 +228,7 @@ def test_narrow_phase_kernels_match_the_test(device, precision):
     candidates = GrowableBuffer(wp.vec4i, m, device, "candidates")
     candidates.data.assign(wp.array(rows, dtype=wp.vec4i, device=device))
     candidates.count.fill_(m)
-    narrow = wc.NarrowPhase(scene.num_objects, device=device)
+    narrow = wc.stages.NarrowPhase(scene.num_objects, device=device)
     narrow.launch(scene, candidates)
     hits = narrow.hits.numpy()
     got = np.zeros(m, bool)

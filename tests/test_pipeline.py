@@ -108,7 +108,7 @@ def test_whole_object_pairs(device, whole_triangles_max, lanes, precision):
 
 def test_whole_object_pairs_deforming(device):
     """Deforming small objects (their world vertices given each frame) as whole-object pairs."""
-    v, t = wc.icosphere(0)
+    v, t = wc.scene.icosphere(0)
     meshes = [(v * 0.5 + np.float32([0.6 * k, 0.1 * k, 0.0]), t) for k in range(6)]
     scene = wc.Scene.from_meshes(meshes, deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene)
@@ -125,18 +125,18 @@ def test_whole_object_pairs_default_by_scene_size():
     """Whole-object pairs by default up to WHOLE_OBJECTS_MAX objects, trees for every pair above."""
     from warp_ccd.stages.mid_phase import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
 
-    bvh = wc.SceneBVH(wc.Scene.random(50, seed=0))
-    assert wc.MidPhaseBVH(bvh).whole_triangles_max == WHOLE_TRIANGLES_MAX
+    bvh = wc.stages.SceneBVH(wc.Scene.random(50, seed=0))
+    assert wc.stages.MidPhaseBVH(bvh).whole_triangles_max == WHOLE_TRIANGLES_MAX
     bvh.lower = wp.zeros(WHOLE_OBJECTS_MAX + 1, dtype=wp.vec3, device=bvh.device)  # as a larger scene's
-    assert wc.MidPhaseBVH(bvh).whole_triangles_max == 0
+    assert wc.stages.MidPhaseBVH(bvh).whole_triangles_max == 0
 
 
 @pytest.mark.parametrize("value", [-1, 65, 2.5, True])
 def test_bad_whole_triangles_max(value):
     scene = wc.Scene.random(4, seed=0)
     with pytest.raises(ValueError, match="whole_triangles_max"):
-        wc.MidPhaseBVH(wc.SceneBVH(scene), whole_triangles_max=value)
-    mid = wc.MidPhaseBVH(wc.SceneBVH(scene))
+        wc.stages.MidPhaseBVH(wc.stages.SceneBVH(scene), whole_triangles_max=value)
+    mid = wc.stages.MidPhaseBVH(wc.stages.SceneBVH(scene))
     with pytest.raises(ValueError, match="whole_triangles_max"):
         mid.whole_triangles_max = value
     for lanes in (0, 3, 512, 32.0, True):
@@ -200,8 +200,9 @@ def test_mid_phases_share_whole_pair_options():
     whose pairs are all whole, leaves them unused)."""
     from warp_ccd.stages.mid_phase import WHOLE_LANES, MidPhase
 
-    mid = wc.MidPhaseAllPairs()
-    assert isinstance(mid, MidPhase) and isinstance(wc.MidPhaseBVH(wc.SceneBVH(wc.Scene.random(3))), MidPhase)
+    mid = wc.stages.MidPhaseAllPairs()
+    assert isinstance(mid, MidPhase)
+    assert isinstance(wc.stages.MidPhaseBVH(wc.stages.SceneBVH(wc.Scene.random(3))), MidPhase)
     assert (mid.whole_triangles_max, mid.whole_lanes) == (0, WHOLE_LANES)
     mid.whole_triangles_max, mid.whole_lanes = np.int64(12), np.int32(8)
     assert (mid.whole_triangles_max, mid.whole_lanes) == (12, 8)
@@ -265,8 +266,11 @@ def test_timings(device):
     assert wc.CollisionPipeline(scene).detect().timings is None
 
 
+CUBE = wc.scene.shape("cube")
+
+
 def cube_at(x, y=0.0, z=0.0, s=1.0):
-    v, t = wc.shape("cube")
+    v, t = CUBE
     return (v * s + np.float32([x, y, z]), t)
 
 
@@ -283,7 +287,7 @@ def test_collide_world_space(device):
 
 def test_collide_with_transforms_matches_fcl(device):
     rng = np.random.default_rng(4)
-    shapes = [wc.icosphere(2), wc.shape("dodecahedron"), wc.shape("cube"), wc.shape("tetrahedron")]
+    shapes = [wc.scene.icosphere(2), *(wc.scene.shape(s) for s in ("dodecahedron", "cube", "tetrahedron"))]
     meshes = [shapes[i % 4] for i in range(40)]  # shared arrays: instanced shapes
     transforms = np.tile(np.eye(4), (40, 1, 1))
     q = rng.normal(size=(40, 4))
@@ -304,7 +308,7 @@ def test_collide_with_transforms_matches_fcl(device):
 
 def test_touching_cubes_count(device):
     """Face-touching cubes collide (closed sets); cubes a hair apart do not."""
-    v, t = wc.shape("cube")
+    v, t = wc.scene.shape("cube")
     side = float(v[:, 0].max() - v[:, 0].min())
     res = wc.collide([cube_at(0), cube_at(side)], device=device)
     assert res.object_pairs.tolist() == [[0, 1]]
@@ -331,8 +335,8 @@ def test_touching_without_crossing(device):
     """Pairs that touch but do not cross (a vertex over a face, an edge over a face's edge, a fifth
     of the tolerance apart): the pipeline's split step 4 finds exactly what Möller's test in one
     function does."""
-    ov, ot = wc.shape("octahedron")
-    cv, ct = wc.shape("cube")
+    ov, ot = wc.scene.shape("octahedron")
+    cv, ct = wc.scene.shape("cube")
     top = float(cv[:, 2].max())
     half = float(cv[:, 0].max())
     lowest = float(ov[:, 2].min())
@@ -392,7 +396,7 @@ def test_empty_and_single(device):
 
 def test_deforming_scene(device):
     """World vertices written by the caller: results follow the written geometry."""
-    v, t = wc.icosphere(2)
+    v, t = wc.scene.icosphere(2)
     scene = wc.Scene.from_meshes([(v, t), (v + np.float32([3, 0, 0]), t)], deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene)
     assert pipe.detect().object_pairs.tolist() == []
@@ -418,10 +422,10 @@ def test_device_arrays_stay_on_device(device):
 BAD_MESHES = [
     ("not a sequence", TypeError, "sequence"),
     ([(np.zeros((3, 3)),)], ValueError, "mesh 0"),
-    ([cube_at(0), (np.full((8, 3), np.nan), wc.shape("cube")[1])], ValueError, "mesh 1: vertex 0 is not finite"),
-    ([cube_at(0), (wc.shape("cube")[0], wc.shape("cube")[1] + 1)], ValueError, "mesh 1: triangle .* out of range"),
-    ([cube_at(0), (wc.shape("cube")[0], np.zeros((0, 3), int))], ValueError, "mesh 1: the mesh has no triangles"),
-    ([cube_at(0), (wc.shape("cube")[0], wc.shape("cube")[1].astype(float))], ValueError, "mesh 1: .*integer"),
+    ([cube_at(0), (np.full((8, 3), np.nan), wc.scene.shape("cube")[1])], ValueError, "mesh 1: vertex 0 is not finite"),
+    ([cube_at(0), (CUBE[0], CUBE[1] + 1)], ValueError, "mesh 1: triangle .* out of range"),
+    ([cube_at(0), (wc.scene.shape("cube")[0], np.zeros((0, 3), int))], ValueError, "mesh 1: the mesh has no triangles"),
+    ([cube_at(0), (CUBE[0], CUBE[1].astype(float))], ValueError, "mesh 1: .*integer"),
 ]
 
 
@@ -542,9 +546,9 @@ def test_segment_of_crossing_triangles(device, precision):
         (lambda s: wc.Scene.random(5, seed=-1), "seed"),
         (lambda s: s.advance("a"), "dt"),
         (lambda s: s.advance(None), "dt"),
-        (lambda s: wc.Scene([wc.shape("cube")], [0.7, 0.2]), "object_shape"),
-        (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[0, 0, 0, 0, 0, 0, 3]]), "poses: row 0"),
-        (lambda s: wc.Scene([wc.shape("cube")], [0], poses=[[np.nan, 0, 0, 0, 0, 0, 1]]), "poses: row 0"),
+        (lambda s: wc.Scene([wc.scene.shape("cube")], [0.7, 0.2]), "object_shape"),
+        (lambda s: wc.Scene([wc.scene.shape("cube")], [0], poses=[[0, 0, 0, 0, 0, 0, 3]]), "poses: row 0"),
+        (lambda s: wc.Scene([wc.scene.shape("cube")], [0], poses=[[np.nan, 0, 0, 0, 0, 0, 1]]), "poses: row 0"),
     ],
 )
 def test_bad_arguments_name_the_argument(call, match):

@@ -14,7 +14,7 @@ def reddish(img):
 
 
 def two_cubes(device, overlap):
-    cube = wc.shape("cube")
+    cube = wc.scene.shape("cube")
     m = np.tile(np.eye(4), (3, 1, 1))
     m[1, 0, 3] = 0.8 if overlap else 3.0
     m[2, 0, 3] = -4.0

@@ -61,7 +61,7 @@ def preamble() -> dict:
     """The namespace every block starts from (:data:`PREAMBLE`)."""
     import warp_ccd as wc
 
-    v, t = wc.shape("cube")
+    v, t = wc.scene.shape("cube")
     v = (np.sign(v).astype(np.float64) + 1.0) / 2.0  # the unit cube [0, 1]^3
     moved = (v + 0.5, t)
     transforms = np.tile(np.eye(4), (2, 1, 1))

@@ -25,7 +25,7 @@ def random_rotations(rng, n):
 
 def crowded_cubes(n=300, seed=0):
     rng = np.random.default_rng(seed)
-    cube = wc.shape("cube")
+    cube = wc.scene.shape("cube")
     transforms = np.tile(np.eye(4), (n, 1, 1))
     transforms[:, :3, :3] = random_rotations(rng, n)
     transforms[:, :3, 3] = rng.normal(scale=0.05, size=(n, 3))
@@ -60,15 +60,15 @@ def test_deterministic_across_runs_and_devices():
 
 
 def nested(outer_name, inner_name, inner_scale, offset=(0.0, 0.0, 0.0)):
-    ov, ot = wc.shape(outer_name)
-    iv, it = wc.shape(inner_name)
+    ov, ot = wc.scene.shape(outer_name)
+    iv, it = wc.scene.shape(inner_name)
     return [(ov * 3.0, ot), (iv * inner_scale + np.float32(offset), it)]
 
 
 @pytest.mark.parametrize("outer", ["cube", "dodecahedron", "icosphere2", "tetrahedron"])
 def test_containment(device, outer):
     meshes = nested(outer, "octahedron", 0.4, offset=(0.1, -0.1, 0.05))
-    meshes.append((wc.shape("cube")[0] * 0.3 + np.float32([20, 0, 0]), wc.shape("cube")[1]))  # far away
+    meshes.append((wc.scene.shape("cube")[0] * 0.3 + np.float32([20, 0, 0]), wc.scene.shape("cube")[1]))  # far away
     plain = wc.collide(meshes, device=device)
     assert plain.object_pairs.shape == (0, 2) and plain.containment_pairs is None
     assert not plain.colliding.any()
@@ -85,10 +85,10 @@ def test_containment_excludes_surface_contacts(device):
     assert res.object_pairs.tolist() == [[0, 1]]
     assert res.containment_pairs.shape == (0, 2)
     # boxes nest but the inner object is outside the outer (a corner of the tetrahedron's box)
-    tv, tt = wc.shape("tetrahedron")
+    tv, tt = wc.scene.shape("tetrahedron")
     v = tv * 3.0
     corner = v.min(axis=0) * 0.9 + np.float32([0.05, 0.05, 0.05])
-    inside_box_not_mesh = [(v, tt), (wc.shape("cube")[0] * 0.05 + corner, wc.shape("cube")[1])]
+    inside_box_not_mesh = [(v, tt), (wc.scene.shape("cube")[0] * 0.05 + corner, wc.scene.shape("cube")[1])]
     lo, hi = v.min(0), v.max(0)
     assert (inside_box_not_mesh[1][0] >= lo).all() and (inside_box_not_mesh[1][0] <= hi).all()
     res = wc.collide(inside_box_not_mesh, device=device, containment=True)
@@ -110,12 +110,12 @@ def test_arrays_on_another_device_are_rejected():
 
 
 def test_set_world_vertices_validation():
-    rigid = wc.Scene.from_meshes([wc.shape("cube")])
+    rigid = wc.Scene.from_meshes([wc.scene.shape("cube")])
     with pytest.raises(ValueError, match="objects are rigid, placed by their poses"):
         rigid.set_world_vertices(np.zeros((8, 3)))
     with pytest.raises(ValueError, match=r"deforming: expected a bool or \(1,\) bools"):
-        wc.Scene([wc.shape("cube")], [0], deforming=[True, False])
-    scene = wc.Scene.from_meshes([wc.shape("cube")], deforming=True)
+        wc.Scene([wc.scene.shape("cube")], [0], deforming=[True, False])
+    scene = wc.Scene.from_meshes([wc.scene.shape("cube")], deforming=True)
     with pytest.raises(ValueError, match=r"expected shape \(8, 3\)"):
         scene.set_world_vertices(np.zeros((7, 3)))
     bad = np.zeros((8, 3))

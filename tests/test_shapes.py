@@ -9,7 +9,7 @@ ALL = [*shapes.SHAPES, "icosphere0", "icosphere1", "icosphere3"]
 
 @pytest.mark.parametrize("name", ALL)
 def test_shape_is_unit_and_outward(name):
-    v, t = wc.shape(name)
+    v, t = wc.scene.shape(name)
     assert v.dtype == np.float32 and t.dtype == np.int32
     assert v.ndim == 2 and v.shape[1] == 3 and t.ndim == 2 and t.shape[1] == 3
     np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-6)
@@ -30,16 +30,17 @@ def test_shape_is_unit_and_outward(name):
 
 
 def test_counts():
-    assert [len(wc.shape(s)[1]) for s in ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")] == [
+    names = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
+    assert [len(wc.scene.shape(s)[1]) for s in names] == [
         4, 12, 8, 36, 20]
-    assert [len(wc.icosphere(k)[1]) for k in range(5)] == [20, 80, 320, 1280, 5120]
+    assert [len(wc.scene.icosphere(k)[1]) for k in range(5)] == [20, 80, 320, 1280, 5120]
 
 
 def test_unknown_shape():
     with pytest.raises(ValueError, match="unknown shape"):
-        wc.shape("torus")
+        wc.scene.shape("torus")
     with pytest.raises(ValueError, match="level"):
-        wc.icosphere(-1)
+        wc.scene.icosphere(-1)
 
 
 @pytest.mark.parametrize(
@@ -61,10 +62,10 @@ def test_unknown_shape():
 )
 def test_validate_mesh_rejects(vertices, triangles, match):
     with pytest.raises(ValueError, match=match) as err:
-        wc.validate_mesh(vertices, triangles, name="mesh 7")
+        wc.scene.validate_mesh(vertices, triangles, name="mesh 7")
     assert "mesh 7" in str(err.value)
 
 
 def test_validate_mesh_accepts_int64_and_float64():
-    v, t = wc.validate_mesh(np.eye(3, dtype=np.float64), np.array([[0, 1, 2]], np.int64))
+    v, t = wc.scene.validate_mesh(np.eye(3, dtype=np.float64), np.array([[0, 1, 2]], np.int64))
     assert v.dtype == np.float32 and t.dtype == np.int32

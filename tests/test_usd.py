@@ -192,7 +192,7 @@ def test_aabb_wireframes_match_world_bounds(tmp_path, device):
 
 
 def test_deforming_scene_writes_meshes_with_points(tmp_path, device):
-    v, t = wc.icosphere(1)
+    v, t = wc.scene.icosphere(1)
     scene = wc.Scene.from_meshes([(v, t), (v + [3.0, 0.0, 0.0], t)], deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene)
     path = tmp_path / "deform.usda"
@@ -325,7 +325,7 @@ def test_segment_markers(tmp_path, device):
     pipe = wc.CollisionPipeline(scene, segments=True)
     path = tmp_path / "segments.usda"
     counts = []
-    with wc.UsdAnimationWriter(path, scene, segments=True) as writer:
+    with wc.usd.UsdAnimationWriter(path, scene, segments=True) as writer:
         for frame in range(3):
             scene.advance(0.2)
             res = pipe.detect()
@@ -338,7 +338,7 @@ def test_segment_markers(tmp_path, device):
         assert len(curves.GetPointsAttr().Get(frame)) == 2 * n
     assert sum(counts) > 0
     with pytest.raises(ValueError, match="segments=True"):
-        with wc.UsdAnimationWriter(tmp_path / "x.usd", scene, segments=True) as writer:
+        with wc.usd.UsdAnimationWriter(tmp_path / "x.usd", scene, segments=True) as writer:
             writer.add_frame(0, wc.CollisionPipeline(scene).detect())
 
 

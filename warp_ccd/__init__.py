@@ -8,46 +8,59 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> scene = wc.Scene.random(1000, seed=0)           # polyhedra in motion
 >>> pipe = wc.CollisionPipeline(scene)
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
+>>> report = wc.check_usd("anim.usd")               # interpenetrations of a USD animation
+
+The API in levels: this module holds what a user of :func:`collide`, :class:`Scene`,
+:class:`CollisionPipeline` and :func:`check_usd` needs; the namespaces below hold the rest:
+
+* :mod:`warp_ccd.geometry`: the exact tests as ``@wp.func``\\ s, to call from your own kernels.
+* :mod:`warp_ccd.scene`: shapes (``shape``, ``icosphere``), motion, mesh validation.
+* :mod:`warp_ccd.stages`: the stage classes (bounds and trees, broad, mid and narrow phase), their
+  protocols and factories.
+* :mod:`warp_ccd.usd`: USD import (``scene_from_usd``), animation export, ``check_usd``'s report and overlay.
+* :mod:`warp_ccd.preview`: preview pictures.
 """
 
-from .geometry import TOLERANCE, tri_tri_edge_face, tri_tri_moller
+from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
+from ._deprecated import module_aliases, warn_renamed
+from .geometry import TOLERANCE
+from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
-from .preview import render_frame, save_preview
-from .scene.motion import EllipseMotion
-from .scene.scene import Scene
-from .scene.shapes import SHAPES, icosphere, shape, validate_mesh
-from .stages.broad_phase import BroadPhaseAllPairs as BroadPhaseNxN
-from .stages.broad_phase import BroadPhaseSAP, broad_phase_pairs
-from .stages.bvh import SceneBVH
-from .stages.bvh_reference import build_tree
-from .stages.mid_phase import MidPhaseAllPairs, MidPhaseBVH
-from .stages.narrow_phase import NarrowPhase
-from .usd.export import UsdAnimationWriter
+from .scene import Scene
+from .stages import broad_phase_pairs
+from .usd import CheckReport, check_usd
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "SHAPES",
     "TOLERANCE",
-    "UsdAnimationWriter",
-    "BroadPhaseNxN",
-    "BroadPhaseSAP",
+    "CheckReport",
     "CollisionPipeline",
     "CollisionResult",
-    "EllipseMotion",
-    "MidPhaseAllPairs",
-    "MidPhaseBVH",
-    "NarrowPhase",
+    "PrecisionWarning",
     "Scene",
-    "SceneBVH",
     "broad_phase_pairs",
-    "build_tree",
+    "check_usd",
     "collide",
-    "icosphere",
-    "render_frame",
-    "save_preview",
-    "shape",
-    "tri_tri_edge_face",
-    "tri_tri_moller",
-    "validate_mesh",
 ]
+
+# Names of the top level until 0.1, kept one release: each use warns and reaches its new home.
+__getattr__ = module_aliases(__name__, {
+    **{name: f"warp_ccd.scene:{name}" for name in ("SHAPES", "EllipseMotion", "icosphere", "shape",
+                                                      "validate_mesh")},
+    **{name: f"warp_ccd.stages:{name}" for name in ("BroadPhaseSAP", "MidPhaseAllPairs", "MidPhaseBVH",
+                                                       "NarrowPhase", "SceneBVH", "build_tree")},
+    "BroadPhaseNxN": "warp_ccd.stages:BroadPhaseAllPairs",
+    **{name: f"warp_ccd.geometry:{name}" for name in ("tri_tri_edge_face", "tri_tri_moller")},
+    **{name: f"warp_ccd.preview:{name}" for name in ("render_frame", "save_preview")},
+    "UsdAnimationWriter": "warp_ccd.usd:UsdAnimationWriter",
+})
+
+
+def _scene_from_usd(cls, *args, **kwargs):
+    """Deprecated: :func:`warp_ccd.usd.scene_from_usd` (the scene room does not read USD)."""
+    warn_renamed("Scene.from_usd", "warp_ccd.usd.scene_from_usd", stacklevel=3)
+    return usd.scene_from_usd(*args, **kwargs)
+
+
+Scene.from_usd = classmethod(_scene_from_usd)

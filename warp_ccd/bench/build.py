@@ -61,7 +61,7 @@ def timed(fn, device, repeats: int) -> tuple[float, float]:
 def noisy_sphere(level: int, rng, bumps: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
     """An icosphere of ``20 * 4**level`` triangles with smooth bumps and a little noise, like a
     scanned blob (float32 vertices, int32 triangles)."""
-    v, t = wc.icosphere(level)
+    v, t = wc.scene.icosphere(level)
     v = v.astype(np.float64)
     k = rng.normal(size=(4, 3))
     phase = rng.uniform(0, 2 * np.pi, 4)
@@ -72,7 +72,7 @@ def noisy_sphere(level: int, rng, bumps: float = 0.15) -> tuple[np.ndarray, np.n
 def shapes_of(num_shapes: int, triangles: int, rng) -> list:
     """``num_shapes`` distinct meshes of ``triangles`` triangles each (20: icosahedra, else 20 * 4**k)."""
     if triangles == 20:
-        v, t = wc.shape("icosahedron")
+        v, t = wc.scene.shape("icosahedron")
         return [(v + rng.normal(0, 0.01, v.shape).astype(np.float32), t) for _ in range(num_shapes)]
     level = int(round(np.log(triangles / 20) / np.log(4)))
     if 20 * 4**level != triangles:
@@ -167,7 +167,7 @@ def spiral(v: np.ndarray, amount: float) -> np.ndarray:
 
 def bench_rebuild(device, count: int, level: int, repeats: int, rng) -> list[dict]:
     """Deforming spheres twisted into spirals: a frame with refit trees against rebuilt ones."""
-    v, t = wc.icosphere(level)
+    v, t = wc.scene.icosphere(level)
     # Shuffle the triangles so that a tree built on the sphere groups triangles far apart on the spiral.
     t = t[rng.permutation(len(t))]
     side = int(np.ceil(count ** (1 / 3)))
@@ -200,7 +200,7 @@ def polyhedra_meshes(num: int, rng) -> tuple[list, np.ndarray]:
     density of ``Scene.random``."""
     meshes = []
     for k in rng.integers(0, len(POLYHEDRA), num):
-        v, t = wc.shape(POLYHEDRA[k])
+        v, t = wc.scene.shape(POLYHEDRA[k])
         meshes.append(((v * rng.uniform(0.5, 1.5) + rng.normal(0, 0.01, v.shape)).astype(np.float64), t.copy()))
     return meshes, transforms_in_cube(num, (num * 4.19 / 0.04) ** (1 / 3), rng)
 

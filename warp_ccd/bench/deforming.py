@@ -74,7 +74,7 @@ def deforming_scene(n: int, level: int, seed: int, device) -> tuple:
     rigid = wc.Scene.random(n, seed=seed, shapes=(f"icosphere{level}",), device=device)
     rigid.advance(DT)
     world = rigid.world_vertex.numpy()
-    _, tri = wc.icosphere(level)
+    _, tri = wc.scene.icosphere(level)
     per = len(world) // max(n, 1)
     meshes = [(world[k * per:(k + 1) * per], tri) for k in range(n)]
     scene = wc.Scene(meshes, np.arange(n), deforming=True, device=device)
