@@ -11,6 +11,7 @@ import warp_ccd as wc
 from warp_ccd.bench import box_tests, deforming, host_breakdown, methods, scaling
 from warp_ccd.bench import broad_phase as broad_phase_bench
 from warp_ccd.bench import pipeline as pipeline_bench
+from warp_ccd.bench.command import add_out_option, add_row, add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.compare import (
     box_overlap_truth,
     classify_triangle_pairs,
@@ -216,6 +217,37 @@ def test_broad_phase_peers_agree(device, name):
         count = find_pairs(broad, lower, upper, pairs)
     check = compare_exact("sap", ref, name, pairs.numpy(count), "box pairs")
     assert check.ok, check.mismatches
+
+
+def test_bench_command_setup(device, tmp_path, capsys):
+    parser = bench_parser("a benchmark")
+    parser.add_argument("--objects", type=int, default=10)
+    add_run_options(parser, frames=5, warmup=2, out=False)
+    parser.add_argument("--replays", type=int, default=3)
+    add_out_option(parser, "JSON file")
+    out = tmp_path / "r.json"
+    args, dev, doc = start(parser, ["--device", device, "--frames", "7", "--out", str(out)])
+    assert str(dev) == device and (args.objects, args.frames, args.warmup, args.replays) == (10, 7, 2, 3)
+    assert not hasattr(args, "seed")  # only the options asked for
+    assert list(doc) == ["device", "device_name", "date", "versions", "git_commit", "git_dirty", "config", "rows"]
+    assert list(doc["config"]) == ["device", "objects", "frames", "warmup", "replays", "out"]  # the options' order
+    assert doc["device"] == device and doc["rows"] == []
+    add_row(doc, {"n": 1})
+    assert capsys.readouterr().out == "{'n': 1}\n"
+    write_result(None, doc)  # no --out: nothing written
+    assert not out.exists()
+    write_result(args.out, doc)
+    assert json.loads(out.read_text())["rows"] == [{"n": 1}]
+    defaults = bench_parser(None, device="cpu")
+    add_run_options(defaults, seed=4)
+    args, dev, _ = start(defaults, [])
+    assert str(dev) == "cpu" and args.seed == 4 and args.out is None and not hasattr(args, "frames")
+    # An unknown device or a JSON file that cannot be written: a usage error before anything runs.
+    for argv in (["--device", "tpu:7"], ["--out", str(tmp_path / "r.txt")], ["--out", str(tmp_path / "no" / "r.json")]):
+        with pytest.raises(SystemExit) as exc:
+            start(parser, argv)
+        assert exc.value.code == 2
+    assert capsys.readouterr().err.count("error:") == 3
 
 
 def test_bench_scripts_run(device, tmp_path, capsys):

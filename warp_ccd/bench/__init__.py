@@ -12,6 +12,8 @@ run :func:`~warp_ccd.bench.scaling.main`, the scaling benchmark:
 
 What the benchmarks share:
 
+* :mod:`warp_ccd.bench.command`: the command-line set-up of every other benchmark (``--device``,
+  ``--frames``, ``--warmup``, ``--seed``, ``--out``; parsing, the device, the result document).
 * :mod:`warp_ccd.bench.peers`: the peers (Warp's built-in tools, python-fcl, newton), each at its
   best.
 * :mod:`warp_ccd.bench.compare`: comparing what two methods found (box pairs exactly, triangle

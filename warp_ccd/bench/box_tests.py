@@ -29,9 +29,8 @@ import time
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.report import environment, write_json
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.geometry.precision import PRECISIONS
 from warp_ccd.pipeline import STAGES, CollisionPipeline
 from warp_ccd.scene.scene import Scene
@@ -147,8 +146,7 @@ def run(spec: str, n: int, args, device, registers: int, pairs_by_case: dict) ->
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--cases", type=_case, nargs="+", default=[("poly", 1000), ("80", 1000)],
                         help="TRIANGLES:N scenes (default: %(default)s)")
     parser.add_argument("--axes", type=int, nargs="+", default=[3, 6], choices=[3, 6])
@@ -162,23 +160,16 @@ def main(argv=None) -> int:
     parser.add_argument("--max-registers", type=int, nargs="+", default=[0],
                         help="most registers a thread of the heavy kernels, 0: as declared (CUDA; default: "
                              "%(default)s)")
-    parser.add_argument("--frames", type=int, default=10)
-    parser.add_argument("--warmup", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default=None, help="JSON file")
-    args = parser.parse_args(argv)
-    quiet_warp()
-    device = resolve_device(args.device)
-    rows = []
-    document = {**environment(device), "config": {**vars(args), "cases": [f"{s}:{n}" for s, n in args.cases]},
-                "rows": rows}
+    add_run_options(parser, frames=10, warmup=3, seed=0, out_help="JSON file")
+    args, device, document = start(parser, argv)
+    document["config"] = {**vars(args), "cases": [f"{s}:{n}" for s, n in args.cases]}
+    rows = document["rows"]
     pairs_by_case = {}
     for registers in args.max_registers:
         _set_max_registers(registers)
         for spec, n in args.cases:
             rows += run(spec, n, args, device, registers, pairs_by_case)
-            if args.out:
-                write_json(args.out, document)
+            write_result(args.out, document)
     _set_max_registers(0)
     return 0
 

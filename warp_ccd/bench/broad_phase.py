@@ -41,12 +41,13 @@ import sys
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.compare import box_overlap_truth, compare_exact
 from warp_ccd.bench.methods import device_modes
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
-from warp_ccd.bench.report import RESULTS, environment, write_json
+from warp_ccd.bench.report import RESULTS
 from warp_ccd.bench.timing import ModeFrames, StageTimes
-from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK, resolve_device
+from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
 from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, BroadPhaseAllPairs, BroadPhaseSAP
 from warp_ccd.stages.buffers import GrowableBuffer
 
@@ -140,8 +141,7 @@ def _count(text: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
+    parser = bench_parser(__doc__.split("\n\n")[0], device_help="Warp device (default: cuda:0 if available, else cpu)")
     parser.add_argument("--min-n", type=_count, default=1000, help="smallest number of boxes (default: %(default)s)")
     parser.add_argument("--max-n", type=_count, default=None,
                         help="largest number of boxes, decades from --min-n (default: 1e5 on CPU, 1e6 on CUDA)")
@@ -153,15 +153,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nxn-max", type=_count, default=None,
                         help=f"largest N for nxn (default: 10000 on CPU, {ALL_PAIRS_LIMIT} on CUDA)")
     parser.add_argument("--newton-max", type=_count, default=None, help="largest N for newton_sap (default: all)")
-    parser.add_argument("--frames", type=int, default=5, help="timed frames (default: %(default)s)")
-    parser.add_argument("--warmup", type=int, default=2,
-                        help="untimed frames before them, at least 1 (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the boxes (default: %(default)s)")
-    parser.add_argument("--out", default=None,
-                        help="JSON file (default: bench/results/broad_phase_<device>.json)")
-    args = parser.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    add_run_options(parser, frames=5, warmup=2, seed=0, frames_help="timed frames (default: %(default)s)",
+                    warmup_help="untimed frames before them, at least 1 (default: %(default)s)",
+                    seed_help="seed of the boxes (default: %(default)s)",
+                    out_help="JSON file (default: bench/results/broad_phase_<device>.json)")
+    args, device, doc = start(parser, argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:
@@ -170,10 +166,6 @@ def main(argv: list[str] | None = None) -> int:
         methods.insert(0, REFERENCE)
     if args.frames < 1 or args.warmup < 1 or args.overlaps <= 0:
         parser.error("--frames and --warmup must be at least 1, --overlaps positive")
-    try:
-        device = resolve_device(args.device)
-    except ValueError as exc:
-        parser.error(str(exc))
     if args.nxn_max is None:
         args.nxn_max = ALL_PAIRS_LIMIT if device.is_cuda else 10000
     max_n = args.max_n or (1_000_000 if device.is_cuda else 100_000)
@@ -185,13 +177,12 @@ def main(argv: list[str] | None = None) -> int:
         RESULTS.mkdir(parents=True, exist_ok=True)
         out = str(RESULTS / f"broad_phase_{str(device).replace(':', '')}.json")
 
-    env = environment(device)
-    print(f"broad phase on {device} ({env['device_name']}), {args.overlaps} overlaps per box, "
+    print(f"broad phase on {device} ({doc['device_name']}), {args.overlaps} overlaps per box, "
           f"{args.frames} frames after {args.warmup} warm-up; ms per frame min / median, ratio to {REFERENCE}, "
           f"best mode (e eager, g graph); * wrong pairs")
     width = 24
     print(f"{'boxes':>11}" + "".join(f"{m:>{width}}" for m in methods) + f"{'pairs':>12}{'overlaps/box':>14}")
-    rows, checks, notes, ok = [], [], [], True
+    rows, checks, notes, ok = doc["rows"], [], [], True
     for n in sorted(sizes):
         res = run_size(n, methods, args, device)
         line = f"{n:>11,}"
@@ -230,8 +221,9 @@ def main(argv: list[str] | None = None) -> int:
         agree = ", ".join(c.peer for c in res["checks"] if c.ok and c.peer_ok)
         print(f"    VERDICT {n:,} boxes: {'OK' if all(c.ok for c in res['checks']) else 'MISMATCH'}"
               + (f" ({agree} agree with {REFERENCE})" if agree else ""))
-        write_json(out, {**env, "config": {**vars(args), "methods": methods, "sizes": sorted(sizes)},
-                         "rows": rows, "checks": checks, "notes": notes, "ok": ok})
+        doc.update(config={**vars(args), "methods": methods, "sizes": sorted(sizes)}, checks=checks, notes=notes,
+                   ok=ok)
+        write_result(out, doc)
     print(f"results written to {out}")
     if not ok:
         print("warp_ccd.bench.broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)

@@ -41,9 +41,9 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.report import environment, write_json
+from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
+from warp_ccd.bench.report import environment
 from warp_ccd.bench.timing import synced_ms
-from warp_ccd.cli.common import resolve_device
 from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild
 from warp_ccd.stages.bvh_reference import build_tree
 
@@ -303,8 +303,7 @@ def bench_one_shot(device, repeats: int, rng, profile: str | None = None) -> lis
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--device", default=None)
+    p = bench_parser(__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cases", nargs="+", default=["1000x20", "100000x80", "10000x1280", "1x1310720", "60x5120"],
                    help="SHAPESxTRIANGLES (triangles 20 or 20 * 4**k)")
     p.add_argument("--small", nargs="*", type=int, default=[], help="other subtree sizes finished per thread")
@@ -316,10 +315,8 @@ def main(argv=None) -> None:
     p.add_argument("--rebuild", default="27x5120", help="OBJECTSxTRIANGLES of the rebuild part ('' skips it)")
     p.add_argument("--no-one-shot", action="store_true")
     p.add_argument("--profile", default=None, help="write cProfile statistics of one one-shot call per scene here")
-    p.add_argument("--out", default=None)
-    args = p.parse_args(argv)
-    wp.config.quiet = True
-    device = resolve_device(args.device)
+    add_out_option(p)
+    args, device = parse_options(p, argv)
     rng = np.random.default_rng(0)
     cases = [tuple(int(float(x)) for x in c.split("x")) for c in args.cases]
     doc = {"benchmark": "build", **environment(device),
@@ -333,7 +330,7 @@ def main(argv=None) -> None:
     if not args.no_one_shot:
         doc["one_shot"] = bench_one_shot(device, args.repeats, rng, args.profile)
     if args.out:
-        write_json(args.out, doc)
+        write_result(args.out, doc)
         print("wrote", args.out)
 
 

@@ -29,19 +29,17 @@ real difference is charged to the method an exact arbiter finds wrong).
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.compare import compare_triangle_pairs
 from warp_ccd.bench.methods import DevicePeerMethod
 from warp_ccd.bench.peers import WarpMeshPipeline
-from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import synced_ms
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import STAGES
 
 DT = 1.0 / 60.0
@@ -161,24 +159,15 @@ def run(n: int, args, device) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--objects", type=lambda x: int(float(x)), nargs="+", default=[1000, 10000])
     parser.add_argument("--level", type=int, default=3, help="icosphere level (3: 1,280 triangles)")
     parser.add_argument("--leaf-sizes", type=int, nargs="+", default=[1, 2, 4, 8])
-    parser.add_argument("--frames", type=int, default=10)
-    parser.add_argument("--warmup", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default=None, help="JSON file")
-    args = parser.parse_args(argv)
-    quiet_warp()
-    device = resolve_device(args.device)
-    rows = []
-    document = {**environment(device), "config": vars(args), "rows": rows}
+    add_run_options(parser, frames=10, warmup=3, seed=0, out_help="JSON file")
+    args, device, document = start(parser, argv)
     for n in args.objects:
-        rows += run(n, args, device)
-        if args.out:
-            write_json(args.out, document)
+        document["rows"] += run(n, args, device)
+        write_result(args.out, document)
     return 0
 
 

@@ -27,17 +27,15 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"case", "tr
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import detect_frames
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene.scene import Scene
 
@@ -141,21 +139,16 @@ def measure_case(spec: str, variant: str, args, device) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--cases", nargs="+", default=["poly:1000", "poly:10000"], metavar="TRIANGLES:N")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
-    parser.add_argument("--frames", type=int, default=50)
-    parser.add_argument("--warmup", type=int, default=5)
+    add_run_options(parser, frames=50, warmup=5, out=False)
     parser.add_argument("--replays", type=int, default=200)
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    quiet_warp()
-    device = resolve_device(args.device)
+    add_out_option(parser)
+    args, device, doc = start(parser, argv)
     if not device.is_cuda:
         print("frame_stages: graphs need a CUDA device; nothing measured")
         return 0
-    doc = {**environment(device), "config": vars(args), "rows": []}
     for spec in args.cases:
         for variant in args.variants:
             rows = measure_case(spec, variant, args, device)
@@ -165,8 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{spec:>12} {variant:<13}: frame {by['frame']['ms_median']:.4f} "
                   f"(min {by['frame']['ms_min']:.4f}) host {by['host']['ms_median']:.4f} loop "
                   f"{by['loop']['ms_median']:.4f} | device up to: {cuts}", flush=True)
-            if args.out:
-                write_json(args.out, doc)
+            write_result(args.out, doc)
     return 0
 
 

@@ -33,7 +33,6 @@ JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -42,8 +41,7 @@ import types
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.report import environment, write_json
-from warp_ccd.cli.common import quiet_warp, resolve_device
+from warp_ccd.bench.command import add_out_option, add_row, bench_parser, start, write_result
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene.scene import Scene
 
@@ -118,15 +116,12 @@ class Waits:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--waits", type=float, nargs="+", default=[0.05, 1.0, 5.0, 20.0, 50.0], help="ms")
     parser.add_argument("--objects", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=15)
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    quiet_warp()
-    device = wp.get_device(resolve_device(args.device))
+    add_out_option(parser)
+    args, device, doc = start(parser, argv)
     waits = Waits(device)
     pipe = CollisionPipeline(Scene.random(args.objects, seed=0, device=device))
     for _ in range(3):
@@ -137,8 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         with wp.ScopedCapture(device=device) as capture:
             wp.launch(_tiny_kernel, dim=1, inputs=[waits.out], device=device)
         graph = capture.graph
-    doc = {**environment(device), "config": {**vars(args), "ns_per_gpu_iteration": waits.ns_per_iteration},
-           "rows": []}
+    doc["config"] = {**vars(args), "ns_per_gpu_iteration": waits.ns_per_iteration}
     works = WORKS if graph is not None else ("python", "detect")
     for method in waits.methods():
         for ms in args.waits:
@@ -163,10 +157,8 @@ def main(argv: list[str] | None = None) -> int:
                        "us_min": round(float(np.min(wall)), 2), "us_median": round(float(np.median(wall)), 2),
                        "cpu_us_median": round(float(np.median(cpu)), 2) if work == "python" else None,
                        "steal_ms": None if steal0 is None else round((steal1 - steal0) / args.repeats, 3)}
-                print(row, flush=True)
-                doc["rows"].append(row)
-    if args.out:
-        write_json(args.out, doc)
+                add_row(doc, row)
+    write_result(args.out, doc)
     return 0
 
 

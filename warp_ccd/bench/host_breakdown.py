@@ -18,16 +18,14 @@ JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.report import environment, write_json
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene.scene import Scene
 
@@ -70,16 +68,11 @@ def frames(pipe: CollisionPipeline, device, count: int) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--objects", type=lambda t: int(float(t)), nargs="+", default=[1000000])
     parser.add_argument("--triangles", nargs="+", default=["poly", "80"])
-    parser.add_argument("--frames", type=int, default=20)
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    quiet_warp()
-    device = resolve_device(args.device)
-    doc = {**environment(device), "config": vars(args), "rows": []}
+    add_run_options(parser, frames=20)
+    args, device, doc = start(parser, argv)
     for spec in args.triangles:
         _, shapes = parse_triangles(spec)
         for n in args.objects:
@@ -94,10 +87,8 @@ def main(argv: list[str] | None = None) -> int:
                 row = {"n": n, "shapes": shapes, "variant": variant, "build_s": round(build, 1),
                        "median": {k: round(float(np.median([r[k] for r in rows])), 4) for k in rows[0]},
                        "min": {k: round(float(np.min([r[k] for r in rows])), 4) for k in rows[0]}}
-                print(row, flush=True)
-                doc["rows"].append(row)
-            if args.out:
-                write_json(args.out, doc)
+                add_row(doc, row)
+            write_result(args.out, doc)
     return 0
 
 

@@ -6,12 +6,11 @@ on a CUDA device: what bounds the occupancy of each (``cuFuncGetAttribute`` on t
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import sys
 
-from warp_ccd.bench.report import environment, write_json
-from warp_ccd.cli.common import quiet_warp, resolve_device
+from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
+from warp_ccd.bench.report import environment
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene import motion, scene
 from warp_ccd.stages import broad_phase, bvh, mid_phase, narrow_phase
@@ -57,12 +56,9 @@ def attributes(kernel, device, block_dim: int = 256) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default="cuda:0")
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(argv)
-    quiet_warp()
-    device = resolve_device(args.device)
+    parser = bench_parser(__doc__.splitlines()[0], device="cuda:0")
+    add_out_option(parser)
+    args, device = parse_options(parser, argv)
     if not device.is_cuda:
         raise SystemExit("kernel_resources: needs a CUDA device")
     s = scene.Scene.random(200, seed=0, device=device)
@@ -73,8 +69,7 @@ def main(argv=None) -> int:
         rows.append(row)
         print(f"{name:<14} registers {row['registers']:>4}  local {row['local_bytes']:>5} B  "
               f"threads/SM {row['resident_threads_per_sm']:>5}", flush=True)
-    if args.out:
-        write_json(args.out, {**environment(device), "rows": rows})
+    write_result(args.out, {**environment(device), "rows": rows})
     return 0
 
 

@@ -19,7 +19,6 @@ both builds of the module (the option is switched and the module rebuilt in betw
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -28,9 +27,8 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
+from warp_ccd.bench.command import add_out_option, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.report import environment, write_json
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.geometry import triangle
 from warp_ccd.geometry.precision import precision_types
 from warp_ccd.stages import narrow_phase
@@ -107,15 +105,12 @@ def measure(fuse: bool, args, device, scene, pipe, cpu: dict) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.split("\n\n")[0])
     parser.add_argument("--objects", type=lambda s: int(float(s)), default=100_000)
     parser.add_argument("--triangles", default="80", help="'poly' or an icosphere's triangle count (default: 80)")
     parser.add_argument("--repeats", type=int, default=30)
-    parser.add_argument("--out", default=None, help="JSON file (default: none)")
-    args = parser.parse_args(argv)
-    quiet_warp()
-    device = resolve_device(args.device)
+    add_out_option(parser, "JSON file (default: none)")
+    args, device, doc = start(parser, argv)
     label, shapes = parse_triangles(args.triangles)
     scene = wc.Scene.random(args.objects, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
     scene.advance(0.5)
@@ -123,7 +118,7 @@ def main(argv=None) -> int:
     pipe.detect()  # candidates of a real frame stay in pipe.mid.candidates
     set_fuse_fp(False)  # the shipped build
     cpu = {precision: verdicts(precision, "cpu") for precision in PRECISIONS}
-    rows = []
+    rows = doc["rows"]
     for fuse in (False, True):  # the shipped build first, then with contraction
         rows += measure(fuse, args, device, scene, pipe, cpu)
     set_fuse_fp(False)
@@ -137,7 +132,7 @@ def main(argv=None) -> int:
         print(f"{a['workload']:<28}{a['precision']:<10}{a['method']:<11}{a['pairs']:>10,}{a['hits']:>10,}"
               f"{a['ms_median']:>10.4f}{b['ms_median']:>10.4f}{b['ms_median'] / a['ms_median']:>8.2f}{differ:>28}")
     if args.out:
-        write_json(args.out, {**environment(device), "config": vars(args), "rows": rows})
+        write_result(args.out, doc)
         print(f"results written to {args.out}")
     return 0
 

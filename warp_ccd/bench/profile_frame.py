@@ -22,16 +22,14 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"n_objects"
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.report import environment, write_json
 from warp_ccd.bench.timing import detect_frames
-from warp_ccd.cli.common import quiet_warp, resolve_device
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene.scene import Scene
 from warp_ccd.stages.frame import MODES
@@ -69,25 +67,21 @@ def frames(pipe: CollisionPipeline, count: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
+    parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--objects", type=lambda t: int(float(t)), nargs="+", default=[1000, 10000])
     parser.add_argument("--triangles", default="poly", help="'poly' or an icosphere's triangle count (80, 1280)")
-    parser.add_argument("--frames", type=int, default=50)
-    parser.add_argument("--warmup", type=int, default=5)
+    add_run_options(parser, frames=50, warmup=5, out=False)
     parser.add_argument("--option", action="append", default=[], metavar="NAME=INT",
                         help="a CollisionPipeline option with an integer value, e.g. cut_depth=2 (repeatable)")
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    add_out_option(parser)
+    args, device, doc = start(parser, argv)
     options = {}
     for item in args.option:
         name, _, value = item.partition("=")
         options[name] = int(value)
-    quiet_warp()
-    device = resolve_device(args.device)
     label, shapes = parse_triangles(args.triangles)
     modes = MODES if device.is_cuda else ("eager",)
-    doc = {**environment(device), "config": vars(args), "rows": [], "activities": []}
+    doc["activities"] = []
     for n in args.objects:
         scene = Scene.random(n, seed=0, device=device, **({} if shapes is None else {"shapes": shapes}))
         pipes = {m: CollisionPipeline(scene, graph=m == "graph", **options) for m in modes}
@@ -107,8 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             doc["rows"].append(row)
             print(f"  frame ({mode}): {row['ms_min']:.3f} ms min, {row['ms_median']:.3f} ms median, "
                   f"host {row['host_ms_median']:.4f} ms")
-        if args.out:
-            write_json(args.out, doc)
+        write_result(args.out, doc)
     return 0
 
 

@@ -23,7 +23,6 @@ peer, timed (update + collide), with its object pairs compared with ours (touchi
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -34,6 +33,7 @@ import time
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, parse_options, write_result
 from warp_ccd.scene.scene import Scene
 from warp_ccd.usd.check import check_usd
 
@@ -192,16 +192,13 @@ def run_case(kind: str, path: str, device, frames: int, fcl_every: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default=None)
-    parser.add_argument("--frames", type=int, default=240)
+    parser = bench_parser(__doc__.splitlines()[0])
+    add_run_options(parser, frames=240, out=False)
     parser.add_argument("--rigid", type=int, default=10000, help="rigid prims (0: skip)")
     parser.add_argument("--deforming", type=int, default=100, help="deforming meshes of 10k triangles (0: skip)")
     parser.add_argument("--fcl-every", type=int, default=10, help="python-fcl on every k-th frame (0: never)")
-    parser.add_argument("--out", default=None)
-    args = parser.parse_args(argv)
-    wp.config.quiet = True
-    device = wp.get_device(args.device)
+    add_out_option(parser)
+    args, device = parse_options(parser, argv)
     result = {"benchmark": "usd_check", "device": str(device), "gpu": device.name if device.is_cuda else None,
               "cpu": platform.processor() or platform.machine(), "warp": wp.__version__, "commit": _git_commit(),
               "date": time.strftime("%Y-%m-%d"), "cases": []}
@@ -225,9 +222,7 @@ def main(argv=None) -> int:
             row["file_mb"] = os.path.getsize(path) / 1e6
             result["cases"].append(row)
             print(json.dumps(row), flush=True)
-    if args.out:
-        with open(args.out, "w") as fh:
-            json.dump(result, fh, indent=1)
+    write_result(args.out, result)
     return 0
 
 

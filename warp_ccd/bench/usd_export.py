@@ -14,8 +14,6 @@ Target: 10,000 objects x 240 frames in at most 3 s on a CPU (binary ``.usd``, no
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import sys
 import tempfile
@@ -23,6 +21,8 @@ import time
 
 import numpy as np
 import warp as wp
+
+from warp_ccd.bench.command import bench_parser, parse_options, write_result
 
 TARGET_S = 3.0
 
@@ -58,29 +58,27 @@ def export_once(scene, flags: np.ndarray, path: str, aabb: bool) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = bench_parser(__doc__.split("\n\n")[0], device="cpu", device_help="Warp device of the scene (default: cpu)")
     parser.add_argument("--num-objects", type=int, default=10_000)
     parser.add_argument("--num-frames", type=int, default=240)
-    parser.add_argument("--device", default="cpu", help="Warp device of the scene (default: cpu)")
     parser.add_argument("--format", choices=("usd", "usdc", "usda"), default="usd")
     parser.add_argument("--aabb", action="store_true", help="also write the AABB wireframes")
     parser.add_argument("--repeat", type=int, default=3, help="runs; the best is reported (default: 3)")
     parser.add_argument("--json", default=None, help="also write the results to this JSON file")
-    args = parser.parse_args(argv)
+    args, device = parse_options(parser, argv, out="json")
     if args.num_objects < 1 or args.num_frames < 1 or args.repeat < 1:
         parser.error("counts must be positive")
 
-    wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     from warp_ccd.scene.scene import Scene
 
     rng = np.random.default_rng(0)
     flags = rng.random((args.num_frames, args.num_objects)) < 0.1
     with tempfile.TemporaryDirectory() as folder:
-        warm = Scene.random(16, seed=1, device=args.device)
+        warm = Scene.random(16, seed=1, device=device)
         export_once(warm, flags[:2, :16], os.path.join(folder, f"warmup.{args.format}"), args.aabb)
         runs = []
         for r in range(args.repeat):
-            scene = Scene.random(args.num_objects, seed=0, device=args.device)
+            scene = Scene.random(args.num_objects, seed=0, device=device)
             runs.append(export_once(scene, flags, os.path.join(folder, f"run{r}.{args.format}"), args.aabb))
     best = min(runs, key=lambda x: x["export_s"])
     result = {
@@ -88,7 +86,7 @@ def main(argv=None) -> int:
         "num_frames": args.num_frames,
         "format": args.format,
         "aabb": args.aabb,
-        "device": str(wp.get_device(args.device)),
+        "device": str(device),
         "cpu_count": os.cpu_count(),
         "runs_export_s": [round(x["export_s"], 4) for x in runs],
         **{k: round(v, 4) for k, v in best.items()},
@@ -109,9 +107,7 @@ def main(argv=None) -> int:
     if result["target_s"] is not None:
         verdict = "PASS" if best["export_s"] <= TARGET_S else "FAIL"
         print(f"  target <= {TARGET_S:.1f} s: {verdict}")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(result, f, indent=2)
+    write_result(args.json, result)
     return 0
 
 
