@@ -122,3 +122,82 @@ def test_nxn_is_all_pairs(device):
     np.testing.assert_array_equal(wc.broad_phase_pairs(lower, upper, method="nxn", device=device), want)
     np.testing.assert_array_equal(wc.broad_phase_pairs(lower, upper, method="sap", device=device), want)
     assert len(want) > 10
+
+
+MOVED_MODULES = {  # module path of 0.1 -> (its new home, a name to find through the old path[, where it lives])
+    "warp_ccd.aabb": ("warp_ccd.geometry.box", "boxes_overlap"),
+    "warp_ccd.precision": ("warp_ccd.geometry.precision", "PrecisionWarning"),
+    "warp_ccd.shapes": ("warp_ccd.scene.shapes", "icosphere"),
+    "warp_ccd.motion": ("warp_ccd.scene.motion", "EllipseMotion"),
+    "warp_ccd.buffers": ("warp_ccd.stages.buffers", "GrowableBuffer"),
+    "warp_ccd.frame": ("warp_ccd.stages.frame", "CountedFrame"),
+    "warp_ccd.bvh": ("warp_ccd.stages.bvh", "SceneBVH"),
+    "warp_ccd.bvh_build": ("warp_ccd.stages.bvh_build", "build_tree", "warp_ccd.stages.bvh_reference"),
+    "warp_ccd.broad_phase": ("warp_ccd.stages.broad_phase", "BroadPhaseSAP"),
+    "warp_ccd.mid_phase": ("warp_ccd.stages.mid_phase", "MidPhaseBVH"),
+    "warp_ccd.narrow_phase": ("warp_ccd.stages.narrow_phase", "tri_tri_moller", "warp_ccd.geometry.triangle"),
+    "warp_ccd.crossing": ("warp_ccd.stages.crossing", "surface_topology", "warp_ccd.stages.surface"),
+    "warp_ccd.usd_import": ("warp_ccd.usd.importer", "open_stage", "warp_ccd.usd.stage"),
+    "warp_ccd.check": ("warp_ccd.usd.check", "check_usd"),
+    "warp_ccd.cli_common": ("warp_ccd.cli.common", "resolve_device"),
+}
+
+
+@pytest.mark.parametrize("old", sorted(MOVED_MODULES))
+def test_moved_modules_import_from_their_old_paths(old):
+    """``from warp_ccd.narrow_phase import tri_tri_moller`` (0.1) works, with one warning naming the new home;
+    a name the module never had is still an AttributeError."""
+    import sys
+
+    home, name, *where = MOVED_MODULES[old]
+    short = old.split(".")[1]
+    for fresh in (lambda: importlib.import_module(old), lambda: getattr(wc, short)):  # wc.narrow_phase too
+        sys.modules.pop(old, None)
+        wc.__dict__.pop(short, None)
+        with pytest.warns(DeprecationWarning, match=rf"{old} is deprecated .* use {home}"):
+            module = fresh()
+        assert module is sys.modules[old]
+        assert getattr(module, name) is getattr(importlib.import_module((where or [home])[0]), name)
+        with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+            module.no_such_name  # noqa: B018
+
+
+def test_names_of_the_usd_module_of_0_1():
+    from warp_ccd.usd import export
+
+    for name in ("COLOR_COLLIDING", "STAGE_EXTENSIONS", "validate_stage_path", "segment_points"):
+        with pytest.warns(DeprecationWarning, match=rf"warp_ccd\.usd\.{name} is deprecated"):
+            assert getattr(wc.usd, name) is getattr(export, name)
+
+
+def test_instance_names_of_scene_bvh_and_motion(device):
+    scene = wc.Scene.random(4, seed=1, device=device)
+    bvh = wc.stages.SceneBVH(scene)
+    with pytest.warns(DeprecationWarning, match=r"SceneBVH\.rigid_instance"):
+        assert bvh.rigid_instance is bvh.rigid_object
+    with pytest.warns(DeprecationWarning, match=r"SceneBVH\.instance_deforming"):
+        assert bvh.instance_deforming is bvh.object_deforming
+    want = wp_clone_numpy(scene.object_pose)
+    with pytest.warns(DeprecationWarning, match=r"EllipseMotion\.launch\(instance_pose=\.\.\.\)"):
+        scene.motion.launch(scene.time, instance_pose=scene.object_pose)
+    np.testing.assert_array_equal(scene.object_pose.numpy(), want)
+
+
+def wp_clone_numpy(a):
+    return a.numpy().copy()
+
+
+def test_importing_the_package_needs_no_io_library():
+    """``import warp_ccd`` (the façade, which gathers the usd room too) works without pxr, Pillow, tqdm and
+    matplotlib: they are imported where they are used."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "for name in ('pxr', 'PIL', 'tqdm', 'matplotlib'):\n"
+            "    sys.modules[name] = None\n"
+            "import warp_ccd, warp_ccd.stages, warp_ccd.usd\n"
+            "print(sorted(n for n in ('pxr', 'PIL', 'tqdm', 'matplotlib') if sys.modules.get(n) is not None))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]"

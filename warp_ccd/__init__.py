@@ -21,8 +21,10 @@ The API in levels: this module holds what a user of :func:`collide`, :class:`Sce
 * :mod:`warp_ccd.preview`: preview pictures.
 """
 
+import importlib
+
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
-from ._deprecated import module_aliases, warn_renamed
+from ._deprecated import install_moved_modules, module_aliases, warn_renamed
 from .geometry import TOLERANCE
 from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
@@ -45,7 +47,7 @@ __all__ = [
 ]
 
 # Names of the top level until 0.1, kept one release: each use warns and reaches its new home.
-__getattr__ = module_aliases(__name__, {
+_moved_name = module_aliases(__name__, {
     **{name: f"warp_ccd.scene:{name}" for name in ("SHAPES", "EllipseMotion", "icosphere", "shape",
                                                       "validate_mesh")},
     **{name: f"warp_ccd.stages:{name}" for name in ("BroadPhaseSAP", "MidPhaseAllPairs", "MidPhaseBVH",
@@ -55,6 +57,34 @@ __getattr__ = module_aliases(__name__, {
     **{name: f"warp_ccd.preview:{name}" for name in ("render_frame", "save_preview")},
     "UsdAnimationWriter": "warp_ccd.usd:UsdAnimationWriter",
 })
+
+# Modules of 0.1 that moved into a room: their old paths import (with a warning) for one release, and
+# their names are found in their new homes (the main one first).
+_MOVED_MODULES = {
+    "aabb": ("geometry.box", "stages.bounds"),
+    "precision": ("geometry.precision",),
+    "shapes": ("scene.shapes",),
+    "motion": ("scene.motion",),
+    "buffers": ("stages.buffers",),
+    "frame": ("stages.frame",),
+    "bvh": ("stages.bvh",),
+    "bvh_build": ("stages.bvh_build", "stages.bvh_reference"),
+    "broad_phase": ("stages.broad_phase",),
+    "mid_phase": ("stages.mid_phase",),
+    "narrow_phase": ("stages.narrow_phase", "geometry.triangle", "geometry.primitives", "stages.crossing"),
+    "crossing": ("stages.crossing", "stages.surface"),
+    "usd_import": ("usd.importer", "usd.stage", "usd.meshes", "usd.poses", "usd.workers"),
+    "check": ("usd.check",),
+    "cli_common": ("cli.common",),
+}
+install_moved_modules({f"warp_ccd.{old}": tuple(f"warp_ccd.{h}" for h in homes)
+                       for old, homes in _MOVED_MODULES.items()})
+
+
+def __getattr__(name: str):
+    if name in _MOVED_MODULES:  # wc.narrow_phase, as the package's attribute it was
+        return importlib.import_module(f"warp_ccd.{name}")
+    return _moved_name(name)
 
 
 def _scene_from_usd(cls, *args, **kwargs):

@@ -5,6 +5,9 @@ Imports nothing of the package, so every room may use it:
 * :class:`renamed_attribute`: a class attribute standing for a renamed one
   (``instance_shape = renamed_attribute("object_shape")``).
 * :func:`renamed_arguments`: a function's renamed keyword arguments, caught by its ``**renamed``.
+* :func:`install_moved_modules`: modules that moved into a room (``warp_ccd.narrow_phase`` is now
+  ``warp_ccd.stages.narrow_phase``): importing the old path warns once and gives a module whose names
+  are looked up in the new homes.
 * :func:`module_aliases`: a module's ``__getattr__`` for renamed or moved module-level names
   (``__getattr__ = module_aliases(__name__, {"BroadPhaseNxN": "warp_ccd.stages.broad_phase:BroadPhaseAllPairs"})``).
 """
@@ -12,9 +15,13 @@ Imports nothing of the package, so every room may use it:
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.util
+import sys
+import types
 import warnings
 
-__all__ = ["module_aliases", "renamed_arguments", "renamed_attribute", "warn_renamed"]
+__all__ = ["install_moved_modules", "module_aliases", "renamed_arguments", "renamed_attribute", "warn_renamed"]
 
 
 def warn_renamed(old: str, new: str, stacklevel: int = 3) -> None:
@@ -93,3 +100,41 @@ def renamed_arguments(where: str, given: dict, renames: dict[str, str]) -> dict:
         warn_renamed(f"{where}({old}=...)", f"{where}({renames[old]}=...)", stacklevel=4)
         out[renames[old]] = value
     return out
+
+
+class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Finds the old path of a moved module; its module looks names up in the new homes."""
+
+    def __init__(self, moves: dict[str, tuple[str, ...]]):
+        self.moves = moves
+
+    def find_spec(self, fullname, path=None, target=None):
+        return importlib.util.spec_from_loader(fullname, self) if fullname in self.moves else None
+
+    def create_module(self, spec):
+        return None  # the default: an empty module, filled by exec_module
+
+    def exec_module(self, module: types.ModuleType) -> None:
+        homes = self.moves[module.__name__]
+        warn_renamed(module.__name__, homes[0], stacklevel=2)
+        loaded = [importlib.import_module(h) for h in homes]
+
+        def __getattr__(name: str):
+            for home in loaded:
+                if hasattr(home, name):
+                    return getattr(home, name)
+            raise AttributeError(f"module {module.__name__!r} (now {homes[0]}) has no attribute {name!r}")
+
+        module.__getattr__ = __getattr__
+        module.__doc__ = f"Deprecated: moved to :mod:`{homes[0]}`."
+
+
+def install_moved_modules(moves: dict[str, tuple[str, ...]]) -> None:
+    """Makes the old paths of moved modules importable for one release (once per process).
+
+    Args:
+        moves: old dotted path -> the new modules its names now live in, the main one first
+            (``{"warp_ccd.narrow_phase": ("warp_ccd.stages.narrow_phase", "warp_ccd.geometry")}``).
+    """
+    if not any(isinstance(f, _MovedModules) for f in sys.meta_path):
+        sys.meta_path.append(_MovedModules(moves))

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._deprecated import renamed_arguments
 from ..geometry.precision import precision_overloads, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -140,7 +141,7 @@ class EllipseMotion:
             precision=precision,
         )
 
-    def launch(self, time, object_pose: wp.array, step: float = 0.0) -> None:
+    def launch(self, time, object_pose: wp.array = None, step: float = 0.0, **renamed) -> None:
         """Writes the poses of all objects at ``time + step`` (seconds) into ``object_pose`` ``(N,)``.
 
         Args:
@@ -149,6 +150,11 @@ class EllipseMotion:
             object_pose: ``(N,)`` poses to write.
             step: seconds added to ``time`` (in float64) before the poses are computed.
         """
+        if renamed:  # instance_pose, as it was called until 0.1
+            object_pose = renamed_arguments("EllipseMotion.launch", renamed,
+                                            {"instance_pose": "object_pose"})["object_pose"]
+        if object_pose is None:
+            raise TypeError("EllipseMotion.launch() missing 1 required argument: 'object_pose'")
         if not isinstance(time, wp.array):
             if getattr(self, "_time", None) is None:
                 self._time = wp.zeros(1, dtype=wp.float64, device=self.device)

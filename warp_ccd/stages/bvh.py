@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .._deprecated import renamed_arguments
+from .._deprecated import renamed_arguments, renamed_attribute
 from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, is_integer
@@ -609,3 +609,7 @@ class SceneBVH:
                               scene.object_scale, scene.world_vertex, scene.object_vertex_start,
                               self.bounds_vertices_max, margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
                       outputs=[self.lower, self.upper], device=self.device)
+
+    # Names of 0.1 ("instance" for what is now called an object everywhere), kept one release.
+    instance_deforming = renamed_attribute("object_deforming")
+    rigid_instance = renamed_attribute("rigid_object")

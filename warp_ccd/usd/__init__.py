@@ -13,9 +13,12 @@ code), :mod:`~warp_ccd.usd.stage` (opening a stage, its layers and time codes),
 poses and scales), :mod:`~warp_ccd.usd.workers` (the
 processes that read transforms in parallel), :mod:`~warp_ccd.usd.check` (:func:`check_usd` and its
 overlay), :mod:`~warp_ccd.usd.export` (:class:`UsdAnimationWriter`). ``pxr`` (usd-core) is imported
-inside functions only: importing this package works without it.
+inside functions only: importing this package works without it. The names of the module
+``warp_ccd.usd`` of 0.1 (now :mod:`~warp_ccd.usd.export`) still resolve here for one release, with a
+warning.
 """
 
+from .._deprecated import module_aliases
 from .check import CheckReport, FrameContacts, check_usd, write_overlay
 from .export import UsdAnimationWriter
 from .importer import UsdMeshImport, scene_from_usd
@@ -32,3 +35,7 @@ __all__ = [
     "stage_time_codes",
     "write_overlay",
 ]
+
+# The module warp_ccd.usd of 0.1 is now warp_ccd.usd.export: its other public names, kept one release.
+__getattr__ = module_aliases(__name__, {name: f"warp_ccd.usd.export:{name}" for name in (
+    "COLOR_COLLIDING", "COLOR_FREE", "COLOR_SEGMENT", "STAGE_EXTENSIONS", "segment_points", "validate_stage_path")})

@@ -61,7 +61,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm import tqdm
 
 from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
 from ..options import integer_option
@@ -84,7 +83,7 @@ class _Instancer:
 
     path: str
     schema: object
-    object_index: np.ndarray  # (I,) USD indices of the instances kept (mask at the first time code)
+    instance_index: np.ndarray  # (I,) USD indices of the instances kept (mask at the first time code)
     proto_index: np.ndarray  # (I,) prototype of each kept instance
     slots: list = field(default_factory=list)  # (prototype, mesh data index, mesh prim, prototype root prim)
     varying: bool = False
@@ -102,7 +101,7 @@ def _check_orientations(rec: _Instancer, code) -> None:
         if value is None or len(value) == 0:
             continue
         q = np.asarray(value, np.float64).reshape(-1, 4)
-        kept = rec.object_index[rec.object_index < len(q)]
+        kept = rec.instance_index[rec.instance_index < len(q)]
         norm = np.linalg.norm(q[kept], axis=1)
         bad = ~np.isfinite(norm) | (norm < ZERO_QUATERNION)
         if bad.any():
@@ -370,7 +369,7 @@ class UsdMeshImport:
                 if len(self._meshes[k].triangles) == 0:
                     self.skipped.append((str(p.GetPath()), "no faces"))
                     continue
-                which = rec.object_index[rec.proto_index == proto]
+                which = rec.instance_index[rec.proto_index == proto]
                 suffix = str(p.GetPath())[len(str(root.GetParent().GetPath()).rstrip("/")):]
                 obj_mesh.append(np.full(which.size, k))
                 obj_path.append([f"{rec.path}[{i}]{suffix}" for i in which.tolist()])
@@ -416,6 +415,8 @@ class UsdMeshImport:
         pooled = self._pooled_poses(varying[by_prim], bake[varying[by_prim]], obj_path)
         rest = varying[~by_prim] if pooled is not None else varying
         cols = ~by_prim if pooled is not None else slice(None)
+        from tqdm import tqdm  # here: importing warp_ccd needs no progress bars
+
         bar = tqdm(total=len(self._codes), desc="reading transforms", unit="time code", leave=False,
                    disable=not (self._progress and rest.size) or None, file=sys.stderr)
         for f, code in enumerate(self._codes if rest.size else ()):
@@ -604,7 +605,7 @@ class UsdMeshImport:
             xforms = rec.schema.ComputeInstanceTransformsAtTime(
                 code, code, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)
             xforms = np.asarray(xforms, np.float64).reshape(-1, 4, 4)
-            if xforms.shape[0] <= int(rec.object_index.max(initial=-1)):
+            if xforms.shape[0] <= int(rec.instance_index.max(initial=-1)):
                 raise ValueError(f"prim {rec.path}: {xforms.shape[0]} instance transforms at time "
                                  f"{code.GetValue():g}, fewer than its instances")
             world = np.asarray(cache.GetLocalToWorldTransform(rec.schema.GetPrim()), np.float64)
