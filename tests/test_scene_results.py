@@ -26,7 +26,7 @@ import functools
 import numpy as np
 import pytest
 
-from warp_ccd.stages.narrow_phase import TOLERANCE
+from warp_ccd.geometry import TOLERANCE
 
 import scene_results
 from conftest import DEFAULT_DEVICE

@@ -200,7 +200,7 @@ class CollisionPipeline:
         mid_phase: ``"bvh"`` (default: tree-vs-tree traversal) or ``"all_pairs"`` (reference:
             every triangle pair of each object pair).
         narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
-        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.stages.narrow_phase`).
+        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd.geometry.triangle`).
         timings: when True, synchronise after each stage and report ms per stage (frames are then
             launched eagerly).
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);

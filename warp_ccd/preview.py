@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .options import integer_option
+from .options import integer_option, number_option
 from .output import PendingFile, check_output_path
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -165,8 +165,7 @@ class PreviewRenderer:
                  view_direction=(1.0, 0.75, 1.35), margin: float = 1.1, device=None):
         integer_option("width", width, low=1)
         integer_option("height", height, low=1)
-        if not 1.0 <= fov < 170.0:
-            raise ValueError(f"fov must lie in [1, 170) degrees, got {fov!r}")
+        number_option("fov (degrees)", fov, low=1.0, high=170.0, high_open=True)
         self.scene = scene
         self.width = int(width)
         self.height = int(height)

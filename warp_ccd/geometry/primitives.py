@@ -28,6 +28,12 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 
 @wp.func
+def _max_abs(v: wp.vec3d) -> wp.float64:
+    """The largest absolute coordinate of ``v`` (its infinity norm)."""
+    return wp.max(wp.max(wp.abs(v[0]), wp.abs(v[1])), wp.abs(v[2]))
+
+
+@wp.func
 def _snap(d: Any, eps: Any):
     if wp.abs(d) <= eps:
         return type(d)(0.0)

@@ -67,6 +67,7 @@ from ..geometry.precision import precision_overloads
 from ..geometry.primitives import (
     _closest_on_triangle,
     _common_part,
+    _max_abs,
     _max_edge,
     _pick,
     _plane_section,
@@ -244,11 +245,6 @@ def _verdict(
                                                    sup_b, m, d, o, tol_rel)
     return (_enters(kb, nb1, nb2, wb2, wa1, ra1, size_b, eps) or _enters(kb, nb1, nb2, wb2, wa2, ra2, size_b, eps)
             or _enters(ka, na1, na2, wa2, wb1, rb1, size_a, eps) or _enters(ka, na1, na2, wa2, wb2, rb2, size_a, eps))
-
-
-@wp.func
-def _max_abs(x: wp.vec3d):
-    return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
 
 
 @wp.func

@@ -46,6 +46,7 @@ import warp as wp
 
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
+from ..geometry.primitives import _max_abs
 from ..options import integer_option
 from ..scene.scene import MeshTopology
 from .buffers import (
@@ -105,7 +106,7 @@ WHOLE_TRIANGLES_LIMIT = 64
 @wp.struct
 class TreePair:
     """What the traversal needs of one object pair, written once per pair by
-    :func:`_pair_count_kernel` so that a work item reads it in one step: the trees' starts, and
+    :func:`_pair_kernel` so that a work item reads it in one step: the trees' starts, and
     the maps between the two objects' box spaces with their paddings."""
 
     a: int
@@ -146,11 +147,6 @@ def _norm_inf(m: wp.mat33d) -> wp.float64:
     """Largest row sum of absolute values (the max-norm's operator norm)."""
     r = abs_matrix(m) * wp.vec3d(1.0)
     return wp.max(wp.max(r[0], r[1]), r[2])
-
-
-@wp.func
-def _max_abs(v: wp.vec3d) -> wp.float64:
-    return wp.max(wp.max(wp.abs(v[0]), wp.abs(v[1])), wp.abs(v[2]))
 
 
 @wp.func

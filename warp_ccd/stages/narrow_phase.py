@@ -223,9 +223,10 @@ def _narrow_touch_kernel(
 ):
     """Step 4 of Möller's test, two threads per row ``u`` of the touch list: thread ``2 u`` tests
     the edges of triangle a against b's face, ``2 u + 1`` those of b against a's
-    (:func:`_edges_near_face`; each thread computes the one normal and the edge normals of its
-    face once). The pair touches when one of the six edge tests says so (:func:`_edges_meet`);
-    the first thread to find it (its flag) appends the row."""
+    (:func:`~warp_ccd.geometry.primitives._edges_near_face`; each thread computes the one normal and
+    the edge normals of its face once). The pair touches when one of the six edge tests says so
+    (:func:`~warp_ccd.geometry.primitives._edges_meet`); the first thread to find it (its flag)
+    appends the row."""
     t = wp.tid()
     u = t / 2
     side = t - 2 * u
