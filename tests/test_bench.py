@@ -238,10 +238,10 @@ def test_bench_command_setup(device, tmp_path, capsys):
     assert not out.exists()
     write_result(args.out, doc)
     assert json.loads(out.read_text())["rows"] == [{"n": 1}]
-    defaults = bench_parser(None, device="cpu")
+    defaults = bench_parser(None, device=device)  # a benchmark's own default device
     add_run_options(defaults, seed=4)
     args, dev, _ = start(defaults, [])
-    assert str(dev) == "cpu" and args.seed == 4 and args.out is None and not hasattr(args, "frames")
+    assert str(dev) == device and args.seed == 4 and args.out is None and not hasattr(args, "frames")
     # An unknown device or a JSON file that cannot be written: a usage error before anything runs.
     for argv in (["--device", "tpu:7"], ["--out", str(tmp_path / "r.txt")], ["--out", str(tmp_path / "no" / "r.json")]):
         with pytest.raises(SystemExit) as exc:
