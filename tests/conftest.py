@@ -1,7 +1,6 @@
 """Shared fixtures: every test that takes ``device`` runs on each available Warp device."""
 
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -10,8 +9,6 @@ import warp as wp
 wp.config.quiet = True
 wp.config.log_level = wp.LOG_WARNING
 wp.init()
-
-sys.path.insert(0, os.path.dirname(__file__))
 
 ALL_DEVICES = [str(d) for d in wp.get_devices()]
 """Every Warp device present (tests that compare devices use these)."""
