@@ -27,7 +27,7 @@ from .. import __version__
 from ..output import PendingFile, check_output_path
 from .methods import REFERENCE, CaseResult
 
-__all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "RESULTS", "BenchReport", "environment", "write_json"]
+__all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "RESULTS", "BenchReport", "environment", "git_commit", "write_json"]
 
 JSON_EXTENSIONS = (".json",)
 PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
@@ -46,7 +46,7 @@ def _bytes(n: float | None) -> str:
     return f"{int(n)} B"
 
 
-def _git_commit() -> tuple[str | None, bool | None]:
+def git_commit() -> tuple[str | None, bool | None]:
     """``(commit, tracked files other than bench/results/ modified)`` of the code that runs: ``WARP_CCD_GIT_COMMIT`` and
     ``WARP_CCD_GIT_DIRTY`` ("0" or "1") from the environment when set (a copy of the tree on
     another machine, whose git, if any, need not describe it), else the checkout's HEAD, else Nones."""
@@ -81,7 +81,7 @@ def environment(device) -> dict:
             versions[dist] = importlib.metadata.version(dist)
         except importlib.metadata.PackageNotFoundError:
             versions[dist] = None
-    commit, dirty = _git_commit()
+    commit, dirty = git_commit()
     return {
         "device": str(device),
         "device_name": getattr(device, "name", None),

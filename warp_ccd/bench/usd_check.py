@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import subprocess
 import tempfile
 import time
 
@@ -34,18 +33,16 @@ import numpy as np
 import warp as wp
 
 from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, parse_options, write_result
+from warp_ccd.bench.report import git_commit
 from warp_ccd.scene.scene import Scene
 from warp_ccd.usd.check import check_usd
 
 
-def _git_commit() -> str:
-    env = os.environ.get("WARP_CCD_GIT_COMMIT")
-    if env:
-        return env + ("-dirty" if os.environ.get("WARP_CCD_GIT_DIRTY") == "1" else "")
-    try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+def _commit_label() -> str:
+    """The commit measured (:func:`~warp_ccd.bench.report.git_commit`) as this file records it: the
+    commit, ``-dirty`` when the tracked code was modified, or ``unknown``."""
+    commit, dirty = git_commit()
+    return "unknown" if commit is None else commit + ("-dirty" if dirty else "")
 
 
 def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 0, device=None) -> None:
@@ -200,7 +197,7 @@ def main(argv=None) -> int:
     add_out_option(parser)
     args, device = parse_options(parser, argv)
     result = {"benchmark": "usd_check", "device": str(device), "gpu": device.name if device.is_cuda else None,
-              "cpu": platform.processor() or platform.machine(), "warp": wp.__version__, "commit": _git_commit(),
+              "cpu": platform.processor() or platform.machine(), "warp": wp.__version__, "commit": _commit_label(),
               "date": time.strftime("%Y-%m-%d"), "cases": []}
     with tempfile.TemporaryDirectory() as folder:
         # Compile and load every kernel once, outside the timed runs.
