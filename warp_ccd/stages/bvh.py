@@ -79,7 +79,8 @@ quaternion rotation and a translation) and of a box put under a pose, in units i
 of ``|t| + scale * r`` (``t`` the translation, ``r`` the shape's radius): each output is a sum of
 about ten rounded terms of at most that size; 128 leaves a wide margin."""
 
-__all__ = ["LEAF_SIZE_MAX", "OBJECT_BOUNDS", "WORLD_ERROR_ULPS", "SceneBVH", "TreeView"]
+__all__ = ["LEAF_SIZE_MAX", "OBJECT_BOUNDS", "WORLD_ERROR_ULPS", "SceneBVH", "TreeView", "leaf_box_at",
+           "swept_triangle_box_at"]
 
 
 @wp.struct
@@ -130,6 +131,41 @@ def triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], margin_rel:
 
 
 @wp.func
+def swept_triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], world_vertex_start: wp.array[Any],
+                          margin_rel: Any, pad_abs: wp.float64, tri_start: int, vertex_start: int, tri: int):
+    """``(lower, upper)`` float32 box in the world of triangle ``tri`` (as :func:`triangle_box_at`)
+    over a linear motion: the box of its three vertices in ``world_vertex_start`` (the motion's
+    start) and in ``world_vertex`` (its end), which holds the triangle at every time between,
+    padded by ``margin_rel`` times its longest edge at either end plus ``pad_abs`` (scene units:
+    a continuous test's least distance and tolerance), in float64, and rounded outward."""
+    idx = mesh.shape_triangle[tri_start + tri]
+    a = world_vertex[vertex_start + idx[0]]
+    b = world_vertex[vertex_start + idx[1]]
+    c = world_vertex[vertex_start + idx[2]]
+    a0 = world_vertex_start[vertex_start + idx[0]]
+    b0 = world_vertex_start[vertex_start + idx[1]]
+    c0 = world_vertex_start[vertex_start + idx[2]]
+    edge_sq = wp.max(wp.max(wp.length_sq(b - a), wp.length_sq(c - b)), wp.length_sq(a - c))
+    edge_sq = wp.max(edge_sq, wp.max(wp.max(wp.length_sq(b0 - a0), wp.length_sq(c0 - b0)), wp.length_sq(a0 - c0)))
+    edge = wp.sqrt(edge_sq)
+    pad = type(a)(margin_rel * edge, margin_rel * edge, margin_rel * edge)
+    lo = wp.vec3d(wp.min(wp.min(wp.min(a, b), c), wp.min(wp.min(a0, b0), c0)) - pad) - wp.vec3d(pad_abs)
+    hi = wp.vec3d(wp.max(wp.max(wp.max(a, b), c), wp.max(wp.max(a0, b0), c0)) + pad) + wp.vec3d(pad_abs)
+    return box_lower32(lo), box_upper32(hi)
+
+
+@wp.func
+def leaf_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], world_vertex_start: wp.array[Any], swept: int,
+                pad_abs: wp.float64, margin_rel: Any, tri_start: int, vertex_start: int, tri: int):
+    """A triangle's box as a leaf's: :func:`triangle_box_at`, or with ``swept`` (a continuous
+    frame's) :func:`swept_triangle_box_at` (``world_vertex_start`` is then read, else not)."""
+    if swept != 0:
+        return swept_triangle_box_at(mesh, world_vertex, world_vertex_start, margin_rel, pad_abs, tri_start,
+                                     vertex_start, tri)
+    return triangle_box_at(mesh, world_vertex, margin_rel, tri_start, vertex_start, tri)
+
+
+@wp.func
 def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri: int, margin_rel: Any):
     """:func:`triangle_box_at` of local triangle ``tri`` of object ``inst``."""
     return triangle_box_at(mesh, world_vertex, margin_rel, mesh.shape_triangle_start[mesh.object_shape[inst]],
@@ -140,6 +176,9 @@ def triangle_box(mesh: MeshTopology, world_vertex: wp.array[Any], inst: int, tri
 def _refit_node(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
+    world_vertex_start: wp.array[Any],
+    swept: int,
+    pad_abs: wp.float64,
     tree: TreeView,
     s: int,
     inst: int,
@@ -149,7 +188,8 @@ def _refit_node(
     object_upper: wp.array[wp.vec3],
 ):
     """Box of ``node`` (local id in shape ``s``) of object ``inst``: from its triangles (leaf,
-    padded by the tolerance) or its children's boxes; the root's box is the object's box."""
+    padded by the tolerance; with ``swept`` their boxes over the motion from ``world_vertex_start``,
+    :func:`swept_triangle_box_at`) or its children's boxes; the root's box is the object's box."""
     shape_node = tree.layout_node_start[tree.shape_layout[s]] + node
     slot = tree.object_node_start[inst] + node
     child = tree.node_child[shape_node]
@@ -160,8 +200,11 @@ def _refit_node(
         base = tree.shape_tri_order_start[s]
         lo = wp.vec3(BOX_EMPTY)
         hi = wp.vec3(-BOX_EMPTY)
+        tri_start = mesh.shape_triangle_start[mesh.object_shape[inst]]
+        vertex_start = mesh.object_vertex_start[inst]
         for k in range(rng[0], rng[0] + rng[1]):
-            tri_lo, tri_hi = triangle_box(mesh, world_vertex, inst, tree.tri_order[base + k], margin_rel)
+            tri_lo, tri_hi = leaf_box_at(mesh, world_vertex, world_vertex_start, swept, pad_abs, margin_rel,
+                                         tri_start, vertex_start, tree.tri_order[base + k])
             lo = wp.min(lo, tri_lo)
             hi = wp.max(hi, tri_hi)
     else:
@@ -198,6 +241,9 @@ def _layout_item(
 def _refit_level_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
+    world_vertex_start: wp.array[Any],
+    swept: int,
+    pad_abs: wp.float64,
     tree: TreeView,
     block_start: wp.array[wp.int32],
     level_count: wp.array[wp.int32],
@@ -213,14 +259,17 @@ def _refit_level_kernel(
     Items laid out by layout (:func:`_layout_item`), ``level_count`` nodes of the level per object;
     the level's nodes are ``level_first ..`` in every tree (:meth:`~warp_ccd.stages.bvh_build.TreeSizes.level`)."""
     _b, inst, k = _layout_item(wp.tid(), block_start, level_count, layout_object, layout_object_start)
-    _refit_node(mesh, world_vertex, tree, mesh.object_shape[inst], inst, level_first + k, margin_rel,
-                object_lower, object_upper)
+    _refit_node(mesh, world_vertex, world_vertex_start, swept, pad_abs, tree, mesh.object_shape[inst], inst,
+                level_first + k, margin_rel, object_lower, object_upper)
 
 
 @wp.kernel
 def _refit_small_leaf_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
+    world_vertex_start: wp.array[Any],
+    swept: int,
+    pad_abs: wp.float64,
     tree: TreeView,
     block_start: wp.array[wp.int32],
     block_count: wp.array[wp.int32],
@@ -236,8 +285,8 @@ def _refit_small_leaf_kernel(
     laid out by layout (:func:`_layout_item`), ``block_count`` leaves per object."""
     b, inst, k = _layout_item(wp.tid(), block_start, block_count, layout_object, layout_object_start)
     node = tree.leaf_node[tree.layout_leaf_start[block_layout[b]] + k]
-    _refit_node(mesh, world_vertex, tree, mesh.object_shape[inst], inst, node, margin_rel, object_lower,
-                object_upper)
+    _refit_node(mesh, world_vertex, world_vertex_start, swept, pad_abs, tree, mesh.object_shape[inst], inst, node,
+                margin_rel, object_lower, object_upper)
 
 
 @wp.kernel
@@ -276,9 +325,14 @@ def _refit_small_inner_kernel(
         object_upper[inst] = hi
 
 
-_REFIT_LEVEL, _REFIT_SMALL_LEAF = (
-    precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
-    for k in (_refit_level_kernel, _refit_small_leaf_kernel))
+def swept_arg_types(s, v, q, t) -> dict:
+    """Argument types of a kernel of one precision (:func:`~warp_ccd.geometry.precision.precision_overloads`)
+    that takes ``world_vertex``, ``world_vertex_start`` and ``margin_rel`` (the leaf boxes' inputs)."""
+    return {"world_vertex": wp.array[v], "world_vertex_start": wp.array[v], "margin_rel": s}
+
+
+_REFIT_LEVEL, _REFIT_SMALL_LEAF = (precision_overloads(k, swept_arg_types)
+                                   for k in (_refit_level_kernel, _refit_small_leaf_kernel))
 
 
 @wp.func
@@ -416,14 +470,18 @@ class _RefitPlan:
         self.levels = [tuple(views[9 + 2 * k: 11 + 2 * k]) for k in range(depth)]  # (block_start, level_count)
 
     def launch(self, topology: MeshTopology, vertices: wp.array, tree: TreeView, margin, precision: str,
-               lower: wp.array, upper: wp.array) -> None:
+               lower: wp.array, upper: wp.array, start: wp.array | None = None, pad_abs: float = 0.0) -> None:
         """Refits the boxes of the plan's objects from ``vertices`` (``topology``'s), small trees
-        first, then the others deepest level first; roots also into ``lower`` / ``upper``."""
+        first, then the others deepest level first; roots also into ``lower`` / ``upper``. With
+        ``start``, swept boxes over the motion from ``start`` to ``vertices``, padded by ``pad_abs``
+        too (:func:`swept_triangle_box_at`)."""
         d = self.device
         small = [self.small_layout, self.small_object, self.small_object_start]
+        sweep = [vertices if start is None else start, int(start is not None), wp.float64(pad_abs)]
         if self.num_small_leaves:
             wp.launch(_REFIT_SMALL_LEAF[precision], dim=self.num_small_leaves,
-                      inputs=[topology, vertices, tree, self.small_leaf_block, self.small_leaf_count, *small, margin],
+                      inputs=[topology, vertices, *sweep, tree, self.small_leaf_block, self.small_leaf_count, *small,
+                              margin],
                       outputs=[lower, upper], device=d)
         if self.num_small_inner:
             wp.launch(_refit_small_inner_kernel, dim=self.num_small_inner,
@@ -434,7 +492,7 @@ class _RefitPlan:
             if self.level_items[k]:
                 block, count = self.levels[k]
                 wp.launch(_REFIT_LEVEL[precision], dim=self.level_items[k],
-                          inputs=[topology, vertices, tree, block, count, self.level_first[k], self.big_object,
+                          inputs=[topology, vertices, *sweep, tree, block, count, self.level_first[k], self.big_object,
                                   self.big_object_start, margin],
                           outputs=[lower, upper], device=d)
 
@@ -464,6 +522,11 @@ class SceneBVH:
             ``n``, the vertices of objects of up to ``n`` vertices (0: ``"tree"``).
         small_subtree: largest subtree one thread of the build finishes alone (default: see
             :class:`~warp_ccd.stages.bvh_build.TreeBuild`).
+        world_trees: every object's tree in the world, refit every frame as a deforming object's
+            (a continuous frame's swept boxes: :meth:`refit` with ``world_vertex_start``); the
+            traversal's frames are then identities.
+        pad_abs: leaf padding in scene units besides ``margin_rel``, with ``world_vertex_start``
+            (a continuous test's least distance plus its tolerance).
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (float32, world), written by :meth:`refit`.
@@ -475,11 +538,12 @@ class SceneBVH:
         max_triangles, min_triangles: triangles of the largest and of the smallest object's mesh.
         bounds_vertices_max: most vertices of a rigid object whose box comes from its vertices
             (from ``object_bounds``).
+        world_trees, pad_abs: as above.
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
-                 small_subtree: int | None = None, **renamed):
+                 small_subtree: int | None = None, world_trees: bool = False, pad_abs: float = 0.0, **renamed):
         if renamed:  # instance_refit_max_nodes, as it was called until 0.1
             object_refit_max_nodes = renamed_arguments("SceneBVH", renamed, {
                 "instance_refit_max_nodes": "object_refit_max_nodes"})["object_refit_max_nodes"]
@@ -494,6 +558,8 @@ class SceneBVH:
                              f"[0, 2**31), got {object_bounds!r}")
         self.device = scene.device
         self.margin_rel = float(margin_rel)
+        self.world_trees = bool(world_trees)
+        self.pad_abs = float(pad_abs)
         self.leaf_size = int(leaf_size)
         self.cut_depth = int(cut_depth)
         self.object_bounds = object_bounds
@@ -508,7 +574,7 @@ class SceneBVH:
         num_shapes = scene.num_shapes
         n = scene.num_objects
         inst_shape = scene.object_shape_np
-        deforming = scene.object_deforming_np
+        deforming = scene.object_deforming_np | self.world_trees  # world trees: every object's refit
         nodes = sizes.num_nodes
         # Slots: the shapes of rigid objects first (shape space), then each deforming object's.
         has_rigid = np.zeros(num_shapes, bool)
@@ -596,12 +662,29 @@ class SceneBVH:
         """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
         return []
 
-    def refit(self, scene) -> None:
+    def sweep_args(self, scene, world_vertex_start: wp.array | None) -> list:
+        """``[world_vertex, world_vertex_start, swept, pad_abs]`` of a kernel of leaf boxes
+        (:func:`leaf_box_at`): swept when ``world_vertex_start`` is given, else not (and the start
+        is the world vertices themselves, never read)."""
+        swept = world_vertex_start is not None
+        return [scene.world_vertex, world_vertex_start if swept else scene.world_vertex, int(swept),
+                wp.float64(self.pad_abs)]
+
+    def refit(self, scene, world_vertex_start: wp.array | None = None) -> None:
         """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
-        roots are their object boxes), then the rigid objects' boxes (see ``object_bounds``)."""
+        roots are their object boxes), then the rigid objects' boxes (see ``object_bounds``).
+
+        Args:
+            scene: the scene.
+            world_vertex_start: ``(V,)`` world vertices at the start of a linear motion that ends at
+                ``scene.world_vertex`` (the scene's vector type): leaf boxes are then the triangles'
+                swept boxes, padded by :attr:`pad_abs` too (``world_trees`` only).
+        """
+        if world_vertex_start is not None and self.rigid_object.shape[0]:
+            raise ValueError("world_vertex_start: swept boxes need every tree in the world (world_trees=True)")
         margin = scene.scalar_type(self.margin_rel)
         self.refit_plan.launch(scene.topology, scene.world_vertex, self.tree, margin, scene.precision, self.lower,
-                               self.upper)
+                               self.upper, world_vertex_start, self.pad_abs)
         if self.rigid_object.shape[0]:
             eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
             wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_object.shape[0],

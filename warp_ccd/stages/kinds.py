@@ -135,7 +135,8 @@ class NarrowPhaseStage(Protocol):
 
 def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, cut_depth: int = 3,
                    separating_axes: int = 6, object_bounds: str | int = "auto", candidate_capacity: int | None = None,
-                   front_capacity: int | None = None, device=None) -> tuple[BoundsStage, MidPhaseStage]:
+                   front_capacity: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
+                   device=None) -> tuple[BoundsStage, MidPhaseStage]:
     """The mid phase of a method name, with the bounds stage it reads.
 
     Args:
@@ -151,6 +152,8 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
         candidate_capacity: initial capacity of the candidates (>= 1; default 16 an object with
             ``bvh``, 64 with ``all_pairs``, at least 1,024).
         front_capacity: initial capacity of the traversal's front (>= 1; ``bvh``; default four per object).
+        world_trees: every tree in the world, refit each frame (``bvh``; a continuous frame's swept boxes).
+        pad_abs: swept boxes' padding in scene units (a continuous test's least distance and tolerance).
         device: Warp device (the scene's).
 
     Returns:
@@ -167,10 +170,10 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
     n = scene.num_objects
     if method == "bvh":
         bvh = SceneBVH(scene, leaf_size=leaf_size, margin_rel=margin_rel, cut_depth=cut_depth,
-                       object_bounds=object_bounds)
+                       object_bounds=object_bounds, world_trees=world_trees, pad_abs=pad_abs)
         return bvh, MidPhaseBVH(bvh, capacity=candidate_capacity or max(1024, 16 * n), front_capacity=front_capacity,
                                 separating_axes=separating_axes, device=device)
-    return (ObjectBounds(n, device=device, margin_rel=margin_rel),
+    return (ObjectBounds(n, device=device, margin_rel=margin_rel, pad_abs=pad_abs),
             MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=device))
 
 

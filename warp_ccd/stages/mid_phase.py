@@ -49,15 +49,8 @@ from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_abs
 from ..options import integer_option
 from ..scene.scene import MeshTopology
-from .buffers import (
-    BLOCK_DIM,
-    GrowableBuffer,
-    block_dim_for,
-    block_reserve,
-    upper_bound,
-    used_count,
-)
-from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, triangle_box_at
+from .buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, upper_bound, used_count
+from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, leaf_box_at, swept_arg_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -469,19 +462,21 @@ def _is_whole_pair(object_triangle_start: wp.array[wp.int32], a: int, b: int, wh
 
 
 @wp.func
-def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], margin_rel: Any, big: int, i: int, small: int,
-               m_small: int):
+def _whole_row(topology: MeshTopology, world_vertex: wp.array[Any], world_vertex_start: wp.array[Any], swept: int,
+               pad_abs: wp.float64, margin_rel: Any, big: int, i: int, small: int, m_small: int):
     """``(hits, count)``: bit ``j`` of the int64 ``hits`` is set when the world boxes of triangle
     ``i`` of ``big`` and ``j`` of ``small`` overlap (:func:`~warp_ccd.stages.bvh.triangle_box_at`, the
-    trees' leaf boxes)."""
+    trees' leaf boxes; with ``swept``, their boxes over the motion from ``world_vertex_start``)."""
     big_start = topology.shape_triangle_start[topology.object_shape[big]]
-    lo, hi = triangle_box_at(topology, world_vertex, margin_rel, big_start, topology.object_vertex_start[big], i)
+    lo, hi = leaf_box_at(topology, world_vertex, world_vertex_start, swept, pad_abs, margin_rel, big_start,
+                     topology.object_vertex_start[big], i)
     tri_start = topology.shape_triangle_start[topology.object_shape[small]]
     vertex_start = topology.object_vertex_start[small]
     hits = wp.int64(0)
     count = int(0)
     for j in range(m_small):
-        lo_j, hi_j = triangle_box_at(topology, world_vertex, margin_rel, tri_start, vertex_start, j)
+        lo_j, hi_j = leaf_box_at(topology, world_vertex, world_vertex_start, swept, pad_abs, margin_rel, tri_start,
+                             vertex_start, j)
         if boxes_overlap(lo, hi, lo_j, hi_j):
             hits = hits | (wp.int64(1) << wp.int64(j))
             count += 1
@@ -507,6 +502,9 @@ def _write_whole_row(hits: wp.int64, m_small: int, a: int, b: int, big_is_a: boo
 def _whole_pair_kernel(
     topology: MeshTopology,
     world_vertex: wp.array[Any],
+    world_vertex_start: wp.array[Any],
+    swept: int,
+    pad_abs: wp.float64,
     margin_rel: Any,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
@@ -552,7 +550,8 @@ def _whole_pair_kernel(
         count = int(0)
         first = wp.int64(0)
         for i in range(sub, m_big, lanes):
-            hits, found = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+            hits, found = _whole_row(topology, world_vertex, world_vertex_start, swept, pad_abs, margin_rel, big, i,
+                                     small, m_small)
             if i == sub:
                 first = hits
             count += found
@@ -561,11 +560,12 @@ def _whole_pair_kernel(
             for i in range(sub, m_big, lanes):
                 hits = first
                 if i != sub:
-                    hits, _found = _whole_row(topology, world_vertex, margin_rel, big, i, small, m_small)
+                    hits, _found = _whole_row(topology, world_vertex, world_vertex_start, swept, pad_abs, margin_rel,
+                                              big, i, small, m_small)
                 slot = _write_whole_row(hits, m_small, a, b, big == a, i, slot, candidate, candidate_capacity)
 
 
-_WHOLE = precision_overloads(_whole_pair_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
+_WHOLE = precision_overloads(_whole_pair_kernel, swept_arg_types)
 
 
 class MidPhase:
@@ -662,13 +662,16 @@ class MidPhaseBVH(MidPhase):
         reads after it: the front (its largest level), then the candidates."""
         return [self.front, self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
+    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
+               world_vertex_start: wp.array | None = None) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
 
         Args:
             scene: the scene whose trees :attr:`bvh` holds (refit for this frame).
             pairs: the broad phase's object pairs.
             reset_counters: zero the counters of :attr:`counters` first; False when the caller has.
+            world_vertex_start: the start of a linear motion to ``scene.world_vertex`` (a continuous
+                frame: the trees were refit with it, and whole-object pairs test swept boxes too).
         """
         d = self.device
         if reset_counters:
@@ -688,7 +691,8 @@ class MidPhaseBVH(MidPhase):
             per_block = self.block_dim // lanes
             blocks = min(self.num_blocks, (pairs.capacity + per_block - 1) // per_block)
             wp.launch_tiled(_WHOLE[scene.precision], dim=[blocks],
-                            inputs=[scene.topology, scene.world_vertex, scene.scalar_type(self.bvh.margin_rel),
+                            inputs=[scene.topology, *self.bvh.sweep_args(scene, world_vertex_start),
+                                    scene.scalar_type(self.bvh.margin_rel),
                                     pairs.data, pairs.count, pairs.capacity, whole, lanes, blocks, cand.capacity],
                             outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
         if self.bvh.max_triangles <= whole:
@@ -776,9 +780,10 @@ class MidPhaseAllPairs(MidPhase):
         by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
+    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
+               world_vertex_start: wp.array | None = None) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
-        counter is set by the write kernel, so ``reset_counters`` changes nothing)."""
+        counter is set by the write kernel, so ``reset_counters`` changes nothing, nor ``world_vertex_start``)."""
         d = self.device
         if self._work is None or self._work.shape[0] != pairs.capacity:
             self._work = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
