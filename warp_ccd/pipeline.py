@@ -8,6 +8,16 @@ small kernel) and waiting once; between stages the host reads nothing. On CUDA t
 frame, optionally with the scene's motion, is a captured graph replayed each frame
 (:class:`~warp_ccd.stages.frame.CountedFrame`). A counter that passed its buffer's capacity makes that
 buffer grow and the frame run again (then the graph is captured anew), so no pair is ever dropped.
+
+A continuous pipeline (``continuous=True``) reports what happens over the linear motion of every
+world vertex since the previous :meth:`~CollisionPipeline.detect` (or the pipeline's construction):
+it keeps the motion's start, :attr:`~CollisionPipeline.world_vertex_start`, in one of two device
+arrays; its frame refits every tree from swept boxes (:class:`~warp_ccd.stages.bvh.SceneBVH` with
+``world_trees``), runs the broad and mid phases on them, then the continuous narrow phase
+(:mod:`warp_ccd.stages.continuous`), and copies the world vertices into the *other* array, the next
+frame's start (a copy inside the frame, so inside its graph). A run of the frame that made a buffer
+grow runs again on the same start (it only wrote the other array); the two arrays swap roles once
+a frame fits, so each of the two frames (and graphs) reads one and writes the other.
 """
 
 from __future__ import annotations
@@ -19,11 +29,13 @@ from functools import cached_property
 import numpy as np
 import warp as wp
 
+from .geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE
 from .geometry.triangle import TOLERANCE
-from .options import integer_option
-from .scene.scene import Scene
+from .options import integer_option, number_option
+from .scene.scene import Scene, transforms_to_poses
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
+from .stages.continuous import ContinuousNarrowPhase, continuous_options
 from .stages.frame import CountedFrame, FrameCache, frame_mode
 from .stages.kinds import make_mid_phase, make_narrow_phase
 
@@ -63,30 +75,35 @@ class CollisionResult:
             waiting for the device), in ms.
         runs: how many times ``detect()`` ran the frame for it (more than 1 when a buffer grew).
         device_colliding: ``(N,)`` int32 flags on the device.
+        continuous: whether it is a continuous result (pairs that collide over a motion, with
+            their times of impact: :attr:`triangle_toi`, :attr:`object_toi`, :attr:`toi`).
 
     Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
     (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
-    ``device_contained``, ``device_segments``) and the counts it reports.
+    ``device_contained``, ``device_segments``, ``device_toi``: a continuous result's) and the
+    counts it reports.
     """
 
     def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained=None, device_segments=None):
+                 device_contained=None, device_segments=None, device_toi=None):
         self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
                    int(device_triangle_pairs.shape[0]), {})
         self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
-                             device_segments=device_segments)
+                             device_segments=device_segments, device_toi=device_toi,
+                             continuous=device_toi is not None)
 
     @classmethod
     def _of_buffers(cls, num_objects: int, rows: dict, device_colliding: wp.array, timings: dict | None,
                     num_candidates: int, num_broad_pairs: int) -> CollisionResult:
         """A result over a pipeline's buffers, made in a few steps (it is Python's time of every
         frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
-        and ``device_segments`` to ``(buffer array, count)``, sliced on first access (a view
-        costs Python some 10 us; a name left out is None)."""
+        ``device_segments`` and ``device_toi`` to ``(buffer array, count)``, sliced on first access (a
+        view costs Python some 10 us; a name left out is None; ``device_toi`` makes it continuous)."""
         result = cls.__new__(cls)
         result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
                      rows["device_triangle_pairs"][1], rows)
+        result.continuous = "device_toi" in rows
         return result
 
     def _hold(self, num_objects: int, device_colliding: wp.array, timings: dict | None, num_candidates: int,
@@ -94,7 +111,8 @@ class CollisionResult:
         """Sets what every result holds (``rows``: the views made on first access, as in :meth:`_of_buffers`)."""
         self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
                              num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
-                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows)
+                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows,
+                             continuous=False)
 
     def _view(self, name: str):
         held = self._rows.get(name)
@@ -116,6 +134,43 @@ class CollisionResult:
         None without ``segments``."""
         return self._view("device_segments")
 
+    @cached_property
+    def device_toi(self) -> wp.array | None:
+        """``(M,)`` float64 times of impact in ``[0, 1]`` on the device (rows of
+        :attr:`device_triangle_pairs`), or None for a discrete result."""
+        return self._view("device_toi")
+
+    @cached_property
+    def triangle_toi(self) -> np.ndarray | None:
+        """``(M,)`` float64 time of impact of each row of :attr:`triangle_pairs` (same order): the
+        earliest ``t`` in ``[0, 1]`` at which the two triangles meet (or come within the pipeline's
+        ``min_distance``), never later than the true one; 0 for a pair that meets at the start.
+        None for a discrete result."""
+        if self.device_toi is None:
+            return None
+        self.triangle_pairs  # noqa: B018 (computes the row order)
+        return self.device_toi.numpy()[self._order]
+
+    @cached_property
+    def object_toi(self) -> np.ndarray | None:
+        """``(K,)`` float64 earliest time of impact of each row of :attr:`object_pairs` (the least of
+        its triangle pairs'), or None for a discrete result."""
+        if self.device_toi is None:
+            return None
+        t = self.triangle_pairs
+        out = np.full(len(self.object_pairs), np.inf)
+        if len(t):
+            _, row = np.unique(t[:, [0, 2]], axis=0, return_inverse=True)
+            np.minimum.at(out, row.reshape(-1), self.triangle_toi)
+        return out
+
+    @property
+    def toi(self) -> float:
+        """The earliest time of impact of the frame (``inf`` when nothing collides, and for a
+        discrete result)."""
+        t = self.triangle_toi
+        return float(t.min()) if t is not None and len(t) else float("inf")
+
     def copy(self) -> "CollisionResult":
         """The same result with device arrays of its own (valid after the next ``detect()``)."""
 
@@ -124,7 +179,7 @@ class CollisionResult:
 
         out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
                               self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
-                              own(self.device_segments))
+                              own(self.device_segments), own(self.device_toi))
         out.host_ms, out.runs = self.host_ms, self.runs
         return out
 
@@ -187,7 +242,8 @@ class CollisionResult:
         return flags
 
     def __repr__(self) -> str:
-        return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}, "
+        toi = f", toi={self.toi}" if self.continuous else ""
+        return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}{toi}, "
                 f"timings={self.timings})")
 
 
@@ -227,6 +283,21 @@ class CollisionPipeline:
             vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
             <warp_ccd.stages.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
             the results are the same, the traversal faster); 0 (default) never.
+        continuous: report what collides over the linear motion of every world vertex since the
+            previous :meth:`detect` (at the first, since construction): triangle pairs that meet at
+            some time ``t`` in ``[0, 1]`` of it, with their times of impact
+            (:attr:`CollisionResult.triangle_toi`; see :mod:`warp_ccd.stages.continuous`). Every
+            tree is then refit each frame from swept boxes (``leaf_size`` defaults to
+            :data:`DEFORMING_LEAF_SIZE`). Not with ``segments``, ``containment`` or another
+            ``narrow_phase`` than the default.
+        min_distance: with ``continuous``, pairs that come within this distance (scene units,
+            infinity norm, >= 0) collide too.
+        ccd_tolerance: with ``continuous``, the test's distance tolerance (> 0, scene units: a false
+            positive comes within about it of a contact; default
+            :data:`~warp_ccd.geometry.ccd.CCD_TOLERANCE`).
+        ccd_max_iterations: with ``continuous``, the most boxes one primitive query examines
+            (default :data:`~warp_ccd.geometry.ccd.CCD_MAX_ITERATIONS`; past it the answer is a
+            conservative collision).
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
@@ -237,6 +308,7 @@ class CollisionPipeline:
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
         rebuilds: tree rebuilds so far (``rebuild_every``).
+        continuous: as above.
     """
 
     def __init__(
@@ -260,9 +332,15 @@ class CollisionPipeline:
         hit_capacity: int | None = None,
         front_capacity: int | None = None,
         rebuild_every: int = 0,
+        continuous: bool = False,
+        min_distance: float = 0.0,
+        ccd_tolerance: float = CCD_TOLERANCE,
+        ccd_max_iterations: int = CCD_MAX_ITERATIONS,
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
+        ccd = _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase,
+                                segments, containment)
         mode = frame_mode(scene.device, False if graph is None and timings else graph)
         if graph and timings:
             raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
@@ -271,19 +349,33 @@ class CollisionPipeline:
             raise ValueError(f"rebuild_every must be 0 with the all_pairs mid phase (no trees), got {rebuild_every!r}")
         pair_capacity = integer_option("pair_capacity", pair_capacity, low=1, allow_none=True)
         if leaf_size is None:
-            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming else RIGID_LEAF_SIZE
+            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming or continuous else RIGID_LEAF_SIZE
         self.scene = scene
         self.device = d = scene.device
         n = scene.num_objects
         self.timings = bool(timings)
         self.graph = mode == "graph"
         self.broad = make_broad_phase(broad_phase, device=d)
-        self.narrow = make_narrow_phase(narrow_phase, n, tolerance=tolerance, hit_capacity=hit_capacity,
-                                        segments=segments, containment=containment, device=d)
+        self.continuous = ccd is not None
+        if self.continuous:
+            hit_capacity = integer_option("hit_capacity", hit_capacity, low=1, allow_none=True)
+            self.narrow = ContinuousNarrowPhase(n, min_distance=ccd[0], tolerance=ccd[1], max_iterations=ccd[2],
+                                                capacity=hit_capacity or max(256, 4 * n), device=d)
+            # Leaf boxes padded by the discrete tolerance (at least the one of the test at t = 0 of
+            # triangle_pair_toi), the least distance and the continuous tolerance.
+            margin_rel = max(number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True), TOLERANCE)
+            pad_abs = self.narrow.pad_abs
+        else:
+            self.narrow = make_narrow_phase(narrow_phase, n, tolerance=tolerance, hit_capacity=hit_capacity,
+                                            segments=segments, containment=containment, device=d)
+            margin_rel, pad_abs = self.narrow.tolerance, 0.0
         self.boxes, self.mid = make_mid_phase(
-            mid_phase, scene, leaf_size=leaf_size, margin_rel=self.narrow.tolerance, cut_depth=cut_depth,
+            mid_phase, scene, leaf_size=leaf_size, margin_rel=margin_rel, cut_depth=cut_depth,
             separating_axes=separating_axes, object_bounds=object_bounds, candidate_capacity=candidate_capacity,
-            front_capacity=front_capacity, device=d)
+            front_capacity=front_capacity, world_trees=self.continuous, pad_abs=pad_abs, device=d)
+        # The motion's start, two arrays: a frame reads one and writes the other (module docs).
+        self._starts = [wp.clone(scene.world_vertex), wp.empty_like(scene.world_vertex)] if self.continuous else None
+        self._parity = 0
         # One pair slot an object to start with (the scaling scenes hold 0.01-0.13 pairs an object; a
         # crowded frame grows it once): the mid phase keeps a TreePair of 136 bytes a slot beside it.
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, n), d, "broad-phase pairs")
@@ -299,9 +391,18 @@ class CollisionPipeline:
         self._detects = 0
         self._times = None
 
-    def _launch_stages(self) -> None:
+    @property
+    def world_vertex_start(self) -> wp.array | None:
+        """``(V,)`` world vertices where the next :meth:`detect`'s motion starts (the scene's vector
+        type, on its device): the scene's at construction, then at the previous :meth:`detect`.
+        None unless ``continuous``. Writing into it (``wp.copy``) moves the next motion's start."""
+        return None if self._starts is None else self._starts[self._parity]
+
+    def _launch_stages(self, parity: int = 0) -> None:
         """Enqueues the four stages (the frame's counters were reset before); with ``timings``,
-        times each stage."""
+        times each stage. A continuous frame reads the start ``parity`` and writes the other."""
+        if self.continuous:
+            return self._launch_continuous(parity)
         scene = self.scene
         times = {} if self.timings else None
 
@@ -329,19 +430,47 @@ class CollisionPipeline:
             times["total"] = sum(times[s] for s in STAGES)
         self._times = times
 
+    def _launch_continuous(self, parity: int) -> None:
+        """The continuous frame's stages: swept refit, broad, mid, continuous narrow phase over the
+        motion from start ``parity`` to the world vertices, then the world vertices copied into the
+        other start (the next frame's)."""
+        scene = self.scene
+        start = self._starts[parity]
+        times = {} if self.timings else None
+        if times is not None:
+            wp.synchronize_device(self.device)
+        t = time.perf_counter()
+        for stage, work in (
+                ("refit", lambda: self.boxes.refit(scene, start)),
+                ("broad", lambda: self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)),
+                ("mid", lambda: self.mid.launch(scene, self.pairs, reset_counters=False, world_vertex_start=start)),
+                ("narrow", lambda: self.narrow.launch(scene, start, self.mid.candidates, reset_counters=False))):
+            work()
+            if times is not None:
+                wp.synchronize_device(self.device)
+                now = time.perf_counter()
+                times[stage], t = (now - t) * 1e3, now
+        wp.copy(self._starts[1 - parity], scene.world_vertex)
+        if times is not None:
+            times["total"] = sum(times[s] for s in STAGES)
+        self._times = times
+
     def _frame(self, step: float | None) -> CountedFrame:
-        """The frame that advances the scene by ``step`` first (None: detection alone)."""
-        frame = self._frames.frames.get(step)
+        """The frame that advances the scene by ``step`` first (None: detection alone); a continuous
+        pipeline's reads the current start (one frame per start array)."""
+        parity = self._parity
+        key = (step, parity) if self.continuous else step
+        frame = self._frames.frames.get(key)
         if frame is not None:
             return frame
         if step is None:
-            return self._frames.get(None, self._launch_stages)
+            return self._frames.get(key, lambda: self._launch_stages(parity))
 
         def launch():
             self.scene.enqueue_advance(step)
-            self._launch_stages()
+            self._launch_stages(parity)
 
-        return self._frames.get(step, launch)
+        return self._frames.get(key, launch)
 
     def detect(self, advance: float | None = None) -> CollisionResult:
         """Runs one frame on the scene's world vertices.
@@ -374,7 +503,7 @@ class CollisionPipeline:
         grew = frame.run_once()
         wait_ms = frame.wait_ms
         runs = 1
-        while grew:  # a buffer grew: detect again on the same world vertices
+        while grew:  # a buffer grew: detect again on the same world vertices (and the same start)
             frame = self._frame(None)
             grew = frame.run_once()
             wait_ms += frame.wait_ms
@@ -382,6 +511,9 @@ class CollisionPipeline:
         narrow = self.narrow
         hits = narrow.hits
         rows = {"device_triangle_pairs": (hits.data, hits.last_count)}
+        if self.continuous:
+            rows["device_toi"] = (narrow.toi, hits.last_count)
+            self._parity ^= 1  # the frame wrote the other start: the next motion starts here
         if narrow.contained is not None:
             rows["device_contained"] = (narrow.contained.data, narrow.contained.last_count)
         if narrow.segments:
@@ -399,13 +531,48 @@ class CollisionPipeline:
             self.scene.enqueue_advance(step)
         empty = wp.zeros(0, dtype=wp.vec2i, device=d) if self.narrow.contained is not None else None
         no_segments = wp.zeros((0, 2), dtype=self.scene.vec3_type, device=d) if self.narrow.segments else None
+        no_toi = None
+        if self.continuous:
+            wp.copy(self.world_vertex_start, self.scene.world_vertex)
+            no_toi = wp.zeros(0, dtype=wp.float64, device=d)
         return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
-                               device_contained=empty, device_segments=no_segments)
+                               device_contained=empty, device_segments=no_segments, device_toi=no_toi)
 
 
-def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", **options) -> CollisionResult:
-    """One-shot collision detection among meshes (like trimesh's ``CollisionManager``).
+def _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase: str,
+                      segments: bool, containment: bool) -> tuple | None:
+    """The continuous options checked: ``(min_distance, tolerance, max_iterations)``, or None for a
+    discrete pipeline (whose continuous options must keep their defaults).
+
+    Raises:
+        ValueError: naming the option: a bad value, a continuous option without ``continuous=True``,
+            or an option a continuous pipeline does not have (``segments``, ``containment``, another
+            ``narrow_phase``).
+    """
+    if not isinstance(continuous, (bool, np.bool_)):
+        raise ValueError(f"continuous must be True or False, got {continuous!r}")
+    options = continuous_options(min_distance, ccd_tolerance, ccd_max_iterations)
+    if not continuous:
+        for name, value, default in zip(("min_distance", "ccd_tolerance", "ccd_max_iterations"), options,
+                                        (0.0, CCD_TOLERANCE, CCD_MAX_ITERATIONS)):
+            if value != default:
+                raise ValueError(f"{name} is an option of continuous detection (continuous=True), got {value!r}")
+        return None
+    if segments:
+        raise ValueError("segments: a continuous pipeline has no intersection segments (continuous=True)")
+    if containment:
+        raise ValueError("containment: a continuous pipeline does not report containment (continuous=True)")
+    if narrow_phase != "moller":
+        raise ValueError(f"narrow_phase: a continuous pipeline's narrow phase is its own (continuous=True), "
+                         f"got {narrow_phase!r}")
+    return options
+
+
+def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", *, transforms_end=None,
+            vertices_end=None, min_distance: float = 0.0, **options) -> CollisionResult:
+    """One-shot collision detection among meshes (like trimesh's ``CollisionManager``), at one
+    moment or over a motion.
 
     Args:
         meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
@@ -413,29 +580,98 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test in
             double precision (for scenes far from the origin).
+        transforms_end: ``(N, 4, 4)`` rigid transforms at the end of a motion (continuous detection:
+            every vertex moves linearly from where ``transforms`` put it, ``t = 0``, to where
+            ``transforms_end`` puts it, ``t = 1``).
+        vertices_end: the meshes' vertices at the end of a motion, one ``(n_i, 3)`` array per mesh
+            in the mesh's own frame (placed by ``transforms_end``, or else ``transforms``, when given):
+            continuous detection of deforming meshes.
+        min_distance: continuous detection: pairs that come within this distance (scene units,
+            infinity norm) collide too; with neither end given, a query of the meshes as they are.
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
             ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,
-            ``containment``, capacities).
+            ``containment``, ``ccd_tolerance``, ``ccd_max_iterations``, capacities).
 
     Returns:
-        :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``.
+        :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``; a
+        continuous one (either end given, or ``min_distance`` > 0) with the pairs that collide at
+        some time of the motion, and ``triangle_toi``, ``object_toi``, ``toi``.
 
     Raises:
-        ValueError / TypeError: naming the bad mesh or transform and the problem; a ValueError
+        ValueError / TypeError: naming the bad mesh, transform or end and the problem; a ValueError
             too where the coordinates are too far from the origin for ``precision`` at the
             triangles' size (float32: beyond about ``8.4e3`` times the typical triangle, use
             ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd.scene.scene.Scene.from_meshes>`).
     """
-    scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
+    min_distance = number_option("min_distance", min_distance, low=0.0)
+    continuous = transforms_end is not None or vertices_end is not None or min_distance > 0.0
+    if continuous:
+        options["continuous"] = True
+        options["min_distance"] = min_distance
+    if transforms_end is not None:
+        _check_transforms(transforms_end, len(meshes), "transforms_end")
+    if vertices_end is not None:  # deforming: world vertices at both ends, computed here
+        ends = _vertices_end(meshes, vertices_end)
+        start = _placed(meshes, [np.asarray(v, np.float64) for v, _ in meshes], transforms)
+        end = _placed(meshes, ends, transforms if transforms_end is None else transforms_end, "transforms_end")
+        scene = Scene.from_meshes([(v, t) for v, (_, t) in zip(start, meshes)], deforming=True, device=device,
+                                  precision=precision)
+    else:
+        scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
     # every object pair of a small scene or 32 pairs an object, 8 bytes each; one candidate a
     # triangle per triangle of a leaf, 16 bytes each, a node pair of the front a triangle, 24 bytes,
     # and 8 bytes of hits a triangle, for this call only), where a persistent pipeline starts lean
     # and grows.
     n, tris = scene.num_objects, scene.num_triangles
-    leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
+    leaf = options.get("leaf_size") or (DEFORMING_LEAF_SIZE if continuous else RIGID_LEAF_SIZE)
     options.setdefault("pair_capacity", max(64, min(n * (n - 1) // 2, 32 * n)))
     options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
     options.setdefault("front_capacity", max(1024, 4 * n, tris))
-    return CollisionPipeline(scene, **options).detect()
+    pipeline = CollisionPipeline(scene, **options)
+    if vertices_end is not None:
+        scene.set_world_vertices(np.concatenate(end) if end else np.zeros((0, 3)))
+    elif transforms_end is not None:
+        scene.set_transforms(transforms_end)
+    return pipeline.detect()
+
+
+def _vertices_end(meshes: Sequence, vertices_end) -> list[np.ndarray]:
+    """``vertices_end`` as float64 arrays, one per mesh, checked against the meshes."""
+    if isinstance(vertices_end, (str, bytes)) or not isinstance(vertices_end, Sequence):
+        raise ValueError(f"vertices_end: expected a sequence of (n, 3) arrays, one per mesh, "
+                         f"got {type(vertices_end).__name__}")
+    if len(vertices_end) != len(meshes):
+        raise ValueError(f"vertices_end: expected {len(meshes)} arrays (one per mesh), got {len(vertices_end)}")
+    out = []
+    for i, (v, (v0, _)) in enumerate(zip(vertices_end, meshes)):
+        try:
+            a = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"vertices_end: mesh {i}: not an array of numbers ({exc})") from None
+        shape = np.shape(v0)
+        if a.shape != shape:
+            raise ValueError(f"vertices_end: mesh {i}: expected shape {shape} (its vertices), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"vertices_end: mesh {i}: vertex {int(np.argmin(np.isfinite(a).all(axis=1)))} "
+                             f"is not finite")
+        out.append(a)
+    return out
+
+
+def _check_transforms(transforms, n: int, name: str) -> None:
+    """Validates rigid transforms (:func:`~warp_ccd.scene.scene.transforms_to_poses`), the message naming ``name``."""
+    try:
+        transforms_to_poses(transforms, n)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}" if name != "transforms" else str(exc)) from None
+
+
+def _placed(meshes: Sequence, vertices: list[np.ndarray], transforms, name: str = "transforms") -> list[np.ndarray]:
+    """Each mesh's ``vertices`` under its transform (validated), in float64; as they are without one."""
+    if transforms is None:
+        return vertices
+    _check_transforms(transforms, len(meshes), name)
+    m = np.asarray(transforms, np.float64)
+    return [v @ m[i, :3, :3].T + m[i, :3, 3] for i, v in enumerate(vertices)]

@@ -64,7 +64,9 @@ class BoundsStage(Protocol):
     def counters(self) -> list[GrowableBuffer]: ...
 
     def refit(self, scene) -> None:
-        """Writes :attr:`lower` and :attr:`upper` from ``scene``'s world vertices (host reads nothing)."""
+        """Writes :attr:`lower` and :attr:`upper` from ``scene``'s world vertices (host reads nothing).
+        A continuous frame calls ``refit(scene, world_vertex_start)``: swept boxes, over the motion
+        from those vertices to the scene's."""
 
 
 @runtime_checkable
@@ -99,7 +101,7 @@ class MidPhaseStage(Protocol):
 
     def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes the candidates of the object ``pairs`` of ``scene`` (``reset_counters=False``:
-        the caller has zeroed :attr:`counters`)."""
+        the caller has zeroed :attr:`counters`; a continuous frame passes ``world_vertex_start`` too)."""
 
 
 @runtime_checkable

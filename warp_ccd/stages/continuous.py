@@ -1,0 +1,159 @@
+"""Continuous narrow phase: the time of impact of each candidate triangle pair over a linear motion.
+
+A continuous frame (:class:`~warp_ccd.pipeline.CollisionPipeline` with ``continuous=True``) sees
+every world vertex move linearly from ``world_vertex_start`` (``t = 0``) to the scene's
+``world_vertex`` (``t = 1``). Its refit, broad and mid phases work on swept boxes (a triangle's box
+over both ends, padded by the least distance and the tolerance: :func:`~warp_ccd.stages.bvh.swept_triangle_box_at`),
+so every triangle pair that comes within ``min_distance`` at some ``t`` is a candidate.
+:class:`ContinuousNarrowPhase` then runs :func:`~warp_ccd.geometry.ccd.triangle_pair_toi` on each
+candidate row ``(obj_a, tri_a, obj_b, tri_b)``, one thread a row: a pair with a toi in ``[0, 1]``
+is appended to :attr:`~ContinuousNarrowPhase.hits` (capacity + counter; it grows, nothing is
+dropped) with its toi in :attr:`~ContinuousNarrowPhase.toi` (float64, same slot), and both objects
+are flagged. The toi is never later than the true one (Tight Inclusion's guarantee); 0 for a
+pair that already meets at ``t = 0``.
+
+Cost: one query of up to 15 primitive pairs a candidate, each a bounded search
+(``max_iterations`` boxes); most candidates of a swept frame are rejected by the first boxes.
+The module is compiled without floating-point contraction (``fuse_fp=False``), as
+:mod:`warp_ccd.geometry.ccd` asks, so that every device gives the same tois.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, triangle_pair_toi
+from ..geometry.precision import precision_overloads
+from ..options import integer_option, number_option
+from ..scene.scene import MeshTopology, mesh_triangle
+from .buffers import GrowableBuffer, reserve_slot, used_count
+
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
+
+__all__ = ["ContinuousNarrowPhase", "continuous_options"]
+
+
+@wp.kernel
+def _continuous_kernel(
+    mesh: MeshTopology,
+    world_vertex_start: wp.array[Any],
+    world_vertex: wp.array[Any],
+    candidate: wp.array[wp.vec4i],
+    candidate_count: wp.array[wp.int64],
+    candidate_capacity: int,
+    min_distance: wp.float64,
+    tolerance: wp.float64,
+    max_iterations: int,
+    hit_capacity: int,
+    # Outputs
+    hit: wp.array[wp.vec4i],
+    hit_toi: wp.array[wp.float64],
+    hit_count: wp.array[wp.int64],
+    object_colliding: wp.array[wp.int32],
+):
+    """One thread per candidate slot: the toi of row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion
+    from ``world_vertex_start`` to ``world_vertex``; a toi in ``[0, 1]`` appends the row and its toi
+    and flags both objects."""
+    k = wp.tid()
+    if k >= used_count(candidate_count, candidate_capacity):
+        return
+    c = candidate[k]
+    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    toi = triangle_pair_toi(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance,
+                            max_iterations)
+    if toi <= wp.float64(1.0):
+        slot = reserve_slot(hit_count, hit_capacity)
+        if slot >= 0:
+            hit[slot] = c
+            hit_toi[slot] = toi
+        object_colliding[c[0]] = 1
+        object_colliding[c[2]] = 1
+
+
+_CONTINUOUS = precision_overloads(_continuous_kernel, lambda s, v, q, t: {
+    "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
+
+
+def continuous_options(min_distance, tolerance, max_iterations) -> tuple[float, float, int]:
+    """The options of a continuous test, checked: ``(min_distance, tolerance, max_iterations)``.
+
+    Raises:
+        ValueError: naming the option (``min_distance`` >= 0, ``ccd_tolerance`` > 0,
+            ``ccd_max_iterations`` in ``[1, 2**31 - 1]``).
+    """
+    return (number_option("min_distance", min_distance, low=0.0),
+            number_option("ccd_tolerance", tolerance, low=0.0, low_open=True),
+            integer_option("ccd_max_iterations", max_iterations, low=1, high=2**31 - 1))
+
+
+class ContinuousNarrowPhase:
+    """Times of impact of candidate triangle pairs over a linear motion; owns what it writes.
+
+    Args:
+        num_objects: ``N`` (size of :attr:`object_colliding`).
+        min_distance: pairs that come within this distance (scene units, infinity norm) collide.
+        tolerance: the test's distance tolerance (scene units; a false positive comes within about
+            it of a contact).
+        max_iterations: most boxes one primitive query examines (past it the answer is conservative).
+        capacity: initial capacity of the hit buffer (it grows).
+        device: Warp device.
+
+    Attributes:
+        hits: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec4i`` rows
+            ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, of the pairs that collide in ``[0, 1]``.
+        toi: ``(hits.capacity,)`` float64, the toi of each row of :attr:`hits` (same slot), in ``[0, 1]``.
+        object_colliding: ``(N,)`` int32, 1 for an object with a hit.
+        min_distance, tolerance, max_iterations: as above.
+        segments, segment, contained: False, None, None (a continuous frame has neither segments
+            nor containment; :class:`~warp_ccd.stages.kinds.NarrowPhaseStage`'s members).
+    """
+
+    def __init__(self, num_objects: int, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
+                 max_iterations: int = CCD_MAX_ITERATIONS, capacity: int = 1024, device=None):
+        self.min_distance, self.tolerance, self.max_iterations = continuous_options(min_distance, tolerance,
+                                                                                    max_iterations)
+        self.device = wp.get_device(device)
+        self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
+        self.toi = wp.zeros(self.hits.capacity, dtype=wp.float64, device=self.device)
+        self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
+        self.segments = False
+        self.segment = None
+        self.contained = None
+
+    @property
+    def pad_abs(self) -> float:
+        """Padding in scene units of the swept boxes upstream: the least distance plus the tolerance
+        (a pair the test may report is never culled by a box)."""
+        return self.min_distance + self.tolerance
+
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """The buffers with counters that :meth:`launch` writes (the hits)."""
+        return [self.hits]
+
+    def launch(self, scene, world_vertex_start: wp.array, candidates: GrowableBuffer, *,
+               reset_counters: bool = True) -> None:
+        """Tests the ``candidates`` over the motion from ``world_vertex_start`` to ``scene.world_vertex``:
+        resets and writes :attr:`hits`, :attr:`toi` and :attr:`object_colliding` (host reads nothing).
+
+        Args:
+            scene: the :class:`~warp_ccd.scene.scene.Scene` (its world vertices at ``t = 1``).
+            world_vertex_start: ``(V,)`` world vertices at ``t = 0`` (the scene's vector type).
+            candidates: ``wp.vec4i`` candidate triangle pairs (the mid phase's, from swept boxes).
+            reset_counters: zero the hits' counter first; False when the caller has.
+        """
+        d = self.device
+        hits = self.hits
+        if reset_counters:
+            hits.reset()
+        if self.toi.shape[0] != hits.capacity:  # follows the hits' capacity (after a growth, eagerly)
+            self.toi = wp.zeros(hits.capacity, dtype=wp.float64, device=d)
+        self.object_colliding.zero_()
+        wp.launch(_CONTINUOUS[scene.precision], dim=candidates.capacity,
+                  inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, candidates.count,
+                          candidates.capacity, wp.float64(self.min_distance), wp.float64(self.tolerance),
+                          self.max_iterations, hits.capacity],
+                  outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
