@@ -9,6 +9,7 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> pipe = wc.CollisionPipeline(scene)
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
 >>> report = wc.check_usd("anim.usd")               # interpenetrations of a USD animation
+>>> hit, toi = wc.ccd_queries("vertex_face", x0, x1)  # continuous: earliest time of impact
 
 The API in levels: this module holds what a user of :func:`collide`, :class:`Scene`,
 :class:`CollisionPipeline` and :func:`check_usd` needs; the namespaces below hold the rest:
@@ -26,6 +27,7 @@ import importlib
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
 from ._deprecated import install_moved_modules, module_aliases, warn_renamed
 from .geometry import TOLERANCE
+from .geometry.ccd import ccd_queries
 from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
 from .scene import Scene
@@ -42,6 +44,7 @@ __all__ = [
     "PrecisionWarning",
     "Scene",
     "broad_phase_pairs",
+    "ccd_queries",
     "check_usd",
     "collide",
 ]

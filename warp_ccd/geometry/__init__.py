@@ -16,11 +16,16 @@ Compile that module without floating-point contraction, for the same verdict on 
         if geometry.tri_tri_moller(a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2], geometry.TOLERANCE):
             hit[k] = 1
 
+Continuous collision: :func:`vertex_face_toi`, :func:`edge_edge_toi` and :func:`triangle_pair_toi`
+give the earliest time in ``[0, 1]`` that linearly moving primitives touch, or :data:`NO_HIT`
+(conservative: never late, never missed; :mod:`warp_ccd.geometry.ccd`).
+
 Boxes are float32 ``wp.vec3`` corners: :func:`boxes_overlap` tests two closed boxes, :func:`box_lower32` /
 :func:`box_upper32` round a corner outward to float32, :func:`vertex_bounds` bounds a run of vertices.
 """
 
 from .box import BOX_EMPTY, box_lower32, box_upper32, boxes_overlap, vertex_bounds
+from .ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, NO_HIT, edge_edge_toi, triangle_pair_toi, vertex_face_toi
 from .triangle import (
     CONTACT_AREA,
     CONTACT_NONE,
@@ -37,19 +42,25 @@ from .triangle import (
 
 __all__ = [
     "BOX_EMPTY",
+    "CCD_MAX_ITERATIONS",
+    "CCD_TOLERANCE",
     "CONTACT_AREA",
     "CONTACT_NONE",
     "CONTACT_SEGMENT",
     "METHOD_EDGE_FACE",
     "METHOD_MOLLER",
+    "NO_HIT",
     "TOLERANCE",
     "box_lower32",
     "box_upper32",
     "boxes_overlap",
     "crossing_depth",
+    "edge_edge_toi",
     "tri_tri_edge_face",
     "tri_tri_moller",
     "tri_tri_segment",
     "tri_tri_test",
+    "triangle_pair_toi",
     "vertex_bounds",
+    "vertex_face_toi",
 ]

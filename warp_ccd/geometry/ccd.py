@@ -1,0 +1,544 @@
+"""Continuous collision of moving primitives: the earliest time a vertex meets a face, or an edge an edge.
+
+Each vertex moves linearly from its position at ``t = 0`` to its position at ``t = 1``. A
+vertex-face pair ``(p; f0, f1, f2)`` collides when at some ``t`` the point lies on the closed
+triangle, an edge-edge pair ``(ea0, ea1; eb0, eb1)`` when the two closed segments meet; with a
+minimum separation ``d``, when they come within ``d`` (in the infinity norm, so every pair within
+Euclidean ``d`` is among them). The time of impact (toi) is the earliest such ``t``.
+
+The method is Tight Inclusion's (Wang et al. 2021, "A Large Scale Benchmark and an Inclusion-Based
+Algorithm for Continuous Collision Detection"), with its own certified error bound and a stackless
+depth-first search:
+
+* Both pairs are the roots of a function ``F(t, u, v)`` over a box of parameters: for vertex-face
+  ``F = p(t) - (f0(t) + u (f1(t) - f0(t)) + v (f2(t) - f0(t)))`` with ``u, v >= 0, u + v <= 1``;
+  for edge-edge ``F = ea0(t) + u (ea1(t) - ea0(t)) - eb0(t) - v (eb1(t) - eb0(t))`` with
+  ``u, v`` in ``[0, 1]``. ``F`` is multilinear (of degree one in each parameter), so over any box of
+  parameters each coordinate of ``F`` lies between the least and the greatest of its values at the
+  box's eight corners: when, on some axis, every corner is above ``d`` or every one below ``-d``,
+  the box holds no collision.
+* Corner values are computed in float64 (float32 inputs are converted exactly) in a fixed order;
+  each is within ``eps = 2^-45 * m`` of its true value, ``m`` the largest absolute coordinate of
+  the eight points on that axis (a forward error bound of the evaluation, about 65 units in the
+  last place of ``m``, with fourfold slack; see ``docs/ARCHITECTURE.md``). A box is rejected only
+  when its corners lie beyond ``d + eps``: a true collision is never rejected.
+* Boxes are bisected (dyadic intervals, exact in float64) until one is *accepted*: its values all
+  lie within ``d + eps`` of the origin, or span at most ``tolerance`` on every axis, or its
+  parameter widths all fall below the widths that ``tolerance`` asks for (as Tight Inclusion
+  derives them from the motion). An accepted box reports its least ``t``: the toi is never later
+  than the true one, and a false positive lies within about ``tolerance`` of a true contact.
+* The search is depth-first, lower halves first, and keeps going while a box could start earlier
+  than the best toi found; the split at each depth depends only on the depth (the widest
+  dimension relative to its tolerance, as Tight Inclusion splits), so the path back up needs no
+  stack: a thread holds three lower corners and three widths. Past ``max_iterations`` boxes the
+  answer is a collision at the earliest time any unfinished box starts (conservative).
+
+Every device gives the same answer: compile the calling module with ``fuse_fp=False`` (as this
+module is), so that CUDA does not contract ``a * b + c`` into an FMA.
+
+:func:`vertex_face_toi`, :func:`edge_edge_toi` and :func:`triangle_pair_toi` are the device
+functions; :func:`ccd_queries` runs batches of queries from numpy (``ccd_batch_kernel``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from ..options import integer_option, number_option
+from .triangle import TOLERANCE, tri_tri_moller
+
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
+
+__all__ = [
+    "CCD_KINDS",
+    "CCD_MAX_ITERATIONS",
+    "CCD_TOLERANCE",
+    "NO_HIT",
+    "ccd_batch_kernel",
+    "ccd_queries",
+    "edge_edge_toi",
+    "triangle_pair_toi",
+    "vertex_face_toi",
+]
+
+CCD_TOLERANCE = 1.0e-6
+"""Default distance tolerance of a query (same units as the coordinates): an accepted box's values
+span at most this much, so a false positive comes within about this distance (Tight Inclusion's
+default)."""
+
+CCD_MAX_ITERATIONS = 1_000_000
+"""Default cap on the boxes one query examines; past it the query reports a collision at the
+earliest time an unfinished box starts (a conservative answer; no query of the test sets gets near)."""
+
+NO_HIT = wp.constant(wp.float64(math.inf))
+"""The toi of a pair that never collides."""
+
+CCD_KINDS = {"vertex_face": 0, "edge_edge": 1}
+"""Query kinds of :func:`ccd_queries` and their codes in :data:`ccd_batch_kernel`."""
+
+KIND_VERTEX_FACE = wp.constant(0)
+KIND_EDGE_EDGE = wp.constant(1)
+
+ERROR_SCALE = wp.constant(wp.float64(2.0**-45))
+"""Certified error of a corner value, relative to the largest absolute coordinate on its axis."""
+
+ERROR_FLOOR = wp.constant(wp.float64(1.0e-300))
+"""Absolute error added to cover gradual underflow."""
+
+WIDTH_MIN = wp.constant(wp.float64(2.0**-60))
+"""Parameter intervals are never split below this width (a box that narrow is accepted)."""
+
+_F0 = wp.constant(wp.float64(0.0))
+_F1 = wp.constant(wp.float64(1.0))
+_F2 = wp.constant(wp.float64(2.0))
+_HALF = wp.constant(wp.float64(0.5))
+_INF = wp.constant(wp.float64(math.inf))
+
+
+@wp.func
+def _lerp(x0: wp.float64, x1: wp.float64, t: wp.float64) -> wp.float64:
+    return x0 + (x1 - x0) * t
+
+
+@wp.func
+def _corner(kind: int, a: wp.float64, b: wp.float64, c: wp.float64, d: wp.float64, u: wp.float64,
+            v: wp.float64) -> wp.float64:
+    """One coordinate of ``F`` at ``(u, v)``, from the four points' coordinates at one time."""
+    if kind == KIND_VERTEX_FACE:  # a = p, b c d = f0 f1 f2
+        return a - (b + ((c - b) * u + (d - b) * v))
+    return (a + (b - a) * u) - (c + (d - c) * v)  # a b = ea0 ea1, c d = eb0 eb1
+
+
+@wp.func
+def _axis_values(kind: int, x0: wp.vec4d, x1: wp.vec4d, t: wp.float64, u_lo: wp.float64, u_hi: wp.float64,
+                 v_lo: wp.float64, v_hi: wp.float64) -> wp.vec4d:
+    """One coordinate of ``F`` at the four ``(u, v)`` corners of a box at time ``t`` (``x0``, ``x1``:
+    the four points' coordinates on that axis at ``t = 0`` and ``t = 1``), in the order
+    ``(u_lo, v_lo), (u_hi, v_lo), (u_lo, v_hi), (u_hi, v_hi)``."""
+    a = _lerp(x0[0], x1[0], t)
+    b = _lerp(x0[1], x1[1], t)
+    c = _lerp(x0[2], x1[2], t)
+    d = _lerp(x0[3], x1[3], t)
+    return wp.vec4d(_corner(kind, a, b, c, d, u_lo, v_lo), _corner(kind, a, b, c, d, u_hi, v_lo),
+                    _corner(kind, a, b, c, d, u_lo, v_hi), _corner(kind, a, b, c, d, u_hi, v_hi))
+
+
+@wp.func
+def _axis_range(kind: int, x0: wp.vec4d, x1: wp.vec4d, lo: wp.vec3d, w: wp.vec3d):
+    """Least and greatest of one coordinate of ``F`` over the 8 corners of the box ``[lo, lo + w]``,
+    and how much it changes along an edge of the box in ``t``, ``u`` and ``v`` (the most of the
+    box's four edges in each)."""
+    u_hi = lo[1] + w[1]
+    v_hi = lo[2] + w[2]
+    f = _axis_values(kind, x0, x1, lo[0], lo[1], u_hi, lo[2], v_hi)
+    g = _axis_values(kind, x0, x1, lo[0] + w[0], lo[1], u_hi, lo[2], v_hi)
+    low = wp.min(wp.min(wp.min(f[0], f[1]), wp.min(f[2], f[3])), wp.min(wp.min(g[0], g[1]), wp.min(g[2], g[3])))
+    high = wp.max(wp.max(wp.max(f[0], f[1]), wp.max(f[2], f[3])), wp.max(wp.max(g[0], g[1]), wp.max(g[2], g[3])))
+    dt = wp.max(wp.max(wp.abs(g[0] - f[0]), wp.abs(g[1] - f[1])), wp.max(wp.abs(g[2] - f[2]), wp.abs(g[3] - f[3])))
+    du = wp.max(wp.max(wp.abs(f[1] - f[0]), wp.abs(f[3] - f[2])), wp.max(wp.abs(g[1] - g[0]), wp.abs(g[3] - g[2])))
+    dv = wp.max(wp.max(wp.abs(f[2] - f[0]), wp.abs(f[3] - f[1])), wp.max(wp.abs(g[2] - g[0]), wp.abs(g[3] - g[1])))
+    return low, high, wp.vec3d(dt, du, dv)
+
+
+@wp.func
+def _linf(a: wp.vec3d) -> wp.float64:
+    return wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
+
+
+@wp.func
+def _max_abs4(x0: wp.vec4d, x1: wp.vec4d) -> wp.float64:
+    m = _F0
+    for i in range(4):
+        m = wp.max(m, wp.max(wp.abs(x0[i]), wp.abs(x1[i])))
+    return m
+
+
+@wp.func
+def _tol_div(tolerance: wp.float64, length: wp.float64) -> wp.float64:
+    if length > _F0:
+        return tolerance / length
+    return _INF
+
+
+@wp.func
+def _next_split(w: wp.vec3d, tol: wp.vec3d, spread: wp.vec3d) -> int:
+    """The parameter to split: among those wider than their tolerance, the one along which the
+    unfinished coordinates of ``F`` change most (``spread``), else the widest relative to its
+    tolerance (the lowest index on a tie); -1 when none is wider (a leaf)."""
+    best = int(-1)
+    best_s = -_F1
+    best_r = _F1
+    by_ratio = int(-1)
+    for j in range(3):
+        r = w[j] / tol[j]
+        if r > _F1 and w[j] > WIDTH_MIN:
+            if spread[j] > best_s:
+                best = j
+                best_s = spread[j]
+            if r > best_r:
+                by_ratio = j
+                best_r = r
+    if best_s > _F0:
+        return best
+    return by_ratio
+
+
+PATH_WORDS = 6
+"""64-bit words of a search's path: 2 bits a level, so up to 192 levels (at most 3 x 60 splits)."""
+
+_path_t = wp.types.vector(length=PATH_WORDS, dtype=wp.uint64)
+
+
+@wp.func
+def _path_push(path: _path_t, depth: int, dim: int) -> _path_t:
+    """``path`` with parameter ``dim`` split at level ``depth``."""
+    word = depth >> 5
+    shift = wp.uint64((depth & 31) * 2)
+    out = path
+    out[word] = (path[word] & ~(wp.uint64(3) << shift)) | (wp.uint64(dim) << shift)
+    return out
+
+
+@wp.func
+def _path_dim(path: _path_t, depth: int) -> int:
+    """The parameter split at level ``depth``."""
+    return int((path[depth >> 5] >> wp.uint64((depth & 31) * 2)) & wp.uint64(3))
+
+
+@wp.func
+def _is_upper_half(lo: wp.float64, w: wp.float64) -> bool:
+    """Whether the interval ``[lo, lo + w]`` (``lo`` a multiple of the power of two ``w``) is the
+    upper half of its parent."""
+    k = lo / w
+    return wp.floor(k * _HALF) * _F2 != k
+
+
+MAT34D = wp.types.matrix(shape=(3, 4), dtype=wp.float64)
+"""Four points on the three axes (rows x, y, z; columns the points)."""
+
+
+@wp.func
+def _pending_start(lo_in: wp.vec3d, w_in: wp.vec3d, path: _path_t, depth_in: int, include_box: bool) -> wp.float64:
+    """The earliest start time of the boxes a search stopped at box ``(lo, w)`` (level ``depth``)
+    has not finished: each upper sibling still ahead on the way up, and the box itself when
+    ``include_box``."""
+    lo = wp.vec3d(lo_in)
+    w = wp.vec3d(w_in)
+    start = _INF
+    if include_box:
+        start = lo[0]
+    depth = depth_in
+    while depth > 0:
+        depth -= 1
+        j = _path_dim(path, depth)
+        if _is_upper_half(lo[j], w[j]):
+            lo[j] = lo[j] - w[j]
+        else:
+            sibling = lo[0]
+            if j == 0:
+                sibling = lo[0] + w[0]
+            start = wp.min(start, sibling)
+        w[j] = w[j] * _F2
+    return start
+
+
+@wp.func
+def _parameter_tolerances(kind: int, x0: MAT34D, x1: MAT34D, tolerance: wp.float64) -> wp.vec3d:
+    """Widths of ``t``, ``u`` and ``v`` below which a box needs no split: ``tolerance`` over three
+    times the longest edge of the box of ``F`` along that parameter, in the infinity norm (Tight
+    Inclusion's ``compute_*_tolerances``; infinite along a parameter ``F`` does not depend on)."""
+    len_t = _F0
+    len_u = _F0
+    len_v = _F0
+    for ui in range(2):
+        for vi in range(2):
+            u = wp.float64(ui)
+            v = wp.float64(vi)
+            f0 = wp.vec3d()
+            f1 = wp.vec3d()
+            fu = wp.vec3d()
+            fv = wp.vec3d()
+            gu = wp.vec3d()
+            gv = wp.vec3d()
+            for ax in range(3):
+                a = x0[ax]
+                b = x1[ax]
+                f0[ax] = _corner(kind, a[0], a[1], a[2], a[3], u, v)
+                f1[ax] = _corner(kind, b[0], b[1], b[2], b[3], u, v)
+                fu[ax] = _corner(kind, a[0], a[1], a[2], a[3], _F1 - u, v)
+                fv[ax] = _corner(kind, a[0], a[1], a[2], a[3], u, _F1 - v)
+                gu[ax] = _corner(kind, b[0], b[1], b[2], b[3], _F1 - u, v)
+                gv[ax] = _corner(kind, b[0], b[1], b[2], b[3], u, _F1 - v)
+            len_t = wp.max(len_t, _linf(f1 - f0))
+            len_u = wp.max(len_u, wp.max(_linf(fu - f0), _linf(gu - f1)))
+            len_v = wp.max(len_v, wp.max(_linf(fv - f0), _linf(gv - f1)))
+    three = wp.float64(3.0)
+    return wp.vec3d(_tol_div(tolerance, three * len_t), _tol_div(tolerance, three * len_u),
+                    _tol_div(tolerance, three * len_v))
+
+
+@wp.func
+def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
+                  max_iterations: int, t_end: wp.float64) -> wp.float64:
+    """Earliest toi before ``t_end`` of one query in float64, or ``t_end`` when there is none.
+
+    Args:
+        kind: ``KIND_VERTEX_FACE`` (points p, f0, f1, f2) or ``KIND_EDGE_EDGE`` (ea0, ea1, eb0, eb1).
+        x0, x1: the four points at ``t = 0`` and ``t = 1``, rows x, y, z.
+        min_distance: minimum separation (>= 0, infinity norm).
+        tolerance: distance tolerance (> 0).
+        max_iterations: most boxes examined.
+        t_end: only times before it are searched (:data:`NO_HIT` for all of ``[0, 1]``; a smaller
+            value when an earlier query already found that toi).
+    """
+    tol = _parameter_tolerances(kind, x0, x1, tolerance)
+    eps = wp.vec3d()
+    for ax in range(3):
+        eps[ax] = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR + min_distance
+    lo = wp.vec3d(_F0, _F0, _F0)
+    w = wp.vec3d(_F1, _F1, _F1)
+    path = _path_t()
+    depth = int(0)
+    best = t_end
+    iterations = int(0)
+    done = bool(False)
+    while not done:
+        descend = int(-1)
+        visit = lo[0] < best
+        if kind == KIND_VERTEX_FACE and lo[1] + lo[2] > _F1:
+            visit = False  # wholly outside the triangle u + v <= 1
+        if visit:
+            iterations += 1
+            reject = bool(False)
+            finished = bool(True)
+            spread = wp.vec3d()
+            for ax in range(3):
+                if not reject:
+                    fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
+                    e = eps[ax]
+                    if fl > e or fh < -e:
+                        reject = True
+                    elif (fl < -e or fh > e) and fh - fl > tolerance:
+                        # Neither within d + eps everywhere nor within the tolerance of it.
+                        finished = False
+                        spread = wp.max(spread, change)
+            if not reject:
+                if not finished:
+                    if best < lo[0] + w[0] and w[0] > tol[0] and w[0] > WIDTH_MIN:
+                        # The box straddles the best toi so far: only its part before it matters.
+                        descend = 0
+                    else:
+                        descend = _next_split(w, tol, spread)
+                if descend < 0:
+                    best = lo[0]  # accepted (lo[0] < best)
+            if iterations >= max_iterations:
+                # Out of budget: a collision no later than any unfinished box could hold one.
+                best = wp.min(best, _pending_start(lo, w, path, depth, descend >= 0))
+                done = True
+        if not done:
+            if descend >= 0:
+                path = _path_push(path, depth, descend)
+                depth += 1
+                w[descend] = w[descend] * _HALF  # the lower half first
+            else:
+                # Next box: climb past upper halves, then step to the upper sibling.
+                climbing = bool(True)
+                while climbing:
+                    if depth == 0:
+                        climbing = False
+                        done = True
+                    else:
+                        j = _path_dim(path, depth - 1)
+                        if _is_upper_half(lo[j], w[j]):
+                            lo[j] = lo[j] - w[j]
+                            w[j] = w[j] * _F2
+                            depth -= 1
+                        else:
+                            lo[j] = lo[j] + w[j]
+                            climbing = False
+    return best
+
+
+@wp.func
+def _points(a: Any, b: Any, c: Any, d: Any) -> MAT34D:
+    return MAT34D(wp.float64(a[0]), wp.float64(b[0]), wp.float64(c[0]), wp.float64(d[0]),
+                  wp.float64(a[1]), wp.float64(b[1]), wp.float64(c[1]), wp.float64(d[1]),
+                  wp.float64(a[2]), wp.float64(b[2]), wp.float64(c[2]), wp.float64(d[2]))
+
+
+@wp.func
+def vertex_face_toi(p_t0: Any, f0_t0: Any, f1_t0: Any, f2_t0: Any, p_t1: Any, f0_t1: Any, f1_t1: Any, f2_t1: Any,
+                    min_distance: wp.float64, tolerance: wp.float64, max_iterations: int) -> wp.float64:
+    """Earliest time in ``[0, 1]`` the moving point ``p`` comes within ``min_distance`` of the moving
+    closed triangle ``(f0, f1, f2)``, or :data:`NO_HIT` (``wp.vec3`` or ``wp.vec3d`` points at
+    ``t = 0`` and ``t = 1``; computed in float64; see the module docstring)."""
+    return primitive_toi(KIND_VERTEX_FACE, _points(p_t0, f0_t0, f1_t0, f2_t0), _points(p_t1, f0_t1, f1_t1, f2_t1),
+                         min_distance, tolerance, max_iterations, NO_HIT)
+
+
+@wp.func
+def edge_edge_toi(ea0_t0: Any, ea1_t0: Any, eb0_t0: Any, eb1_t0: Any, ea0_t1: Any, ea1_t1: Any, eb0_t1: Any,
+                  eb1_t1: Any, min_distance: wp.float64, tolerance: wp.float64, max_iterations: int) -> wp.float64:
+    """Earliest time in ``[0, 1]`` the moving closed segments ``(ea0, ea1)`` and ``(eb0, eb1)`` come
+    within ``min_distance``, or :data:`NO_HIT` (as :func:`vertex_face_toi`)."""
+    return primitive_toi(KIND_EDGE_EDGE, _points(ea0_t0, ea1_t0, eb0_t0, eb1_t0),
+                         _points(ea0_t1, ea1_t1, eb0_t1, eb1_t1), min_distance, tolerance, max_iterations, NO_HIT)
+
+
+@wp.func
+def _pick3(x0: Any, x1: Any, x2: Any, i: int):
+    if i == 0:
+        return x0
+    if i == 1:
+        return x1
+    return x2
+
+
+@wp.func
+def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any,
+                      a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64,
+                      tolerance: wp.float64, max_iterations: int) -> wp.float64:
+    """Earliest time in ``[0, 1]`` two moving closed triangles ``a`` and ``b`` touch: 0 when they
+    already meet at ``t = 0`` (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance),
+    else the earliest toi of their 6 vertex-face and 9 edge-edge pairs, or :data:`NO_HIT`.
+
+    Two triangles that start apart can only come to meet through a vertex-face or an edge-edge
+    contact, so this is their first contact (within ``min_distance``). Each query searches only
+    before the best toi so far.
+    """
+    if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
+        return _F0
+    best = NO_HIT
+    for i in range(3):
+        pa0 = _pick3(a0_t0, a1_t0, a2_t0, i)
+        pa1 = _pick3(a0_t1, a1_t1, a2_t1, i)
+        best = primitive_toi(KIND_VERTEX_FACE, _points(pa0, b0_t0, b1_t0, b2_t0), _points(pa1, b0_t1, b1_t1, b2_t1),
+                             min_distance, tolerance, max_iterations, best)
+        pb0 = _pick3(b0_t0, b1_t0, b2_t0, i)
+        pb1 = _pick3(b0_t1, b1_t1, b2_t1, i)
+        best = primitive_toi(KIND_VERTEX_FACE, _points(pb0, a0_t0, a1_t0, a2_t0), _points(pb1, a0_t1, a1_t1, a2_t1),
+                             min_distance, tolerance, max_iterations, best)
+    for i in range(3):
+        ea0 = _pick3(a0_t0, a1_t0, a2_t0, i)
+        ea1 = _pick3(a0_t0, a1_t0, a2_t0, (i + 1) % 3)
+        ea0e = _pick3(a0_t1, a1_t1, a2_t1, i)
+        ea1e = _pick3(a0_t1, a1_t1, a2_t1, (i + 1) % 3)
+        for j in range(3):
+            eb0 = _pick3(b0_t0, b1_t0, b2_t0, j)
+            eb1 = _pick3(b0_t0, b1_t0, b2_t0, (j + 1) % 3)
+            eb0e = _pick3(b0_t1, b1_t1, b2_t1, j)
+            eb1e = _pick3(b0_t1, b1_t1, b2_t1, (j + 1) % 3)
+            best = primitive_toi(KIND_EDGE_EDGE, _points(ea0, ea1, eb0, eb1), _points(ea0e, ea1e, eb0e, eb1e),
+                                 min_distance, tolerance, max_iterations, best)
+    return best
+
+
+@wp.kernel
+def ccd_batch_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
+                     tolerance: wp.float64, max_iterations: int, toi: wp.array[wp.float64]):
+    """One query a thread: ``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1`` (``wp.vec3``
+    or ``wp.vec3d``); writes ``toi`` ``(n,)`` (:data:`NO_HIT` where none)."""
+    k = wp.tid()
+    toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
+                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
+                           NO_HIT)
+
+
+for _vec in (wp.vec3, wp.vec3d):
+    wp.overload(ccd_batch_kernel, {"x0": wp.array2d[_vec], "x1": wp.array2d[_vec]})
+
+
+@wp.kernel
+def _count_nonfinite_kernel(x: wp.array2d[Any], count: wp.array[wp.int32]):
+    k, i = wp.tid()
+    p = x[k, i]
+    for ax in range(3):
+        if not wp.isfinite(p[ax]):
+            wp.atomic_add(count, 0, 1)
+
+
+for _vec in (wp.vec3, wp.vec3d):
+    wp.overload(_count_nonfinite_kernel, {"x": wp.array2d[_vec]})
+
+
+def _query_points(name: str, x, device) -> wp.array:
+    """``x`` as an ``(n, 4)`` array of ``wp.vec3`` / ``wp.vec3d`` on ``device``, validated."""
+    if isinstance(x, wp.array):
+        if x.dtype in (wp.vec3, wp.vec3d) and x.ndim == 2 and x.shape[1] == 4:
+            arr = x
+        elif x.dtype in (wp.float32, wp.float64) and x.ndim == 3 and x.shape[1:] == (4, 3):
+            arr = x.view(wp.vec3 if x.dtype == wp.float32 else wp.vec3d).reshape((x.shape[0], 4)) \
+                if x.is_contiguous else None
+            if arr is None:
+                raise ValueError(f"{name}: a device array must be contiguous")
+        else:
+            raise ValueError(f"{name}: expected an (n, 4, 3) float array, got a Warp array of {x.dtype.__name__} "
+                             f"and shape {x.shape}")
+        if str(arr.device) != str(device):
+            arr = arr.to(device)
+        if arr.shape[0]:
+            count = wp.zeros(1, dtype=wp.int32, device=device)
+            wp.launch(_count_nonfinite_kernel, dim=arr.shape, inputs=[arr], outputs=[count], device=device)
+            if int(count.numpy()[0]):
+                raise ValueError(f"{name}: {int(count.numpy()[0])} coordinates are not finite")
+        return arr
+    a = np.asarray(x)
+    if a.ndim != 3 or a.shape[1:] != (4, 3):
+        raise ValueError(f"{name}: expected an (n, 4, 3) array, got shape {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{name}: expected float coordinates, got dtype {a.dtype}")
+    if a.size and not np.isfinite(a).all():
+        bad = int(np.nonzero(~np.isfinite(a).reshape(len(a), -1).all(axis=1))[0][0])
+        raise ValueError(f"{name}: query {bad} has a coordinate that is not finite")
+    if a.dtype == np.float32:
+        return wp.array(np.ascontiguousarray(a), dtype=wp.vec3, device=device)
+    return wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.vec3d, device=device)
+
+
+def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
+                max_iterations: int = CCD_MAX_ITERATIONS, device=None) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous collision of many moving vertex-face or edge-edge pairs.
+
+    Args:
+        kind: ``"vertex_face"`` (rows p, f0, f1, f2) or ``"edge_edge"`` (rows ea0, ea1, eb0, eb1).
+        x0, x1: ``(n, 4, 3)`` float32 or float64 points at ``t = 0`` and ``t = 1`` (numpy, or Warp
+            arrays of that shape or ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d``); every vertex moves
+            linearly between them.
+        min_distance: minimum separation (>= 0, same units; infinity norm).
+        tolerance: distance tolerance of a query (> 0; a false positive comes within about it).
+        max_iterations: most boxes one query examines (>= 1; past it the answer is conservative).
+        device: Warp device (default: Warp's default device).
+
+    Returns:
+        ``(hit, toi)``: ``(n,)`` bool and ``(n,)`` float64 earliest time of impact in ``[0, 1]``
+        (``inf`` where no hit), never later than the true one; the same on every device, and for
+        float32 inputs the same as for the same values in float64.
+
+    Raises:
+        ValueError: an unknown ``kind``, a bad shape, non-finite coordinates, ``x0`` and ``x1`` of
+            different lengths, or a bad option.
+    """
+    if kind not in CCD_KINDS:
+        raise ValueError(f"kind must be one of {tuple(CCD_KINDS)}, got {kind!r}")
+    min_distance = number_option("min_distance", min_distance, low=0.0)
+    tolerance = number_option("tolerance", tolerance, low=0.0, low_open=True)
+    max_iterations = integer_option("max_iterations", max_iterations, low=1, high=2**31 - 1)
+    device = wp.get_device(device)
+    a0 = _query_points("x0", x0, device)
+    a1 = _query_points("x1", x1, device)
+    if a0.shape[0] != a1.shape[0]:
+        raise ValueError(f"x0 and x1 must hold the same number of queries, got {a0.shape[0]} and {a1.shape[0]}")
+    if a0.dtype != a1.dtype:  # float32 values are exact in float64: compute both in float64
+        a0, a1 = (a if a.dtype == wp.vec3d else wp.array(a.numpy().astype(np.float64), dtype=wp.vec3d, device=device)
+                  for a in (a0, a1))
+    n = a0.shape[0]
+    toi = wp.empty(n, dtype=wp.float64, device=device)
+    if n:
+        wp.launch(ccd_batch_kernel, dim=n, inputs=[CCD_KINDS[kind], a0, a1, wp.float64(min_distance),
+                                                  wp.float64(tolerance), max_iterations], outputs=[toi], device=device)
+    t = toi.numpy()
+    return t <= 1.0, t
