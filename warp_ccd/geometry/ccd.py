@@ -83,6 +83,9 @@ CCD_KINDS = {"vertex_face": 0, "edge_edge": 1}
 KIND_VERTEX_FACE = wp.constant(0)
 KIND_EDGE_EDGE = wp.constant(1)
 
+PAIR_QUERIES = 15
+"""Primitive queries of a triangle pair: 3 + 3 vertex-face, 3 x 3 edge-edge."""
+
 ERROR_SCALE = wp.constant(wp.float64(2.0**-45))
 """Certified error of a corner value, relative to the largest absolute coordinate on its axis."""
 
@@ -413,27 +416,25 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
         return _F0
     best = NO_HIT
-    for i in range(3):
-        pa0 = _pick3(a0_t0, a1_t0, a2_t0, i)
-        pa1 = _pick3(a0_t1, a1_t1, a2_t1, i)
-        best = primitive_toi(KIND_VERTEX_FACE, _points(pa0, b0_t0, b1_t0, b2_t0), _points(pa1, b0_t1, b1_t1, b2_t1),
-                             min_distance, tolerance, max_iterations, best)
-        pb0 = _pick3(b0_t0, b1_t0, b2_t0, i)
-        pb1 = _pick3(b0_t1, b1_t1, b2_t1, i)
-        best = primitive_toi(KIND_VERTEX_FACE, _points(pb0, a0_t0, a1_t0, a2_t0), _points(pb1, a0_t1, a1_t1, a2_t1),
-                             min_distance, tolerance, max_iterations, best)
-    for i in range(3):
-        ea0 = _pick3(a0_t0, a1_t0, a2_t0, i)
-        ea1 = _pick3(a0_t0, a1_t0, a2_t0, (i + 1) % 3)
-        ea0e = _pick3(a0_t1, a1_t1, a2_t1, i)
-        ea1e = _pick3(a0_t1, a1_t1, a2_t1, (i + 1) % 3)
-        for j in range(3):
-            eb0 = _pick3(b0_t0, b1_t0, b2_t0, j)
-            eb1 = _pick3(b0_t0, b1_t0, b2_t0, (j + 1) % 3)
-            eb0e = _pick3(b0_t1, b1_t1, b2_t1, j)
-            eb1e = _pick3(b0_t1, b1_t1, b2_t1, (j + 1) % 3)
-            best = primitive_toi(KIND_EDGE_EDGE, _points(ea0, ea1, eb0, eb1), _points(ea0e, ea1e, eb0e, eb1e),
-                                 min_distance, tolerance, max_iterations, best)
+    num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
+    for q in range(num_queries):
+        kind = KIND_VERTEX_FACE
+        i = q % 3
+        if q < 3:  # a vertex of a against face b
+            x0 = _points(_pick3(a0_t0, a1_t0, a2_t0, i), b0_t0, b1_t0, b2_t0)
+            x1 = _points(_pick3(a0_t1, a1_t1, a2_t1, i), b0_t1, b1_t1, b2_t1)
+        elif q < 6:  # a vertex of b against face a
+            x0 = _points(_pick3(b0_t0, b1_t0, b2_t0, i), a0_t0, a1_t0, a2_t0)
+            x1 = _points(_pick3(b0_t1, b1_t1, b2_t1, i), a0_t1, a1_t1, a2_t1)
+        else:  # edge i of a against edge j of b
+            kind = KIND_EDGE_EDGE
+            i = (q - 6) // 3
+            j = (q - 6) % 3
+            x0 = _points(_pick3(a0_t0, a1_t0, a2_t0, i), _pick3(a0_t0, a1_t0, a2_t0, (i + 1) % 3),
+                         _pick3(b0_t0, b1_t0, b2_t0, j), _pick3(b0_t0, b1_t0, b2_t0, (j + 1) % 3))
+            x1 = _points(_pick3(a0_t1, a1_t1, a2_t1, i), _pick3(a0_t1, a1_t1, a2_t1, (i + 1) % 3),
+                         _pick3(b0_t1, b1_t1, b2_t1, j), _pick3(b0_t1, b1_t1, b2_t1, (j + 1) % 3))
+        best = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, best)
     return best
 
 
