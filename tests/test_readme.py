@@ -98,6 +98,10 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
             raise AssertionError(f"README python block {k} failed: {type(exc).__name__}: {exc}\n{block}") from exc
         if "hit" in ns:  # the kernel of one's own: the two triangles cross
             assert ns["hit"].numpy().tolist() == [1]
+        if "swept" in ns:  # the continuous example: the box reaches the wall at (1 - 0.1 / sqrt(3)) / 2, never later
+            assert ns["swept"].object_pairs.tolist() == [[0, 1]]
+            assert 0.4711 < ns["swept"].toi <= (1 - 0.1 / np.sqrt(3)) / 2
+            assert ns["hits"].tolist() == [True] and 0.4999 < ns["tois"][0] <= 0.5
         if "report" in ns:
             uses_usd = True
             assert ns["report"].penetrating and len(ns["report"].frames) == 24
