@@ -4,13 +4,17 @@ Subcommands:
 
 * ``demo``: a seeded random scene of polyhedra in motion, collision detection every frame, the
   animation written to USD (colliding objects in colour), optionally a preview image or GIF, and
-  a summary of what was found and how long each stage took.
+  a summary of what was found and how long each stage took. With ``--continuous``, fast small
+  boxes flying through thin walls (:mod:`warp_ccd.cli.tunnelling`), detected at every frame and
+  continuously over every frame step: the contacts only the continuous detection saw are counted.
 * ``check``: every interpenetration in a USD animation, frame by frame (:mod:`warp_ccd.usd.check`): a
-  summary table, optionally a JSON report, a USD overlay and a picture of the worst frame. Exit
-  status 0 when nothing penetrates, 1 when something does (or, with ``--count-touching``,
-  touches), 2 when the input or the arguments are bad, 3 on an internal error, so that it can
-  gate a pipeline. No output may be the input or one of its layers; every output is written to a
-  temporary file and all are moved into place at the end, so a failed run writes nothing.
+  summary table, optionally a JSON report, a USD overlay and a picture of the worst frame; with
+  ``--continuous``, also the prim pairs that touch between consecutive time codes, and which of them
+  tunnel (no end frame shows them). Exit status 0 when nothing penetrates, 1 when something does
+  (or tunnels, or, with ``--count-touching``, touches), 2 when the input or the arguments are bad,
+  3 on an internal error, so that it can gate a pipeline. No output may be the input or one of its
+  layers; every output is written to a temporary file and all are moved into place at the end, so a
+  failed run writes nothing.
 * ``bench``: the benchmarks of :mod:`warp_ccd.bench`; every argument after ``bench`` goes there.
 
 Bad arguments end with one line on stderr and a non-zero exit status, never a traceback; so does
@@ -26,6 +30,7 @@ import re
 import sys
 import time
 import traceback
+import types
 import warnings
 
 from .common import (
@@ -51,6 +56,8 @@ CHECK_KERNEL_MODULES = ("warp_ccd.scene.scene", "warp_ccd.stages.bvh_build", "wa
                         "warp_ccd.stages.broad_phase", "warp_ccd.stages.mid_phase", "warp_ccd.stages.narrow_phase",
                         "warp_ccd.stages.buffers", "warp_ccd.stages.crossing")
 """The modules whose Warp kernels ``check`` runs (``warp_ccd.preview`` too with ``--preview``)."""
+CONTINUOUS_KERNEL_MODULES = ("warp_ccd.stages.continuous",)
+"""The modules whose Warp kernels ``check --continuous`` runs besides."""
 
 _DASH_VALUE = re.compile(r"-\.?\d")
 """A value that starts like a negative number (``-5:10``), which argparse would take for an option."""
@@ -120,14 +127,20 @@ def _build_parser() -> OneLineParser:
     demo.add_argument("--seed", type=_count(0), default=0, help="random seed of the scene (default: %(default)s)")
     demo.add_argument("--aabb", action="store_true", help="also write each object's bounding box as a wireframe")
     demo.add_argument("--segments", action="store_true", help="also write the intersection segments as line markers")
+    demo.add_argument("--continuous", action="store_true",
+                      help="fast small boxes flying through thin walls, detected at each frame and continuously "
+                      "over each frame step; an object is coloured when it collides at any time of the step to "
+                      "the frame, and the contacts the frames alone miss are counted")
 
     check = sub.add_parser(
         "check",
         help="find every interpenetration in a USD animation, frame by frame (exit 1 if any)",
         description="Read a USD stage's meshes, detect the prim pairs whose surfaces pass through each other at "
         "every frame, print a summary, optionally write a JSON report, a USD overlay and a picture. "
-        "Exit status: 0 nothing penetrates, 1 something does (or touches, with --count-touching), 2 bad "
-        "arguments or input, 3 an internal error.",
+        "With --continuous, also the prim pairs that touch between consecutive time codes (each vertex "
+        "moving linearly), marked tunnelling where neither end frame shows them. "
+        "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or touches with --count-touching), "
+        "2 bad arguments or input, 3 an internal error.",
     )
     check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
     check.add_argument("--frames", default=None, metavar="START:END[:STEP]",
@@ -143,6 +156,13 @@ def _build_parser() -> OneLineParser:
                        "contact has depth 0 (default: %(default)s)")
     check.add_argument("--count-touching", action="store_true",
                        help="report touching (resting) contact as collisions too")
+    check.add_argument("--continuous", action="store_true",
+                       help="also report the prim pairs that touch between consecutive time codes (each vertex "
+                       "moving linearly), with the time of first contact; a pair that neither end frame shows "
+                       "intersecting is tunnelling, a finding like a penetration")
+    check.add_argument("--min-distance", type=_depth, default=0.0, metavar="D",
+                       help="with --continuous, surfaces that come within D scene units count as touching "
+                       "(default: %(default)s)")
     check.add_argument("--report", default=None, metavar="REPORT.json", help="write the JSON report here")
     check.add_argument("--usd-out", default=None, metavar="OVERLAY.usd",
                        help="write a layer over IN.usd with the penetrating prims in colour per frame")
@@ -222,7 +242,20 @@ def _run_demo(args) -> int:
         raise CliError(f"{PROG} demo: error: {exc}") from None
     dt = 1.0 / 60.0
     start = time.perf_counter()
-    scene = Scene.random(args.num_objects, seed=args.seed, device=device)
+    walls = sweep = tally = None
+    if args.continuous:
+        from .tunnelling import ContactTally, ThinWalls
+
+        try:
+            walls = ThinWalls(args.num_objects, seed=args.seed, device=device)
+        except ValueError as exc:
+            raise CliError(f"{PROG} demo: error: {exc}") from None
+        scene = walls.scene
+        sweep = CollisionPipeline(scene, continuous=True, timings=True)  # its motion starts at frame 0
+        tally = ContactTally()
+        sweep_ms = np.full(args.num_frames, np.nan)
+    else:
+        scene = Scene.random(args.num_objects, seed=args.seed, device=device)
     pipe = CollisionPipeline(scene, timings=True, segments=args.segments)
     writer = UsdAnimationWriter(args.out, scene, fps=60, aabb=args.aabb, segments=args.segments)
     renderer = None
@@ -236,15 +269,26 @@ def _run_demo(args) -> int:
     try:
         bar = tqdm(range(args.num_frames), desc="frames", unit="frame", disable=None, file=sys.stderr)
         for frame in bar:
-            scene.advance(dt)
+            if walls is None:
+                scene.advance(dt)
+            else:
+                walls.place(frame)
             res = pipe.detect()
             colliding = res.colliding
+            shown = res
+            if sweep is not None:  # over the step from the previous frame (frame 0: no motion)
+                at_frame = res.object_pairs
+                step = sweep.detect()
+                tally.add(at_frame, step.object_pairs)
+                sweep_ms[frame] = (step.timings or {}).get("total", np.nan)
+                colliding = colliding | step.colliding
+                shown = types.SimpleNamespace(colliding=colliding, segments=res.segments)
             colliding_counts[frame] = int(colliding.sum())
             pair_counts[frame] = res.num_triangle_pairs
             for s, ms in (res.timings or {}).items():
                 stage_ms.setdefault(s, np.full(args.num_frames, np.nan))[frame] = ms
             t = time.perf_counter()
-            writer.add_frame(frame, res)  # its flags, and its segments with --segments
+            writer.add_frame(frame, shown)  # its flags, and its segments with --segments
             export_s += time.perf_counter() - t
             if args.preview is not None and (gif or frame == args.num_frames - 1):
                 t = time.perf_counter()
@@ -275,13 +319,21 @@ def _run_demo(args) -> int:
     stages = "  ".join(f"{s} {np.nanmean(stage_ms[s][timed]):.3f}" for s in order) or "n/a"
     size_mb = os.path.getsize(out_path) / 1e6
     lines = [
-        f"{PROG} demo: {n} objects, {f} frames on {device} (seed {args.seed})",
+        f"{PROG} demo: {n} objects, {f} frames on {device} (seed {args.seed})"
+        + (f", continuous: fast boxes through thin walls ({n - walls.num_walls} boxes, {walls.num_walls} "
+           f"wall{'s' if walls.num_walls > 1 else ''})" if walls else ""),
         f"  colliding objects / frame : mean {colliding_counts.mean():.1f} "
         f"({100.0 * colliding_counts.mean() / n:.1f} %), max {colliding_counts.max()}",
         f"  triangle pairs / frame    : mean {pair_counts.mean():.1f}, max {pair_counts.max()}",
         f"  ms / frame by stage       : {stages}  ({timed_note})",
         f"  USD                       : {out_path} ({size_mb:.1f} MB, export {export_s:.2f} s)",
     ]
+    if tally is not None:
+        lines[4:4] = [
+            f"  contacts (object pairs)   : at the frames {tally.at_frames}, over the frame steps "
+            f"{tally.over_steps}, only continuous (the frames miss them) {tally.only_continuous}",
+            f"  continuous ms / frame     : total {np.nanmean(sweep_ms[timed]):.3f}  ({timed_note})",
+        ]
     if preview_path is not None:
         what = f"{len(frames)} frames" if gif else "last frame"
         lines.append(f"  preview                   : {preview_path} ({what}, {preview_s:.2f} s)")
@@ -315,6 +367,8 @@ def _run_check(args) -> int:
             if validate_preview_path(args.preview)[1] != ".png":
                 raise ValueError(f"cannot write {args.preview}: the preview of a check is one picture (use .png)")
         frames = _frames(args.frames)
+        if args.min_distance > 0.0 and not args.continuous:
+            raise ValueError("--min-distance is an option of --continuous")
     except ValueError as exc:
         raise fail(str(exc)) from None
     try:
@@ -339,7 +393,8 @@ def _run_check(args) -> int:
         raise fail(str(exc)) from None
     opened = time.perf_counter() - t
 
-    modules = CHECK_KERNEL_MODULES + (("warp_ccd.preview",) if args.preview is not None else ())
+    modules = (CHECK_KERNEL_MODULES + (CONTINUOUS_KERNEL_MODULES if args.continuous else ())
+               + (("warp_ccd.preview",) if args.preview is not None else ()))
     for name in modules:
         importlib.import_module(name)
     if uncached_modules(device, modules):
@@ -355,7 +410,8 @@ def _run_check(args) -> int:
                                count_touching=args.count_touching, segments=args.segments,
                                include_invisible=args.include_invisible,
                                include_purposes=tuple(args.include_purpose), progress=True,
-                               allow_missing=args.allow_missing)
+                               allow_missing=args.allow_missing, continuous=args.continuous,
+                               min_distance=args.min_distance)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)

@@ -21,6 +21,13 @@ their own constant colour or grey otherwise); instance proxies are coloured thro
 instanceable ancestor, PointInstancer instances through the instancer's per-instance
 ``displayColor`` (``vertex`` interpolation); with segments, the intersection segments of every
 frame are one ``BasisCurves`` prim.
+
+**Continuous** (``continuous=True``, :mod:`~warp_ccd.usd.sweep`): one continuous pipeline more, whose
+every detection covers the linear motion since the previous time code, reports per interval between
+consecutive time codes the prim pairs that touch at some time in it (:attr:`CheckReport.intervals`),
+and marks *tunnelling* those that neither end frame shows intersecting. In the overlay a prim that
+tunnels in the interval starting at a time code is orange there (red still wins: it penetrates), and
+its ``warpCcd:tunnelling`` attribute is true there.
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ from ..options import number_option
 from ..output import PendingFile, check_output_path
 from ..stages.crossing import CrossingClassifier
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
+from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
 
 __all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
 
@@ -95,6 +103,10 @@ class CheckReport:
         missing: the sublayers, references and payloads that could not be opened (checked
             without them; see :func:`~warp_ccd.usd.stage.missing_layers`).
         source: the :class:`~warp_ccd.usd.importer.UsdMeshImport` (its scene is at the last frame).
+        intervals: with ``continuous``, one :class:`~warp_ccd.usd.sweep.SweepInterval` per pair of
+            consecutive time codes; None otherwise.
+        min_distance: with ``continuous``, the distance within which surfaces count as touching.
+        ccd_tolerance: with ``continuous``, the continuous test's distance tolerance.
     """
 
     stage: str
@@ -107,6 +119,15 @@ class CheckReport:
     skipped: list = field(default_factory=list)
     missing: list = field(default_factory=list)
     source: object = field(default=None, repr=False, compare=False)
+    intervals: list | None = None
+    min_distance: float = 0.0
+    ccd_tolerance: float = 0.0
+
+    @property
+    def tunnelling(self) -> bool:
+        """Whether a pair touches between two time codes where neither shows it intersecting
+        (continuous checks only)."""
+        return any(bool(iv.tunnelling.any()) for iv in self.intervals or ())
 
     @property
     def penetrating(self) -> bool:
@@ -123,10 +144,13 @@ class CheckReport:
     @property
     def findings(self) -> str | None:
         """What the check found, as the command's exit status reads it: ``"penetrating"`` when a
-        pair penetrates, else ``"touching"`` when pairs touch and ``count_touching`` counts them as
-        collisions, else None (exit status 0)."""
+        pair penetrates, else ``"tunnelling"`` when a continuous check found a pair touching only
+        between time codes, else ``"touching"`` when pairs touch and ``count_touching`` counts them
+        as collisions, else None (exit status 0)."""
         if self.penetrating:
             return "penetrating"
+        if self.tunnelling:
+            return "tunnelling"
         if self.count_touching and self.touching:
             return "touching"
         return None
@@ -178,7 +202,7 @@ class CheckReport:
             frames.append({"time": f.time, "triangle_pairs": int(len(rows)), "touching_pairs": int(f.num_touching),
                            "pairs": pairs})
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
-        return {
+        out = {
             "stage": self.stage,
             "findings": self.findings,
             "penetrating": self.penetrating,
@@ -195,6 +219,10 @@ class CheckReport:
             "frames": frames,
             "seconds": self.seconds,
         }
+        if self.intervals is not None:
+            out["tunnelling"] = self.tunnelling
+            out["continuous"] = sweep_json(self.intervals, self.object_path, self.min_distance, self.ccd_tolerance)
+        return out
 
     def write_json(self, path) -> str:
         """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place.
@@ -251,12 +279,15 @@ class CheckReport:
                              f"{p['max_triangle_pairs']:14d}  {p['max_depth']:.3g}")
             if len(pairs) > top:
                 lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
+        if self.intervals is not None:
+            lines += sweep_summary(self.intervals, self.object_path, self.min_distance, top)
         s = self.seconds
         if s:
             per = s.get("detect", 0.0) / max(n, 1) * 1e3
             lines.append(f"  seconds: read {s.get('read', 0):.2f}, build {s.get('build', 0):.2f}, "
                          f"set frames {s.get('set', 0):.2f}, detect {s.get('detect', 0):.2f} ({per:.2f} ms/frame), "
-                         f"classify {s.get('classify', 0):.2f}")
+                         f"classify {s.get('classify', 0):.2f}"
+                         + (f", continuous {s.get('continuous', 0):.2f}" if self.intervals is not None else ""))
         return "\n".join(lines)
 
 
@@ -285,7 +316,8 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
 def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision: str = "float32",
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
               include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
-              progress: bool = False, allow_missing: bool = False) -> CheckReport:
+              progress: bool = False, allow_missing: bool = False, continuous: bool = False,
+              min_distance: float = 0.0) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -307,6 +339,11 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
             the frames).
         allow_missing: check a stage whose sublayers, references or payloads cannot all be
             opened (without them; :attr:`CheckReport.missing` lists them) instead of raising.
+        continuous: also report, per interval between consecutive time codes, the prim pairs that
+            touch at some time in it (every vertex moving linearly between its positions at the
+            two time codes), and which of them tunnel (:attr:`CheckReport.intervals`).
+        min_distance: with ``continuous``, pairs that come within this distance (scene units,
+            >= 0) count as touching.
 
     Returns:
         The :class:`CheckReport`.
@@ -323,6 +360,9 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     from .stage import open_stage, require_layers, stage_time_codes
 
     number_option("min_depth", min_depth, low=0.0)
+    number_option("min_distance", min_distance, low=0.0)
+    if min_distance > 0.0 and not continuous:
+        raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
     missing = require_layers(stage, allow_missing)
@@ -336,11 +376,20 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     scene = imp.scene
     pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
     classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
+    # One continuous pipeline for the whole animation: each detect covers the motion since the last.
+    sweep = CollisionPipeline(scene, continuous=True, min_distance=min_distance) if continuous else None
     seconds["build"] += time.perf_counter() - t
     seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
+    if continuous:
+        seconds["continuous"] = 0.0
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
                          count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped))
+    if continuous:
+        report.intervals = []
+        report.min_distance = float(min_distance)
+        report.ccd_tolerance = float(sweep.narrow.tolerance)
+    intersecting = None  # the object pairs of the previous time code (touching included)
     bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not progress or None, leave=False)
     for k in bar:
         t = time.perf_counter()
@@ -356,6 +405,15 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         seconds["detect"] += t_detect - t1
         seconds["classify"] += t2 - t_detect
         report.frames.append(contacts)
+        if continuous:
+            t3 = time.perf_counter()
+            now = res.object_pairs  # the discrete result's, read before it can change
+            if k == 0:
+                wp.copy(sweep.world_vertex_start, scene.world_vertex)  # the motion starts at the first time code
+            else:
+                report.intervals.append(sweep_interval(imp, sweep.detect(), times[k - 1], times[k], intersecting, now))
+            intersecting = now
+            seconds["continuous"] += time.perf_counter() - t3
         bar.set_postfix(pairs=len(contacts.triangle_pairs), refresh=False)
     bar.close()
     wp.synchronize_device(scene.device)
@@ -366,8 +424,9 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 
 
 def write_overlay(report: CheckReport, out_path) -> str:
-    """Writes a USD layer over the checked stage: penetrating prims in colour per frame, and the
-    intersection segments (when the check kept them) as curves.
+    """Writes a USD layer over the checked stage: penetrating prims in colour per frame (with a
+    continuous check, tunnelling prims in orange at the start of the interval, and their
+    ``warpCcd:tunnelling`` attribute), and the intersection segments (when the check kept them) as curves.
 
     The layer's only sublayer is the checked stage's file (a relative path when they share a
     folder), so it opens as the animation with the overlay on top. Written to a temporary file
@@ -422,20 +481,23 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
         hit = np.zeros((len(report.frames), n), bool)
         for k, f in enumerate(report.frames):
             hit[k, f.triangle_pairs[:, [0, 2]].ravel()] = True
-        red = Gf.Vec3f(*COLOR_PENETRATING)
         times = [f.time for f in report.frames]
+        # Tunnelling in the interval that starts at a time code (continuous checks): orange there.
+        tunnel = tunnelling_flags(report.intervals or (), times, n)
+        red, orange = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING)
         with Sdf.ChangeBlock():
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
-            targets: dict[str, np.ndarray] = {}
-            for i in np.nonzero(hit.any(axis=0))[0].tolist():
+            targets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+            for i in np.nonzero((hit | tunnel).any(axis=0))[0].tolist():
                 if imp.object_instancer[i] is not None:
                     continue
                 prim = src.GetPrimAtPath(imp.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
-                targets[key] = targets.get(key, np.zeros(len(times), bool)) | hit[:, i]
-            for path, flags in targets.items():
+                was_hit, was_tunnel = targets.get(key, (np.zeros(len(times), bool), np.zeros(len(times), bool)))
+                targets[key] = (was_hit | hit[:, i], was_tunnel | tunnel[:, i])
+            for path, (flags, tunnels) in targets.items():
                 prim = stage.GetPrimAtPath(path)
                 primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                                                   UsdGeom.Tokens.constant)
@@ -444,13 +506,17 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
                         and len(own.Get()) == 1:
                     clear = own.Get()[0]
-                for tc, f in zip(times, flags.tolist()):
-                    primvar.Set(Vt.Vec3fArray([red if f else clear]), tc)
+                for tc, f, g in zip(times, flags.tolist(), tunnels.tolist()):
+                    primvar.Set(Vt.Vec3fArray([red if f else orange if g else clear]), tc)
+                if report.intervals is not None:
+                    flag = prim.CreateAttribute("warpCcd:tunnelling", Sdf.ValueTypeNames.Bool, custom=True)
+                    for tc, g in zip(times, tunnels.tolist()):
+                        flag.Set(bool(g), tc)
             # PointInstancer instances: the instancer's per-instance colour.
             instancer = np.array(imp.object_instancer, dtype=object)
             for path in sorted({p for p in imp.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
-                if not hit[:, rows].any():
+                if not (hit[:, rows] | tunnel[:, rows]).any():
                     continue
                 schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
                 size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
@@ -459,6 +525,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                                                                   UsdGeom.Tokens.vertex)
                 for k, tc in enumerate(times):
                     colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
+                    colors[imp.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
                     colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
                     primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
         # Defined outside the change block: a new prim needs the stage recomposed.
