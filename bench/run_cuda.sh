@@ -8,18 +8,21 @@
 # triangles, up to 1e4), the broad phase alone up to 1e7 boxes, the tree builds (and
 # one-shot collide() against python-fcl), and where a frame's host time goes (split at the launch
 # and the wait; the host's own speed right after waits of 0.05-50 ms), and `warp-ccd check` on USD animations of
-# 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each.
+# 10,000 rigid prims and of 100 deforming 10k-triangle meshes, 240 frames each; then continuous collision:
+# 1e7 vertex-face and edge-edge queries per second (a simulation's mix and random ones) against Tight
+# Inclusion (ipctk, one CPU thread, on a subset) with their agreement (ccd_queries_<tag>.json), and the
+# continuous frame against the discrete frame of the same scene up to 1e6 polyhedra (continuous_<tag>.json).
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
 #   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, stages, profile, narrow, scaling, spheres, boxes, deforming,
-#                                          # broad, build, host, usd
+#                                          # broad, build, host, usd, ccd, continuous
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
 # WARP_CCD_GIT_DIRTY=0|1) so that the logs and result files name the commit they measured. The
 # suite runs each test on $DEVICE only (the CPU is what CI covers; set TEST_DEVICES=cpu,cuda for
 # both); the tests that compare the CPU with CUDA live still run wherever Warp has both.
-# Needs warp-lang (CUDA build), numpy and pytest; python-fcl, newton and matplotlib are optional
+# Needs warp-lang (CUDA build), numpy and pytest; python-fcl, newton, ipctk and matplotlib are optional
 # (a missing peer is skipped with a note). Each step runs even if an earlier one failed; the exit
 # status is that of the first failure.
 set -u
@@ -28,13 +31,14 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd}
+parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd ccd continuous}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
     profiled="100"; hosted="300"; waits="0.05 5"; builds="100x20 10x80 1x1280"; small="32"; rebuild="2x320"
     usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
     mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
+    ccd="--queries 4000 --objects 100 --ipctk-queries 1000 --repeats 2"; continuous="100 300"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests="tests"
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
@@ -42,6 +46,7 @@ else
     usd="--frames 240 --rigid 10000 --deforming 100 --fcl-every 10"
     mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
     staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
+    ccd="--queries 1e7 --objects 1e4 --ipctk-queries 2e4 --repeats 10"; continuous="1e3 1e4 1e5 1e6"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -101,9 +106,14 @@ for part in $parts; do
             --out "$out/host_after_wait_$tag.json" ;;
     usd)
         step python3 -m warp_ccd.bench.usd_check --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
+    ccd)
+        step python3 -m warp_ccd.bench.ccd_queries --device "$device" $ccd --out "$out/ccd_queries_$tag.json" ;;
+    continuous)
+        step python3 -m warp_ccd.bench.continuous --device "$device" --objects $continuous --frames $frames --warmup 3 \
+            --out "$out/continuous_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
-            "host, usd)" >&2
+            "host, usd, ccd, continuous)" >&2
         status=2 ;;
     esac
 done
