@@ -34,6 +34,11 @@ of the object's *box space*:
   :attr:`TreeView.leaf_node`); bigger trees one launch per level, deepest first, one thread per
   (object, node). The root's box is the object's box.
 
+* **world trees** (``SceneBVH(world_trees=True)``, a continuous frame's): every object is treated
+  as a deforming one, its tree refit in the world each frame from its triangles' *swept* boxes (the
+  box of a triangle at both ends of a linear motion, :func:`swept_triangle_box_at`, padded by
+  ``pad_abs`` too), so the traversal's frames are identities and the roots hold the whole motion.
+
 Leaf boxes are padded by the narrow phase's tolerance times their triangle's longest edge (in
 their own space: the padding scales with the object), so that the trees never reject a pair the
 narrow phase accepts. A rigid object's world vertices are computed from its pose in floating
