@@ -89,11 +89,20 @@ PAIR_QUERIES = 15
 ERROR_SCALE = wp.constant(wp.float64(2.0**-45))
 """Certified error of a corner value, relative to the largest absolute coordinate on its axis."""
 
+ERROR_SCALE_ROTATED = wp.constant(wp.float64(2.0**-44))
+"""Certified error of a corner value in the contact frame, relative to the largest absolute
+coordinate of the query's points on any axis (rotating the points adds its own rounding; see
+``docs/ARCHITECTURE.md``)."""
+
 ERROR_FLOOR = wp.constant(wp.float64(1.0e-300))
 """Absolute error added to cover gradual underflow."""
 
 WIDTH_MIN = wp.constant(wp.float64(2.0**-60))
 """Parameter intervals are never split below this width (a box that narrow is accepted)."""
+
+DISCRETE_PAD = wp.constant(wp.float64(2.0 * TOLERANCE * math.sqrt(3.0)))
+"""Triangles whose boxes at ``t = 0`` are apart by more than this times their extent cannot meet in
+the discrete test (its tolerance is ``TOLERANCE`` times their longest edge)."""
 
 _F0 = wp.constant(wp.float64(0.0))
 _F1 = wp.constant(wp.float64(1.0))
@@ -249,6 +258,52 @@ def _pending_start(lo_in: wp.vec3d, w_in: wp.vec3d, path: _path_t, depth_in: int
     return start
 
 
+MAT33D = wp.types.matrix(shape=(3, 3), dtype=wp.float64)
+
+
+@wp.func
+def _column(x: MAT34D, j: int) -> wp.vec3d:
+    return wp.vec3d(x[0, j], x[1, j], x[2, j])
+
+
+@wp.func
+def _contact_frame(kind: int, x0: MAT34D, x1: MAT34D) -> MAT33D:
+    """Rows of an orthonormal frame (computed, so orthonormal to rounding: invertible, which is all
+    the search needs) whose third row is the normal of the face (vertex-face) or of the two edges
+    (edge-edge), summed over both ends of the motion; the identity when that normal vanishes."""
+    n = wp.vec3d()
+    a = wp.vec3d()
+    for k in range(2):
+        x = x0
+        if k == 1:
+            x = x1
+        if kind == KIND_VERTEX_FACE:
+            e = _column(x, 2) - _column(x, 1)
+            n += wp.cross(e, _column(x, 3) - _column(x, 1))
+        else:
+            e = _column(x, 1) - _column(x, 0)
+            n += wp.cross(e, _column(x, 3) - _column(x, 2))
+        a += e
+    length = wp.length(n)
+    if not (length > _F0):
+        return wp.identity(n=3, dtype=wp.float64)
+    n = n / length
+    a = a - n * wp.dot(a, n)  # the first axis along the face's (the first edge's) first edge, if it can be
+    la = wp.length(a)
+    if not (la > wp.float64(1.0e-3) * wp.length(n)):
+        # Any unit vector across n: from the axis n leans on least.
+        axis = wp.vec3d(_F1, _F0, _F0)
+        if wp.abs(n[1]) < wp.abs(n[0]) and wp.abs(n[1]) <= wp.abs(n[2]):
+            axis = wp.vec3d(_F0, _F1, _F0)
+        elif wp.abs(n[2]) < wp.abs(n[0]):
+            axis = wp.vec3d(_F0, _F0, _F1)
+        a = wp.cross(n, axis)
+        la = wp.length(a)
+    a = a / la
+    b = wp.cross(n, a)
+    return wp.matrix_from_rows(a, b, n)
+
+
 @wp.func
 def _parameter_tolerances(kind: int, x0: MAT34D, x1: MAT34D, tolerance: wp.float64) -> wp.vec3d:
     """Widths of ``t``, ``u`` and ``v`` below which a box needs no split: ``tolerance`` over three
@@ -298,12 +353,30 @@ def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, t
         t_end: only times before it are searched (:data:`NO_HIT` for all of ``[0, 1]``; a smaller
             value when an earlier query already found that toi).
     """
-    tol = _parameter_tolerances(kind, x0, x1, tolerance)
     eps = wp.vec3d()
     for ax in range(3):
         eps[ax] = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR + min_distance
     lo = wp.vec3d(_F0, _F0, _F0)
     w = wp.vec3d(_F1, _F1, _F1)
+    # Most queries of a frame are far apart: the whole box is rejected before anything else is computed.
+    for ax in range(3):
+        fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
+        if fl > eps[ax] or fh < -eps[ax]:
+            return t_end
+    if min_distance == _F0:
+        # Search in a frame whose third axis is the face's normal (vertex-face) or the edges' common
+        # normal (edge-edge): F = 0 does not depend on the frame, and there the distance along the
+        # normal rejects times far from the contact whatever the box's extent over the face.
+        r = _contact_frame(kind, x0, x1)
+        if r[0, 0] != _F1 or r[1, 1] != _F1:
+            m = _F0
+            for ax in range(3):
+                m = wp.max(m, _max_abs4(x0[ax], x1[ax]))
+            x0 = r @ x0
+            x1 = r @ x1
+            e = ERROR_SCALE_ROTATED * m + ERROR_FLOOR
+            eps = wp.vec3d(e, e, e)
+    tol = _parameter_tolerances(kind, x0, x1, tolerance)
     path = _path_t()
     depth = int(0)
     best = t_end
@@ -393,6 +466,25 @@ def edge_edge_toi(ea0_t0: Any, ea1_t0: Any, eb0_t0: Any, eb1_t0: Any, ea0_t1: An
 
 
 @wp.func
+def _abs3(v: wp.vec3d) -> wp.vec3d:
+    return wp.vec3d(wp.abs(v[0]), wp.abs(v[1]), wp.abs(v[2]))
+
+
+@wp.func
+def _max3(v: wp.vec3d) -> wp.float64:
+    return wp.max(wp.max(v[0], v[1]), v[2])
+
+
+@wp.func
+def _apart(lo_p: wp.vec3d, hi_p: wp.vec3d, lo_q: wp.vec3d, hi_q: wp.vec3d, gap: wp.vec3d) -> bool:
+    """Whether boxes ``p`` and ``q`` are more than ``gap`` apart on some axis."""
+    for ax in range(3):
+        if lo_p[ax] - hi_q[ax] > gap[ax] or lo_q[ax] - hi_p[ax] > gap[ax]:
+            return True
+    return False
+
+
+@wp.func
 def _pick3(x0: Any, x1: Any, x2: Any, i: int):
     if i == 0:
         return x0
@@ -413,28 +505,73 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     contact, so this is their first contact (within ``min_distance``). Each query searches only
     before the best toi so far.
     """
-    if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
-        return _F0
+    # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
+    # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
+    # root (its F lies in the difference of the boxes; the one rounding of that difference is within
+    # eps), so most of a candidate's 15 queries end at a few comparisons.
+    a0 = wp.vec3d(a0_t0)
+    a1 = wp.vec3d(a1_t0)
+    a2 = wp.vec3d(a2_t0)
+    b0 = wp.vec3d(b0_t0)
+    b1 = wp.vec3d(b1_t0)
+    b2 = wp.vec3d(b2_t0)
+    a0e = wp.vec3d(a0_t1)
+    a1e = wp.vec3d(a1_t1)
+    a2e = wp.vec3d(a2_t1)
+    b0e = wp.vec3d(b0_t1)
+    b1e = wp.vec3d(b1_t1)
+    b2e = wp.vec3d(b2_t1)
+    lo_a = wp.matrix_from_rows(wp.min(a0, a0e), wp.min(a1, a1e), wp.min(a2, a2e))  # rows: the three vertices
+    hi_a = wp.matrix_from_rows(wp.max(a0, a0e), wp.max(a1, a1e), wp.max(a2, a2e))
+    lo_b = wp.matrix_from_rows(wp.min(b0, b0e), wp.min(b1, b1e), wp.min(b2, b2e))
+    hi_b = wp.matrix_from_rows(wp.max(b0, b0e), wp.max(b1, b1e), wp.max(b2, b2e))
+    tri_lo_a = wp.min(wp.min(lo_a[0], lo_a[1]), lo_a[2])
+    tri_hi_a = wp.max(wp.max(hi_a[0], hi_a[1]), hi_a[2])
+    tri_lo_b = wp.min(wp.min(lo_b[0], lo_b[1]), lo_b[2])
+    tri_hi_b = wp.max(wp.max(hi_b[0], hi_b[1]), hi_b[2])
+    m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
+    e = m * ERROR_SCALE + wp.vec3d(ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance)
+    # The discrete test at t = 0 only where the triangles' boxes at t = 0 come within twice its tolerance.
+    lo0_a = wp.min(wp.min(a0, a1), a2)
+    hi0_a = wp.max(wp.max(a0, a1), a2)
+    lo0_b = wp.min(wp.min(b0, b1), b2)
+    hi0_b = wp.max(wp.max(b0, b1), b2)
+    extent = _max3(wp.max(hi0_a - lo0_a, hi0_b - lo0_b))
+    pad = DISCRETE_PAD * extent
+    if not _apart(lo0_a, hi0_a, lo0_b, hi0_b, wp.vec3d(pad, pad, pad)):
+        if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
+            return _F0
     best = NO_HIT
     num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
     for q in range(num_queries):
         kind = KIND_VERTEX_FACE
         i = q % 3
-        if q < 3:  # a vertex of a against face b
-            x0 = _points(_pick3(a0_t0, a1_t0, a2_t0, i), b0_t0, b1_t0, b2_t0)
-            x1 = _points(_pick3(a0_t1, a1_t1, a2_t1, i), b0_t1, b1_t1, b2_t1)
-        elif q < 6:  # a vertex of b against face a
-            x0 = _points(_pick3(b0_t0, b1_t0, b2_t0, i), a0_t0, a1_t0, a2_t0)
-            x1 = _points(_pick3(b0_t1, b1_t1, b2_t1, i), a0_t1, a1_t1, a2_t1)
+        j = int(0)
+        if q < 3:  # vertex i of a against face b
+            near = not _apart(lo_a[i], hi_a[i], tri_lo_b, tri_hi_b, e)
+        elif q < 6:  # vertex i of b against face a
+            near = not _apart(lo_b[i], hi_b[i], tri_lo_a, tri_hi_a, e)
         else:  # edge i of a against edge j of b
             kind = KIND_EDGE_EDGE
             i = (q - 6) // 3
             j = (q - 6) % 3
-            x0 = _points(_pick3(a0_t0, a1_t0, a2_t0, i), _pick3(a0_t0, a1_t0, a2_t0, (i + 1) % 3),
-                         _pick3(b0_t0, b1_t0, b2_t0, j), _pick3(b0_t0, b1_t0, b2_t0, (j + 1) % 3))
-            x1 = _points(_pick3(a0_t1, a1_t1, a2_t1, i), _pick3(a0_t1, a1_t1, a2_t1, (i + 1) % 3),
-                         _pick3(b0_t1, b1_t1, b2_t1, j), _pick3(b0_t1, b1_t1, b2_t1, (j + 1) % 3))
-        best = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, best)
+            i1 = (i + 1) % 3
+            j1 = (j + 1) % 3
+            near = not _apart(wp.min(lo_a[i], lo_a[i1]), wp.max(hi_a[i], hi_a[i1]), wp.min(lo_b[j], lo_b[j1]),
+                              wp.max(hi_b[j], hi_b[j1]), e)
+        if near:
+            if q < 3:
+                x0 = _points(_pick3(a0, a1, a2, i), b0, b1, b2)
+                x1 = _points(_pick3(a0e, a1e, a2e, i), b0e, b1e, b2e)
+            elif q < 6:
+                x0 = _points(_pick3(b0, b1, b2, i), a0, a1, a2)
+                x1 = _points(_pick3(b0e, b1e, b2e, i), a0e, a1e, a2e)
+            else:
+                x0 = _points(_pick3(a0, a1, a2, i), _pick3(a0, a1, a2, (i + 1) % 3), _pick3(b0, b1, b2, j),
+                             _pick3(b0, b1, b2, (j + 1) % 3))
+                x1 = _points(_pick3(a0e, a1e, a2e, i), _pick3(a0e, a1e, a2e, (i + 1) % 3), _pick3(b0e, b1e, b2e, j),
+                             _pick3(b0e, b1e, b2e, (j + 1) % 3))
+            best = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, best)
     return best
 
 
