@@ -14,7 +14,8 @@ Two query sets, each half vertex-face and half edge-edge queries (``--queries`` 
 Coordinates are rounded to float32 once, so that the float32 and float64 arrays hold the same values
 (the answers must then be the same, bit for bit). Methods, in the same process:
 
-* ``ours_device``: ``ccd_batch_kernel`` launched directly on arrays uploaded beforehand, float64 and
+* ``ours_device``: the two passes of ``ccd_queries`` (``run_queries``: every query within a few boxes,
+  then the rest packed) on arrays uploaded beforehand, float64 and
   float32, on ``--device``; kernel time only (CUDA events; wall time on the CPU), min and median
   over ``--repeats`` launches after one warm-up launch; with ``min_distance = 0`` and with
   ``--min-distance`` times the set's scale (the median object radius, 1 for ``random``).
@@ -50,7 +51,7 @@ import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.narrow_phase import gpu_ms
 from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
-from warp_ccd.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, ccd_batch_kernel
+from warp_ccd.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, run_queries
 
 DT = 1.0 / 60.0
 KINDS = ("vertex_face", "edge_edge")
@@ -143,15 +144,16 @@ def _upload(x: np.ndarray, precision: str, device) -> wp.array:
 
 def ours(kind: str, x0: np.ndarray, x1: np.ndarray, precision: str, min_distance: float, device,
          repeats: int) -> tuple[np.ndarray, float, float]:
-    """``(toi, ms_min, ms_median)`` of ``ccd_batch_kernel`` on ``device`` (arrays uploaded first,
-    kernel time only)."""
+    """``(toi, ms_min, ms_median)`` of the two passes of ``ccd_queries`` (``run_queries``) on
+    ``device`` (arrays and scratch allocated first, kernel time only)."""
     a0, a1 = _upload(x0, precision, device), _upload(x1, precision, device)
     toi = wp.empty(len(x0), dtype=wp.float64, device=device)
+    deferred = wp.empty(len(x0), dtype=wp.int32, device=device)
+    deferred_count = wp.zeros(1, dtype=wp.int32, device=device)
 
     def launch():
-        wp.launch(ccd_batch_kernel, dim=len(x0), inputs=[CCD_KINDS[kind], a0, a1, wp.float64(min_distance),
-                                                         wp.float64(CCD_TOLERANCE), CCD_MAX_ITERATIONS],
-                  outputs=[toi], device=device)
+        run_queries(CCD_KINDS[kind], a0, a1, min_distance, CCD_TOLERANCE, CCD_MAX_ITERATIONS, toi, deferred,
+                    deferred_count)
 
     lo, med = gpu_ms(launch, device, repeats)
     return toi.numpy(), lo, med

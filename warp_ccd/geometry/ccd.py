@@ -59,8 +59,12 @@ __all__ = [
     "CCD_TOLERANCE",
     "NO_HIT",
     "ccd_batch_kernel",
+    "ccd_first_pass_kernel",
+    "ccd_second_pass_kernel",
+    "pair_search",
     "ccd_queries",
     "edge_edge_toi",
+    "run_queries",
     "triangle_pair_toi",
     "vertex_face_toi",
 ]
@@ -73,6 +77,12 @@ default)."""
 CCD_MAX_ITERATIONS = 1_000_000
 """Default cap on the boxes one query examines; past it the query reports a collision at the
 earliest time an unfinished box starts (a conservative answer; no query of the test sets gets near)."""
+
+FIRST_PASS_ITERATIONS = 16
+"""Boxes a query may examine in the first of the two passes (:func:`run_queries`, the continuous
+narrow phase). On a GPU a warp runs as long as its longest lane: a frame's queries mostly end in a
+box or a few, a few percent search hundreds; the first pass settles the short ones, the second runs
+the rest packed together."""
 
 NO_HIT = wp.constant(wp.float64(math.inf))
 """The toi of a pair that never collides."""
@@ -340,9 +350,10 @@ def _parameter_tolerances(kind: int, x0: MAT34D, x1: MAT34D, tolerance: wp.float
 
 
 @wp.func
-def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
-                  max_iterations: int, t_end: wp.float64) -> wp.float64:
-    """Earliest toi before ``t_end`` of one query in float64, or ``t_end`` when there is none.
+def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
+            max_iterations: int, t_end: wp.float64):
+    """Earliest toi before ``t_end`` of one query in float64, or ``t_end`` when there is none, and
+    whether the search ran out of ``max_iterations`` (its answer is then the conservative one).
 
     Args:
         kind: ``KIND_VERTEX_FACE`` (points p, f0, f1, f2) or ``KIND_EDGE_EDGE`` (ea0, ea1, eb0, eb1).
@@ -362,7 +373,7 @@ def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, t
     for ax in range(3):
         fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
         if fl > eps[ax] or fh < -eps[ax]:
-            return t_end
+            return t_end, int(0)
     if min_distance == _F0:
         # Search in a frame whose third axis is the face's normal (vertex-face) or the edges' common
         # normal (edge-edge): F = 0 does not depend on the frame, and there the distance along the
@@ -381,6 +392,7 @@ def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, t
     depth = int(0)
     best = t_end
     iterations = int(0)
+    exhausted = int(0)
     done = bool(False)
     while not done:
         descend = int(-1)
@@ -414,6 +426,7 @@ def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, t
             if iterations >= max_iterations:
                 # Out of budget: a collision no later than any unfinished box could hold one.
                 best = wp.min(best, _pending_start(lo, w, path, depth, descend >= 0))
+                exhausted = 1
                 done = True
         if not done:
             if descend >= 0:
@@ -436,7 +449,16 @@ def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, t
                         else:
                             lo[j] = lo[j] + w[j]
                             climbing = False
-    return best
+    return best, exhausted
+
+
+@wp.func
+def primitive_toi(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
+                  max_iterations: int, t_end: wp.float64) -> wp.float64:
+    """Earliest toi before ``t_end`` of one query in float64 (``x0``, ``x1``: the four points at
+    ``t = 0`` and ``t = 1``, rows x, y, z), or ``t_end`` when there is none (see :func:`_search`)."""
+    toi, exhausted = _search(kind, x0, x1, min_distance, tolerance, max_iterations, t_end)
+    return toi
 
 
 @wp.func
@@ -494,17 +516,12 @@ def _pick3(x0: Any, x1: Any, x2: Any, i: int):
 
 
 @wp.func
-def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any,
-                      a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64,
-                      tolerance: wp.float64, max_iterations: int) -> wp.float64:
-    """Earliest time in ``[0, 1]`` two moving closed triangles ``a`` and ``b`` touch: 0 when they
-    already meet at ``t = 0`` (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance),
-    else the earliest toi of their 6 vertex-face and 9 edge-edge pairs, or :data:`NO_HIT`.
-
-    Two triangles that start apart can only come to meet through a vertex-face or an edge-edge
-    contact, so this is their first contact (within ``min_distance``). Each query searches only
-    before the best toi so far.
-    """
+def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
+                a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
+                max_iterations: int, stop_when_exhausted: bool):
+    """:func:`triangle_pair_toi` and whether one of its queries ran out of ``max_iterations`` (with
+    ``stop_when_exhausted``, the first that does ends the search: a first pass with a small budget
+    leaves such pairs to a second one, see :data:`FIRST_PASS_ITERATIONS`)."""
     # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
     # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
     # root (its F lies in the difference of the boxes; the one rounding of that difference is within
@@ -540,8 +557,9 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     pad = DISCRETE_PAD * extent
     if not _apart(lo0_a, hi0_a, lo0_b, hi0_b, wp.vec3d(pad, pad, pad)):
         if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
-            return _F0
+            return _F0, int(0)
     best = NO_HIT
+    exhausted = int(0)
     num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
     for q in range(num_queries):
         kind = KIND_VERTEX_FACE
@@ -571,23 +589,88 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
                              _pick3(b0, b1, b2, (j + 1) % 3))
                 x1 = _points(_pick3(a0e, a1e, a2e, i), _pick3(a0e, a1e, a2e, (i + 1) % 3), _pick3(b0e, b1e, b2e, j),
                              _pick3(b0e, b1e, b2e, (j + 1) % 3))
-            best = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, best)
-    return best
+            best, ran_out = _search(kind, x0, x1, min_distance, tolerance, max_iterations, best)
+            if ran_out != 0:
+                exhausted = 1
+                if stop_when_exhausted:
+                    return best, exhausted
+    if best > _F1:
+        # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
+        # the end, so that a continuous frame holds what a discrete frame at either end holds.
+        lo1_a = wp.min(wp.min(a0e, a1e), a2e)
+        hi1_a = wp.max(wp.max(a0e, a1e), a2e)
+        lo1_b = wp.min(wp.min(b0e, b1e), b2e)
+        hi1_b = wp.max(wp.max(b0e, b1e), b2e)
+        pad1 = DISCRETE_PAD * _max3(wp.max(hi1_a - lo1_a, hi1_b - lo1_b))
+        if not _apart(lo1_a, hi1_a, lo1_b, hi1_b, wp.vec3d(pad1, pad1, pad1)):
+            if tri_tri_moller(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, type(a0_t1[0])(TOLERANCE)):
+                best = _F1
+    return best, exhausted
+
+
+@wp.func
+def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any,
+                      a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64,
+                      tolerance: wp.float64, max_iterations: int) -> wp.float64:
+    """Earliest time in ``[0, 1]`` two moving closed triangles ``a`` and ``b`` touch: 0 when they
+    already meet at ``t = 0`` (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance),
+    else the earliest toi of their 6 vertex-face and 9 edge-edge pairs, else 1 when they meet at
+    ``t = 1`` (the discrete test again), else :data:`NO_HIT`.
+
+    Two triangles that start apart can only come to meet through a vertex-face or an edge-edge
+    contact, so this is their first contact (within ``min_distance``). Each query searches only
+    before the best toi so far.
+    """
+    toi, exhausted = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
+                                 min_distance, tolerance, max_iterations, False)
+    return toi
 
 
 @wp.kernel
 def ccd_batch_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
                      tolerance: wp.float64, max_iterations: int, toi: wp.array[wp.float64]):
     """One query a thread: ``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1`` (``wp.vec3``
-    or ``wp.vec3d``); writes ``toi`` ``(n,)`` (:data:`NO_HIT` where none)."""
+    or ``wp.vec3d``); writes ``toi`` ``(n,)`` (:data:`NO_HIT` where none). One pass: see
+    :func:`ccd_queries` for the two passes that keep a GPU's lanes busy."""
     k = wp.tid()
     toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
                            _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
                            NO_HIT)
 
 
+@wp.kernel
+def ccd_first_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
+                          tolerance: wp.float64, budget: int, toi: wp.array[wp.float64],
+                          deferred: wp.array[wp.int32], deferred_count: wp.array[wp.int32]):
+    """:data:`ccd_batch_kernel` within ``budget`` boxes a query; a query that needs more is listed in
+    ``deferred`` (``deferred_count[0]`` of them; ``deferred`` holds every query at most) for
+    :data:`ccd_second_pass_kernel`."""
+    k = wp.tid()
+    t, exhausted = _search(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
+                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, budget, NO_HIT)
+    toi[k] = t
+    if exhausted != 0:
+        deferred[wp.atomic_add(deferred_count, 0, 1)] = k
+
+
+@wp.kernel
+def ccd_second_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
+                           tolerance: wp.float64, max_iterations: int, deferred: wp.array[wp.int32],
+                           deferred_count: wp.array[wp.int32], toi: wp.array[wp.float64]):
+    """The deferred queries of :data:`ccd_first_pass_kernel` from the start with ``max_iterations``,
+    one a thread, packed: a warp's lanes all search long, none waits idle beside a short one."""
+    i = wp.tid()
+    if i >= deferred_count[0]:
+        return
+    k = deferred[i]
+    toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
+                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
+                           NO_HIT)
+
+
 for _vec in (wp.vec3, wp.vec3d):
-    wp.overload(ccd_batch_kernel, {"x0": wp.array2d[_vec], "x1": wp.array2d[_vec]})
+    for _kernel in (ccd_batch_kernel, ccd_first_pass_kernel, ccd_second_pass_kernel):
+        wp.overload(_kernel, {"x0": wp.array2d[_vec], "x1": wp.array2d[_vec]})
 
 
 @wp.kernel
@@ -637,6 +720,35 @@ def _query_points(name: str, x, device) -> wp.array:
     return wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.vec3d, device=device)
 
 
+def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tolerance: float, max_iterations: int,
+                toi: wp.array, deferred: wp.array | None = None, deferred_count: wp.array | None = None) -> None:
+    """Enqueues the two passes over ``n`` queries (no host read: a graph can hold them): every query
+    within :data:`FIRST_PASS_ITERATIONS` boxes, then the ones that needed more, packed.
+
+    Args:
+        kind: a code of :data:`CCD_KINDS`.
+        x0, x1: ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d`` points at ``t = 0`` and ``t = 1``.
+        min_distance, tolerance, max_iterations: as in :func:`ccd_queries`.
+        toi: ``(n,)`` float64 output.
+        deferred, deferred_count: scratch, ``(n,)`` and ``(1,)`` int32 (allocated when None).
+    """
+    n = x0.shape[0]
+    device = x0.device
+    if deferred is None:
+        deferred = wp.empty(n, dtype=wp.int32, device=device)
+    if deferred_count is None:
+        deferred_count = wp.zeros(1, dtype=wp.int32, device=device)
+    else:
+        deferred_count.zero_()
+    d, tol = wp.float64(min_distance), wp.float64(tolerance)
+    budget = min(FIRST_PASS_ITERATIONS, max_iterations)
+    wp.launch(ccd_first_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, budget],
+              outputs=[toi, deferred, deferred_count], device=device)
+    if max_iterations > budget:
+        wp.launch(ccd_second_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, max_iterations, deferred,
+                                                        deferred_count], outputs=[toi], device=device)
+
+
 def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
                 max_iterations: int = CCD_MAX_ITERATIONS, device=None) -> tuple[np.ndarray, np.ndarray]:
     """Continuous collision of many moving vertex-face or edge-edge pairs.
@@ -676,7 +788,6 @@ def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: floa
     n = a0.shape[0]
     toi = wp.empty(n, dtype=wp.float64, device=device)
     if n:
-        wp.launch(ccd_batch_kernel, dim=n, inputs=[CCD_KINDS[kind], a0, a1, wp.float64(min_distance),
-                                                  wp.float64(tolerance), max_iterations], outputs=[toi], device=device)
+        run_queries(CCD_KINDS[kind], a0, a1, min_distance, tolerance, max_iterations, toi)
     t = toi.numpy()
     return t <= 1.0, t

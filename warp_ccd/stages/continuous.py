@@ -13,7 +13,12 @@ are flagged. The toi is never later than the true one (Tight Inclusion's guarant
 pair that already meets at ``t = 0``.
 
 Cost: one query of up to 15 primitive pairs a candidate, each a bounded search
-(``max_iterations`` boxes); most candidates of a swept frame are rejected by the first boxes.
+(``max_iterations`` boxes); most candidates of a swept frame are rejected by their swept boxes or
+the first box of a search. Two passes: the first gives each query
+:data:`~warp_ccd.geometry.ccd.FIRST_PASS_ITERATIONS` boxes and lists the candidates one of whose
+queries needs more (a few percent); the second runs those from the start, packed one a thread, so
+that on a GPU the few long searches do not each hold a warp of 31 finished lanes. The results are
+those of one pass (the search is deterministic; a search within the budget is the same search).
 The module is compiled without floating-point contraction (``fuse_fp=False``), as
 :mod:`warp_ccd.geometry.ccd` asks, so that every device gives the same tois.
 """
@@ -22,7 +27,7 @@ from typing import Any
 
 import warp as wp
 
-from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, triangle_pair_toi
+from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, FIRST_PASS_ITERATIONS, pair_search
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, number_option
 from ..scene.scene import MeshTopology, mesh_triangle
@@ -33,14 +38,79 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 __all__ = ["ContinuousNarrowPhase", "continuous_options"]
 
 
+@wp.func
+def _pair_toi(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any], c: wp.vec4i,
+              min_distance: wp.float64, tolerance: wp.float64, max_iterations: int, stop_when_exhausted: bool):
+    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    return pair_search(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance,
+                       max_iterations, stop_when_exhausted)
+
+
+@wp.func
+def _append_hit(c: wp.vec4i, toi: wp.float64, hit_capacity: int, hit: wp.array[wp.vec4i],
+                hit_toi: wp.array[wp.float64], hit_count: wp.array[wp.int64], object_colliding: wp.array[wp.int32]):
+    if toi <= wp.float64(1.0):
+        slot = reserve_slot(hit_count, hit_capacity)
+        if slot >= 0:
+            hit[slot] = c
+            hit_toi[slot] = toi
+        object_colliding[c[0]] = 1
+        object_colliding[c[2]] = 1
+
+
 @wp.kernel
-def _continuous_kernel(
+def _first_pass_kernel(
     mesh: MeshTopology,
     world_vertex_start: wp.array[Any],
     world_vertex: wp.array[Any],
     candidate: wp.array[wp.vec4i],
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
+    min_distance: wp.float64,
+    tolerance: wp.float64,
+    budget: int,
+    second_pass: int,
+    hit_capacity: int,
+    deferred_capacity: int,
+    # Outputs
+    hit: wp.array[wp.vec4i],
+    hit_toi: wp.array[wp.float64],
+    hit_count: wp.array[wp.int64],
+    object_colliding: wp.array[wp.int32],
+    deferred: wp.array[wp.int32],
+    deferred_count: wp.array[wp.int64],
+):
+    """One thread per candidate slot: the toi of row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion
+    from ``world_vertex_start`` to ``world_vertex``, each primitive query within ``budget`` boxes; a
+    toi in ``[0, 1]`` appends the row and its toi and flags both objects; a row one of whose queries
+    needs more boxes is left to :func:`_second_pass_kernel` (its slot appended to ``deferred``) when
+    ``second_pass``, else its conservative answer stands."""
+    k = wp.tid()
+    if k >= used_count(candidate_count, candidate_capacity):
+        return
+    c = candidate[k]
+    toi, exhausted = _pair_toi(mesh, world_vertex_start, world_vertex, c, min_distance, tolerance, budget,
+                               second_pass != 0)
+    if exhausted != 0 and second_pass != 0:
+        slot = reserve_slot(deferred_count, deferred_capacity)
+        if slot >= 0:
+            deferred[slot] = k
+        return
+    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
+
+
+@wp.kernel
+def _second_pass_kernel(
+    mesh: MeshTopology,
+    world_vertex_start: wp.array[Any],
+    world_vertex: wp.array[Any],
+    candidate: wp.array[wp.vec4i],
+    deferred: wp.array[wp.int32],
+    deferred_count: wp.array[wp.int64],
+    deferred_capacity: int,
     min_distance: wp.float64,
     tolerance: wp.float64,
     max_iterations: int,
@@ -51,29 +121,20 @@ def _continuous_kernel(
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
-    """One thread per candidate slot: the toi of row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion
-    from ``world_vertex_start`` to ``world_vertex``; a toi in ``[0, 1]`` appends the row and its toi
-    and flags both objects."""
-    k = wp.tid()
-    if k >= used_count(candidate_count, candidate_capacity):
+    """The deferred rows from the start with ``max_iterations`` boxes a query, one a thread, packed
+    (a warp's lanes all search long: none idles beside a short one)."""
+    i = wp.tid()
+    if i >= used_count(deferred_count, deferred_capacity):
         return
-    c = candidate[k]
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
-    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
-    toi = triangle_pair_toi(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance,
-                            max_iterations)
-    if toi <= wp.float64(1.0):
-        slot = reserve_slot(hit_count, hit_capacity)
-        if slot >= 0:
-            hit[slot] = c
-            hit_toi[slot] = toi
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
+    c = candidate[deferred[i]]
+    toi, exhausted = _pair_toi(mesh, world_vertex_start, world_vertex, c, min_distance, tolerance, max_iterations,
+                               False)
+    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
 
 
-_CONTINUOUS = precision_overloads(_continuous_kernel, lambda s, v, q, t: {
+_FIRST = precision_overloads(_first_pass_kernel, lambda s, v, q, t: {
+    "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
+_SECOND = precision_overloads(_second_pass_kernel, lambda s, v, q, t: {
     "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
 
 
@@ -106,6 +167,8 @@ class ContinuousNarrowPhase:
             ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, of the pairs that collide in ``[0, 1]``.
         toi: ``(hits.capacity,)`` float64, the toi of each row of :attr:`hits` (same slot), in ``[0, 1]``.
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
+        deferred: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of int32 candidate slots left to the
+            second pass.
         min_distance, tolerance, max_iterations: as above.
         segments, segment, contained: False, None, None (a continuous frame has neither segments
             nor containment; :class:`~warp_ccd.stages.kinds.NarrowPhaseStage`'s members).
@@ -117,6 +180,7 @@ class ContinuousNarrowPhase:
                                                                                     max_iterations)
         self.device = wp.get_device(device)
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
+        self.deferred = GrowableBuffer(wp.int32, max(64, capacity // 4), self.device, "deferred candidates")
         self.toi = wp.zeros(self.hits.capacity, dtype=wp.float64, device=self.device)
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
         self.segments = False
@@ -131,8 +195,8 @@ class ContinuousNarrowPhase:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """The buffers with counters that :meth:`launch` writes (the hits)."""
-        return [self.hits]
+        """The buffers with counters that :meth:`launch` writes (the hits, the deferred candidates)."""
+        return [self.hits, self.deferred]
 
     def launch(self, scene, world_vertex_start: wp.array, candidates: GrowableBuffer, *,
                reset_counters: bool = True) -> None:
@@ -152,8 +216,19 @@ class ContinuousNarrowPhase:
         if self.toi.shape[0] != hits.capacity:  # follows the hits' capacity (after a growth, eagerly)
             self.toi = wp.zeros(hits.capacity, dtype=wp.float64, device=d)
         self.object_colliding.zero_()
-        wp.launch(_CONTINUOUS[scene.precision], dim=candidates.capacity,
+        deferred = self.deferred
+        budget = min(FIRST_PASS_ITERATIONS, self.max_iterations)
+        second = self.max_iterations > budget
+        if reset_counters:
+            deferred.reset()
+        d64, tol64 = wp.float64(self.min_distance), wp.float64(self.tolerance)
+        wp.launch(_FIRST[scene.precision], dim=candidates.capacity,
                   inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, candidates.count,
-                          candidates.capacity, wp.float64(self.min_distance), wp.float64(self.tolerance),
-                          self.max_iterations, hits.capacity],
-                  outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
+                          candidates.capacity, d64, tol64, budget, int(second), hits.capacity, deferred.capacity],
+                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data, deferred.count],
+                  device=d)
+        if second:
+            wp.launch(_SECOND[scene.precision], dim=deferred.capacity,
+                      inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, deferred.data,
+                              deferred.count, deferred.capacity, d64, tol64, self.max_iterations, hits.capacity],
+                      outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
