@@ -187,6 +187,27 @@ def _tol_div(tolerance: wp.float64, length: wp.float64) -> wp.float64:
 
 
 @wp.func
+def _get(v: wp.vec3d, j: int) -> wp.float64:
+    """``v[j]`` through static indices (a dynamic index puts a vector in a GPU thread's local memory,
+    which the search reads every box)."""
+    if j == 0:
+        return v[0]
+    if j == 1:
+        return v[1]
+    return v[2]
+
+
+@wp.func
+def _put(v: wp.vec3d, j: int, x: wp.float64) -> wp.vec3d:
+    """``v`` with ``v[j] = x``, through static indices."""
+    if j == 0:
+        return wp.vec3d(x, v[1], v[2])
+    if j == 1:
+        return wp.vec3d(v[0], x, v[2])
+    return wp.vec3d(v[0], v[1], x)
+
+
+@wp.func
 def _next_split(w: wp.vec3d, tol: wp.vec3d, spread: wp.vec3d) -> int:
     """The parameter to split: among those wider than their tolerance, the one along which the
     unfinished coordinates of ``F`` change most (``spread``), else the widest relative to its
@@ -209,26 +230,49 @@ def _next_split(w: wp.vec3d, tol: wp.vec3d, spread: wp.vec3d) -> int:
     return by_ratio
 
 
-PATH_WORDS = 6
-"""64-bit words of a search's path: 2 bits a level, so up to 192 levels (at most 3 x 60 splits)."""
+PATH_WORDS = 4
+"""64-bit words of a search's path: 2 bits a level, so :data:`MAX_DEPTH` levels."""
+
+MAX_DEPTH = wp.constant(32 * PATH_WORDS)
+"""Deepest level of a search: a box there is accepted (conservative; tolerances that ask for more
+splits than this, 128 halvings over three parameters, are not met)."""
 
 _path_t = wp.types.vector(length=PATH_WORDS, dtype=wp.uint64)
 
 
 @wp.func
+def _path_word(path: _path_t, word: int) -> wp.uint64:
+    if word == 0:
+        return path[0]
+    if word == 1:
+        return path[1]
+    if word == 2:
+        return path[2]
+    return path[3]
+
+
+@wp.func
 def _path_push(path: _path_t, depth: int, dim: int) -> _path_t:
-    """``path`` with parameter ``dim`` split at level ``depth``."""
+    """``path`` with parameter ``dim`` split at level ``depth`` (static indices only, as :func:`_get`)."""
     word = depth >> 5
     shift = wp.uint64((depth & 31) * 2)
+    x = (_path_word(path, word) & ~(wp.uint64(3) << shift)) | (wp.uint64(dim) << shift)
     out = path
-    out[word] = (path[word] & ~(wp.uint64(3) << shift)) | (wp.uint64(dim) << shift)
+    if word == 0:
+        out[0] = x
+    elif word == 1:
+        out[1] = x
+    elif word == 2:
+        out[2] = x
+    else:
+        out[3] = x
     return out
 
 
 @wp.func
 def _path_dim(path: _path_t, depth: int) -> int:
     """The parameter split at level ``depth``."""
-    return int((path[depth >> 5] >> wp.uint64((depth & 31) * 2)) & wp.uint64(3))
+    return int((_path_word(path, depth >> 5) >> wp.uint64((depth & 31) * 2)) & wp.uint64(3))
 
 
 @wp.func
@@ -257,14 +301,16 @@ def _pending_start(lo_in: wp.vec3d, w_in: wp.vec3d, path: _path_t, depth_in: int
     while depth > 0:
         depth -= 1
         j = _path_dim(path, depth)
-        if _is_upper_half(lo[j], w[j]):
-            lo[j] = lo[j] - w[j]
+        lj = _get(lo, j)
+        wj = _get(w, j)
+        if _is_upper_half(lj, wj):
+            lo = _put(lo, j, lj - wj)
         else:
             sibling = lo[0]
             if j == 0:
                 sibling = lo[0] + w[0]
             start = wp.min(start, sibling)
-        w[j] = w[j] * _F2
+        w = _put(w, j, wj * _F2)
     return start
 
 
@@ -415,7 +461,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
                         finished = False
                         spread = wp.max(spread, change)
             if not reject:
-                if not finished:
+                if not finished and depth < MAX_DEPTH:
                     if best < lo[0] + w[0] and w[0] > tol[0] and w[0] > WIDTH_MIN:
                         # The box straddles the best toi so far: only its part before it matters.
                         descend = 0
@@ -432,7 +478,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
             if descend >= 0:
                 path = _path_push(path, depth, descend)
                 depth += 1
-                w[descend] = w[descend] * _HALF  # the lower half first
+                w = _put(w, descend, _get(w, descend) * _HALF)  # the lower half first
             else:
                 # Next box: climb past upper halves, then step to the upper sibling.
                 climbing = bool(True)
@@ -442,12 +488,14 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
                         done = True
                     else:
                         j = _path_dim(path, depth - 1)
-                        if _is_upper_half(lo[j], w[j]):
-                            lo[j] = lo[j] - w[j]
-                            w[j] = w[j] * _F2
+                        lj = _get(lo, j)
+                        wj = _get(w, j)
+                        if _is_upper_half(lj, wj):
+                            lo = _put(lo, j, lj - wj)
+                            w = _put(w, j, wj * _F2)
                             depth -= 1
                         else:
-                            lo[j] = lo[j] + w[j]
+                            lo = _put(lo, j, lj + wj)
                             climbing = False
     return best, exhausted
 
@@ -538,14 +586,22 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
     b0e = wp.vec3d(b0_t1)
     b1e = wp.vec3d(b1_t1)
     b2e = wp.vec3d(b2_t1)
-    lo_a = wp.matrix_from_rows(wp.min(a0, a0e), wp.min(a1, a1e), wp.min(a2, a2e))  # rows: the three vertices
-    hi_a = wp.matrix_from_rows(wp.max(a0, a0e), wp.max(a1, a1e), wp.max(a2, a2e))
-    lo_b = wp.matrix_from_rows(wp.min(b0, b0e), wp.min(b1, b1e), wp.min(b2, b2e))
-    hi_b = wp.matrix_from_rows(wp.max(b0, b0e), wp.max(b1, b1e), wp.max(b2, b2e))
-    tri_lo_a = wp.min(wp.min(lo_a[0], lo_a[1]), lo_a[2])
-    tri_hi_a = wp.max(wp.max(hi_a[0], hi_a[1]), hi_a[2])
-    tri_lo_b = wp.min(wp.min(lo_b[0], lo_b[1]), lo_b[2])
-    tri_hi_b = wp.max(wp.max(hi_b[0], hi_b[1]), hi_b[2])
+    lo_a0 = wp.min(a0, a0e)
+    lo_a1 = wp.min(a1, a1e)
+    lo_a2 = wp.min(a2, a2e)
+    hi_a0 = wp.max(a0, a0e)
+    hi_a1 = wp.max(a1, a1e)
+    hi_a2 = wp.max(a2, a2e)
+    lo_b0 = wp.min(b0, b0e)
+    lo_b1 = wp.min(b1, b1e)
+    lo_b2 = wp.min(b2, b2e)
+    hi_b0 = wp.max(b0, b0e)
+    hi_b1 = wp.max(b1, b1e)
+    hi_b2 = wp.max(b2, b2e)
+    tri_lo_a = wp.min(wp.min(lo_a0, lo_a1), lo_a2)
+    tri_hi_a = wp.max(wp.max(hi_a0, hi_a1), hi_a2)
+    tri_lo_b = wp.min(wp.min(lo_b0, lo_b1), lo_b2)
+    tri_hi_b = wp.max(wp.max(hi_b0, hi_b1), hi_b2)
     m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
     e = m * ERROR_SCALE + wp.vec3d(ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance)
     # The discrete test at t = 0 only where the triangles' boxes at t = 0 come within twice its tolerance.
@@ -566,17 +622,20 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
         i = q % 3
         j = int(0)
         if q < 3:  # vertex i of a against face b
-            near = not _apart(lo_a[i], hi_a[i], tri_lo_b, tri_hi_b, e)
+            near = not _apart(_pick3(lo_a0, lo_a1, lo_a2, i), _pick3(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
         elif q < 6:  # vertex i of b against face a
-            near = not _apart(lo_b[i], hi_b[i], tri_lo_a, tri_hi_a, e)
+            near = not _apart(_pick3(lo_b0, lo_b1, lo_b2, i), _pick3(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
         else:  # edge i of a against edge j of b
             kind = KIND_EDGE_EDGE
             i = (q - 6) // 3
             j = (q - 6) % 3
             i1 = (i + 1) % 3
             j1 = (j + 1) % 3
-            near = not _apart(wp.min(lo_a[i], lo_a[i1]), wp.max(hi_a[i], hi_a[i1]), wp.min(lo_b[j], lo_b[j1]),
-                              wp.max(hi_b[j], hi_b[j1]), e)
+            lo_ea = wp.min(_pick3(lo_a0, lo_a1, lo_a2, i), _pick3(lo_a0, lo_a1, lo_a2, i1))
+            hi_ea = wp.max(_pick3(hi_a0, hi_a1, hi_a2, i), _pick3(hi_a0, hi_a1, hi_a2, i1))
+            lo_eb = wp.min(_pick3(lo_b0, lo_b1, lo_b2, j), _pick3(lo_b0, lo_b1, lo_b2, j1))
+            hi_eb = wp.max(_pick3(hi_b0, hi_b1, hi_b2, j), _pick3(hi_b0, hi_b1, hi_b2, j1))
+            near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
         if near:
             if q < 3:
                 x0 = _points(_pick3(a0, a1, a2, i), b0, b1, b2)
