@@ -61,6 +61,8 @@ __all__ = [
     "ccd_batch_kernel",
     "ccd_first_pass_kernel",
     "ccd_second_pass_kernel",
+    "pair_meets_at_end",
+    "pair_query",
     "pair_search",
     "ccd_queries",
     "edge_edge_toi",
@@ -564,12 +566,59 @@ def _pick3(x0: Any, x1: Any, x2: Any, i: int):
 
 
 @wp.func
+def pair_query(q: int, a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b1: wp.vec3d, b2: wp.vec3d,
+               a0e: wp.vec3d, a1e: wp.vec3d, a2e: wp.vec3d, b0e: wp.vec3d, b1e: wp.vec3d, b2e: wp.vec3d):
+    """Query ``q`` (of :data:`PAIR_QUERIES`) of two moving triangles: ``(kind, x0, x1)``; 0-2 a vertex
+    of ``a`` against face ``b``, 3-5 a vertex of ``b`` against face ``a``, 6-14 edge ``(q - 6) // 3``
+    of ``a`` against edge ``(q - 6) % 3`` of ``b``."""
+    kind = KIND_VERTEX_FACE
+    i = q % 3
+    if q < 3:
+        x0 = _points(_pick3(a0, a1, a2, i), b0, b1, b2)
+        x1 = _points(_pick3(a0e, a1e, a2e, i), b0e, b1e, b2e)
+    elif q < 6:
+        x0 = _points(_pick3(b0, b1, b2, i), a0, a1, a2)
+        x1 = _points(_pick3(b0e, b1e, b2e, i), a0e, a1e, a2e)
+    else:
+        kind = KIND_EDGE_EDGE
+        i = (q - 6) // 3
+        j = (q - 6) % 3
+        x0 = _points(_pick3(a0, a1, a2, i), _pick3(a0, a1, a2, (i + 1) % 3), _pick3(b0, b1, b2, j),
+                     _pick3(b0, b1, b2, (j + 1) % 3))
+        x1 = _points(_pick3(a0e, a1e, a2e, i), _pick3(a0e, a1e, a2e, (i + 1) % 3), _pick3(b0e, b1e, b2e, j),
+                     _pick3(b0e, b1e, b2e, (j + 1) % 3))
+    return kind, x0, x1
+
+
+@wp.func
+def pair_meets_at_end(a0_t1: Any, a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any) -> bool:
+    """The discrete test on the triangles at ``t = 1`` (run only where their boxes come within twice
+    its tolerance)."""
+    a0e = wp.vec3d(a0_t1)
+    a1e = wp.vec3d(a1_t1)
+    a2e = wp.vec3d(a2_t1)
+    b0e = wp.vec3d(b0_t1)
+    b1e = wp.vec3d(b1_t1)
+    b2e = wp.vec3d(b2_t1)
+    lo1_a = wp.min(wp.min(a0e, a1e), a2e)
+    hi1_a = wp.max(wp.max(a0e, a1e), a2e)
+    lo1_b = wp.min(wp.min(b0e, b1e), b2e)
+    hi1_b = wp.max(wp.max(b0e, b1e), b2e)
+    pad1 = DISCRETE_PAD * _max3(wp.max(hi1_a - lo1_a, hi1_b - lo1_b))
+    if _apart(lo1_a, hi1_a, lo1_b, hi1_b, wp.vec3d(pad1, pad1, pad1)):
+        return False
+    return tri_tri_moller(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, type(a0_t1[0])(TOLERANCE))
+
+
+@wp.func
 def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
                 a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
-                max_iterations: int, stop_when_exhausted: bool):
-    """:func:`triangle_pair_toi` and whether one of its queries ran out of ``max_iterations`` (with
-    ``stop_when_exhausted``, the first that does ends the search: a first pass with a small budget
-    leaves such pairs to a second one, see :data:`FIRST_PASS_ITERATIONS`)."""
+                max_iterations: int, defer: bool):
+    """:func:`triangle_pair_toi`, with each query's search within ``max_iterations`` boxes, and the
+    mask of the queries that needed more (bit ``q``). With ``defer`` those queries' (conservative)
+    answers are left out of the toi and the end test is skipped when the mask is not 0: a second
+    pass runs them in full (:func:`pair_query`, :func:`pair_meets_at_end`), and the minimum of
+    both is then :func:`triangle_pair_toi`'s answer exactly (each query is searched on its own)."""
     # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
     # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
     # root (its F lies in the difference of the boxes; the one rounding of that difference is within
@@ -615,18 +664,15 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
         if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
             return _F0, int(0)
     best = NO_HIT
-    exhausted = int(0)
+    mask = int(0)
     num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
     for q in range(num_queries):
-        kind = KIND_VERTEX_FACE
         i = q % 3
-        j = int(0)
         if q < 3:  # vertex i of a against face b
             near = not _apart(_pick3(lo_a0, lo_a1, lo_a2, i), _pick3(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
         elif q < 6:  # vertex i of b against face a
             near = not _apart(_pick3(lo_b0, lo_b1, lo_b2, i), _pick3(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
         else:  # edge i of a against edge j of b
-            kind = KIND_EDGE_EDGE
             i = (q - 6) // 3
             j = (q - 6) % 3
             i1 = (i + 1) % 3
@@ -637,34 +683,18 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
             hi_eb = wp.max(_pick3(hi_b0, hi_b1, hi_b2, j), _pick3(hi_b0, hi_b1, hi_b2, j1))
             near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
         if near:
-            if q < 3:
-                x0 = _points(_pick3(a0, a1, a2, i), b0, b1, b2)
-                x1 = _points(_pick3(a0e, a1e, a2e, i), b0e, b1e, b2e)
-            elif q < 6:
-                x0 = _points(_pick3(b0, b1, b2, i), a0, a1, a2)
-                x1 = _points(_pick3(b0e, b1e, b2e, i), a0e, a1e, a2e)
+            kind, x0, x1 = pair_query(q, a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e)
+            toi, ran_out = _search(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT)
+            if ran_out != 0 and defer:
+                mask = mask | (1 << q)
             else:
-                x0 = _points(_pick3(a0, a1, a2, i), _pick3(a0, a1, a2, (i + 1) % 3), _pick3(b0, b1, b2, j),
-                             _pick3(b0, b1, b2, (j + 1) % 3))
-                x1 = _points(_pick3(a0e, a1e, a2e, i), _pick3(a0e, a1e, a2e, (i + 1) % 3), _pick3(b0e, b1e, b2e, j),
-                             _pick3(b0e, b1e, b2e, (j + 1) % 3))
-            best, ran_out = _search(kind, x0, x1, min_distance, tolerance, max_iterations, best)
-            if ran_out != 0:
-                exhausted = 1
-                if stop_when_exhausted:
-                    return best, exhausted
-    if best > _F1:
+                best = wp.min(best, toi)
+    if best > _F1 and mask == 0:
         # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
         # the end, so that a continuous frame holds what a discrete frame at either end holds.
-        lo1_a = wp.min(wp.min(a0e, a1e), a2e)
-        hi1_a = wp.max(wp.max(a0e, a1e), a2e)
-        lo1_b = wp.min(wp.min(b0e, b1e), b2e)
-        hi1_b = wp.max(wp.max(b0e, b1e), b2e)
-        pad1 = DISCRETE_PAD * _max3(wp.max(hi1_a - lo1_a, hi1_b - lo1_b))
-        if not _apart(lo1_a, hi1_a, lo1_b, hi1_b, wp.vec3d(pad1, pad1, pad1)):
-            if tri_tri_moller(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, type(a0_t1[0])(TOLERANCE)):
-                best = _F1
-    return best, exhausted
+        if pair_meets_at_end(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
+            best = _F1
+    return best, mask
 
 
 @wp.func
@@ -677,8 +707,8 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     ``t = 1`` (the discrete test again), else :data:`NO_HIT`.
 
     Two triangles that start apart can only come to meet through a vertex-face or an edge-edge
-    contact, so this is their first contact (within ``min_distance``). Each query searches only
-    before the best toi so far.
+    contact, so this is their first contact (within ``min_distance``). Each query is searched on
+    its own (a frame's second pass runs the long ones side by side, with the same answer).
     """
     toi, exhausted = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
                                  min_distance, tolerance, max_iterations, False)

@@ -14,11 +14,13 @@ pair that already meets at ``t = 0``.
 
 Cost: one query of up to 15 primitive pairs a candidate, each a bounded search
 (``max_iterations`` boxes); most candidates of a swept frame are rejected by their swept boxes or
-the first box of a search. Two passes: the first gives each query
-:data:`~warp_ccd.geometry.ccd.FIRST_PASS_ITERATIONS` boxes and lists the candidates one of whose
-queries needs more (a few percent); the second runs those from the start, packed one a thread, so
-that on a GPU the few long searches do not each hold a warp of 31 finished lanes. The results are
-those of one pass (the search is deterministic; a search within the budget is the same search).
+the first box of a search. Three passes: the first gives each query
+:data:`~warp_ccd.geometry.ccd.FIRST_PASS_ITERATIONS` boxes and lists the candidates some of whose
+queries need more (about 1%), with the mask of those queries; the second runs each such query from
+the start, one a thread, side by side (on a GPU a long search in a warp of finished lanes, or one
+candidate's long searches one after the other, cost their whole length in latency); the third
+appends the listed candidates. The results are those of one pass (each query is searched on its
+own, deterministically; a search within the budget is the same search).
 The module is compiled without floating-point contraction (``fuse_fp=False``), as
 :mod:`warp_ccd.geometry.ccd` asks, so that every device gives the same tois.
 """
@@ -27,7 +29,17 @@ from typing import Any
 
 import warp as wp
 
-from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, FIRST_PASS_ITERATIONS, pair_search
+from ..geometry.ccd import (
+    CCD_MAX_ITERATIONS,
+    CCD_TOLERANCE,
+    FIRST_PASS_ITERATIONS,
+    NO_HIT,
+    PAIR_QUERIES,
+    pair_meets_at_end,
+    pair_query,
+    pair_search,
+    primitive_toi,
+)
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, number_option
 from ..scene.scene import MeshTopology, mesh_triangle
@@ -36,17 +48,6 @@ from .buffers import GrowableBuffer, reserve_slot, used_count
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["ContinuousNarrowPhase", "continuous_options"]
-
-
-@wp.func
-def _pair_toi(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any], c: wp.vec4i,
-              min_distance: wp.float64, tolerance: wp.float64, max_iterations: int, stop_when_exhausted: bool):
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
-    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
-    return pair_search(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance,
-                       max_iterations, stop_when_exhausted)
 
 
 @wp.func
@@ -72,7 +73,7 @@ def _first_pass_kernel(
     min_distance: wp.float64,
     tolerance: wp.float64,
     budget: int,
-    second_pass: int,
+    defer: int,
     hit_capacity: int,
     deferred_capacity: int,
     # Outputs
@@ -80,24 +81,30 @@ def _first_pass_kernel(
     hit_toi: wp.array[wp.float64],
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
-    deferred: wp.array[wp.int32],
+    deferred: wp.array[wp.vec2i],
+    deferred_toi: wp.array[wp.float64],
     deferred_count: wp.array[wp.int64],
 ):
     """One thread per candidate slot: the toi of row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion
     from ``world_vertex_start`` to ``world_vertex``, each primitive query within ``budget`` boxes; a
-    toi in ``[0, 1]`` appends the row and its toi and flags both objects; a row one of whose queries
-    needs more boxes is left to :func:`_second_pass_kernel` (its slot appended to ``deferred``) when
-    ``second_pass``, else its conservative answer stands."""
+    toi in ``[0, 1]`` appends the row and its toi and flags both objects. With ``defer``, a row some
+    of whose queries need more boxes goes to ``deferred`` as ``(slot, mask of those queries)`` with
+    the least toi of the others in ``deferred_toi`` (:func:`_second_pass_kernel`)."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
-    toi, exhausted = _pair_toi(mesh, world_vertex_start, world_vertex, c, min_distance, tolerance, budget,
-                               second_pass != 0)
-    if exhausted != 0 and second_pass != 0:
+    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    toi, mask = pair_search(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance, budget,
+                            defer != 0)
+    if mask != 0:
         slot = reserve_slot(deferred_count, deferred_capacity)
         if slot >= 0:
-            deferred[slot] = k
+            deferred[slot] = wp.vec2i(k, mask)
+            deferred_toi[slot] = toi
         return
     _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
 
@@ -108,12 +115,48 @@ def _second_pass_kernel(
     world_vertex_start: wp.array[Any],
     world_vertex: wp.array[Any],
     candidate: wp.array[wp.vec4i],
-    deferred: wp.array[wp.int32],
+    deferred: wp.array[wp.vec2i],
     deferred_count: wp.array[wp.int64],
     deferred_capacity: int,
     min_distance: wp.float64,
     tolerance: wp.float64,
     max_iterations: int,
+    # Outputs
+    deferred_toi: wp.array[wp.float64],
+):
+    """One thread per (deferred row, query): a query of the row's mask searched from the start with
+    ``max_iterations`` boxes, side by side with the row's other long queries and the other rows'
+    (a lone long search takes its whole length in latency), its toi min-ed into ``deferred_toi``."""
+    tid = wp.tid()
+    i = tid // PAIR_QUERIES
+    q = tid - i * PAIR_QUERIES
+    if i >= used_count(deferred_count, deferred_capacity):
+        return
+    d = deferred[i]
+    if (d[1] >> q) & 1 == 0:
+        return
+    c = candidate[d[0]]
+    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    kind, x0, x1 = pair_query(q, wp.vec3d(a0), wp.vec3d(a1), wp.vec3d(a2), wp.vec3d(b0), wp.vec3d(b1), wp.vec3d(b2),
+                              wp.vec3d(a0e), wp.vec3d(a1e), wp.vec3d(a2e), wp.vec3d(b0e), wp.vec3d(b1e),
+                              wp.vec3d(b2e))
+    toi = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT)
+    if toi <= wp.float64(1.0):
+        wp.atomic_min(deferred_toi, i, toi)
+
+
+@wp.kernel
+def _third_pass_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    candidate: wp.array[wp.vec4i],
+    deferred: wp.array[wp.vec2i],
+    deferred_toi: wp.array[wp.float64],
+    deferred_count: wp.array[wp.int64],
+    deferred_capacity: int,
     hit_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
@@ -121,14 +164,17 @@ def _second_pass_kernel(
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
-    """The deferred rows from the start with ``max_iterations`` boxes a query, one a thread, packed
-    (a warp's lanes all search long: none idles beside a short one)."""
+    """One thread per deferred row: its toi (the end test when none), appended as the first pass does."""
     i = wp.tid()
     if i >= used_count(deferred_count, deferred_capacity):
         return
-    c = candidate[deferred[i]]
-    toi, exhausted = _pair_toi(mesh, world_vertex_start, world_vertex, c, min_distance, tolerance, max_iterations,
-                               False)
+    c = candidate[deferred[i][0]]
+    toi = deferred_toi[i]
+    if toi > wp.float64(1.0):
+        a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+        b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+        if pair_meets_at_end(a0e, a1e, a2e, b0e, b1e, b2e):
+            toi = wp.float64(1.0)
     _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
 
 
@@ -136,6 +182,7 @@ _FIRST = precision_overloads(_first_pass_kernel, lambda s, v, q, t: {
     "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
 _SECOND = precision_overloads(_second_pass_kernel, lambda s, v, q, t: {
     "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
+_THIRD = precision_overloads(_third_pass_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
 def continuous_options(min_distance, tolerance, max_iterations) -> tuple[float, float, int]:
@@ -167,8 +214,8 @@ class ContinuousNarrowPhase:
             ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, of the pairs that collide in ``[0, 1]``.
         toi: ``(hits.capacity,)`` float64, the toi of each row of :attr:`hits` (same slot), in ``[0, 1]``.
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
-        deferred: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of int32 candidate slots left to the
-            second pass.
+        deferred: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec2i`` ``(candidate slot,
+            mask of its long queries)`` left to the second pass; ``deferred_toi`` their toi so far.
         min_distance, tolerance, max_iterations: as above.
         segments, segment, contained: False, None, None (a continuous frame has neither segments
             nor containment; :class:`~warp_ccd.stages.kinds.NarrowPhaseStage`'s members).
@@ -180,7 +227,8 @@ class ContinuousNarrowPhase:
                                                                                     max_iterations)
         self.device = wp.get_device(device)
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
-        self.deferred = GrowableBuffer(wp.int32, max(64, capacity // 4), self.device, "deferred candidates")
+        self.deferred = GrowableBuffer(wp.vec2i, max(64, capacity // 4), self.device, "deferred candidates")
+        self.deferred_toi = wp.zeros(self.deferred.capacity, dtype=wp.float64, device=self.device)
         self.toi = wp.zeros(self.hits.capacity, dtype=wp.float64, device=self.device)
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
         self.segments = False
@@ -218,17 +266,23 @@ class ContinuousNarrowPhase:
         self.object_colliding.zero_()
         deferred = self.deferred
         budget = min(FIRST_PASS_ITERATIONS, self.max_iterations)
-        second = self.max_iterations > budget
+        defer = self.max_iterations > budget
         if reset_counters:
             deferred.reset()
+        if self.deferred_toi.shape[0] != deferred.capacity:
+            self.deferred_toi = wp.zeros(deferred.capacity, dtype=wp.float64, device=d)
         d64, tol64 = wp.float64(self.min_distance), wp.float64(self.tolerance)
         wp.launch(_FIRST[scene.precision], dim=candidates.capacity,
                   inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, candidates.count,
-                          candidates.capacity, d64, tol64, budget, int(second), hits.capacity, deferred.capacity],
-                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data, deferred.count],
-                  device=d)
-        if second:
-            wp.launch(_SECOND[scene.precision], dim=deferred.capacity,
+                          candidates.capacity, d64, tol64, budget, int(defer), hits.capacity, deferred.capacity],
+                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data, self.deferred_toi,
+                           deferred.count], device=d)
+        if defer:
+            wp.launch(_SECOND[scene.precision], dim=deferred.capacity * PAIR_QUERIES,
                       inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, deferred.data,
-                              deferred.count, deferred.capacity, d64, tol64, self.max_iterations, hits.capacity],
+                              deferred.count, deferred.capacity, d64, tol64, self.max_iterations],
+                      outputs=[self.deferred_toi], device=d)
+            wp.launch(_THIRD[scene.precision], dim=deferred.capacity,
+                      inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
+                              deferred.count, deferred.capacity, hits.capacity],
                       outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
