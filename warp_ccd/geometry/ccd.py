@@ -80,7 +80,7 @@ CCD_MAX_ITERATIONS = 1_000_000
 """Default cap on the boxes one query examines; past it the query reports a collision at the
 earliest time an unfinished box starts (a conservative answer; no query of the test sets gets near)."""
 
-FIRST_PASS_ITERATIONS = 16
+FIRST_PASS_ITERATIONS = 4
 """Boxes a query may examine in the first of the two passes (:func:`run_queries`, the continuous
 narrow phase). On a GPU a warp runs as long as its longest lane: a frame's queries mostly end in a
 box or a few, a few percent search hundreds; the first pass settles the short ones, the second runs
@@ -363,41 +363,6 @@ def _contact_frame(kind: int, x0: MAT34D, x1: MAT34D) -> MAT33D:
 
 
 @wp.func
-def _parameter_tolerances(kind: int, x0: MAT34D, x1: MAT34D, tolerance: wp.float64) -> wp.vec3d:
-    """Widths of ``t``, ``u`` and ``v`` below which a box needs no split: ``tolerance`` over three
-    times the longest edge of the box of ``F`` along that parameter, in the infinity norm (Tight
-    Inclusion's ``compute_*_tolerances``; infinite along a parameter ``F`` does not depend on)."""
-    len_t = _F0
-    len_u = _F0
-    len_v = _F0
-    for ui in range(2):
-        for vi in range(2):
-            u = wp.float64(ui)
-            v = wp.float64(vi)
-            f0 = wp.vec3d()
-            f1 = wp.vec3d()
-            fu = wp.vec3d()
-            fv = wp.vec3d()
-            gu = wp.vec3d()
-            gv = wp.vec3d()
-            for ax in range(3):
-                a = x0[ax]
-                b = x1[ax]
-                f0[ax] = _corner(kind, a[0], a[1], a[2], a[3], u, v)
-                f1[ax] = _corner(kind, b[0], b[1], b[2], b[3], u, v)
-                fu[ax] = _corner(kind, a[0], a[1], a[2], a[3], _F1 - u, v)
-                fv[ax] = _corner(kind, a[0], a[1], a[2], a[3], u, _F1 - v)
-                gu[ax] = _corner(kind, b[0], b[1], b[2], b[3], _F1 - u, v)
-                gv[ax] = _corner(kind, b[0], b[1], b[2], b[3], u, _F1 - v)
-            len_t = wp.max(len_t, _linf(f1 - f0))
-            len_u = wp.max(len_u, wp.max(_linf(fu - f0), _linf(gu - f1)))
-            len_v = wp.max(len_v, wp.max(_linf(fv - f0), _linf(gv - f1)))
-    three = wp.float64(3.0)
-    return wp.vec3d(_tol_div(tolerance, three * len_t), _tol_div(tolerance, three * len_u),
-                    _tol_div(tolerance, three * len_v))
-
-
-@wp.func
 def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
             max_iterations: int, t_end: wp.float64):
     """Earliest toi before ``t_end`` of one query in float64, or ``t_end`` when there is none, and
@@ -435,7 +400,18 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
             x1 = r @ x1
             e = ERROR_SCALE_ROTATED * m + ERROR_FLOOR
             eps = wp.vec3d(e, e, e)
-    tol = _parameter_tolerances(kind, x0, x1, tolerance)
+    # Parameter tolerances from the whole box (Tight Inclusion's compute_*_tolerances: the tolerance
+    # over three times the longest edge of F's box along each parameter, in the infinity norm;
+    # infinite along a parameter F does not depend on); in the contact frame the box is tested again.
+    longest = wp.vec3d()
+    for ax in range(3):
+        fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
+        if fl > eps[ax] or fh < -eps[ax]:
+            return t_end, int(0)
+        longest = wp.max(longest, change)
+    three = wp.float64(3.0)
+    tol = wp.vec3d(_tol_div(tolerance, three * longest[0]), _tol_div(tolerance, three * longest[1]),
+                   _tol_div(tolerance, three * longest[2]))
     path = _path_t()
     depth = int(0)
     best = t_end
