@@ -27,7 +27,7 @@ import importlib
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
 from ._deprecated import install_moved_modules, module_aliases, warn_renamed
 from .geometry import TOLERANCE
-from .geometry.ccd import ccd_queries
+from .geometry.ccd_queries import ccd_queries
 from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
 from .scene import Scene

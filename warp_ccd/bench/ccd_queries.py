@@ -51,7 +51,8 @@ import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.narrow_phase import gpu_ms
 from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
-from warp_ccd.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, run_queries
+from warp_ccd.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE
+from warp_ccd.geometry.ccd_queries import run_queries
 
 DT = 1.0 / 60.0
 KINDS = ("vertex_face", "edge_edge")

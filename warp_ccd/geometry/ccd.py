@@ -37,7 +37,7 @@ Every device gives the same answer: compile the calling module with ``fuse_fp=Fa
 module is), so that CUDA does not contract ``a * b + c`` into an FMA.
 
 :func:`vertex_face_toi`, :func:`edge_edge_toi` and :func:`triangle_pair_toi` are the device
-functions; :func:`ccd_queries` runs batches of queries from numpy (``ccd_batch_kernel``).
+functions; :mod:`warp_ccd.geometry.ccd_queries` runs batches of queries from numpy (``ccd_queries``).
 """
 
 from __future__ import annotations
@@ -45,10 +45,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
 import warp as wp
 
-from ..options import integer_option, number_option
 from .triangle import TOLERANCE, tri_tri_moller
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -58,15 +56,10 @@ __all__ = [
     "CCD_MAX_ITERATIONS",
     "CCD_TOLERANCE",
     "NO_HIT",
-    "ccd_batch_kernel",
-    "ccd_first_pass_kernel",
-    "ccd_second_pass_kernel",
     "pair_meets_at_end",
     "pair_query",
     "pair_search",
-    "ccd_queries",
     "edge_edge_toi",
-    "run_queries",
     "triangle_pair_toi",
     "vertex_face_toi",
 ]
@@ -81,8 +74,8 @@ CCD_MAX_ITERATIONS = 1_000_000
 earliest time an unfinished box starts (a conservative answer; no query of the test sets gets near)."""
 
 FIRST_PASS_ITERATIONS = 4
-"""Boxes a query may examine in the first of the two passes (:func:`run_queries`, the continuous
-narrow phase). On a GPU a warp runs as long as its longest lane: a frame's queries mostly end in a
+"""Boxes a query may examine in the first pass (:func:`~warp_ccd.geometry.ccd_queries.run_queries`,
+the continuous narrow phase). On a GPU a warp runs as long as its longest lane: a frame's queries mostly end in a
 box or a few, a few percent search hundreds; the first pass settles the short ones, the second runs
 the rest packed together."""
 
@@ -90,7 +83,7 @@ NO_HIT = wp.constant(wp.float64(math.inf))
 """The toi of a pair that never collides."""
 
 CCD_KINDS = {"vertex_face": 0, "edge_edge": 1}
-"""Query kinds of :func:`ccd_queries` and their codes in :data:`ccd_batch_kernel`."""
+"""Query kinds of :func:`~warp_ccd.geometry.ccd_queries.ccd_queries` and their codes in the kernels."""
 
 KIND_VERTEX_FACE = wp.constant(0)
 KIND_EDGE_EDGE = wp.constant(1)
@@ -689,170 +682,3 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     toi, exhausted = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
                                  min_distance, tolerance, max_iterations, False)
     return toi
-
-
-@wp.kernel
-def ccd_batch_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
-                     tolerance: wp.float64, max_iterations: int, toi: wp.array[wp.float64]):
-    """One query a thread: ``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1`` (``wp.vec3``
-    or ``wp.vec3d``); writes ``toi`` ``(n,)`` (:data:`NO_HIT` where none). One pass: see
-    :func:`ccd_queries` for the two passes that keep a GPU's lanes busy."""
-    k = wp.tid()
-    toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
-                           NO_HIT)
-
-
-@wp.kernel
-def ccd_first_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
-                          tolerance: wp.float64, budget: int, toi: wp.array[wp.float64],
-                          deferred: wp.array[wp.int32], deferred_count: wp.array[wp.int32]):
-    """:data:`ccd_batch_kernel` within ``budget`` boxes a query; a query that needs more is listed in
-    ``deferred`` (``deferred_count[0]`` of them; ``deferred`` holds every query at most) for
-    :data:`ccd_second_pass_kernel`."""
-    k = wp.tid()
-    t, exhausted = _search(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, budget, NO_HIT)
-    toi[k] = t
-    if exhausted != 0:
-        deferred[wp.atomic_add(deferred_count, 0, 1)] = k
-
-
-@wp.kernel
-def ccd_second_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
-                           tolerance: wp.float64, max_iterations: int, deferred: wp.array[wp.int32],
-                           deferred_count: wp.array[wp.int32], toi: wp.array[wp.float64]):
-    """The deferred queries of :data:`ccd_first_pass_kernel` from the start with ``max_iterations``,
-    one a thread, packed: a warp's lanes all search long, none waits idle beside a short one."""
-    i = wp.tid()
-    if i >= deferred_count[0]:
-        return
-    k = deferred[i]
-    toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
-                           NO_HIT)
-
-
-for _vec in (wp.vec3, wp.vec3d):
-    for _kernel in (ccd_batch_kernel, ccd_first_pass_kernel, ccd_second_pass_kernel):
-        wp.overload(_kernel, {"x0": wp.array2d[_vec], "x1": wp.array2d[_vec]})
-
-
-@wp.kernel
-def _count_nonfinite_kernel(x: wp.array2d[Any], count: wp.array[wp.int32]):
-    k, i = wp.tid()
-    p = x[k, i]
-    for ax in range(3):
-        if not wp.isfinite(p[ax]):
-            wp.atomic_add(count, 0, 1)
-
-
-for _vec in (wp.vec3, wp.vec3d):
-    wp.overload(_count_nonfinite_kernel, {"x": wp.array2d[_vec]})
-
-
-def _query_points(name: str, x, device) -> wp.array:
-    """``x`` as an ``(n, 4)`` array of ``wp.vec3`` / ``wp.vec3d`` on ``device``, validated."""
-    if isinstance(x, wp.array):
-        if x.dtype in (wp.vec3, wp.vec3d) and x.ndim == 2 and x.shape[1] == 4:
-            arr = x
-        elif x.dtype in (wp.float32, wp.float64) and x.ndim == 3 and x.shape[1:] == (4, 3):
-            arr = x.view(wp.vec3 if x.dtype == wp.float32 else wp.vec3d).reshape((x.shape[0], 4)) \
-                if x.is_contiguous else None
-            if arr is None:
-                raise ValueError(f"{name}: a device array must be contiguous")
-        else:
-            raise ValueError(f"{name}: expected an (n, 4, 3) float array, got a Warp array of {x.dtype.__name__} "
-                             f"and shape {x.shape}")
-        if str(arr.device) != str(device):
-            arr = arr.to(device)
-        if arr.shape[0]:
-            count = wp.zeros(1, dtype=wp.int32, device=device)
-            wp.launch(_count_nonfinite_kernel, dim=arr.shape, inputs=[arr], outputs=[count], device=device)
-            if int(count.numpy()[0]):
-                raise ValueError(f"{name}: {int(count.numpy()[0])} coordinates are not finite")
-        return arr
-    a = np.asarray(x)
-    if a.ndim != 3 or a.shape[1:] != (4, 3):
-        raise ValueError(f"{name}: expected an (n, 4, 3) array, got shape {a.shape}")
-    if a.dtype.kind not in "fiu":
-        raise ValueError(f"{name}: expected float coordinates, got dtype {a.dtype}")
-    if a.size and not np.isfinite(a).all():
-        bad = int(np.nonzero(~np.isfinite(a).reshape(len(a), -1).all(axis=1))[0][0])
-        raise ValueError(f"{name}: query {bad} has a coordinate that is not finite")
-    if a.dtype == np.float32:
-        return wp.array(np.ascontiguousarray(a), dtype=wp.vec3, device=device)
-    return wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.vec3d, device=device)
-
-
-def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tolerance: float, max_iterations: int,
-                toi: wp.array, deferred: wp.array | None = None, deferred_count: wp.array | None = None) -> None:
-    """Enqueues the two passes over ``n`` queries (no host read: a graph can hold them): every query
-    within :data:`FIRST_PASS_ITERATIONS` boxes, then the ones that needed more, packed.
-
-    Args:
-        kind: a code of :data:`CCD_KINDS`.
-        x0, x1: ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d`` points at ``t = 0`` and ``t = 1``.
-        min_distance, tolerance, max_iterations: as in :func:`ccd_queries`.
-        toi: ``(n,)`` float64 output.
-        deferred, deferred_count: scratch, ``(n,)`` and ``(1,)`` int32 (allocated when None).
-    """
-    n = x0.shape[0]
-    device = x0.device
-    if deferred is None:
-        deferred = wp.empty(n, dtype=wp.int32, device=device)
-    if deferred_count is None:
-        deferred_count = wp.zeros(1, dtype=wp.int32, device=device)
-    else:
-        deferred_count.zero_()
-    d, tol = wp.float64(min_distance), wp.float64(tolerance)
-    budget = min(FIRST_PASS_ITERATIONS, max_iterations)
-    wp.launch(ccd_first_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, budget],
-              outputs=[toi, deferred, deferred_count], device=device)
-    if max_iterations > budget:
-        wp.launch(ccd_second_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, max_iterations, deferred,
-                                                        deferred_count], outputs=[toi], device=device)
-
-
-def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
-                max_iterations: int = CCD_MAX_ITERATIONS, device=None) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous collision of many moving vertex-face or edge-edge pairs.
-
-    Args:
-        kind: ``"vertex_face"`` (rows p, f0, f1, f2) or ``"edge_edge"`` (rows ea0, ea1, eb0, eb1).
-        x0, x1: ``(n, 4, 3)`` float32 or float64 points at ``t = 0`` and ``t = 1`` (numpy, or Warp
-            arrays of that shape or ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d``); every vertex moves
-            linearly between them.
-        min_distance: minimum separation (>= 0, same units; infinity norm).
-        tolerance: distance tolerance of a query (> 0; a false positive comes within about it).
-        max_iterations: most boxes one query examines (>= 1; past it the answer is conservative).
-        device: Warp device (default: Warp's default device).
-
-    Returns:
-        ``(hit, toi)``: ``(n,)`` bool and ``(n,)`` float64 earliest time of impact in ``[0, 1]``
-        (``inf`` where no hit), never later than the true one; the same on every device, and for
-        float32 inputs the same as for the same values in float64.
-
-    Raises:
-        ValueError: an unknown ``kind``, a bad shape, non-finite coordinates, ``x0`` and ``x1`` of
-            different lengths, or a bad option.
-    """
-    if kind not in CCD_KINDS:
-        raise ValueError(f"kind must be one of {tuple(CCD_KINDS)}, got {kind!r}")
-    min_distance = number_option("min_distance", min_distance, low=0.0)
-    tolerance = number_option("tolerance", tolerance, low=0.0, low_open=True)
-    max_iterations = integer_option("max_iterations", max_iterations, low=1, high=2**31 - 1)
-    device = wp.get_device(device)
-    a0 = _query_points("x0", x0, device)
-    a1 = _query_points("x1", x1, device)
-    if a0.shape[0] != a1.shape[0]:
-        raise ValueError(f"x0 and x1 must hold the same number of queries, got {a0.shape[0]} and {a1.shape[0]}")
-    if a0.dtype != a1.dtype:  # float32 values are exact in float64: compute both in float64
-        a0, a1 = (a if a.dtype == wp.vec3d else wp.array(a.numpy().astype(np.float64), dtype=wp.vec3d, device=device)
-                  for a in (a0, a1))
-    n = a0.shape[0]
-    toi = wp.empty(n, dtype=wp.float64, device=device)
-    if n:
-        run_queries(CCD_KINDS[kind], a0, a1, min_distance, tolerance, max_iterations, toi)
-    t = toi.numpy()
-    return t <= 1.0, t
