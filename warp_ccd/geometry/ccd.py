@@ -47,6 +47,7 @@ from typing import Any
 
 import warp as wp
 
+from .primitives import _pick
 from .triangle import TOLERANCE, tri_tri_moller
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -526,15 +527,6 @@ def _apart(lo_p: wp.vec3d, hi_p: wp.vec3d, lo_q: wp.vec3d, hi_q: wp.vec3d, gap: 
 
 
 @wp.func
-def _pick3(x0: Any, x1: Any, x2: Any, i: int):
-    if i == 0:
-        return x0
-    if i == 1:
-        return x1
-    return x2
-
-
-@wp.func
 def pair_query(q: int, a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b1: wp.vec3d, b2: wp.vec3d,
                a0e: wp.vec3d, a1e: wp.vec3d, a2e: wp.vec3d, b0e: wp.vec3d, b1e: wp.vec3d, b2e: wp.vec3d):
     """Query ``q`` (of :data:`PAIR_QUERIES`) of two moving triangles: ``(kind, x0, x1)``; 0-2 a vertex
@@ -543,19 +535,19 @@ def pair_query(q: int, a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b
     kind = KIND_VERTEX_FACE
     i = q % 3
     if q < 3:
-        x0 = _points(_pick3(a0, a1, a2, i), b0, b1, b2)
-        x1 = _points(_pick3(a0e, a1e, a2e, i), b0e, b1e, b2e)
+        x0 = _points(_pick(a0, a1, a2, i), b0, b1, b2)
+        x1 = _points(_pick(a0e, a1e, a2e, i), b0e, b1e, b2e)
     elif q < 6:
-        x0 = _points(_pick3(b0, b1, b2, i), a0, a1, a2)
-        x1 = _points(_pick3(b0e, b1e, b2e, i), a0e, a1e, a2e)
+        x0 = _points(_pick(b0, b1, b2, i), a0, a1, a2)
+        x1 = _points(_pick(b0e, b1e, b2e, i), a0e, a1e, a2e)
     else:
         kind = KIND_EDGE_EDGE
         i = (q - 6) // 3
         j = (q - 6) % 3
-        x0 = _points(_pick3(a0, a1, a2, i), _pick3(a0, a1, a2, (i + 1) % 3), _pick3(b0, b1, b2, j),
-                     _pick3(b0, b1, b2, (j + 1) % 3))
-        x1 = _points(_pick3(a0e, a1e, a2e, i), _pick3(a0e, a1e, a2e, (i + 1) % 3), _pick3(b0e, b1e, b2e, j),
-                     _pick3(b0e, b1e, b2e, (j + 1) % 3))
+        x0 = _points(_pick(a0, a1, a2, i), _pick(a0, a1, a2, (i + 1) % 3), _pick(b0, b1, b2, j),
+                     _pick(b0, b1, b2, (j + 1) % 3))
+        x1 = _points(_pick(a0e, a1e, a2e, i), _pick(a0e, a1e, a2e, (i + 1) % 3), _pick(b0e, b1e, b2e, j),
+                     _pick(b0e, b1e, b2e, (j + 1) % 3))
     return kind, x0, x1
 
 
@@ -638,18 +630,18 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
     for q in range(num_queries):
         i = q % 3
         if q < 3:  # vertex i of a against face b
-            near = not _apart(_pick3(lo_a0, lo_a1, lo_a2, i), _pick3(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
+            near = not _apart(_pick(lo_a0, lo_a1, lo_a2, i), _pick(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
         elif q < 6:  # vertex i of b against face a
-            near = not _apart(_pick3(lo_b0, lo_b1, lo_b2, i), _pick3(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
+            near = not _apart(_pick(lo_b0, lo_b1, lo_b2, i), _pick(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
         else:  # edge i of a against edge j of b
             i = (q - 6) // 3
             j = (q - 6) % 3
             i1 = (i + 1) % 3
             j1 = (j + 1) % 3
-            lo_ea = wp.min(_pick3(lo_a0, lo_a1, lo_a2, i), _pick3(lo_a0, lo_a1, lo_a2, i1))
-            hi_ea = wp.max(_pick3(hi_a0, hi_a1, hi_a2, i), _pick3(hi_a0, hi_a1, hi_a2, i1))
-            lo_eb = wp.min(_pick3(lo_b0, lo_b1, lo_b2, j), _pick3(lo_b0, lo_b1, lo_b2, j1))
-            hi_eb = wp.max(_pick3(hi_b0, hi_b1, hi_b2, j), _pick3(hi_b0, hi_b1, hi_b2, j1))
+            lo_ea = wp.min(_pick(lo_a0, lo_a1, lo_a2, i), _pick(lo_a0, lo_a1, lo_a2, i1))
+            hi_ea = wp.max(_pick(hi_a0, hi_a1, hi_a2, i), _pick(hi_a0, hi_a1, hi_a2, i1))
+            lo_eb = wp.min(_pick(lo_b0, lo_b1, lo_b2, j), _pick(lo_b0, lo_b1, lo_b2, j1))
+            hi_eb = wp.max(_pick(hi_b0, hi_b1, hi_b2, j), _pick(hi_b0, hi_b1, hi_b2, j1))
             near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
         if near:
             kind, x0, x1 = pair_query(q, a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e)

@@ -51,6 +51,16 @@ __all__ = ["ContinuousNarrowPhase", "continuous_options"]
 
 
 @wp.func
+def _row_vertices(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any], c: wp.vec4i):
+    """The two triangles of row ``c`` at the start and at the end of the motion."""
+    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    return a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e
+
+
+@wp.func
 def _append_hit(c: wp.vec4i, toi: wp.float64, hit_capacity: int, hit: wp.array[wp.vec4i],
                 hit_toi: wp.array[wp.float64], hit_count: wp.array[wp.int64], object_colliding: wp.array[wp.int32]):
     if toi <= wp.float64(1.0):
@@ -94,10 +104,7 @@ def _first_pass_kernel(
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
-    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
     toi, mask = pair_search(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance, budget,
                             defer != 0)
     if mask != 0:
@@ -136,10 +143,7 @@ def _second_pass_kernel(
     if (d[1] >> q) & 1 == 0:
         return
     c = candidate[d[0]]
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
-    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
     kind, x0, x1 = pair_query(q, wp.vec3d(a0), wp.vec3d(a1), wp.vec3d(a2), wp.vec3d(b0), wp.vec3d(b1), wp.vec3d(b2),
                               wp.vec3d(a0e), wp.vec3d(a1e), wp.vec3d(a2e), wp.vec3d(b0e), wp.vec3d(b1e),
                               wp.vec3d(b2e))
