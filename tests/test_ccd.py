@@ -196,3 +196,23 @@ def test_empty(device, kind):
         x = np.zeros((0, 4, 3), dtype)
         hit, toi = warp_ccd.ccd_queries(kind, x, x, min_distance=0.0, device=device)
         assert hit.shape == (0,) and toi.shape == (0,) and hit.dtype == bool and toi.dtype == np.float64
+
+
+@pytest.mark.parametrize("scale, tolerance", [(1.0, 6.448096526425068e-17), (2.0**34, 1.1077745480978747e-06)])
+def test_tolerance_below_float64_resolution_terminates(device, scale, tolerance):
+    """A tolerance that asks for parameter widths below 2^-53 (tiny, or the default at coordinates
+    near 1e10) once made the search revisit one box for ever: widths stop at 2^-53, where every box
+    corner is exact, and the answer stays conservative. A face collapsed to a point, a vertex
+    falling through it: it comes within d (infinity norm) at t = (1 - d) / 2."""
+    x0 = np.array([[[0, 0, 1.0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]]) * scale
+    x1 = np.array([[[0, 0, -1.0], [0, 0, 0], [0, 0, 0], [0, 0, 0]]]) * scale
+    d = 0.8373815668597853 * scale
+    hit, toi = warp_ccd.ccd_queries("vertex_face", x0, x1, min_distance=d, tolerance=tolerance, device=device)
+    assert hit.tolist() == [True]
+    assert toi[0] <= (1 - d / scale) / 2 and toi[0] > (1 - d / scale) / 2 - 1e-3
+
+
+def test_kind_must_be_a_name(device):
+    x = np.zeros((1, 4, 3))
+    with pytest.raises(ValueError, match="kind"):
+        warp_ccd.ccd_queries(["vertex_face"], x, x, device=device)

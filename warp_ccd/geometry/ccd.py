@@ -103,8 +103,11 @@ coordinate of the query's points on any axis (rotating the points adds its own r
 ERROR_FLOOR = wp.constant(wp.float64(1.0e-300))
 """Absolute error added to cover gradual underflow."""
 
-WIDTH_MIN = wp.constant(wp.float64(2.0**-60))
-"""Parameter intervals are never split below this width (a box that narrow is accepted)."""
+WIDTH_MIN = wp.constant(wp.float64(2.0**-53))
+"""Parameter intervals are never split below this width (a box that narrow is accepted): every
+corner ``k * 2^-l`` in ``[0, 1]`` stays exact in float64, so ``lo + w``, ``lo - w`` and the climb's
+parity test are exact (narrower, ``lo + w`` could round back to ``lo`` and the search revisit one
+box for ever)."""
 
 DISCRETE_PAD = wp.constant(wp.float64(2.0 * TOLERANCE * math.sqrt(3.0)))
 """Triangles whose boxes at ``t = 0`` are apart by more than this times their extent cannot meet in

@@ -176,7 +176,7 @@ def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: floa
         ValueError: an unknown ``kind``, a bad shape, non-finite coordinates, ``x0`` and ``x1`` of
             different lengths, or a bad option.
     """
-    if kind not in CCD_KINDS:
+    if not isinstance(kind, str) or kind not in CCD_KINDS:
         raise ValueError(f"kind must be one of {tuple(CCD_KINDS)}, got {kind!r}")
     min_distance = number_option("min_distance", min_distance, low=0.0)
     tolerance = number_option("tolerance", tolerance, low=0.0, low_open=True)
