@@ -400,10 +400,12 @@ class CollisionPipeline:
 
     def _launch_stages(self, parity: int = 0) -> None:
         """Enqueues the four stages (the frame's counters were reset before); with ``timings``,
-        times each stage. A continuous frame reads the start ``parity`` and writes the other."""
-        if self.continuous:
-            return self._launch_continuous(parity)
+        times each stage. A continuous frame works on swept boxes over the motion from start
+        ``parity`` to the world vertices, then copies the world vertices into the other start (the
+        next frame's)."""
         scene = self.scene
+        start = self._starts[parity] if self.continuous else None
+        sweep = {} if start is None else {"world_vertex_start": start}
         times = {} if self.timings else None
 
         def mark(stage: str, start: float) -> float:
@@ -417,40 +419,20 @@ class CollisionPipeline:
         if times is not None:
             wp.synchronize_device(self.device)
         t = time.perf_counter()
-        self.boxes.refit(scene)
+        self.boxes.refit(scene, **sweep)
         t = mark("refit", t)
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
         t = mark("broad", t)
-        self.mid.launch(scene, self.pairs, reset_counters=False)
+        self.mid.launch(scene, self.pairs, reset_counters=False, **sweep)
         t = mark("mid", t)
-        self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
-                           reset_counters=False)
+        if start is None:
+            self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
+                               reset_counters=False)
+        else:
+            self.narrow.launch(scene, start, self.mid.candidates, reset_counters=False)
         mark("narrow", t)
-        if times is not None:
-            times["total"] = sum(times[s] for s in STAGES)
-        self._times = times
-
-    def _launch_continuous(self, parity: int) -> None:
-        """The continuous frame's stages: swept refit, broad, mid, continuous narrow phase over the
-        motion from start ``parity`` to the world vertices, then the world vertices copied into the
-        other start (the next frame's)."""
-        scene = self.scene
-        start = self._starts[parity]
-        times = {} if self.timings else None
-        if times is not None:
-            wp.synchronize_device(self.device)
-        t = time.perf_counter()
-        for stage, work in (
-                ("refit", lambda: self.boxes.refit(scene, start)),
-                ("broad", lambda: self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)),
-                ("mid", lambda: self.mid.launch(scene, self.pairs, reset_counters=False, world_vertex_start=start)),
-                ("narrow", lambda: self.narrow.launch(scene, start, self.mid.candidates, reset_counters=False))):
-            work()
-            if times is not None:
-                wp.synchronize_device(self.device)
-                now = time.perf_counter()
-                times[stage], t = (now - t) * 1e3, now
-        wp.copy(self._starts[1 - parity], scene.world_vertex)
+        if start is not None:
+            wp.copy(self._starts[1 - parity], scene.world_vertex)
         if times is not None:
             times["total"] = sum(times[s] for s in STAGES)
         self._times = times
