@@ -330,6 +330,14 @@ def _refit_small_inner_kernel(
         object_upper[inst] = hi
 
 
+def leaf_box_args(vertices: wp.array, start: wp.array | None, pad_abs: float) -> list:
+    """``[world_vertex, world_vertex_start, swept, pad_abs]`` of a kernel of leaf boxes
+    (:func:`leaf_box_at`): swept when ``start`` is given, else not (and the start is ``vertices``
+    themselves, never read)."""
+    swept = start is not None
+    return [vertices, start if swept else vertices, int(swept), wp.float64(pad_abs)]
+
+
 def swept_arg_types(s, v, q, t) -> dict:
     """Argument types of a kernel of one precision (:func:`~warp_ccd.geometry.precision.precision_overloads`)
     that takes ``world_vertex``, ``world_vertex_start`` and ``margin_rel`` (the leaf boxes' inputs)."""
@@ -482,10 +490,10 @@ class _RefitPlan:
         too (:func:`swept_triangle_box_at`)."""
         d = self.device
         small = [self.small_layout, self.small_object, self.small_object_start]
-        sweep = [vertices if start is None else start, int(start is not None), wp.float64(pad_abs)]
+        sweep = leaf_box_args(vertices, start, pad_abs)
         if self.num_small_leaves:
             wp.launch(_REFIT_SMALL_LEAF[precision], dim=self.num_small_leaves,
-                      inputs=[topology, vertices, *sweep, tree, self.small_leaf_block, self.small_leaf_count, *small,
+                      inputs=[topology, *sweep, tree, self.small_leaf_block, self.small_leaf_count, *small,
                               margin],
                       outputs=[lower, upper], device=d)
         if self.num_small_inner:
@@ -497,7 +505,7 @@ class _RefitPlan:
             if self.level_items[k]:
                 block, count = self.levels[k]
                 wp.launch(_REFIT_LEVEL[precision], dim=self.level_items[k],
-                          inputs=[topology, vertices, *sweep, tree, block, count, self.level_first[k], self.big_object,
+                          inputs=[topology, *sweep, tree, block, count, self.level_first[k], self.big_object,
                                   self.big_object_start, margin],
                           outputs=[lower, upper], device=d)
 
@@ -668,12 +676,8 @@ class SceneBVH:
         return []
 
     def sweep_args(self, scene, world_vertex_start: wp.array | None) -> list:
-        """``[world_vertex, world_vertex_start, swept, pad_abs]`` of a kernel of leaf boxes
-        (:func:`leaf_box_at`): swept when ``world_vertex_start`` is given, else not (and the start
-        is the world vertices themselves, never read)."""
-        swept = world_vertex_start is not None
-        return [scene.world_vertex, world_vertex_start if swept else scene.world_vertex, int(swept),
-                wp.float64(self.pad_abs)]
+        """:func:`leaf_box_args` of the scene's world vertices and this tree's :attr:`pad_abs`."""
+        return leaf_box_args(scene.world_vertex, world_vertex_start, self.pad_abs)
 
     def refit(self, scene, world_vertex_start: wp.array | None = None) -> None:
         """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
