@@ -27,26 +27,16 @@ from .ccd import (
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["ccd_batch_kernel", "ccd_first_pass_kernel", "ccd_queries", "ccd_second_pass_kernel", "run_queries"]
-
-
-@wp.kernel
-def ccd_batch_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
-                     tolerance: wp.float64, max_iterations: int, toi: wp.array[wp.float64]):
-    """One query a thread: ``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1`` (``wp.vec3``
-    or ``wp.vec3d``); writes ``toi`` ``(n,)`` (:data:`NO_HIT` where none). One pass: see
-    :func:`ccd_queries` for the two passes that keep a GPU's lanes busy."""
-    k = wp.tid()
-    toi[k] = primitive_toi(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, max_iterations,
-                           NO_HIT)
+__all__ = ["ccd_first_pass_kernel", "ccd_queries", "ccd_second_pass_kernel", "run_queries"]
 
 
 @wp.kernel
 def ccd_first_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
                           tolerance: wp.float64, budget: int, toi: wp.array[wp.float64],
                           deferred: wp.array[wp.int32], deferred_count: wp.array[wp.int32]):
-    """:data:`ccd_batch_kernel` within ``budget`` boxes a query; a query that needs more is listed in
+    """One query a thread (``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1``, ``wp.vec3`` or
+    ``wp.vec3d``), its toi into ``toi`` (:data:`~warp_ccd.geometry.ccd.NO_HIT` where none), within
+    ``budget`` boxes; a query that needs more is listed in
     ``deferred`` (``deferred_count[0]`` of them; ``deferred`` holds every query at most) for
     :data:`ccd_second_pass_kernel`."""
     k = wp.tid()
@@ -73,7 +63,7 @@ def ccd_second_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], 
 
 
 for _vec in (wp.vec3, wp.vec3d):
-    for _kernel in (ccd_batch_kernel, ccd_first_pass_kernel, ccd_second_pass_kernel):
+    for _kernel in (ccd_first_pass_kernel, ccd_second_pass_kernel):
         wp.overload(_kernel, {"x0": wp.array2d[_vec], "x1": wp.array2d[_vec]})
 
 
