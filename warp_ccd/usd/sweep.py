@@ -85,10 +85,15 @@ def sweep_interval(imp, result, start: float, end: float, intersecting_start, in
     lead = rows[starts]
     pairs = lead[:, [0, 2]].astype(np.int32)
     faces = np.stack([imp.faces(lead[:, 0], lead[:, 1]), imp.faces(lead[:, 2], lead[:, 3])], axis=1).astype(np.int32)
-    seen = {tuple(p) for p in np.asarray(intersecting_start).reshape(-1, 2).tolist()}
-    seen |= {tuple(p) for p in np.asarray(intersecting_end).reshape(-1, 2).tolist()}
-    tunnelling = np.array([tuple(p) not in seen for p in pairs.tolist()], bool)
+    seen = np.concatenate([_pair_keys(intersecting_start), _pair_keys(intersecting_end)])
+    tunnelling = ~np.isin(_pair_keys(pairs), seen)
     return SweepInterval(float(start), float(end), pairs, toi[starts], tunnelling, counts.astype(np.int64), faces)
+
+
+def _pair_keys(pairs) -> np.ndarray:
+    """``(K,)`` int64 keys ``a << 32 | b`` of ``(K, 2)`` object pairs (indices below ``2**31``)."""
+    p = np.asarray(pairs, np.int64).reshape(-1, 2)
+    return (p[:, 0] << 32) | p[:, 1]
 
 
 def _tunnelling_rows(intervals, object_path) -> list[dict]:
