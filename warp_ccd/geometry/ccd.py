@@ -57,7 +57,7 @@ __all__ = [
     "CCD_MAX_ITERATIONS",
     "CCD_TOLERANCE",
     "NO_HIT",
-    "pair_meets_at_end",
+    "pair_meets",
     "pair_query",
     "pair_search",
     "edge_edge_toi",
@@ -555,23 +555,17 @@ def pair_query(q: int, a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b
 
 
 @wp.func
-def pair_meets_at_end(a0_t1: Any, a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any) -> bool:
-    """The discrete test on the triangles at ``t = 1`` (run only where their boxes come within twice
-    its tolerance)."""
-    a0e = wp.vec3d(a0_t1)
-    a1e = wp.vec3d(a1_t1)
-    a2e = wp.vec3d(a2_t1)
-    b0e = wp.vec3d(b0_t1)
-    b1e = wp.vec3d(b1_t1)
-    b2e = wp.vec3d(b2_t1)
-    lo1_a = wp.min(wp.min(a0e, a1e), a2e)
-    hi1_a = wp.max(wp.max(a0e, a1e), a2e)
-    lo1_b = wp.min(wp.min(b0e, b1e), b2e)
-    hi1_b = wp.max(wp.max(b0e, b1e), b2e)
-    pad1 = DISCRETE_PAD * _max3(wp.max(hi1_a - lo1_a, hi1_b - lo1_b))
-    if _apart(lo1_a, hi1_a, lo1_b, hi1_b, wp.vec3d(pad1, pad1, pad1)):
+def pair_meets(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
+    """The discrete test (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance) on two
+    triangles at one time, run only where their boxes come within twice its tolerance."""
+    lo_a = wp.min(wp.min(wp.vec3d(a0), wp.vec3d(a1)), wp.vec3d(a2))
+    hi_a = wp.max(wp.max(wp.vec3d(a0), wp.vec3d(a1)), wp.vec3d(a2))
+    lo_b = wp.min(wp.min(wp.vec3d(b0), wp.vec3d(b1)), wp.vec3d(b2))
+    hi_b = wp.max(wp.max(wp.vec3d(b0), wp.vec3d(b1)), wp.vec3d(b2))
+    pad = DISCRETE_PAD * _max3(wp.max(hi_a - lo_a, hi_b - lo_b))
+    if _apart(lo_a, hi_a, lo_b, hi_b, wp.vec3d(pad, pad, pad)):
         return False
-    return tri_tri_moller(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, type(a0_t1[0])(TOLERANCE))
+    return tri_tri_moller(a0, a1, a2, b0, b1, b2, type(a0[0])(TOLERANCE))
 
 
 @wp.func
@@ -581,7 +575,7 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
     """:func:`triangle_pair_toi`, with each query's search within ``max_iterations`` boxes, and the
     mask of the queries that needed more (bit ``q``). With ``defer`` those queries' (conservative)
     answers are left out of the toi and the end test is skipped when the mask is not 0: a second
-    pass runs them in full (:func:`pair_query`, :func:`pair_meets_at_end`), and the minimum of
+    pass runs them in full (:func:`pair_query`, :func:`pair_meets` at ``t = 1``), and the minimum of
     both is then :func:`triangle_pair_toi`'s answer exactly (each query is searched on its own)."""
     # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
     # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
@@ -617,16 +611,8 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
     tri_hi_b = wp.max(wp.max(hi_b0, hi_b1), hi_b2)
     m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
     e = m * ERROR_SCALE + wp.vec3d(ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance)
-    # The discrete test at t = 0 only where the triangles' boxes at t = 0 come within twice its tolerance.
-    lo0_a = wp.min(wp.min(a0, a1), a2)
-    hi0_a = wp.max(wp.max(a0, a1), a2)
-    lo0_b = wp.min(wp.min(b0, b1), b2)
-    hi0_b = wp.max(wp.max(b0, b1), b2)
-    extent = _max3(wp.max(hi0_a - lo0_a, hi0_b - lo0_b))
-    pad = DISCRETE_PAD * extent
-    if not _apart(lo0_a, hi0_a, lo0_b, hi0_b, wp.vec3d(pad, pad, pad)):
-        if tri_tri_moller(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, type(a0_t0[0])(TOLERANCE)):
-            return _F0, int(0)
+    if pair_meets(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0):
+        return _F0, int(0)
     best = NO_HIT
     mask = int(0)
     num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
@@ -656,7 +642,7 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
     if best > _F1 and mask == 0:
         # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
         # the end, so that a continuous frame holds what a discrete frame at either end holds.
-        if pair_meets_at_end(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
+        if pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
             best = _F1
     return best, mask
 

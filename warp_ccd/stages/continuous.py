@@ -35,7 +35,7 @@ from ..geometry.ccd import (
     FIRST_PASS_ITERATIONS,
     NO_HIT,
     PAIR_QUERIES,
-    pair_meets_at_end,
+    pair_meets,
     pair_query,
     pair_search,
     primitive_toi,
@@ -177,7 +177,7 @@ def _third_pass_kernel(
     if toi > wp.float64(1.0):
         a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
         b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
-        if pair_meets_at_end(a0e, a1e, a2e, b0e, b1e, b2e):
+        if pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
             toi = wp.float64(1.0)
     _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
 
