@@ -7,8 +7,8 @@ minimum separation ``d``, when they come within ``d`` (in the infinity norm, so 
 Euclidean ``d`` is among them). The time of impact (toi) is the earliest such ``t``.
 
 The method is Tight Inclusion's (Wang et al. 2021, "A Large Scale Benchmark and an Inclusion-Based
-Algorithm for Continuous Collision Detection"), with its own certified error bound and a stackless
-depth-first search:
+Algorithm for Continuous Collision Detection"), with its own certified error bound, a stackless
+depth-first search, root proofs, and a certified coplanarity filter in front:
 
 * Both pairs are the roots of a function ``F(t, u, v)`` over a box of parameters: for vertex-face
   ``F = p(t) - (f0(t) + u (f1(t) - f0(t)) + v (f2(t) - f0(t)))`` with ``u, v >= 0, u + v <= 1``;
@@ -25,13 +25,25 @@ depth-first search:
 * Boxes are bisected (dyadic intervals, exact in float64) until one is *accepted*: its values all
   lie within ``d + eps`` of the origin, or span at most ``tolerance`` on every axis, or its
   parameter widths all fall below the widths that ``tolerance`` asks for (as Tight Inclusion
-  derives them from the motion). An accepted box reports its least ``t``: the toi is never later
-  than the true one, and a false positive lies within about ``tolerance`` of a true contact.
+  derives them from the motion), or it certainly holds a root and its time width is within the
+  tolerance's (:func:`~warp_ccd.geometry.ccd_boxes._proves_root`: the Poincare-Miranda test on
+  ``F`` preconditioned by its inverse Jacobian, with margins for every rounding). An accepted box
+  reports its least ``t``: the toi is never later than the true one, and a false positive lies
+  within about ``tolerance`` of a true contact.
 * The search is depth-first, lower halves first, and keeps going while a box could start earlier
-  than the best toi found; the split at each depth depends only on the depth (the widest
-  dimension relative to its tolerance, as Tight Inclusion splits), so the path back up needs no
-  stack: a thread holds three lower corners and three widths. Past ``max_iterations`` boxes the
-  answer is a collision at the earliest time any unfinished box starts (conservative).
+  than the best toi found; the path back up is two bits a level, so it needs no stack: a thread
+  holds three lower corners and three widths. Past ``max_iterations`` boxes the answer is a
+  collision at the earliest time any unfinished box starts (conservative).
+* At ``d = 0`` a contact needs the four points coplanar: the determinant of the query's three
+  difference vectors, a cubic ``c(t)`` in Bernstein form with a certified error bound
+  (:func:`_coplanarity`), must vanish. A query whose cubic keeps one sign over ``[0, 1]`` is ruled
+  out at once (most queries of a frame). Otherwise the search walks dyadic time intervals earliest
+  first, drops those over which ``c`` keeps one sign, halves the others down to the time
+  tolerance, and there proves the contact (:func:`_proof_box`: one Miranda box around the point
+  where ``F`` is least) or searches that interval's boxes as above. A hit costs tens of cheap
+  steps instead of hundreds of boxes; the cubic only ever rules times out (never in), so the
+  guarantees are the search's. A cubic near zero for long (a motion in one plane) falls back to
+  the search over the whole box.
 
 Every device gives the same answer: compile the calling module with ``fuse_fp=False`` (as this
 module is), so that CUDA does not contract ``a * b + c`` into an FMA.
@@ -47,6 +59,28 @@ from typing import Any
 
 import warp as wp
 
+from .ccd_boxes import (
+    _F0,
+    _F1,
+    _F2,
+    _HALF,
+    ERROR_FLOOR,
+    ERROR_SCALE,
+    ERROR_SCALE_ROTATED,
+    KIND_EDGE_EDGE,
+    KIND_VERTEX_FACE,
+    MAT33D,
+    MAT34D,
+    WIDTH_MIN,
+    _axis_range,
+    _box_search,
+    _is_upper_half,
+    _linf,
+    _max_abs4,
+    _proves_root,
+    _tol_div,
+    _value,
+)
 from .primitives import _pick
 from .triangle import TOLERANCE, tri_tri_moller
 
@@ -57,6 +91,7 @@ __all__ = [
     "CCD_MAX_ITERATIONS",
     "CCD_TOLERANCE",
     "NO_HIT",
+    "pair_filter",
     "pair_meets",
     "pair_query",
     "pair_search",
@@ -74,247 +109,18 @@ CCD_MAX_ITERATIONS = 1_000_000
 """Default cap on the boxes one query examines; past it the query reports a collision at the
 earliest time an unfinished box starts (a conservative answer; no query of the test sets gets near)."""
 
-FIRST_PASS_ITERATIONS = 4
-"""Boxes a query may examine in the first pass (:func:`~warp_ccd.geometry.ccd_queries.run_queries`,
-the continuous narrow phase). On a GPU a warp runs as long as its longest lane: a frame's queries mostly end in a
-box or a few, a few percent search hundreds; the first pass settles the short ones, the second runs
-the rest packed together."""
-
 NO_HIT = wp.constant(wp.float64(math.inf))
 """The toi of a pair that never collides."""
 
 CCD_KINDS = {"vertex_face": 0, "edge_edge": 1}
 """Query kinds of :func:`~warp_ccd.geometry.ccd_queries.ccd_queries` and their codes in the kernels."""
 
-KIND_VERTEX_FACE = wp.constant(0)
-KIND_EDGE_EDGE = wp.constant(1)
-
 PAIR_QUERIES = 15
 """Primitive queries of a triangle pair: 3 + 3 vertex-face, 3 x 3 edge-edge."""
-
-ERROR_SCALE = wp.constant(wp.float64(2.0**-45))
-"""Certified error of a corner value, relative to the largest absolute coordinate on its axis."""
-
-ERROR_SCALE_ROTATED = wp.constant(wp.float64(2.0**-44))
-"""Certified error of a corner value in the contact frame, relative to the largest absolute
-coordinate of the query's points on any axis (rotating the points adds its own rounding; see
-``docs/ARCHITECTURE.md``)."""
-
-ERROR_FLOOR = wp.constant(wp.float64(1.0e-300))
-"""Absolute error added to cover gradual underflow."""
-
-WIDTH_MIN = wp.constant(wp.float64(2.0**-53))
-"""Parameter intervals are never split below this width (a box that narrow is accepted): every
-corner ``k * 2^-l`` in ``[0, 1]`` stays exact in float64, so ``lo + w``, ``lo - w`` and the climb's
-parity test are exact (narrower, ``lo + w`` could round back to ``lo`` and the search revisit one
-box for ever)."""
 
 DISCRETE_PAD = wp.constant(wp.float64(2.0 * TOLERANCE * math.sqrt(3.0)))
 """Triangles whose boxes at ``t = 0`` are apart by more than this times their extent cannot meet in
 the discrete test (its tolerance is ``TOLERANCE`` times their longest edge)."""
-
-_F0 = wp.constant(wp.float64(0.0))
-_F1 = wp.constant(wp.float64(1.0))
-_F2 = wp.constant(wp.float64(2.0))
-_HALF = wp.constant(wp.float64(0.5))
-_INF = wp.constant(wp.float64(math.inf))
-
-
-@wp.func
-def _lerp(x0: wp.float64, x1: wp.float64, t: wp.float64) -> wp.float64:
-    return x0 + (x1 - x0) * t
-
-
-@wp.func
-def _corner(kind: int, a: wp.float64, b: wp.float64, c: wp.float64, d: wp.float64, u: wp.float64,
-            v: wp.float64) -> wp.float64:
-    """One coordinate of ``F`` at ``(u, v)``, from the four points' coordinates at one time."""
-    if kind == KIND_VERTEX_FACE:  # a = p, b c d = f0 f1 f2
-        return a - (b + ((c - b) * u + (d - b) * v))
-    return (a + (b - a) * u) - (c + (d - c) * v)  # a b = ea0 ea1, c d = eb0 eb1
-
-
-@wp.func
-def _axis_values(kind: int, x0: wp.vec4d, x1: wp.vec4d, t: wp.float64, u_lo: wp.float64, u_hi: wp.float64,
-                 v_lo: wp.float64, v_hi: wp.float64) -> wp.vec4d:
-    """One coordinate of ``F`` at the four ``(u, v)`` corners of a box at time ``t`` (``x0``, ``x1``:
-    the four points' coordinates on that axis at ``t = 0`` and ``t = 1``), in the order
-    ``(u_lo, v_lo), (u_hi, v_lo), (u_lo, v_hi), (u_hi, v_hi)``."""
-    a = _lerp(x0[0], x1[0], t)
-    b = _lerp(x0[1], x1[1], t)
-    c = _lerp(x0[2], x1[2], t)
-    d = _lerp(x0[3], x1[3], t)
-    return wp.vec4d(_corner(kind, a, b, c, d, u_lo, v_lo), _corner(kind, a, b, c, d, u_hi, v_lo),
-                    _corner(kind, a, b, c, d, u_lo, v_hi), _corner(kind, a, b, c, d, u_hi, v_hi))
-
-
-@wp.func
-def _axis_range(kind: int, x0: wp.vec4d, x1: wp.vec4d, lo: wp.vec3d, w: wp.vec3d):
-    """Least and greatest of one coordinate of ``F`` over the 8 corners of the box ``[lo, lo + w]``,
-    and how much it changes along an edge of the box in ``t``, ``u`` and ``v`` (the most of the
-    box's four edges in each)."""
-    u_hi = lo[1] + w[1]
-    v_hi = lo[2] + w[2]
-    f = _axis_values(kind, x0, x1, lo[0], lo[1], u_hi, lo[2], v_hi)
-    g = _axis_values(kind, x0, x1, lo[0] + w[0], lo[1], u_hi, lo[2], v_hi)
-    low = wp.min(wp.min(wp.min(f[0], f[1]), wp.min(f[2], f[3])), wp.min(wp.min(g[0], g[1]), wp.min(g[2], g[3])))
-    high = wp.max(wp.max(wp.max(f[0], f[1]), wp.max(f[2], f[3])), wp.max(wp.max(g[0], g[1]), wp.max(g[2], g[3])))
-    dt = wp.max(wp.max(wp.abs(g[0] - f[0]), wp.abs(g[1] - f[1])), wp.max(wp.abs(g[2] - f[2]), wp.abs(g[3] - f[3])))
-    du = wp.max(wp.max(wp.abs(f[1] - f[0]), wp.abs(f[3] - f[2])), wp.max(wp.abs(g[1] - g[0]), wp.abs(g[3] - g[2])))
-    dv = wp.max(wp.max(wp.abs(f[2] - f[0]), wp.abs(f[3] - f[1])), wp.max(wp.abs(g[2] - g[0]), wp.abs(g[3] - g[1])))
-    return low, high, wp.vec3d(dt, du, dv)
-
-
-@wp.func
-def _linf(a: wp.vec3d) -> wp.float64:
-    return wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
-
-
-@wp.func
-def _max_abs4(x0: wp.vec4d, x1: wp.vec4d) -> wp.float64:
-    m = _F0
-    for i in range(4):
-        m = wp.max(m, wp.max(wp.abs(x0[i]), wp.abs(x1[i])))
-    return m
-
-
-@wp.func
-def _tol_div(tolerance: wp.float64, length: wp.float64) -> wp.float64:
-    if length > _F0:
-        return tolerance / length
-    return _INF
-
-
-@wp.func
-def _get(v: wp.vec3d, j: int) -> wp.float64:
-    """``v[j]`` through static indices (a dynamic index puts a vector in a GPU thread's local memory,
-    which the search reads every box)."""
-    if j == 0:
-        return v[0]
-    if j == 1:
-        return v[1]
-    return v[2]
-
-
-@wp.func
-def _put(v: wp.vec3d, j: int, x: wp.float64) -> wp.vec3d:
-    """``v`` with ``v[j] = x``, through static indices."""
-    if j == 0:
-        return wp.vec3d(x, v[1], v[2])
-    if j == 1:
-        return wp.vec3d(v[0], x, v[2])
-    return wp.vec3d(v[0], v[1], x)
-
-
-@wp.func
-def _next_split(w: wp.vec3d, tol: wp.vec3d, spread: wp.vec3d) -> int:
-    """The parameter to split: among those wider than their tolerance, the one along which the
-    unfinished coordinates of ``F`` change most (``spread``), else the widest relative to its
-    tolerance (the lowest index on a tie); -1 when none is wider (a leaf)."""
-    best = int(-1)
-    best_s = -_F1
-    best_r = _F1
-    by_ratio = int(-1)
-    for j in range(3):
-        r = w[j] / tol[j]
-        if r > _F1 and w[j] > WIDTH_MIN:
-            if spread[j] > best_s:
-                best = j
-                best_s = spread[j]
-            if r > best_r:
-                by_ratio = j
-                best_r = r
-    if best_s > _F0:
-        return best
-    return by_ratio
-
-
-PATH_WORDS = 4
-"""64-bit words of a search's path: 2 bits a level, so :data:`MAX_DEPTH` levels."""
-
-MAX_DEPTH = wp.constant(32 * PATH_WORDS)
-"""Deepest level of a search: a box there is accepted (conservative; tolerances that ask for more
-splits than this, 128 halvings over three parameters, are not met)."""
-
-_path_t = wp.types.vector(length=PATH_WORDS, dtype=wp.uint64)
-
-
-@wp.func
-def _path_word(path: _path_t, word: int) -> wp.uint64:
-    if word == 0:
-        return path[0]
-    if word == 1:
-        return path[1]
-    if word == 2:
-        return path[2]
-    return path[3]
-
-
-@wp.func
-def _path_push(path: _path_t, depth: int, dim: int) -> _path_t:
-    """``path`` with parameter ``dim`` split at level ``depth`` (static indices only, as :func:`_get`)."""
-    word = depth >> 5
-    shift = wp.uint64((depth & 31) * 2)
-    x = (_path_word(path, word) & ~(wp.uint64(3) << shift)) | (wp.uint64(dim) << shift)
-    out = path
-    if word == 0:
-        out[0] = x
-    elif word == 1:
-        out[1] = x
-    elif word == 2:
-        out[2] = x
-    else:
-        out[3] = x
-    return out
-
-
-@wp.func
-def _path_dim(path: _path_t, depth: int) -> int:
-    """The parameter split at level ``depth``."""
-    return int((_path_word(path, depth >> 5) >> wp.uint64((depth & 31) * 2)) & wp.uint64(3))
-
-
-@wp.func
-def _is_upper_half(lo: wp.float64, w: wp.float64) -> bool:
-    """Whether the interval ``[lo, lo + w]`` (``lo`` a multiple of the power of two ``w``) is the
-    upper half of its parent."""
-    k = lo / w
-    return wp.floor(k * _HALF) * _F2 != k
-
-
-MAT34D = wp.types.matrix(shape=(3, 4), dtype=wp.float64)
-"""Four points on the three axes (rows x, y, z; columns the points)."""
-
-
-@wp.func
-def _pending_start(lo_in: wp.vec3d, w_in: wp.vec3d, path: _path_t, depth_in: int, include_box: bool) -> wp.float64:
-    """The earliest start time of the boxes a search stopped at box ``(lo, w)`` (level ``depth``)
-    has not finished: each upper sibling still ahead on the way up, and the box itself when
-    ``include_box``."""
-    lo = wp.vec3d(lo_in)
-    w = wp.vec3d(w_in)
-    start = _INF
-    if include_box:
-        start = lo[0]
-    depth = depth_in
-    while depth > 0:
-        depth -= 1
-        j = _path_dim(path, depth)
-        lj = _get(lo, j)
-        wj = _get(w, j)
-        if _is_upper_half(lj, wj):
-            lo = _put(lo, j, lj - wj)
-        else:
-            sibling = lo[0]
-            if j == 0:
-                sibling = lo[0] + w[0]
-            start = wp.min(start, sibling)
-        w = _put(w, j, wj * _F2)
-    return start
-
-
-MAT33D = wp.types.matrix(shape=(3, 3), dtype=wp.float64)
-
 
 @wp.func
 def _column(x: MAT34D, j: int) -> wp.vec3d:
@@ -359,6 +165,217 @@ def _contact_frame(kind: int, x0: MAT34D, x1: MAT34D) -> MAT33D:
     return wp.matrix_from_rows(a, b, n)
 
 
+COPLANAR_ERROR = wp.constant(wp.float64(2.0**-44))
+"""Certified error of a Bernstein coefficient of the coplanarity cubic (:func:`_coplanarity`),
+relative to the cube of the largest absolute coordinate of its three difference vectors: a
+determinant of float64 differences is within about ``50 * 2^-53`` of it; eightfold slack."""
+
+BERNSTEIN_ROUNDING = wp.constant(wp.float64(2.0**-46))
+"""Bound on the rounding of the cubic's Bernstein coefficients over a sub-interval (three convex
+combinations, :func:`_blossom`), relative to the largest coefficient over ``[0, 1]``."""
+
+COPLANAR_LEAVES = 8
+"""Intervals of the coplanarity search narrowed down to the time tolerance before a query falls
+back to the search over its whole box (a cubic that stays near zero over a long time: a motion in
+or near one plane)."""
+
+ONE_BELOW = wp.constant(wp.float64(1.0 - 2.0**-52))
+"""A bound on a rounded sum that keeps the exact sum within 1."""
+
+PROOF_HALF_WIDTH = wp.constant(wp.float64(2.0**-16))
+"""Half width in ``u`` and ``v`` of the box :func:`_proof_box` builds around the estimated contact."""
+
+
+@wp.func
+def _det3(a: wp.vec3d, b: wp.vec3d, c: wp.vec3d) -> wp.float64:
+    return wp.dot(a, wp.cross(b, c))
+
+
+@wp.func
+def _coplanarity(kind: int, x0: MAT34D, x1: MAT34D):
+    """Bernstein coefficients over ``[0, 1]`` of the cubic ``c(t)``, the determinant of the query's
+    three difference vectors at ``t`` (``f1 - f0``, ``f2 - f0``, ``p - f0``; or ``ea1 - ea0``,
+    ``eb1 - eb0``, ``eb0 - ea0``), zero exactly when the four points are coplanar, which every
+    contact at ``min_distance = 0`` needs; and a bound on their error. Each difference moves
+    linearly, so ``c``'s coefficients are the determinants of the ends' vectors taken from one end
+    or the other, averaged (its blossom)."""
+    i0 = 1  # the origin and the first vector's tip: f0, f1 (ea0, ea1)
+    i1 = 2
+    if kind == KIND_EDGE_EDGE:
+        i0 = 0
+        i1 = 1
+    o0 = _column(x0, i0)
+    o1 = _column(x1, i0)
+    a0 = _column(x0, i1) - o0
+    a1 = _column(x1, i1) - o1
+    b0 = wp.vec3d()
+    b1 = wp.vec3d()
+    q0 = wp.vec3d()
+    q1 = wp.vec3d()
+    if kind == KIND_EDGE_EDGE:  # ea1 - ea0, eb1 - eb0, eb0 - ea0
+        b0 = _column(x0, 3) - _column(x0, 2)
+        b1 = _column(x1, 3) - _column(x1, 2)
+        q0 = _column(x0, 2) - o0
+        q1 = _column(x1, 2) - o1
+    else:  # f1 - f0, f2 - f0, p - f0
+        b0 = _column(x0, 3) - o0
+        b1 = _column(x1, 3) - o1
+        q0 = _column(x0, 0) - o0
+        q1 = _column(x1, 0) - o1
+    third = wp.float64(1.0) / wp.float64(3.0)
+    c = wp.vec4d(_det3(a0, b0, q0),
+                 (_det3(a1, b0, q0) + _det3(a0, b1, q0) + _det3(a0, b0, q1)) * third,
+                 (_det3(a0, b1, q1) + _det3(a1, b0, q1) + _det3(a1, b1, q0)) * third,
+                 _det3(a1, b1, q1))
+    m = wp.max(wp.max(_linf(a0), _linf(a1)), wp.max(wp.max(_linf(b0), _linf(b1)), wp.max(_linf(q0), _linf(q1))))
+    big = wp.max(wp.max(wp.abs(c[0]), wp.abs(c[1])), wp.max(wp.abs(c[2]), wp.abs(c[3])))
+    return c, COPLANAR_ERROR * m * m * m + BERNSTEIN_ROUNDING * big + ERROR_FLOOR
+
+
+@wp.func
+def _blossom(c: wp.vec4d, s1: wp.float64, s2: wp.float64, s3: wp.float64) -> wp.float64:
+    """The blossom (polar form) of the cubic with Bernstein coefficients ``c`` at ``(s1, s2, s3)``."""
+    d0 = c[0] + (c[1] - c[0]) * s1
+    d1 = c[1] + (c[2] - c[1]) * s1
+    d2 = c[2] + (c[3] - c[2]) * s1
+    e0 = d0 + (d1 - d0) * s2
+    e1 = d1 + (d2 - d1) * s2
+    return e0 + (e1 - e0) * s3
+
+
+@wp.func
+def _one_signed_on(c: wp.vec4d, a: wp.float64, b: wp.float64, e: wp.float64) -> bool:
+    """Whether the cubic keeps one sign over ``[a, b]``: its Bernstein coefficients there (its
+    blossom at ``a`` and ``b``) all beyond ``e`` on one side (they bound it)."""
+    c0 = _blossom(c, a, a, a)
+    c1 = _blossom(c, a, a, b)
+    c2 = _blossom(c, a, b, b)
+    c3 = _blossom(c, b, b, b)
+    if c0 > e and c1 > e and c2 > e and c3 > e:
+        return True
+    return c0 < -e and c1 < -e and c2 < -e and c3 < -e
+
+
+@wp.func
+def _proof_box(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, wt: wp.float64, err: wp.vec3d) -> bool:
+    """Whether a contact certainly lies in ``[a, a + wt]``: :func:`_proves_root` on the box of that
+    time interval and a square of half width :data:`PROOF_HALF_WIDTH` around the ``(u, v)`` that
+    solve ``F = 0`` in the least-squares sense at its middle (``F`` is linear in ``(u, v)`` at one
+    time), when that square lies inside the query's domain."""
+    tc = a + _HALF * wt
+    f = wp.vec3d()
+    fu = wp.vec3d()
+    fv = wp.vec3d()
+    for ax in range(3):
+        f[ax] = _value(kind, x0[ax], x1[ax], tc, _F0, _F0)
+        fu[ax] = _value(kind, x0[ax], x1[ax], tc, _F1, _F0) - f[ax]
+        fv[ax] = _value(kind, x0[ax], x1[ax], tc, _F0, _F1) - f[ax]
+    uu = wp.dot(fu, fu)
+    uv = wp.dot(fu, fv)
+    vv = wp.dot(fv, fv)
+    det = uu * vv - uv * uv
+    if not (det > _F0):
+        return False
+    pu = wp.dot(fu, f)
+    pv = wp.dot(fv, f)
+    u = (uv * pv - vv * pu) / det
+    v = (uv * pu - uu * pv) / det
+    h = PROOF_HALF_WIDTH
+    u_lo = u - h
+    v_lo = v - h
+    u_hi = u_lo + _F2 * h
+    v_hi = v_lo + _F2 * h
+    if not (u_lo >= _F0 and v_lo >= _F0 and u_hi <= _F1 and v_hi <= _F1):
+        return False
+    if kind == KIND_VERTEX_FACE and not (u_hi + v_hi <= ONE_BELOW):
+        return False  # the rounded sum within 1 - 2^-52: the exact one within 1
+    return _proves_root(kind, x0, x1, wp.vec3d(a, u_lo, v_lo), wp.vec3d(wt, u_hi - u_lo, v_hi - v_lo), err)
+
+
+@wp.func
+def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: MAT34D, tol: wp.vec3d,
+                     eps: wp.vec3d, err: wp.vec3d, tolerance: wp.float64, max_iterations: int,
+                     t_end: wp.float64):
+    """The search at ``min_distance = 0`` through the times the four points may be coplanar:
+    ``(toi, steps, exhausted, fall back)``.
+
+    A depth-first search over dyadic time intervals, earliest first, drops each interval over which
+    the coplanarity cubic ``c`` (Bernstein coefficients, error ``c_err``) keeps one sign: no contact
+    can happen there. An interval that it cannot drop is halved until it is no wider than the time
+    tolerance ``tol[0]``; there, the contact is proved by :func:`_proof_box` (its start is then the
+    toi), or else the boxes over that interval are searched (:func:`_box_search`). More than
+    :data:`COPLANAR_LEAVES` such intervals (a cubic near zero for long): fall back (the caller runs
+    the search over the whole box)."""
+    a = _F0
+    wt = _F1
+    best = t_end
+    steps = int(0)
+    leaves = int(0)
+    done = bool(False)
+    while not done:
+        descend = bool(False)
+        if a < best:
+            steps += 1
+            b = a + wt
+            if not _one_signed_on(c, a, b, c_err):
+                if wt > tol[0] and wt > WIDTH_MIN:
+                    descend = True
+                else:
+                    leaves += 1
+                    if leaves > COPLANAR_LEAVES:
+                        return best, steps, int(0), int(1)
+                    if _proof_box(kind, x0, x1, a, wt, err):
+                        best = a
+                    else:
+                        found, boxes, ran_out = _box_search(kind, x0, x1, wp.vec3d(a, _F0, _F0),
+                                                            wp.vec3d(wt, _F1, _F1), tol, eps, err, tolerance,
+                                                            wp.max(max_iterations - steps, 1), best)
+                        steps += boxes
+                        best = found
+                        if ran_out != 0:
+                            return wp.min(best, b), steps, int(1), int(0)
+            if steps >= max_iterations and not descend:
+                # Out of budget: a collision no earlier than any interval not yet finished.
+                return wp.min(best, b), steps, int(1), int(0)
+            if steps >= max_iterations:
+                return wp.min(best, a), steps, int(1), int(0)
+        if descend:
+            wt = wt * _HALF
+        else:
+            climbing = bool(True)
+            while climbing:
+                if wt >= _F1:
+                    climbing = False
+                    done = True
+                elif _is_upper_half(a, wt):
+                    a = a - wt
+                    wt = wt * _F2
+                else:
+                    a = a + wt
+                    climbing = False
+    return best, steps, int(0), int(0)
+
+
+@wp.func
+def _excluded(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64) -> bool:
+    """Whether a query's filters rule out any contact: at ``min_distance = 0`` the coplanarity cubic
+    keeps one sign over ``[0, 1]`` (:func:`_coplanarity`: the four points are never coplanar, most
+    queries of a frame), or ``F`` over the whole box of parameters stays beyond ``min_distance``
+    plus the rounding on one axis."""
+    if min_distance == _F0:
+        c, c_err = _coplanarity(kind, x0, x1)
+        if _one_signed_on(c, _F0, _F1, c_err):
+            return True
+    lo = wp.vec3d(_F0, _F0, _F0)
+    w = wp.vec3d(_F1, _F1, _F1)
+    for ax in range(3):
+        e = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR + min_distance
+        fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
+        if fl > e or fh < -e:
+            return True
+    return False
+
+
 @wp.func
 def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, tolerance: wp.float64,
             max_iterations: int, t_end: wp.float64):
@@ -370,20 +387,20 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
         x0, x1: the four points at ``t = 0`` and ``t = 1``, rows x, y, z.
         min_distance: minimum separation (>= 0, infinity norm).
         tolerance: distance tolerance (> 0).
-        max_iterations: most boxes examined.
+        max_iterations: most boxes (and coplanarity intervals) examined.
         t_end: only times before it are searched (:data:`NO_HIT` for all of ``[0, 1]``; a smaller
             value when an earlier query already found that toi).
     """
-    eps = wp.vec3d()
+    if _excluded(kind, x0, x1, min_distance):
+        return t_end, int(0)
+    err = wp.vec3d()
     for ax in range(3):
-        eps[ax] = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR + min_distance
+        err[ax] = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR
+    eps = err + wp.vec3d(min_distance, min_distance, min_distance)
     lo = wp.vec3d(_F0, _F0, _F0)
     w = wp.vec3d(_F1, _F1, _F1)
-    # Most queries of a frame are far apart: the whole box is rejected before anything else is computed.
-    for ax in range(3):
-        fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
-        if fl > eps[ax] or fh < -eps[ax]:
-            return t_end, int(0)
+    x0w = x0
+    x1w = x1
     if min_distance == _F0:
         # Search in a frame whose third axis is the face's normal (vertex-face) or the edges' common
         # normal (edge-edge): F = 0 does not depend on the frame, and there the distance along the
@@ -396,10 +413,12 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
             x0 = r @ x0
             x1 = r @ x1
             e = ERROR_SCALE_ROTATED * m + ERROR_FLOOR
-            eps = wp.vec3d(e, e, e)
+            err = wp.vec3d(e, e, e)
+            eps = err
     # Parameter tolerances from the whole box (Tight Inclusion's compute_*_tolerances: the tolerance
     # over three times the longest edge of F's box along each parameter, in the infinity norm;
-    # infinite along a parameter F does not depend on); in the contact frame the box is tested again.
+    # infinite along a parameter F does not depend on); in the contact frame the box is tested again
+    # (the world's axes were, by _excluded).
     longest = wp.vec3d()
     for ax in range(3):
         fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
@@ -409,69 +428,17 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
     three = wp.float64(3.0)
     tol = wp.vec3d(_tol_div(tolerance, three * longest[0]), _tol_div(tolerance, three * longest[1]),
                    _tol_div(tolerance, three * longest[2]))
-    path = _path_t()
-    depth = int(0)
-    best = t_end
-    iterations = int(0)
-    exhausted = int(0)
-    done = bool(False)
-    while not done:
-        descend = int(-1)
-        visit = lo[0] < best
-        if kind == KIND_VERTEX_FACE and lo[1] + lo[2] > _F1:
-            visit = False  # wholly outside the triangle u + v <= 1
-        if visit:
-            iterations += 1
-            reject = bool(False)
-            finished = bool(True)
-            spread = wp.vec3d()
-            for ax in range(3):
-                if not reject:
-                    fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
-                    e = eps[ax]
-                    if fl > e or fh < -e:
-                        reject = True
-                    elif (fl < -e or fh > e) and fh - fl > tolerance:
-                        # Neither within d + eps everywhere nor within the tolerance of it.
-                        finished = False
-                        spread = wp.max(spread, change)
-            if not reject:
-                if not finished and depth < MAX_DEPTH:
-                    if best < lo[0] + w[0] and w[0] > tol[0] and w[0] > WIDTH_MIN:
-                        # The box straddles the best toi so far: only its part before it matters.
-                        descend = 0
-                    else:
-                        descend = _next_split(w, tol, spread)
-                if descend < 0:
-                    best = lo[0]  # accepted (lo[0] < best)
-            if iterations >= max_iterations:
-                # Out of budget: a collision no later than any unfinished box could hold one.
-                best = wp.min(best, _pending_start(lo, w, path, depth, descend >= 0))
-                exhausted = 1
-                done = True
-        if not done:
-            if descend >= 0:
-                path = _path_push(path, depth, descend)
-                depth += 1
-                w = _put(w, descend, _get(w, descend) * _HALF)  # the lower half first
-            else:
-                # Next box: climb past upper halves, then step to the upper sibling.
-                climbing = bool(True)
-                while climbing:
-                    if depth == 0:
-                        climbing = False
-                        done = True
-                    else:
-                        j = _path_dim(path, depth - 1)
-                        lj = _get(lo, j)
-                        wj = _get(w, j)
-                        if _is_upper_half(lj, wj):
-                            lo = _put(lo, j, lj - wj)
-                            w = _put(w, j, wj * _F2)
-                            depth -= 1
-                        else:
-                            lo = _put(lo, j, lj + wj)
-                            climbing = False
+    used = int(0)
+    if min_distance == _F0:
+        c, c_err = _coplanarity(kind, x0w, x1w)
+        best, used, exhausted, fall_back = _coplanar_search(kind, c, c_err, x0, x1, tol, eps, err, tolerance,
+                                                            max_iterations, t_end)
+        if fall_back == 0:
+            return best, exhausted
+        if used >= max_iterations:
+            return _F0, int(1)  # nothing proved yet: the conservative answer is the start
+    best, boxes, exhausted = _box_search(kind, x0, x1, lo, w, tol, eps, err, tolerance, max_iterations - used,
+                                         t_end)
     return best, exhausted
 
 
@@ -568,83 +535,98 @@ def pair_meets(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
     return tri_tri_moller(a0, a1, a2, b0, b1, b2, type(a0[0])(TOLERANCE))
 
 
-@wp.func
-def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
-                a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
-                max_iterations: int, defer: bool):
-    """:func:`triangle_pair_toi`, with each query's search within ``max_iterations`` boxes, and the
-    mask of the queries that needed more (bit ``q``). With ``defer`` those queries' (conservative)
-    answers are left out of the toi and the end test is skipped when the mask is not 0: a second
-    pass runs them in full (:func:`pair_query`, :func:`pair_meets` at ``t = 1``), and the minimum of
-    both is then :func:`triangle_pair_toi`'s answer exactly (each query is searched on its own)."""
-    # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
-    # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
-    # root (its F lies in the difference of the boxes; the one rounding of that difference is within
-    # eps), so most of a candidate's 15 queries end at a few comparisons.
-    a0 = wp.vec3d(a0_t0)
-    a1 = wp.vec3d(a1_t0)
-    a2 = wp.vec3d(a2_t0)
-    b0 = wp.vec3d(b0_t0)
-    b1 = wp.vec3d(b1_t0)
-    b2 = wp.vec3d(b2_t0)
-    a0e = wp.vec3d(a0_t1)
-    a1e = wp.vec3d(a1_t1)
-    a2e = wp.vec3d(a2_t1)
-    b0e = wp.vec3d(b0_t1)
-    b1e = wp.vec3d(b1_t1)
-    b2e = wp.vec3d(b2_t1)
-    lo_a0 = wp.min(a0, a0e)
-    lo_a1 = wp.min(a1, a1e)
-    lo_a2 = wp.min(a2, a2e)
-    hi_a0 = wp.max(a0, a0e)
-    hi_a1 = wp.max(a1, a1e)
-    hi_a2 = wp.max(a2, a2e)
-    lo_b0 = wp.min(b0, b0e)
-    lo_b1 = wp.min(b1, b1e)
-    lo_b2 = wp.min(b2, b2e)
-    hi_b0 = wp.max(b0, b0e)
-    hi_b1 = wp.max(b1, b1e)
-    hi_b2 = wp.max(b2, b2e)
-    tri_lo_a = wp.min(wp.min(lo_a0, lo_a1), lo_a2)
-    tri_hi_a = wp.max(wp.max(hi_a0, hi_a1), hi_a2)
-    tri_lo_b = wp.min(wp.min(lo_b0, lo_b1), lo_b2)
-    tri_hi_b = wp.max(wp.max(hi_b0, hi_b1), hi_b2)
-    m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
-    e = m * ERROR_SCALE + wp.vec3d(ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance, ERROR_FLOOR + min_distance)
-    if pair_meets(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0):
-        return _F0, int(0)
-    best = NO_HIT
-    mask = int(0)
-    num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
-    for q in range(num_queries):
-        i = q % 3
-        if q < 3:  # vertex i of a against face b
-            near = not _apart(_pick(lo_a0, lo_a1, lo_a2, i), _pick(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
-        elif q < 6:  # vertex i of b against face a
-            near = not _apart(_pick(lo_b0, lo_b1, lo_b2, i), _pick(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
-        else:  # edge i of a against edge j of b
-            i = (q - 6) // 3
-            j = (q - 6) % 3
-            i1 = (i + 1) % 3
-            j1 = (j + 1) % 3
-            lo_ea = wp.min(_pick(lo_a0, lo_a1, lo_a2, i), _pick(lo_a0, lo_a1, lo_a2, i1))
-            hi_ea = wp.max(_pick(hi_a0, hi_a1, hi_a2, i), _pick(hi_a0, hi_a1, hi_a2, i1))
-            lo_eb = wp.min(_pick(lo_b0, lo_b1, lo_b2, j), _pick(lo_b0, lo_b1, lo_b2, j1))
-            hi_eb = wp.max(_pick(hi_b0, hi_b1, hi_b2, j), _pick(hi_b0, hi_b1, hi_b2, j1))
-            near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
-        if near:
-            kind, x0, x1 = pair_query(q, a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e)
-            toi, ran_out = _search(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT)
-            if ran_out != 0 and defer:
-                mask = mask | (1 << q)
-            else:
-                best = wp.min(best, toi)
-    if best > _F1 and mask == 0:
-        # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
-        # the end, so that a continuous frame holds what a discrete frame at either end holds.
-        if pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
-            best = _F1
-    return best, mask
+def _pair_scan(search: bool):
+    """The scan of a candidate's 15 queries: with ``search``, :func:`pair_search`; without,
+    :func:`pair_filter` (a function without the searches: a first pass's kernel stays small)."""
+
+    @wp.func
+    def scan(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
+             a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
+             max_iterations: int):
+        # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
+        # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
+        # root (its F lies in the difference of the boxes; the one rounding of that difference is within
+        # eps), so most of a candidate's 15 queries end at a few comparisons.
+        a0 = wp.vec3d(a0_t0)
+        a1 = wp.vec3d(a1_t0)
+        a2 = wp.vec3d(a2_t0)
+        b0 = wp.vec3d(b0_t0)
+        b1 = wp.vec3d(b1_t0)
+        b2 = wp.vec3d(b2_t0)
+        a0e = wp.vec3d(a0_t1)
+        a1e = wp.vec3d(a1_t1)
+        a2e = wp.vec3d(a2_t1)
+        b0e = wp.vec3d(b0_t1)
+        b1e = wp.vec3d(b1_t1)
+        b2e = wp.vec3d(b2_t1)
+        lo_a0 = wp.min(a0, a0e)
+        lo_a1 = wp.min(a1, a1e)
+        lo_a2 = wp.min(a2, a2e)
+        hi_a0 = wp.max(a0, a0e)
+        hi_a1 = wp.max(a1, a1e)
+        hi_a2 = wp.max(a2, a2e)
+        lo_b0 = wp.min(b0, b0e)
+        lo_b1 = wp.min(b1, b1e)
+        lo_b2 = wp.min(b2, b2e)
+        hi_b0 = wp.max(b0, b0e)
+        hi_b1 = wp.max(b1, b1e)
+        hi_b2 = wp.max(b2, b2e)
+        tri_lo_a = wp.min(wp.min(lo_a0, lo_a1), lo_a2)
+        tri_hi_a = wp.max(wp.max(hi_a0, hi_a1), hi_a2)
+        tri_lo_b = wp.min(wp.min(lo_b0, lo_b1), lo_b2)
+        tri_hi_b = wp.max(wp.max(hi_b0, hi_b1), hi_b2)
+        m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
+        pad = ERROR_FLOOR + min_distance
+        e = m * ERROR_SCALE + wp.vec3d(pad, pad, pad)
+        if pair_meets(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0):
+            return _F0, int(0)
+        best = NO_HIT
+        mask = int(0)
+        num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
+        for q in range(num_queries):
+            i = q % 3
+            if q < 3:  # vertex i of a against face b
+                near = not _apart(_pick(lo_a0, lo_a1, lo_a2, i), _pick(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
+            elif q < 6:  # vertex i of b against face a
+                near = not _apart(_pick(lo_b0, lo_b1, lo_b2, i), _pick(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
+            else:  # edge i of a against edge j of b
+                i = (q - 6) // 3
+                j = (q - 6) % 3
+                i1 = (i + 1) % 3
+                j1 = (j + 1) % 3
+                lo_ea = wp.min(_pick(lo_a0, lo_a1, lo_a2, i), _pick(lo_a0, lo_a1, lo_a2, i1))
+                hi_ea = wp.max(_pick(hi_a0, hi_a1, hi_a2, i), _pick(hi_a0, hi_a1, hi_a2, i1))
+                lo_eb = wp.min(_pick(lo_b0, lo_b1, lo_b2, j), _pick(lo_b0, lo_b1, lo_b2, j1))
+                hi_eb = wp.max(_pick(hi_b0, hi_b1, hi_b2, j), _pick(hi_b0, hi_b1, hi_b2, j1))
+                near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
+            if near:
+                kind, x0, x1 = pair_query(q, a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e)
+                if wp.static(search):
+                    best = wp.min(best, primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT))
+                elif not _excluded(kind, x0, x1, min_distance):
+                    mask = mask | (1 << q)
+        if best > _F1 and mask == 0:
+            # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
+            # the end, so that a continuous frame holds what a discrete frame at either end holds.
+            if pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
+                best = _F1
+        return best, mask
+
+    return scan
+
+
+pair_search = _pair_scan(True)
+""":func:`triangle_pair_toi` as ``(toi, 0)``: ``pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0,
+a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, min_distance, tolerance, max_iterations)`` (device function)."""
+
+pair_filter = _pair_scan(False)
+"""The first pass of :func:`triangle_pair_toi` (same arguments, device function): ``(toi, mask)``.
+``toi`` is 0 when the triangles meet at ``t = 0``; else the mask holds bit ``q`` for each query
+(:func:`pair_query`) that its filters do not rule out (:func:`_excluded`); with a mask of 0, ``toi``
+is 1 when they meet at ``t = 1`` and :data:`NO_HIT` otherwise. A second pass searches the masked
+queries (:func:`primitive_toi`) and, when none hits, runs the end test (:func:`pair_meets` at
+``t = 1``): the minimum is :func:`triangle_pair_toi`'s answer exactly (each query is searched on its own,
+and its filters are the first steps of its search)."""
 
 
 @wp.func
@@ -660,6 +642,6 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     contact, so this is their first contact (within ``min_distance``). Each query is searched on
     its own (a frame's second pass runs the long ones side by side, with the same answer).
     """
-    toi, exhausted = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
-                                 min_distance, tolerance, max_iterations, False)
+    toi, mask = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
+                            min_distance, tolerance, max_iterations)
     return toi

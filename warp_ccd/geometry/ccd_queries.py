@@ -1,10 +1,11 @@
 """Batches of continuous-collision queries: :func:`ccd_queries` (numpy or Warp arrays in, numpy out)
 and the kernels it launches, :func:`run_queries`' two passes.
 
-A GPU runs a warp as long as its longest lane. A frame's queries mostly end in a box or a few and a
-few percent search hundreds, so the first pass gives every query :data:`FIRST_PASS_ITERATIONS`
-boxes and lists the rest; the second runs those from the start, packed one a thread. The answers
-are those of one pass (the search is deterministic: a search within the budget is the same search).
+A GPU runs a warp as long as its longest lane. Most queries of a frame are ruled out by their
+filters (the coplanarity cubic, the whole box: :func:`~warp_ccd.geometry.ccd._excluded`) and the
+rest search tens to hundreds of steps, so the first pass runs every query's filters and lists those
+they leave; the second searches those, packed one a thread. The answers are those of one pass (the
+filters are the first steps of the search, which is deterministic).
 The device functions are in :mod:`warp_ccd.geometry.ccd`.
 """
 
@@ -18,10 +19,9 @@ from .ccd import (
     CCD_KINDS,
     CCD_MAX_ITERATIONS,
     CCD_TOLERANCE,
-    FIRST_PASS_ITERATIONS,
     NO_HIT,
+    _excluded,
     _points,
-    _search,
     primitive_toi,
 )
 
@@ -32,18 +32,15 @@ __all__ = ["ccd_first_pass_kernel", "ccd_queries", "ccd_second_pass_kernel", "ru
 
 @wp.kernel
 def ccd_first_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], min_distance: wp.float64,
-                          tolerance: wp.float64, budget: int, toi: wp.array[wp.float64],
-                          deferred: wp.array[wp.int32], deferred_count: wp.array[wp.int32]):
+                          toi: wp.array[wp.float64], deferred: wp.array[wp.int32], deferred_count: wp.array[wp.int32]):
     """One query a thread (``x0``, ``x1`` ``(n, 4)`` points at ``t = 0`` and ``t = 1``, ``wp.vec3`` or
-    ``wp.vec3d``), its toi into ``toi`` (:data:`~warp_ccd.geometry.ccd.NO_HIT` where none), within
-    ``budget`` boxes; a query that needs more is listed in
-    ``deferred`` (``deferred_count[0]`` of them; ``deferred`` holds every query at most) for
-    :data:`ccd_second_pass_kernel`."""
+    ``wp.vec3d``) through its filters: ``toi`` set to :data:`~warp_ccd.geometry.ccd.NO_HIT`, and a
+    query they do not rule out listed in ``deferred`` (``deferred_count[0]`` of them; ``deferred``
+    holds every query at most) for :data:`ccd_second_pass_kernel`."""
     k = wp.tid()
-    t, exhausted = _search(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                           _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance, tolerance, budget, NO_HIT)
-    toi[k] = t
-    if exhausted != 0:
+    toi[k] = NO_HIT
+    if not _excluded(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
+                     _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance):
         deferred[wp.atomic_add(deferred_count, 0, 1)] = k
 
 
@@ -116,8 +113,8 @@ def _query_points(name: str, x, device) -> wp.array:
 
 def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tolerance: float, max_iterations: int,
                 toi: wp.array, deferred: wp.array | None = None, deferred_count: wp.array | None = None) -> None:
-    """Enqueues the two passes over ``n`` queries (no host read: a graph can hold them): every query
-    within :data:`FIRST_PASS_ITERATIONS` boxes, then the ones that needed more, packed.
+    """Enqueues the two passes over ``n`` queries (no host read: a graph can hold them): every query's
+    filters, then the search of the queries they leave, packed.
 
     Args:
         kind: a code of :data:`CCD_KINDS`.
@@ -135,12 +132,10 @@ def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tole
     else:
         deferred_count.zero_()
     d, tol = wp.float64(min_distance), wp.float64(tolerance)
-    budget = min(FIRST_PASS_ITERATIONS, max_iterations)
-    wp.launch(ccd_first_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, budget],
-              outputs=[toi, deferred, deferred_count], device=device)
-    if max_iterations > budget:
-        wp.launch(ccd_second_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, max_iterations, deferred,
-                                                        deferred_count], outputs=[toi], device=device)
+    wp.launch(ccd_first_pass_kernel, dim=n, inputs=[kind, x0, x1, d], outputs=[toi, deferred, deferred_count],
+              device=device)
+    wp.launch(ccd_second_pass_kernel, dim=n, inputs=[kind, x0, x1, d, tol, max_iterations, deferred, deferred_count],
+              outputs=[toi], device=device)
 
 
 def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,

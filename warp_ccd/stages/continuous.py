@@ -13,14 +13,15 @@ are flagged. The toi is never later than the true one (Tight Inclusion's guarant
 pair that already meets at ``t = 0``.
 
 Cost: one query of up to 15 primitive pairs a candidate, each a bounded search
-(``max_iterations`` boxes); most candidates of a swept frame are rejected by their swept boxes or
-the first box of a search. Three passes: the first gives each query
-:data:`~warp_ccd.geometry.ccd.FIRST_PASS_ITERATIONS` boxes and lists the candidates some of whose
-queries need more (about 1%), with the mask of those queries; the second runs each such query from
-the start, one a thread, side by side (on a GPU a long search in a warp of finished lanes, or one
-candidate's long searches one after the other, cost their whole length in latency); the third
-appends the listed candidates. The results are those of one pass (each query is searched on its
-own, deterministically; a search within the budget is the same search).
+(``max_iterations`` steps); most queries of a swept frame are ruled out by their swept boxes or
+their filters (the coplanarity cubic, the whole box). Three passes: the first runs the discrete
+test at ``t = 0``, the swept boxes and the filters of each candidate
+(:func:`~warp_ccd.geometry.ccd.pair_filter`, a small kernel) and lists the candidates with queries
+left (a few percent), with the mask of those queries; the second searches each such query, one a
+thread, side by side (on a GPU a search in a warp of finished lanes, or one candidate's searches
+one after the other, cost their whole length in latency); the third appends the listed
+candidates. The results are those of one pass (each query is searched on its own,
+deterministically, its filters its first steps).
 The module is compiled without floating-point contraction (``fuse_fp=False``), as
 :mod:`warp_ccd.geometry.ccd` asks, so that every device gives the same tois.
 """
@@ -32,12 +33,11 @@ import warp as wp
 from ..geometry.ccd import (
     CCD_MAX_ITERATIONS,
     CCD_TOLERANCE,
-    FIRST_PASS_ITERATIONS,
     NO_HIT,
     PAIR_QUERIES,
+    pair_filter,
     pair_meets,
     pair_query,
-    pair_search,
     primitive_toi,
 )
 from ..geometry.precision import precision_overloads
@@ -82,8 +82,6 @@ def _first_pass_kernel(
     candidate_capacity: int,
     min_distance: wp.float64,
     tolerance: wp.float64,
-    budget: int,
-    defer: int,
     hit_capacity: int,
     deferred_capacity: int,
     # Outputs
@@ -95,18 +93,18 @@ def _first_pass_kernel(
     deferred_toi: wp.array[wp.float64],
     deferred_count: wp.array[wp.int64],
 ):
-    """One thread per candidate slot: the toi of row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion
-    from ``world_vertex_start`` to ``world_vertex``, each primitive query within ``budget`` boxes; a
-    toi in ``[0, 1]`` appends the row and its toi and flags both objects. With ``defer``, a row some
-    of whose queries need more boxes goes to ``deferred`` as ``(slot, mask of those queries)`` with
-    the least toi of the others in ``deferred_toi`` (:func:`_second_pass_kernel`)."""
+    """One thread per candidate slot: row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion from
+    ``world_vertex_start`` to ``world_vertex`` through its queries' filters
+    (:func:`~warp_ccd.geometry.ccd.pair_filter`): a row that meets at ``t = 0`` (toi 0), or whose
+    queries are all ruled out and that meets at ``t = 1`` (toi 1), is appended with its toi and
+    flags both objects; a row with queries left to search goes to ``deferred`` as ``(slot, mask of
+    those queries)`` (:func:`_second_pass_kernel`), ``deferred_toi`` set to no hit."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
     a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
-    toi, mask = pair_search(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance, budget,
-                            defer != 0)
+    toi, mask = pair_filter(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance, 1)
     if mask != 0:
         slot = reserve_slot(deferred_count, deferred_capacity)
         if slot >= 0:
@@ -269,8 +267,6 @@ class ContinuousNarrowPhase:
             self.toi = wp.zeros(hits.capacity, dtype=wp.float64, device=d)
         self.object_colliding.zero_()
         deferred = self.deferred
-        budget = min(FIRST_PASS_ITERATIONS, self.max_iterations)
-        defer = self.max_iterations > budget
         if reset_counters:
             deferred.reset()
         if self.deferred_toi.shape[0] != deferred.capacity:
@@ -278,15 +274,14 @@ class ContinuousNarrowPhase:
         d64, tol64 = wp.float64(self.min_distance), wp.float64(self.tolerance)
         wp.launch(_FIRST[scene.precision], dim=candidates.capacity,
                   inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, candidates.count,
-                          candidates.capacity, d64, tol64, budget, int(defer), hits.capacity, deferred.capacity],
+                          candidates.capacity, d64, tol64, hits.capacity, deferred.capacity],
                   outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data, self.deferred_toi,
                            deferred.count], device=d)
-        if defer:
-            wp.launch(_SECOND[scene.precision], dim=deferred.capacity * PAIR_QUERIES,
-                      inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, deferred.data,
-                              deferred.count, deferred.capacity, d64, tol64, self.max_iterations],
-                      outputs=[self.deferred_toi], device=d)
-            wp.launch(_THIRD[scene.precision], dim=deferred.capacity,
-                      inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
-                              deferred.count, deferred.capacity, hits.capacity],
-                      outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
+        wp.launch(_SECOND[scene.precision], dim=deferred.capacity * PAIR_QUERIES,
+                  inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, deferred.data,
+                          deferred.count, deferred.capacity, d64, tol64, self.max_iterations],
+                  outputs=[self.deferred_toi], device=d)
+        wp.launch(_THIRD[scene.precision], dim=deferred.capacity,
+                  inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
+                          deferred.count, deferred.capacity, hits.capacity],
+                  outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
