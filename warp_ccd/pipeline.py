@@ -52,7 +52,9 @@ so that fewer pairs reach the exact test (half as many as with leaves of 2)."""
 DEFORMING_LEAF_SIZE = 4
 """Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
 a quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair
-(``warp_ccd/bench/deforming.py``)."""
+(``warp_ccd/bench/deforming.py``). Not in a continuous frame: its leaf pairs' triangle pairs each
+cost a continuous test, dearer than a refit (leaves of one triangle: 18,088 candidates of 3,000
+polyhedra over a step against 66,796 with leaves of 4)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
@@ -262,7 +264,7 @@ class CollisionPipeline:
         graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
             False launches every kernel from Python (the CPU always does). Both give the same results.
         leaf_size: triangles per tree leaf (``bvh`` mid phase; default :data:`RIGID_LEAF_SIZE`, or
-            :data:`DEFORMING_LEAF_SIZE` in a scene with deforming objects).
+            :data:`DEFORMING_LEAF_SIZE` in a discrete pipeline of a scene with deforming objects).
         cut_depth: least level of the tree cut whose boxes make a big rigid object's box for the
             broad phase (``bvh`` mid phase; ``object_bounds``, :class:`~warp_ccd.stages.bvh.SceneBVH`).
         separating_axes: the traversal's box test (``bvh`` mid phase): 6 (default), the box around
@@ -288,7 +290,7 @@ class CollisionPipeline:
             some time ``t`` in ``[0, 1]`` of it, with their times of impact
             (:attr:`CollisionResult.triangle_toi`; see :mod:`warp_ccd.stages.continuous`). Every
             tree is then refit each frame from swept boxes (``leaf_size`` defaults to
-            :data:`DEFORMING_LEAF_SIZE`). Not with ``segments``, ``containment`` or another
+            :data:`RIGID_LEAF_SIZE`). Not with ``segments``, ``containment`` or another
             ``narrow_phase`` than the default.
         min_distance: with ``continuous``, pairs that come within this distance (scene units,
             infinity norm, >= 0) collide too.
@@ -349,7 +351,7 @@ class CollisionPipeline:
             raise ValueError(f"rebuild_every must be 0 with the all_pairs mid phase (no trees), got {rebuild_every!r}")
         pair_capacity = integer_option("pair_capacity", pair_capacity, low=1, allow_none=True)
         if leaf_size is None:
-            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming or continuous else RIGID_LEAF_SIZE
+            leaf_size = DEFORMING_LEAF_SIZE if scene.deforming and not continuous else RIGID_LEAF_SIZE
         self.scene = scene
         self.device = d = scene.device
         n = scene.num_objects
@@ -606,7 +608,7 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
     # and 8 bytes of hits a triangle, for this call only), where a persistent pipeline starts lean
     # and grows.
     n, tris = scene.num_objects, scene.num_triangles
-    leaf = options.get("leaf_size") or (DEFORMING_LEAF_SIZE if continuous else RIGID_LEAF_SIZE)
+    leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
     options.setdefault("pair_capacity", max(64, min(n * (n - 1) // 2, 32 * n)))
     options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
