@@ -109,7 +109,7 @@ for part in $parts; do
     ccd)
         step python3 -m warp_ccd.bench.ccd_queries --device "$device" $ccd --out "$out/ccd_queries_$tag.json" ;;
     continuous)
-        step python3 -m warp_ccd.bench.continuous --device "$device" --objects $continuous --frames $frames --warmup 3 \
+        step python3 -m warp_ccd.bench.continuous --device "$device" --objects $continuous --frames $frames --warmup 3 --profile \
             --out "$out/continuous_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \

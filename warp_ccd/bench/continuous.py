@@ -20,7 +20,11 @@ continuous one did not; none is expected but for pairs within the tolerances of 
 the free device memory after the warm-up is recorded. A continuous pipeline that cannot be built or
 run (memory, at the largest ``N``) is reported as a note and the discrete rows are kept.
 
-    python -m warp_ccd.bench.continuous --device cuda:0 --objects 1e3 1e4 1e5 1e6 \\
+With ``--profile`` the continuous row also holds one eager frame activity by activity (a pipeline
+launched kernel by kernel, ``wp.timing``: GPU ms per kernel, median of 5 frames) and the counts of
+its stages (candidates, candidates with queries left to search after the first pass).
+
+    python -m warp_ccd.bench.continuous --device cuda:0 --objects 1e3 1e4 1e5 1e6 --profile \\
         --out bench/results/continuous_cuda0.json
 """
 
@@ -34,6 +38,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
+from warp_ccd.bench.profile_frame import activities
 from warp_ccd.bench.timing import synced_ms
 
 DT = 1.0 / 60.0
@@ -50,6 +55,20 @@ def _stats(values) -> dict:
 
 def _free_gb(device) -> float | None:
     return device.free_memory / 1024**3 if device.is_cuda else None
+
+
+def _profile(n: int, args, device) -> dict:
+    """One continuous frame of a fresh scene (same seed) launched kernel by kernel: its activities
+    (the 12 slowest, GPU ms) and its stages' counts."""
+    scene = wc.Scene.random(n, seed=args.seed, device=device)
+    pipe = wc.CollisionPipeline(scene, continuous=True, graph=False)
+    for _ in range(args.warmup):
+        pipe.detect(advance=DT)
+    acts = activities(pipe, 5)
+    narrow = pipe.narrow
+    return {"activities": acts[:12], "kernels_ms": float(sum(a["ms"] for a in acts)),
+            "candidates": pipe.mid.candidates.last_count, "deferred": narrow.deferred.last_count,
+            "triangle_pairs": narrow.hits.last_count}
 
 
 def run(n: int, args, device, notes: list) -> list[dict]:
@@ -110,6 +129,8 @@ def run(n: int, args, device, notes: list) -> list[dict]:
         if method == "continuous":
             row["ratio_median"] = row["ms_median"] / rows[0]["ms_median"]
             row.update(counts)
+            if args.profile:
+                row["profile"] = _profile(n, args, device)
         rows.append(row)
     text = f"{n:>9,} objects: discrete {rows[0]['ms_median']:8.3f} ms ({rows[0]['object_pairs_per_frame']:.1f} pairs)"
     if len(rows) > 1:
@@ -127,6 +148,7 @@ def main(argv=None) -> int:
     parser = bench_parser(__doc__.splitlines()[0])
     parser.add_argument("--objects", type=lambda x: int(float(x)), nargs="+", default=[1000, 10_000, 100_000,
                                                                                         1_000_000])
+    parser.add_argument("--profile", action="store_true", help="profile one eager continuous frame per N")
     add_run_options(parser, frames=20, warmup=3, seed=0, out_help="JSON file (default: none)")
     args, device, document = start(parser, argv)
     document["notes"] = []
