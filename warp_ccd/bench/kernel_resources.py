@@ -13,7 +13,7 @@ from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, 
 from warp_ccd.bench.report import environment
 from warp_ccd.pipeline import CollisionPipeline
 from warp_ccd.scene import motion, scene
-from warp_ccd.stages import broad_phase, bvh, mid_phase, narrow_phase
+from warp_ccd.stages import broad_phase, bvh, continuous, mid_phase, narrow_phase
 
 # CUfunction_attribute values (CUDA driver API).
 _ATTRIBUTES = {"max_threads_per_block": 0, "shared_bytes": 1, "local_bytes": 3, "registers": 4}
@@ -33,6 +33,10 @@ def _kernels() -> dict:
         "sap sweep": broad_phase._sap_sweep_kernel,
         "motion pose": motion._MOTION_POSE["float32"],
         "world vertex": scene._WORLD_VERTEX["float32"],
+        "ccd first": continuous._FIRST["float32"],
+        "ccd filter": continuous._FILTER["float32"],
+        "ccd search": continuous._SEARCH["float32"],
+        "ccd last": continuous._LAST["float32"],
     }
 
 
@@ -63,6 +67,7 @@ def main(argv=None) -> int:
         raise SystemExit("kernel_resources: needs a CUDA device")
     s = scene.Scene.random(200, seed=0, device=device)
     CollisionPipeline(s, graph=False).detect(advance=0.01)  # loads every module of the frame
+    CollisionPipeline(s, graph=False, continuous=True).detect(advance=0.01)  # and of a continuous one
     rows = []
     for name, kernel in _kernels().items():
         row = {"kernel": name, "key": kernel.key, **attributes(kernel, device, BLOCK_DIMS.get(name, 256))}

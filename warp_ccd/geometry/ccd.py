@@ -91,10 +91,11 @@ __all__ = [
     "CCD_MAX_ITERATIONS",
     "CCD_TOLERANCE",
     "NO_HIT",
-    "pair_filter",
     "pair_meets",
+    "pair_near_mask",
     "pair_query",
     "pair_search",
+    "query_excluded",
     "edge_edge_toi",
     "triangle_pair_toi",
     "vertex_face_toi",
@@ -199,29 +200,20 @@ def _coplanarity(kind: int, x0: MAT34D, x1: MAT34D):
     contact at ``min_distance = 0`` needs; and a bound on their error. Each difference moves
     linearly, so ``c``'s coefficients are the determinants of the ends' vectors taken from one end
     or the other, averaged (its blossom)."""
-    i0 = 1  # the origin and the first vector's tip: f0, f1 (ea0, ea1)
-    i1 = 2
+    # Static column indices only: a matrix indexed at run time would sit in a thread's local memory.
+    a0 = _column(x0, 2) - _column(x0, 1)  # f1 - f0
+    a1 = _column(x1, 2) - _column(x1, 1)
+    b0 = _column(x0, 3) - _column(x0, 1)  # f2 - f0
+    b1 = _column(x1, 3) - _column(x1, 1)
+    q0 = _column(x0, 0) - _column(x0, 1)  # p - f0
+    q1 = _column(x1, 0) - _column(x1, 1)
     if kind == KIND_EDGE_EDGE:
-        i0 = 0
-        i1 = 1
-    o0 = _column(x0, i0)
-    o1 = _column(x1, i0)
-    a0 = _column(x0, i1) - o0
-    a1 = _column(x1, i1) - o1
-    b0 = wp.vec3d()
-    b1 = wp.vec3d()
-    q0 = wp.vec3d()
-    q1 = wp.vec3d()
-    if kind == KIND_EDGE_EDGE:  # ea1 - ea0, eb1 - eb0, eb0 - ea0
-        b0 = _column(x0, 3) - _column(x0, 2)
+        a0 = _column(x0, 1) - _column(x0, 0)  # ea1 - ea0
+        a1 = _column(x1, 1) - _column(x1, 0)
+        b0 = _column(x0, 3) - _column(x0, 2)  # eb1 - eb0
         b1 = _column(x1, 3) - _column(x1, 2)
-        q0 = _column(x0, 2) - o0
-        q1 = _column(x1, 2) - o1
-    else:  # f1 - f0, f2 - f0, p - f0
-        b0 = _column(x0, 3) - o0
-        b1 = _column(x1, 3) - o1
-        q0 = _column(x0, 0) - o0
-        q1 = _column(x1, 0) - o1
+        q0 = _column(x0, 2) - _column(x0, 0)  # eb0 - ea0
+        q1 = _column(x1, 2) - _column(x1, 0)
     third = wp.float64(1.0) / wp.float64(3.0)
     c = wp.vec4d(_det3(a0, b0, q0),
                  (_det3(a1, b0, q0) + _det3(a0, b1, q0) + _det3(a0, b0, q1)) * third,
@@ -357,7 +349,7 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
 
 
 @wp.func
-def _excluded(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64) -> bool:
+def query_excluded(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64) -> bool:
     """Whether a query's filters rule out any contact: at ``min_distance = 0`` the coplanarity cubic
     keeps one sign over ``[0, 1]`` (:func:`_coplanarity`: the four points are never coplanar, most
     queries of a frame), or ``F`` over the whole box of parameters stays beyond ``min_distance``
@@ -391,7 +383,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
         t_end: only times before it are searched (:data:`NO_HIT` for all of ``[0, 1]``; a smaller
             value when an earlier query already found that toi).
     """
-    if _excluded(kind, x0, x1, min_distance):
+    if query_excluded(kind, x0, x1, min_distance):
         return t_end, int(0)
     err = wp.vec3d()
     for ax in range(3):
@@ -418,7 +410,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
     # Parameter tolerances from the whole box (Tight Inclusion's compute_*_tolerances: the tolerance
     # over three times the longest edge of F's box along each parameter, in the infinity norm;
     # infinite along a parameter F does not depend on); in the contact frame the box is tested again
-    # (the world's axes were, by _excluded).
+    # (the world's axes were, by query_excluded).
     longest = wp.vec3d()
     for ax in range(3):
         fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
@@ -535,98 +527,84 @@ def pair_meets(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
     return tri_tri_moller(a0, a1, a2, b0, b1, b2, type(a0[0])(TOLERANCE))
 
 
-def _pair_scan(search: bool):
-    """The scan of a candidate's 15 queries: with ``search``, :func:`pair_search`; without,
-    :func:`pair_filter` (a function without the searches: a first pass's kernel stays small)."""
-
-    @wp.func
-    def scan(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
-             a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
-             max_iterations: int):
-        # Swept boxes (float64, exact): a vertex's over both ends holds it at every t, a triangle's holds
-        # the moving triangle. A query whose two boxes are apart by more than eps + d on an axis has no
-        # root (its F lies in the difference of the boxes; the one rounding of that difference is within
-        # eps), so most of a candidate's 15 queries end at a few comparisons.
-        a0 = wp.vec3d(a0_t0)
-        a1 = wp.vec3d(a1_t0)
-        a2 = wp.vec3d(a2_t0)
-        b0 = wp.vec3d(b0_t0)
-        b1 = wp.vec3d(b1_t0)
-        b2 = wp.vec3d(b2_t0)
-        a0e = wp.vec3d(a0_t1)
-        a1e = wp.vec3d(a1_t1)
-        a2e = wp.vec3d(a2_t1)
-        b0e = wp.vec3d(b0_t1)
-        b1e = wp.vec3d(b1_t1)
-        b2e = wp.vec3d(b2_t1)
-        lo_a0 = wp.min(a0, a0e)
-        lo_a1 = wp.min(a1, a1e)
-        lo_a2 = wp.min(a2, a2e)
-        hi_a0 = wp.max(a0, a0e)
-        hi_a1 = wp.max(a1, a1e)
-        hi_a2 = wp.max(a2, a2e)
-        lo_b0 = wp.min(b0, b0e)
-        lo_b1 = wp.min(b1, b1e)
-        lo_b2 = wp.min(b2, b2e)
-        hi_b0 = wp.max(b0, b0e)
-        hi_b1 = wp.max(b1, b1e)
-        hi_b2 = wp.max(b2, b2e)
-        tri_lo_a = wp.min(wp.min(lo_a0, lo_a1), lo_a2)
-        tri_hi_a = wp.max(wp.max(hi_a0, hi_a1), hi_a2)
-        tri_lo_b = wp.min(wp.min(lo_b0, lo_b1), lo_b2)
-        tri_hi_b = wp.max(wp.max(hi_b0, hi_b1), hi_b2)
-        m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
-        pad = ERROR_FLOOR + min_distance
-        e = m * ERROR_SCALE + wp.vec3d(pad, pad, pad)
-        if pair_meets(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0):
-            return _F0, int(0)
-        best = NO_HIT
-        mask = int(0)
-        num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies of the search (Warp unrolls constant ranges)
-        for q in range(num_queries):
-            i = q % 3
-            if q < 3:  # vertex i of a against face b
-                near = not _apart(_pick(lo_a0, lo_a1, lo_a2, i), _pick(hi_a0, hi_a1, hi_a2, i), tri_lo_b, tri_hi_b, e)
-            elif q < 6:  # vertex i of b against face a
-                near = not _apart(_pick(lo_b0, lo_b1, lo_b2, i), _pick(hi_b0, hi_b1, hi_b2, i), tri_lo_a, tri_hi_a, e)
-            else:  # edge i of a against edge j of b
-                i = (q - 6) // 3
-                j = (q - 6) % 3
-                i1 = (i + 1) % 3
-                j1 = (j + 1) % 3
-                lo_ea = wp.min(_pick(lo_a0, lo_a1, lo_a2, i), _pick(lo_a0, lo_a1, lo_a2, i1))
-                hi_ea = wp.max(_pick(hi_a0, hi_a1, hi_a2, i), _pick(hi_a0, hi_a1, hi_a2, i1))
-                lo_eb = wp.min(_pick(lo_b0, lo_b1, lo_b2, j), _pick(lo_b0, lo_b1, lo_b2, j1))
-                hi_eb = wp.max(_pick(hi_b0, hi_b1, hi_b2, j), _pick(hi_b0, hi_b1, hi_b2, j1))
-                near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
-            if near:
-                kind, x0, x1 = pair_query(q, a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e)
-                if wp.static(search):
-                    best = wp.min(best, primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT))
-                elif not _excluded(kind, x0, x1, min_distance):
-                    mask = mask | (1 << q)
-        if best > _F1 and mask == 0:
-            # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
-            # the end, so that a continuous frame holds what a discrete frame at either end holds.
-            if pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
-                best = _F1
-        return best, mask
-
-    return scan
+@wp.func
+def _swept(p_t0: Any, p_t1: Any):
+    """The box of a point over a linear motion (exact: a minimum and a maximum)."""
+    return wp.min(p_t0, p_t1), wp.max(p_t0, p_t1)
 
 
-pair_search = _pair_scan(True)
-""":func:`triangle_pair_toi` as ``(toi, 0)``: ``pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0,
-a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1, min_distance, tolerance, max_iterations)`` (device function)."""
+@wp.func
+def pair_near_mask(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any,
+                   a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64) -> int:
+    """Bit ``q`` set for each query (:func:`pair_query`) of two moving triangles whose two primitives'
+    swept boxes come within ``eps + min_distance`` on every axis: the others have no root (their
+    ``F`` lies in the difference of the boxes, whose one rounding is within ``eps``), so most of a
+    candidate's 15 queries end at a few comparisons. The boxes are exact in the points' own
+    precision (a minimum and a maximum); the comparisons are in float64."""
+    lo_a0, hi_a0 = _swept(a0_t0, a0_t1)
+    lo_a1, hi_a1 = _swept(a1_t0, a1_t1)
+    lo_a2, hi_a2 = _swept(a2_t0, a2_t1)
+    lo_b0, hi_b0 = _swept(b0_t0, b0_t1)
+    lo_b1, hi_b1 = _swept(b1_t0, b1_t1)
+    lo_b2, hi_b2 = _swept(b2_t0, b2_t1)
+    tri_lo_a = wp.vec3d(wp.min(wp.min(lo_a0, lo_a1), lo_a2))
+    tri_hi_a = wp.vec3d(wp.max(wp.max(hi_a0, hi_a1), hi_a2))
+    tri_lo_b = wp.vec3d(wp.min(wp.min(lo_b0, lo_b1), lo_b2))
+    tri_hi_b = wp.vec3d(wp.max(wp.max(hi_b0, hi_b1), hi_b2))
+    m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
+    pad = ERROR_FLOOR + min_distance
+    e = m * ERROR_SCALE + wp.vec3d(pad, pad, pad)
+    mask = int(0)
+    num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies (Warp unrolls constant ranges)
+    for q in range(num_queries):
+        i = q % 3
+        near = bool(False)
+        if q < 3:  # vertex i of a against face b
+            near = not _apart(wp.vec3d(_pick(lo_a0, lo_a1, lo_a2, i)), wp.vec3d(_pick(hi_a0, hi_a1, hi_a2, i)),
+                              tri_lo_b, tri_hi_b, e)
+        elif q < 6:  # vertex i of b against face a
+            near = not _apart(wp.vec3d(_pick(lo_b0, lo_b1, lo_b2, i)), wp.vec3d(_pick(hi_b0, hi_b1, hi_b2, i)),
+                              tri_lo_a, tri_hi_a, e)
+        else:  # edge i of a against edge j of b
+            i = (q - 6) // 3
+            j = (q - 6) % 3
+            i1 = (i + 1) % 3
+            j1 = (j + 1) % 3
+            lo_ea = wp.vec3d(wp.min(_pick(lo_a0, lo_a1, lo_a2, i), _pick(lo_a0, lo_a1, lo_a2, i1)))
+            hi_ea = wp.vec3d(wp.max(_pick(hi_a0, hi_a1, hi_a2, i), _pick(hi_a0, hi_a1, hi_a2, i1)))
+            lo_eb = wp.vec3d(wp.min(_pick(lo_b0, lo_b1, lo_b2, j), _pick(lo_b0, lo_b1, lo_b2, j1)))
+            hi_eb = wp.vec3d(wp.max(_pick(hi_b0, hi_b1, hi_b2, j), _pick(hi_b0, hi_b1, hi_b2, j1)))
+            near = not _apart(lo_ea, hi_ea, lo_eb, hi_eb, e)
+        if near:
+            mask = mask | (1 << q)
+    return mask
 
-pair_filter = _pair_scan(False)
-"""The first pass of :func:`triangle_pair_toi` (same arguments, device function): ``(toi, mask)``.
-``toi`` is 0 when the triangles meet at ``t = 0``; else the mask holds bit ``q`` for each query
-(:func:`pair_query`) that its filters do not rule out (:func:`_excluded`); with a mask of 0, ``toi``
-is 1 when they meet at ``t = 1`` and :data:`NO_HIT` otherwise. A second pass searches the masked
-queries (:func:`primitive_toi`) and, when none hits, runs the end test (:func:`pair_meets` at
-``t = 1``): the minimum is :func:`triangle_pair_toi`'s answer exactly (each query is searched on its own,
-and its filters are the first steps of its search)."""
+
+@wp.func
+def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any, a1_t1: Any,
+                a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64, tolerance: wp.float64,
+                max_iterations: int) -> wp.float64:
+    """:func:`triangle_pair_toi` (its body): the discrete test at ``t = 0``; the queries of
+    :func:`pair_near_mask`, each searched on its own (:func:`primitive_toi`); the discrete test at
+    ``t = 1`` when none hits. A frame's narrow phase runs the same steps in passes
+    (:mod:`warp_ccd.stages.continuous`), with the same answer."""
+    if pair_meets(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0):
+        return _F0
+    mask = pair_near_mask(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
+                          min_distance)
+    best = NO_HIT
+    num_queries = int(PAIR_QUERIES)
+    for q in range(num_queries):
+        if (mask >> q) & 1 != 0:
+            kind, x0, x1 = pair_query(q, wp.vec3d(a0_t0), wp.vec3d(a1_t0), wp.vec3d(a2_t0), wp.vec3d(b0_t0),
+                                      wp.vec3d(b1_t0), wp.vec3d(b2_t0), wp.vec3d(a0_t1), wp.vec3d(a1_t1),
+                                      wp.vec3d(a2_t1), wp.vec3d(b0_t1), wp.vec3d(b1_t1), wp.vec3d(b2_t1))
+            best = wp.min(best, primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT))
+    if best > _F1 and pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
+        # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
+        # the end, so that a continuous frame holds what a discrete frame at either end holds.
+        best = _F1
+    return best
 
 
 @wp.func
@@ -642,6 +620,5 @@ def triangle_pair_toi(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any
     contact, so this is their first contact (within ``min_distance``). Each query is searched on
     its own (a frame's second pass runs the long ones side by side, with the same answer).
     """
-    toi, mask = pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
-                            min_distance, tolerance, max_iterations)
-    return toi
+    return pair_search(a0_t0, a1_t0, a2_t0, b0_t0, b1_t0, b2_t0, a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1,
+                       min_distance, tolerance, max_iterations)

@@ -2,7 +2,7 @@
 and the kernels it launches, :func:`run_queries`' two passes.
 
 A GPU runs a warp as long as its longest lane. Most queries of a frame are ruled out by their
-filters (the coplanarity cubic, the whole box: :func:`~warp_ccd.geometry.ccd._excluded`) and the
+filters (the coplanarity cubic, the whole box: :func:`~warp_ccd.geometry.ccd.query_excluded`) and the
 rest search tens to hundreds of steps, so the first pass runs every query's filters and lists those
 they leave; the second searches those, packed one a thread. The answers are those of one pass (the
 filters are the first steps of the search, which is deterministic).
@@ -20,9 +20,9 @@ from .ccd import (
     CCD_MAX_ITERATIONS,
     CCD_TOLERANCE,
     NO_HIT,
-    _excluded,
     _points,
     primitive_toi,
+    query_excluded,
 )
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -39,8 +39,8 @@ def ccd_first_pass_kernel(kind: int, x0: wp.array2d[Any], x1: wp.array2d[Any], m
     holds every query at most) for :data:`ccd_second_pass_kernel`."""
     k = wp.tid()
     toi[k] = NO_HIT
-    if not _excluded(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
-                     _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance):
+    if not query_excluded(kind, _points(x0[k, 0], x0[k, 1], x0[k, 2], x0[k, 3]),
+                          _points(x1[k, 0], x1[k, 1], x1[k, 2], x1[k, 3]), min_distance):
         deferred[wp.atomic_add(deferred_count, 0, 1)] = k
 
 

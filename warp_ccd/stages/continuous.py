@@ -35,15 +35,16 @@ from ..geometry.ccd import (
     CCD_TOLERANCE,
     NO_HIT,
     PAIR_QUERIES,
-    pair_filter,
     pair_meets,
+    pair_near_mask,
     pair_query,
     primitive_toi,
+    query_excluded,
 )
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, number_option
 from ..scene.scene import MeshTopology, mesh_triangle
-from .buffers import GrowableBuffer, reserve_slot, used_count
+from .buffers import GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -72,6 +73,14 @@ def _append_hit(c: wp.vec4i, toi: wp.float64, hit_capacity: int, hit: wp.array[w
         object_colliding[c[2]] = 1
 
 
+@wp.func
+def _bit_count(mask: int) -> int:
+    n = int(0)
+    for q in range(PAIR_QUERIES):
+        n += (mask >> q) & 1
+    return n
+
+
 @wp.kernel
 def _first_pass_kernel(
     mesh: MeshTopology,
@@ -81,9 +90,9 @@ def _first_pass_kernel(
     candidate_count: wp.array[wp.int64],
     candidate_capacity: int,
     min_distance: wp.float64,
-    tolerance: wp.float64,
     hit_capacity: int,
     deferred_capacity: int,
+    query_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
     hit_toi: wp.array[wp.float64],
@@ -92,66 +101,136 @@ def _first_pass_kernel(
     deferred: wp.array[wp.vec2i],
     deferred_toi: wp.array[wp.float64],
     deferred_count: wp.array[wp.int64],
+    query: wp.array[wp.vec2i],
+    query_count: wp.array[wp.int64],
 ):
-    """One thread per candidate slot: row ``(obj_a, tri_a, obj_b, tri_b)`` over the motion from
-    ``world_vertex_start`` to ``world_vertex`` through its queries' filters
-    (:func:`~warp_ccd.geometry.ccd.pair_filter`): a row that meets at ``t = 0`` (toi 0), or whose
-    queries are all ruled out and that meets at ``t = 1`` (toi 1), is appended with its toi and
-    flags both objects; a row with queries left to search goes to ``deferred`` as ``(slot, mask of
-    those queries)`` (:func:`_second_pass_kernel`), ``deferred_toi`` set to no hit."""
-    k = wp.tid()
-    if k >= used_count(candidate_count, candidate_capacity):
-        return
-    c = candidate[k]
-    a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
-    toi, mask = pair_filter(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance, tolerance, 1)
+    """One thread per candidate slot (blocks of threads that reserve their outputs together, as
+    :func:`~warp_ccd.stages.buffers.block_reserve` asks): row ``(obj_a, tri_a, obj_b, tri_b)`` over
+    the motion from ``world_vertex_start`` to ``world_vertex``. A row that meets at ``t = 0`` is
+    appended with toi 0; a row none of whose queries' swept boxes come near
+    (:func:`~warp_ccd.geometry.ccd.pair_near_mask`) with toi 1 if it meets at ``t = 1``; any other
+    row goes to ``deferred`` as ``(slot, mask of its near queries)``, ``deferred_toi`` no hit, and
+    each near query to ``query`` as ``(deferred row, query)``."""
+    block, lane = wp.tid()
+    k = block * wp.block_dim() + lane
+    c = wp.vec4i()
+    mask = int(0)
+    toi = NO_HIT
+    if k < used_count(candidate_count, candidate_capacity):
+        c = candidate[k]
+        a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex,
+                                                                              c)
+        if pair_meets(a0, a1, a2, b0, b1, b2):
+            toi = wp.float64(0.0)
+        else:
+            mask = pair_near_mask(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance)
+            if mask == 0 and pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
+                toi = wp.float64(1.0)
+    # Every thread of the block reserves (with 0 items past the candidates): one atomic a block.
+    is_hit = int(0)
+    if toi <= wp.float64(1.0):
+        is_hit = 1
+    slot = block_reserve(hit_count, lane, is_hit)
+    if is_hit != 0:
+        if slot < wp.int64(hit_capacity):
+            hit[int(slot)] = c
+            hit_toi[int(slot)] = toi
+        object_colliding[c[0]] = 1
+        object_colliding[c[2]] = 1
+    is_deferred = int(0)
     if mask != 0:
-        slot = reserve_slot(deferred_count, deferred_capacity)
-        if slot >= 0:
-            deferred[slot] = wp.vec2i(k, mask)
-            deferred_toi[slot] = toi
-        return
-    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
+        is_deferred = 1
+    row = block_reserve(deferred_count, lane, is_deferred)
+    queries = int(0)
+    if is_deferred != 0 and row < wp.int64(deferred_capacity):
+        queries = _bit_count(mask)  # only a stored row's queries: every listed query names a stored row
+    first = block_reserve(query_count, lane, queries)
+    if queries != 0:
+        i = int(row)
+        deferred[i] = wp.vec2i(k, mask)
+        deferred_toi[i] = NO_HIT
+        n = int(0)
+        for q in range(PAIR_QUERIES):
+            if (mask >> q) & 1 != 0:
+                j = first + wp.int64(n)
+                if j < wp.int64(query_capacity):
+                    query[int(j)] = wp.vec2i(i, q)
+                n += 1
+
+
+@wp.func
+def _query_points(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any],
+                  candidate: wp.array[wp.vec4i], deferred: wp.array[wp.vec2i], entry: wp.vec2i):
+    """Query ``entry[1]`` of deferred row ``entry[0]``: ``(kind, x0, x1)`` (:func:`pair_query`)."""
+    c = candidate[deferred[entry[0]][0]]
+    a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
+    return pair_query(entry[1], wp.vec3d(a0), wp.vec3d(a1), wp.vec3d(a2), wp.vec3d(b0), wp.vec3d(b1), wp.vec3d(b2),
+                      wp.vec3d(a0e), wp.vec3d(a1e), wp.vec3d(a2e), wp.vec3d(b0e), wp.vec3d(b1e), wp.vec3d(b2e))
 
 
 @wp.kernel
-def _second_pass_kernel(
+def _filter_pass_kernel(
     mesh: MeshTopology,
     world_vertex_start: wp.array[Any],
     world_vertex: wp.array[Any],
     candidate: wp.array[wp.vec4i],
     deferred: wp.array[wp.vec2i],
-    deferred_count: wp.array[wp.int64],
-    deferred_capacity: int,
+    query: wp.array[wp.vec2i],
+    query_count: wp.array[wp.int64],
+    query_capacity: int,
+    min_distance: wp.float64,
+    search_capacity: int,
+    # Outputs
+    search: wp.array[wp.vec2i],
+    search_count: wp.array[wp.int64],
+):
+    """One thread per listed query (blocks, as :func:`_first_pass_kernel`): its filters
+    (:func:`~warp_ccd.geometry.ccd.query_excluded`, the first steps of its search); a query they
+    leave goes to ``search`` (a few percent: packed, their searches run side by side)."""
+    block, lane = wp.tid()
+    j = block * wp.block_dim() + lane
+    entry = wp.vec2i()
+    keep = int(0)
+    if j < used_count(query_count, query_capacity):
+        entry = query[j]
+        kind, x0, x1 = _query_points(mesh, world_vertex_start, world_vertex, candidate, deferred, entry)
+        if not query_excluded(kind, x0, x1, min_distance):
+            keep = 1
+    slot = block_reserve(search_count, lane, keep)
+    if keep != 0 and slot < wp.int64(search_capacity):
+        search[int(slot)] = entry
+
+
+@wp.kernel
+def _search_pass_kernel(
+    mesh: MeshTopology,
+    world_vertex_start: wp.array[Any],
+    world_vertex: wp.array[Any],
+    candidate: wp.array[wp.vec4i],
+    deferred: wp.array[wp.vec2i],
+    search: wp.array[wp.vec2i],
+    search_count: wp.array[wp.int64],
+    search_capacity: int,
     min_distance: wp.float64,
     tolerance: wp.float64,
     max_iterations: int,
     # Outputs
     deferred_toi: wp.array[wp.float64],
 ):
-    """One thread per (deferred row, query): a query of the row's mask searched from the start with
-    ``max_iterations`` boxes, side by side with the row's other long queries and the other rows'
-    (a lone long search takes its whole length in latency), its toi min-ed into ``deferred_toi``."""
-    tid = wp.tid()
-    i = tid // PAIR_QUERIES
-    q = tid - i * PAIR_QUERIES
-    if i >= used_count(deferred_count, deferred_capacity):
+    """One thread per query left by its filters: its search (within ``max_iterations`` steps), its
+    toi min-ed into its row's ``deferred_toi``."""
+    j = wp.tid()
+    if j >= used_count(search_count, search_capacity):
         return
-    d = deferred[i]
-    if (d[1] >> q) & 1 == 0:
-        return
-    c = candidate[d[0]]
-    a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex, c)
-    kind, x0, x1 = pair_query(q, wp.vec3d(a0), wp.vec3d(a1), wp.vec3d(a2), wp.vec3d(b0), wp.vec3d(b1), wp.vec3d(b2),
-                              wp.vec3d(a0e), wp.vec3d(a1e), wp.vec3d(a2e), wp.vec3d(b0e), wp.vec3d(b1e),
-                              wp.vec3d(b2e))
+    entry = search[j]
+    kind, x0, x1 = _query_points(mesh, world_vertex_start, world_vertex, candidate, deferred, entry)
     toi = primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT)
     if toi <= wp.float64(1.0):
-        wp.atomic_min(deferred_toi, i, toi)
+        wp.atomic_min(deferred_toi, entry[0], toi)
 
 
 @wp.kernel
-def _third_pass_kernel(
+def _last_pass_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
     candidate: wp.array[wp.vec4i],
@@ -180,11 +259,11 @@ def _third_pass_kernel(
     _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
 
 
-_FIRST = precision_overloads(_first_pass_kernel, lambda s, v, q, t: {
-    "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
-_SECOND = precision_overloads(_second_pass_kernel, lambda s, v, q, t: {
-    "world_vertex_start": wp.array[v], "world_vertex": wp.array[v]})
-_THIRD = precision_overloads(_third_pass_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_SWEPT = lambda s, v, q, t: {"world_vertex_start": wp.array[v], "world_vertex": wp.array[v]}  # noqa: E731
+_FIRST = precision_overloads(_first_pass_kernel, _SWEPT)
+_FILTER = precision_overloads(_filter_pass_kernel, _SWEPT)
+_SEARCH = precision_overloads(_search_pass_kernel, _SWEPT)
+_LAST = precision_overloads(_last_pass_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
 def continuous_options(min_distance, tolerance, max_iterations) -> tuple[float, float, int]:
@@ -217,7 +296,10 @@ class ContinuousNarrowPhase:
         toi: ``(hits.capacity,)`` float64, the toi of each row of :attr:`hits` (same slot), in ``[0, 1]``.
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
         deferred: :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec2i`` ``(candidate slot,
-            mask of its long queries)`` left to the second pass; ``deferred_toi`` their toi so far.
+            mask of its near queries)``, the rows whose queries the later passes run; ``deferred_toi``
+            their toi so far.
+        queries: ``wp.vec2i`` ``(deferred row, query)``, each near query; ``searches``: the same, the
+            queries their filters leave (:class:`~warp_ccd.stages.buffers.GrowableBuffer` both).
         min_distance, tolerance, max_iterations: as above.
         segments, segment, contained: False, None, None (a continuous frame has neither segments
             nor containment; :class:`~warp_ccd.stages.kinds.NarrowPhaseStage`'s members).
@@ -230,6 +312,9 @@ class ContinuousNarrowPhase:
         self.device = wp.get_device(device)
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
         self.deferred = GrowableBuffer(wp.vec2i, max(64, capacity // 4), self.device, "deferred candidates")
+        self.queries = GrowableBuffer(wp.vec2i, 4 * self.deferred.capacity, self.device, "primitive queries")
+        self.searches = GrowableBuffer(wp.vec2i, self.queries.capacity, self.device,
+                                       "primitive searches")
         self.deferred_toi = wp.zeros(self.deferred.capacity, dtype=wp.float64, device=self.device)
         self.toi = wp.zeros(self.hits.capacity, dtype=wp.float64, device=self.device)
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
@@ -245,8 +330,9 @@ class ContinuousNarrowPhase:
 
     @property
     def counters(self) -> list[GrowableBuffer]:
-        """The buffers with counters that :meth:`launch` writes (the hits, the deferred candidates)."""
-        return [self.hits, self.deferred]
+        """The buffers with counters that :meth:`launch` writes (the hits, the deferred candidates,
+        their queries and the queries searched)."""
+        return [self.hits, self.deferred, self.queries, self.searches]
 
     def launch(self, scene, world_vertex_start: wp.array, candidates: GrowableBuffer, *,
                reset_counters: bool = True) -> None:
@@ -266,22 +352,30 @@ class ContinuousNarrowPhase:
         if self.toi.shape[0] != hits.capacity:  # follows the hits' capacity (after a growth, eagerly)
             self.toi = wp.zeros(hits.capacity, dtype=wp.float64, device=d)
         self.object_colliding.zero_()
-        deferred = self.deferred
+        deferred, queries, searches = self.deferred, self.queries, self.searches
         if reset_counters:
-            deferred.reset()
+            for buffer in (deferred, queries, searches):
+                buffer.reset()
         if self.deferred_toi.shape[0] != deferred.capacity:
             self.deferred_toi = wp.zeros(deferred.capacity, dtype=wp.float64, device=d)
         d64, tol64 = wp.float64(self.min_distance), wp.float64(self.tolerance)
-        wp.launch(_FIRST[scene.precision], dim=candidates.capacity,
-                  inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, candidates.count,
-                          candidates.capacity, d64, tol64, hits.capacity, deferred.capacity],
-                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data, self.deferred_toi,
-                           deferred.count], device=d)
-        wp.launch(_SECOND[scene.precision], dim=deferred.capacity * PAIR_QUERIES,
-                  inputs=[scene.topology, world_vertex_start, scene.world_vertex, candidates.data, deferred.data,
-                          deferred.count, deferred.capacity, d64, tol64, self.max_iterations],
+        block = block_dim_for(d)
+        swept = [scene.topology, world_vertex_start, scene.world_vertex, candidates.data]
+        wp.launch_tiled(_FIRST[scene.precision], dim=[(candidates.capacity + block - 1) // block],
+                        inputs=[*swept, candidates.count, candidates.capacity, d64, hits.capacity, deferred.capacity,
+                                queries.capacity],
+                        outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data,
+                                 self.deferred_toi, deferred.count, queries.data, queries.count],
+                        block_dim=block, device=d)
+        wp.launch_tiled(_FILTER[scene.precision], dim=[(queries.capacity + block - 1) // block],
+                        inputs=[*swept, deferred.data, queries.data, queries.count, queries.capacity, d64,
+                                searches.capacity],
+                        outputs=[searches.data, searches.count], block_dim=block, device=d)
+        wp.launch(_SEARCH[scene.precision], dim=searches.capacity,
+                  inputs=[*swept, deferred.data, searches.data, searches.count, searches.capacity, d64, tol64,
+                          self.max_iterations],
                   outputs=[self.deferred_toi], device=d)
-        wp.launch(_THIRD[scene.precision], dim=deferred.capacity,
+        wp.launch(_LAST[scene.precision], dim=deferred.capacity,
                   inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
                           deferred.count, deferred.capacity, hits.capacity],
                   outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
