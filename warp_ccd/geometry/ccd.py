@@ -391,9 +391,10 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
     eps = err + wp.vec3d(min_distance, min_distance, min_distance)
     lo = wp.vec3d(_F0, _F0, _F0)
     w = wp.vec3d(_F1, _F1, _F1)
-    x0w = x0
-    x1w = x1
+    c = wp.vec4d()
+    c_err = _F0
     if min_distance == _F0:
+        c, c_err = _coplanarity(kind, x0, x1)  # in world axes, before the rotation
         # Search in a frame whose third axis is the face's normal (vertex-face) or the edges' common
         # normal (edge-edge): F = 0 does not depend on the frame, and there the distance along the
         # normal rejects times far from the contact whatever the box's extent over the face.
@@ -422,7 +423,6 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
                    _tol_div(tolerance, three * longest[2]))
     used = int(0)
     if min_distance == _F0:
-        c, c_err = _coplanarity(kind, x0w, x1w)
         best, used, exhausted, fall_back = _coplanar_search(kind, c, c_err, x0, x1, tol, eps, err, tolerance,
                                                             max_iterations, t_end)
         if fall_back == 0:

@@ -251,18 +251,7 @@ MAT33D = wp.types.matrix(shape=(3, 3), dtype=wp.float64)
 
 MIRANDA_ROUNDING = wp.constant(wp.float64(2.0**-48))
 """Bound on the rounding of one preconditioned value ``sum_j A_ij F_j`` (three products and two sums
-in float64: about ``3 * 2^-53``; fivefold slack), relative to ``sum_j |A_ij| |F_j|``."""
-
-
-@wp.func
-def _opposite(low_face: wp.vec4d, high_face: wp.vec4d, margin: wp.float64) -> bool:
-    """Whether one coordinate is below ``-margin`` at every corner of one face and above ``margin``
-    at every corner of the opposite face (or the reverse)."""
-    low_min = wp.min(wp.min(low_face[0], low_face[1]), wp.min(low_face[2], low_face[3]))
-    low_max = wp.max(wp.max(low_face[0], low_face[1]), wp.max(low_face[2], low_face[3]))
-    high_min = wp.min(wp.min(high_face[0], high_face[1]), wp.min(high_face[2], high_face[3]))
-    high_max = wp.max(wp.max(high_face[0], high_face[1]), wp.max(high_face[2], high_face[3]))
-    return (low_max < -margin and high_min > margin) or (low_min > margin and high_max < -margin)
+in float64: about ``3 * 2^-53``; tenfold slack), relative to ``sum_j |A_ij| |F_j|`` at that corner."""
 
 
 @wp.func
@@ -275,7 +264,10 @@ def _proves_root(kind: int, x0: MAT34D, x1: MAT34D, lo: wp.vec3d, w: wp.vec3d, e
     too and takes its extremes over a face at the face's four corners; ``err`` bounds the error of
     a corner value of ``F`` per axis, and the test asks for a margin that covers it through ``A`` and
     the rounding of ``A F``. ``A`` is invertible when ``|A J - I| < 1`` (checked, with room for
-    rounding). A box of a vertex-face query must lie inside the triangle ``u + v <= 1``."""
+    rounding). A box of a vertex-face query must lie inside the triangle ``u + v <= 1``.
+
+    Lean on registers (it runs inside the searches): ``G``'s corner values are recomputed for each
+    of its coordinates rather than held."""
     u_hi = lo[1] + w[1]
     v_hi = lo[2] + w[2]
     if kind == KIND_VERTEX_FACE and u_hi + v_hi > _F1:
@@ -285,11 +277,7 @@ def _proves_root(kind: int, x0: MAT34D, x1: MAT34D, lo: wp.vec3d, w: wp.vec3d, e
     uc = lo[1] + _HALF * w[1]
     vc = lo[2] + _HALF * w[2]
     jac = MAT33D()
-    f = MAT34D()  # rows: F's axes at the corners t = lo (the order of _axis_values)
-    g = MAT34D()  # the same at t = lo + w
     for ax in range(3):
-        f[ax] = _axis_values(kind, x0[ax], x1[ax], lo[0], lo[1], u_hi, lo[2], v_hi)
-        g[ax] = _axis_values(kind, x0[ax], x1[ax], t_hi, lo[1], u_hi, lo[2], v_hi)
         # F is linear along each parameter: its derivative is a difference of two values.
         jac[ax, 0] = _value(kind, x0[ax], x1[ax], _F1, uc, vc) - _value(kind, x0[ax], x1[ax], _F0, uc, vc)
         jac[ax, 1] = _value(kind, x0[ax], x1[ax], tc, _F1, vc) - _value(kind, x0[ax], x1[ax], tc, _F0, vc)
@@ -303,22 +291,33 @@ def _proves_root(kind: int, x0: MAT34D, x1: MAT34D, lo: wp.vec3d, w: wp.vec3d, e
         worst = wp.max(worst, row)
     if not (worst <= _HALF):  # also false for a singular Jacobian (inverse 0) and for nan
         return False
-    big = wp.vec3d()
-    for ax in range(3):
-        big[ax] = wp.max(_max_abs4(f[ax], g[ax]), _F0)
     for i in range(3):
-        gf = a[i, 0] * f[0] + a[i, 1] * f[1] + a[i, 2] * f[2]
-        gg = a[i, 0] * g[0] + a[i, 1] * g[1] + a[i, 2] * g[2]
-        absa = wp.vec3d(wp.abs(a[i, 0]), wp.abs(a[i, 1]), wp.abs(a[i, 2]))
-        margin = _F2 * wp.dot(absa, err) + MIRANDA_ROUNDING * wp.dot(absa, big) + ERROR_FLOOR
-        ok = bool(False)
-        if i == 0:  # faces t = lo, t = lo + w
-            ok = _opposite(gf, gg, margin)
-        elif i == 1:  # faces u = lo, u = lo + w
-            ok = _opposite(wp.vec4d(gf[0], gf[2], gg[0], gg[2]), wp.vec4d(gf[1], gf[3], gg[1], gg[3]), margin)
-        else:  # faces v = lo, v = lo + w
-            ok = _opposite(wp.vec4d(gf[0], gf[1], gg[0], gg[1]), wp.vec4d(gf[2], gf[3], gg[2], gg[3]), margin)
-        if not ok:
+        ai = wp.vec3d(a[i, 0], a[i, 1], a[i, 2])
+        absa = wp.vec3d(wp.abs(ai[0]), wp.abs(ai[1]), wp.abs(ai[2]))
+        low_min = _INF
+        low_max = -_INF
+        high_min = _INF
+        high_max = -_INF
+        scale = _F0
+        for corner in range(8):
+            t = wp.where((corner & 4) == 0, lo[0], t_hi)
+            u = wp.where((corner & 1) == 0, lo[1], u_hi)
+            v = wp.where((corner & 2) == 0, lo[2], v_hi)
+            f = wp.vec3d(_value(kind, x0[0], x1[0], t, u, v), _value(kind, x0[1], x1[1], t, u, v),
+                         _value(kind, x0[2], x1[2], t, u, v))
+            g = ai[0] * f[0] + ai[1] * f[1] + ai[2] * f[2]
+            scale = wp.max(scale, wp.dot(absa, wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2]))))
+            # The face of parameter i this corner lies on: t (bit 4), u (bit 1), v (bit 2).
+            on_high = (i == 0 and (corner & 4) != 0) or (i == 1 and (corner & 1) != 0) or \
+                (i == 2 and (corner & 2) != 0)
+            if on_high:
+                high_min = wp.min(high_min, g)
+                high_max = wp.max(high_max, g)
+            else:
+                low_min = wp.min(low_min, g)
+                low_max = wp.max(low_max, g)
+        margin = _F2 * wp.dot(absa, err) + MIRANDA_ROUNDING * scale + ERROR_FLOOR
+        if not ((low_max < -margin and high_min > margin) or (low_min > margin and high_max < -margin)):
             return False
     return True
 
