@@ -321,7 +321,7 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
                     else:
                         found, boxes, ran_out = _box_search(kind, x0, x1, wp.vec3d(a, _F0, _F0),
                                                             wp.vec3d(wt, _F1, _F1), tol, eps, err, tolerance,
-                                                            wp.max(max_iterations - steps, 1), best)
+                                                            wp.max(max_iterations - steps, 1), best, False)
                         steps += boxes
                         best = found
                         if ran_out != 0:
@@ -430,7 +430,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
         if used >= max_iterations:
             return _F0, int(1)  # nothing proved yet: the conservative answer is the start
     best, boxes, exhausted = _box_search(kind, x0, x1, lo, w, tol, eps, err, tolerance, max_iterations - used,
-                                         t_end)
+                                         t_end, True)
     return best, exhausted
 
 
@@ -537,10 +537,10 @@ def _swept(p_t0: Any, p_t1: Any):
 def pair_near_mask(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t0: Any, a0_t1: Any,
                    a1_t1: Any, a2_t1: Any, b0_t1: Any, b1_t1: Any, b2_t1: Any, min_distance: wp.float64) -> int:
     """Bit ``q`` set for each query (:func:`pair_query`) of two moving triangles whose two primitives'
-    swept boxes come within ``eps + min_distance`` on every axis: the others have no root (their
-    ``F`` lies in the difference of the boxes, whose one rounding is within ``eps``), so most of a
-    candidate's 15 queries end at a few comparisons. The boxes are exact in the points' own
-    precision (a minimum and a maximum); the comparisons are in float64."""
+    swept boxes come within ``eps + min_distance`` plus the discrete test's reach on every axis:
+    the others have no root (their ``F`` lies in the difference of the boxes, whose one rounding is
+    within ``eps``), so most of a candidate's 15 queries end at a few comparisons. The boxes are
+    exact in the points' own precision (a minimum and a maximum); the comparisons are in float64."""
     lo_a0, hi_a0 = _swept(a0_t0, a0_t1)
     lo_a1, hi_a1 = _swept(a1_t0, a1_t1)
     lo_a2, hi_a2 = _swept(a2_t0, a2_t1)
@@ -552,7 +552,11 @@ def pair_near_mask(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b
     tri_lo_b = wp.vec3d(wp.min(wp.min(lo_b0, lo_b1), lo_b2))
     tri_hi_b = wp.vec3d(wp.max(wp.max(hi_b0, hi_b1), hi_b2))
     m = wp.max(wp.max(_abs3(tri_lo_a), _abs3(tri_hi_a)), wp.max(_abs3(tri_lo_b), _abs3(tri_hi_b)))
-    pad = ERROR_FLOOR + min_distance
+    # The discrete test's reach too (DISCRETE_PAD times the triangles' extent, their swept boxes'
+    # here, no smaller than at t = 1): see pair_search for why a row without near queries needs no
+    # discrete test at t = 1.
+    reach = DISCRETE_PAD * _max3(wp.max(tri_hi_a - tri_lo_a, tri_hi_b - tri_lo_b))
+    pad = ERROR_FLOOR + min_distance + reach
     e = m * ERROR_SCALE + wp.vec3d(pad, pad, pad)
     mask = int(0)
     num_queries = int(PAIR_QUERIES)  # a loop, not 15 copies (Warp unrolls constant ranges)
@@ -600,9 +604,13 @@ def pair_search(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b2_t
                                       wp.vec3d(b1_t0), wp.vec3d(b2_t0), wp.vec3d(a0_t1), wp.vec3d(a1_t1),
                                       wp.vec3d(a2_t1), wp.vec3d(b0_t1), wp.vec3d(b1_t1), wp.vec3d(b2_t1))
             best = wp.min(best, primitive_toi(kind, x0, x1, min_distance, tolerance, max_iterations, NO_HIT))
-    if best > _F1 and pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
+    if best > _F1 and mask != 0 and pair_meets(a0_t1, a1_t1, a2_t1, b0_t1, b1_t1, b2_t1):
         # Nothing before t = 1: the pair still collides when the discrete test finds it touching at
-        # the end, so that a continuous frame holds what a discrete frame at either end holds.
+        # the end, so that a continuous frame holds what a discrete frame at either end holds. With
+        # no near query it cannot: apart at t = 0, the triangles can only come to meet through a
+        # vertex-face or edge-edge contact (a near query), so at t = 1 they are still apart, by the
+        # least distance of their vertex-face and edge-edge pairs, each more than the discrete
+        # test's reach (their boxes are).
         best = _F1
     return best
 

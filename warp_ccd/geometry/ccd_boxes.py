@@ -324,11 +324,14 @@ def _proves_root(kind: int, x0: MAT34D, x1: MAT34D, lo: wp.vec3d, w: wp.vec3d, e
 
 @wp.func
 def _box_search(kind: int, x0: MAT34D, x1: MAT34D, start_lo: wp.vec3d, start_w: wp.vec3d, tol: wp.vec3d,
-                eps: wp.vec3d, err: wp.vec3d, tolerance: wp.float64, max_iterations: int, best_in: wp.float64):
+                eps: wp.vec3d, err: wp.vec3d, tolerance: wp.float64, max_iterations: int, best_in: wp.float64,
+                prove: bool):
     """The depth-first search over the boxes under ``[start_lo, start_lo + start_w]`` (a dyadic box)
     for a toi before ``best_in``: ``(toi, boxes examined, whether it ran out of max_iterations)``.
     ``tol``: the parameter widths the tolerance asks for; ``eps``: the margin of a rejection per axis
-    (rounding and least distance); ``err``: the rounding alone (:func:`_proves_root`)."""
+    (rounding and least distance); ``err``: the rounding alone (:func:`_proves_root`); ``prove``:
+    whether a box that is not settled is tested for a root (a search over a whole box; a search
+    over one narrow time interval whose root proof failed skips the test, which would fail again)."""
     lo = wp.vec3d(start_lo)
     w = wp.vec3d(start_w)
     path = _path_t()
@@ -362,7 +365,7 @@ def _box_search(kind: int, x0: MAT34D, x1: MAT34D, start_lo: wp.vec3d, start_w: 
                     if best < lo[0] + w[0] and w[0] > tol[0] and w[0] > WIDTH_MIN:
                         # The box straddles the best toi so far: only its part before it matters.
                         descend = 0
-                    elif _proves_root(kind, x0, x1, lo, w, err):
+                    elif prove and _proves_root(kind, x0, x1, lo, w, err):
                         # A contact lies in the box: only its time needs narrowing (accepted once
                         # its t-width is within the tolerance's).
                         if w[0] > tol[0] and w[0] > WIDTH_MIN:

@@ -108,9 +108,9 @@ def _first_pass_kernel(
     :func:`~warp_ccd.stages.buffers.block_reserve` asks): row ``(obj_a, tri_a, obj_b, tri_b)`` over
     the motion from ``world_vertex_start`` to ``world_vertex``. A row that meets at ``t = 0`` is
     appended with toi 0; a row none of whose queries' swept boxes come near
-    (:func:`~warp_ccd.geometry.ccd.pair_near_mask`) with toi 1 if it meets at ``t = 1``; any other
-    row goes to ``deferred`` as ``(slot, mask of its near queries)``, ``deferred_toi`` no hit, and
-    each near query to ``query`` as ``(deferred row, query)``."""
+    (:func:`~warp_ccd.geometry.ccd.pair_near_mask`) has no hit; any other row goes to ``deferred``
+    as ``(slot, mask of its near queries)``, ``deferred_toi`` no hit, and each near query to
+    ``query`` as ``(deferred row, query)``."""
     block, lane = wp.tid()
     k = block * wp.block_dim() + lane
     c = wp.vec4i()
@@ -122,10 +122,8 @@ def _first_pass_kernel(
                                                                               c)
         if pair_meets(a0, a1, a2, b0, b1, b2):
             toi = wp.float64(0.0)
-        else:
+        else:  # no near query: no contact, and no discrete hit at t = 1 either (pair_search)
             mask = pair_near_mask(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance)
-            if mask == 0 and pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
-                toi = wp.float64(1.0)
     # Every thread of the block reserves (with 0 items past the candidates): one atomic a block.
     is_hit = int(0)
     if toi <= wp.float64(1.0):
