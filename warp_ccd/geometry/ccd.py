@@ -39,10 +39,12 @@ depth-first search, root proofs, and a certified coplanarity filter in front:
   (:func:`_coplanarity`), must vanish. A query whose cubic keeps one sign over ``[0, 1]`` is ruled
   out at once (most queries of a frame). Otherwise the search walks dyadic time intervals earliest
   first, drops those over which ``c`` keeps one sign, halves the others down to the time
-  tolerance, and there proves the contact (:func:`_proof_box`: one Miranda box around the point
-  where ``F`` is least) or searches that interval's boxes as above. A hit costs tens of cheap
-  steps instead of hundreds of boxes; the cubic only ever rules times out (never in), so the
-  guarantees are the search's. A cubic near zero for long (a motion in one plane) falls back to
+  tolerance, and there most often settles the interval with one test (:func:`_leaf_verdict`: a
+  Miranda box around the point where ``F`` is least proves a contact; a plane that separates
+  ``F``'s values over the interval from the origin proves none), else searches its boxes as
+  above. A query costs tens of cheap steps instead of hundreds of boxes; the cubic and the plane
+  only ever rule times out, and a contact only counts when proved, so the guarantees are the
+  search's. A cubic near zero for long (a motion in one plane) falls back to
   the search over the whole box.
 
 Every device gives the same answer: compile the calling module with ``fuse_fp=False`` (as this
@@ -64,6 +66,7 @@ from .ccd_boxes import (
     _F1,
     _F2,
     _HALF,
+    _INF,
     ERROR_FLOOR,
     ERROR_SCALE,
     ERROR_SCALE_ROTATED,
@@ -71,6 +74,7 @@ from .ccd_boxes import (
     KIND_VERTEX_FACE,
     MAT33D,
     MAT34D,
+    MIRANDA_ROUNDING,
     WIDTH_MIN,
     _axis_range,
     _box_search,
@@ -184,7 +188,7 @@ ONE_BELOW = wp.constant(wp.float64(1.0 - 2.0**-52))
 """A bound on a rounded sum that keeps the exact sum within 1."""
 
 PROOF_HALF_WIDTH = wp.constant(wp.float64(2.0**-16))
-"""Half width in ``u`` and ``v`` of the box :func:`_proof_box` builds around the estimated contact."""
+"""Half width in ``u`` and ``v`` of the box :func:`_leaf_verdict` builds around the estimated contact."""
 
 
 @wp.func
@@ -249,15 +253,48 @@ def _one_signed_on(c: wp.vec4d, a: wp.float64, b: wp.float64, e: wp.float64) -> 
 
 
 @wp.func
-def _proof_box(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, wt: wp.float64, err: wp.vec3d) -> bool:
-    """Whether a contact certainly lies in ``[a, a + wt]``: :func:`_proves_root` on the box of that
-    time interval and a square of half width :data:`PROOF_HALF_WIDTH` around the ``(u, v)`` that
-    solve ``F = 0`` in the least-squares sense at its middle (``F`` is linear in ``(u, v)`` at one
-    time), when that square lies inside the query's domain."""
+def _hull_side(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, b: wp.float64, lam: wp.vec3d,
+               err: wp.vec3d) -> bool:
+    """Whether ``lam . F`` is below zero, beyond its rounding, at every corner of the query's domain
+    at both ends of the time interval ``[a, b]`` (the triangle's three corners of ``(u, v)``, or the
+    square's four). ``F`` is affine in ``(u, v)`` at one time and in ``t`` at one ``(u, v)``, so its
+    values over the interval and the whole domain lie in the convex hull of those points: then the
+    hyperplane ``lam`` separates them all from the origin, and the interval holds no contact."""
+    bound = _F2 * wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])), err) + ERROR_FLOOR
+    scale = _F0
+    worst = -_INF
+    corners = 4
+    if kind == KIND_VERTEX_FACE:
+        corners = 3
+    for end in range(2):
+        t = wp.where(end == 0, a, b)
+        for k in range(corners):
+            u = wp.where(k == 1 or k == 3, _F1, _F0)
+            v = wp.where(k >= 2, _F1, _F0)
+            f = wp.vec3d(_value(kind, x0[0], x1[0], t, u, v), _value(kind, x0[1], x1[1], t, u, v),
+                         _value(kind, x0[2], x1[2], t, u, v))
+            worst = wp.max(worst, wp.dot(lam, f))
+            scale = wp.max(scale, wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])),
+                                         wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2]))))
+    return worst < -(bound + MIRANDA_ROUNDING * scale)
+
+
+@wp.func
+def _leaf_verdict(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, wt: wp.float64, err: wp.vec3d) -> int:
+    """What one test settles about the time interval ``[a, a + wt]``: 1, a contact certainly lies in
+    it; -1, certainly none; 0, neither (its boxes are then searched).
+
+    ``(u, v)`` solves ``F = 0`` in the least-squares sense at the interval's middle (``F`` is affine in
+    ``(u, v)`` at one time). Inside the domain (by :data:`PROOF_HALF_WIDTH`), :func:`_proves_root`
+    on the box of the interval and a square of that half width around it. Outside, the constraint
+    it breaks most (``u >= 0``, ``v >= 0``, ``u + v <= 1`` or ``u, v <= 1``), preconditioned by the
+    inverse Jacobian ``A`` (``A F`` is about ``(t - t*, u - u*, v - v*)``), gives the hyperplane of
+    :func:`_hull_side`: all of the domain lies on the far side of that constraint's line."""
     tc = a + _HALF * wt
     f = wp.vec3d()
     fu = wp.vec3d()
     fv = wp.vec3d()
+    ft = wp.vec3d()
     for ax in range(3):
         f[ax] = _value(kind, x0[ax], x1[ax], tc, _F0, _F0)
         fu[ax] = _value(kind, x0[ax], x1[ax], tc, _F1, _F0) - f[ax]
@@ -267,7 +304,7 @@ def _proof_box(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, wt: wp.float64,
     vv = wp.dot(fv, fv)
     det = uu * vv - uv * uv
     if not (det > _F0):
-        return False
+        return 0
     pu = wp.dot(fu, f)
     pv = wp.dot(fv, f)
     u = (uv * pv - vv * pu) / det
@@ -277,11 +314,35 @@ def _proof_box(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, wt: wp.float64,
     v_lo = v - h
     u_hi = u_lo + _F2 * h
     v_hi = v_lo + _F2 * h
-    if not (u_lo >= _F0 and v_lo >= _F0 and u_hi <= _F1 and v_hi <= _F1):
-        return False
-    if kind == KIND_VERTEX_FACE and not (u_hi + v_hi <= ONE_BELOW):
-        return False  # the rounded sum within 1 - 2^-52: the exact one within 1
-    return _proves_root(kind, x0, x1, wp.vec3d(a, u_lo, v_lo), wp.vec3d(wt, u_hi - u_lo, v_hi - v_lo), err)
+    inside = u_lo >= _F0 and v_lo >= _F0 and u_hi <= _F1 and v_hi <= _F1
+    if kind == KIND_VERTEX_FACE:
+        inside = inside and u_hi + v_hi <= ONE_BELOW  # the rounded sum within 1 - 2^-52: the exact one within 1
+    if inside:
+        if _proves_root(kind, x0, x1, wp.vec3d(a, u_lo, v_lo), wp.vec3d(wt, u_hi - u_lo, v_hi - v_lo), err):
+            return 1
+        return 0
+    # The most broken constraint, as a row mu of the preconditioned coordinates (t, u, v).
+    mu = wp.vec3d(_F0, -_F1, _F0)  # u >= 0
+    worst = -u
+    if -v > worst:
+        mu = wp.vec3d(_F0, _F0, -_F1)  # v >= 0
+        worst = -v
+    if kind == KIND_VERTEX_FACE:
+        if u + v - _F1 > worst:
+            mu = wp.vec3d(_F0, _F1, _F1)  # u + v <= 1
+    else:
+        if u - _F1 > worst:
+            mu = wp.vec3d(_F0, _F1, _F0)  # u <= 1
+            worst = u - _F1
+        if v - _F1 > worst:
+            mu = wp.vec3d(_F0, _F0, _F1)  # v <= 1
+    for ax in range(3):
+        ft[ax] = _value(kind, x0[ax], x1[ax], _F1, u, v) - _value(kind, x0[ax], x1[ax], _F0, u, v)
+    jac = wp.matrix_from_cols(ft, fu, fv)
+    lam = wp.transpose(wp.inverse(jac)) @ mu  # lam . F = mu . (A F); any lam separates soundly
+    if _hull_side(kind, x0, x1, a, a + wt, lam, err):
+        return -1
+    return 0
 
 
 @wp.func
@@ -294,8 +355,8 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
     A depth-first search over dyadic time intervals, earliest first, drops each interval over which
     the coplanarity cubic ``c`` (Bernstein coefficients, error ``c_err``) keeps one sign: no contact
     can happen there. An interval that it cannot drop is halved until it is no wider than the time
-    tolerance ``tol[0]``; there, the contact is proved by :func:`_proof_box` (its start is then the
-    toi), or else the boxes over that interval are searched (:func:`_box_search`). More than
+    tolerance ``tol[0]``; there, :func:`_leaf_verdict` proves a contact (its start is then the
+    toi) or none, or else the boxes over that interval are searched (:func:`_box_search`). More than
     :data:`COPLANAR_LEAVES` such intervals (a cubic near zero for long): fall back (the caller runs
     the search over the whole box)."""
     a = _F0
@@ -316,9 +377,10 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
                     leaves += 1
                     if leaves > COPLANAR_LEAVES:
                         return best, steps, int(0), int(1)
-                    if _proof_box(kind, x0, x1, a, wt, err):
+                    verdict = _leaf_verdict(kind, x0, x1, a, wt, err)
+                    if verdict > 0:
                         best = a
-                    else:
+                    elif verdict == 0:
                         found, boxes, ran_out = _box_search(kind, x0, x1, wp.vec3d(a, _F0, _F0),
                                                             wp.vec3d(wt, _F1, _F1), tol, eps, err, tolerance,
                                                             wp.max(max_iterations - steps, 1), best, False)
