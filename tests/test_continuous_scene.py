@@ -10,7 +10,15 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, triangle_pair_toi
+from warp_ccd.bench.awkward_pairs import awkward_pairs
+from warp_ccd.geometry.ccd import (
+    CCD_MAX_ITERATIONS,
+    CCD_TOLERANCE,
+    MEETS_UNDECIDED,
+    pair_meets,
+    pair_meets_common,
+    triangle_pair_toi,
+)
 from warp_ccd.scene.scene import MeshTopology, mesh_triangle
 from warp_ccd.scene.shapes import icosphere, shape
 
@@ -263,3 +271,35 @@ def test_fewer_than_two_objects(device):
     r = pipe.detect()
     assert r.continuous and r.toi == np.inf and len(r.triangle_toi) == 0 and len(r.object_toi) == 0
     assert shape("cube")  # the named shapes import beside the meshes of these tests
+
+
+@wp.kernel
+def _meets_kernel(ta: wp.array2d[Any], tb: wp.array2d[Any], common: wp.array[wp.int32],
+                  whole: wp.array[wp.int32]):
+    i = wp.tid()
+    common[i] = pair_meets_common(ta[i, 0], ta[i, 1], ta[i, 2], tb[i, 0], tb[i, 1], tb[i, 2])
+    whole[i] = wp.where(pair_meets(ta[i, 0], ta[i, 1], ta[i, 2], tb[i, 0], tb[i, 1], tb[i, 2]), 1, 0)
+
+
+for _vec in (wp.vec3, wp.vec3d):
+    wp.overload(_meets_kernel, {"ta": wp.array2d[_vec], "tb": wp.array2d[_vec]})
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_discrete_common_path_agrees_with_the_whole_test(device, precision):
+    """The passes' common path of the discrete test (steps 1 to 3 of Möller's) gives the whole
+    test's verdict whenever it gives one, on 20,000 near-degenerate pairs (touching, coplanar,
+    degenerate, far from the origin, tiny) in both orders, and leaves some undecided."""
+    ta, tb = awkward_pairs(precision, n=20_000)
+    vec = wp.vec3 if precision == "float32" else wp.vec3d
+    for a, b in ((ta, tb), (tb, ta)):
+        n = len(a)
+        common = wp.zeros(n, dtype=wp.int32, device=device)
+        whole = wp.zeros(n, dtype=wp.int32, device=device)
+        wp.launch(_meets_kernel, dim=n, inputs=[wp.array(a, dtype=vec, device=device),
+                                                wp.array(b, dtype=vec, device=device)],
+                  outputs=[common, whole], device=device)
+        c, w = common.numpy(), whole.numpy()
+        decided = c != MEETS_UNDECIDED
+        np.testing.assert_array_equal(c[decided], w[decided])
+        assert decided.sum() > n // 2 and (~decided).sum() > 0 and w.sum() > 0 and (w == 0).sum() > 0

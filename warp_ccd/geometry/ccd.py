@@ -85,8 +85,8 @@ from .ccd_boxes import (
     _tol_div,
     _value,
 )
-from .primitives import _pick
-from .triangle import TOLERANCE, tri_tri_moller
+from .primitives import _pick, _unit_normal
+from .triangle import CONTACT_NONE, CONTACT_SEGMENT, TOLERANCE, _centre, _moller_steps, tri_tri_moller
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -96,6 +96,7 @@ __all__ = [
     "CCD_TOLERANCE",
     "NO_HIT",
     "pair_meets",
+    "pair_meets_common",
     "pair_near_mask",
     "pair_query",
     "pair_search",
@@ -576,15 +577,24 @@ def pair_query(q: int, a0: wp.vec3d, a1: wp.vec3d, a2: wp.vec3d, b0: wp.vec3d, b
 
 
 @wp.func
-def pair_meets(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
-    """The discrete test (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance) on two
-    triangles at one time, run only where their boxes come within twice its tolerance."""
+def _beyond_reach(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
+    """Whether two triangles' boxes are apart by more than the discrete test's reach
+    (:data:`DISCRETE_PAD` times their extent): the test cannot find them touching."""
     lo_a = wp.min(wp.min(wp.vec3d(a0), wp.vec3d(a1)), wp.vec3d(a2))
     hi_a = wp.max(wp.max(wp.vec3d(a0), wp.vec3d(a1)), wp.vec3d(a2))
     lo_b = wp.min(wp.min(wp.vec3d(b0), wp.vec3d(b1)), wp.vec3d(b2))
     hi_b = wp.max(wp.max(wp.vec3d(b0), wp.vec3d(b1)), wp.vec3d(b2))
     pad = DISCRETE_PAD * _max3(wp.max(hi_a - lo_a, hi_b - lo_b))
     if _apart(lo_a, hi_a, lo_b, hi_b, wp.vec3d(pad, pad, pad)):
+        return True
+    return False
+
+
+@wp.func
+def pair_meets(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> bool:
+    """The discrete test (:func:`~warp_ccd.geometry.triangle.tri_tri_moller`, its tolerance) on two
+    triangles at one time, run only where their boxes come within twice its tolerance."""
+    if _beyond_reach(a0, a1, a2, b0, b1, b2):
         return False
     return tri_tri_moller(a0, a1, a2, b0, b1, b2, type(a0[0])(TOLERANCE))
 
@@ -644,6 +654,33 @@ def pair_near_mask(a0_t0: Any, a1_t0: Any, a2_t0: Any, b0_t0: Any, b1_t0: Any, b
         if near:
             mask = mask | (1 << q)
     return mask
+
+
+MEETS_UNDECIDED = wp.constant(2)
+""":func:`pair_meets_common`'s answer for a pair it leaves to :func:`pair_meets`."""
+
+
+@wp.func
+def pair_meets_common(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any) -> int:
+    """:func:`pair_meets` on its common path, as the discrete narrow phase's first kernel runs it
+    (steps 1 to 3 of Möller's test, :func:`~warp_ccd.geometry.triangle._moller_steps`, on two
+    triangles that are not degenerate): 1 they meet, 0 they do not, :data:`MEETS_UNDECIDED` for a
+    pair only the whole test decides (a touching test, a coplanar or degenerate pair). A kernel
+    that calls it leaves the whole test, and its registers, to another."""
+    if _beyond_reach(a0, a1, a2, b0, b1, b2):
+        return 0
+    tol = type(a0[0])(TOLERANCE)
+    na, degenerate_a = _unit_normal(a0, a1, a2, tol)
+    nb, degenerate_b = _unit_normal(b0, b1, b2, tol)
+    if degenerate_a or degenerate_b:
+        return MEETS_UNDECIDED
+    c0, c1, c2, d0, d1, d2, eps = _centre(a0, a1, a2, b0, b1, b2, tol)
+    kind, p, q = _moller_steps(c0, c1, c2, d0, d1, d2, na, nb, eps)
+    if kind == CONTACT_NONE:
+        return 0
+    if kind == CONTACT_SEGMENT:
+        return 1
+    return MEETS_UNDECIDED
 
 
 @wp.func

@@ -6,7 +6,7 @@ every world vertex move linearly from ``world_vertex_start`` (``t = 0``) to the 
 over both ends, padded by the least distance and the tolerance: :func:`~warp_ccd.stages.bvh.swept_triangle_box_at`),
 so every triangle pair that comes within ``min_distance`` at some ``t`` is a candidate.
 :class:`ContinuousNarrowPhase` then runs :func:`~warp_ccd.geometry.ccd.triangle_pair_toi` on each
-candidate row ``(obj_a, tri_a, obj_b, tri_b)``, one thread a row: a pair with a toi in ``[0, 1]``
+candidate row ``(obj_a, tri_a, obj_b, tri_b)``, in passes (below): a pair with a toi in ``[0, 1]``
 is appended to :attr:`~ContinuousNarrowPhase.hits` (capacity + counter; it grows, nothing is
 dropped) with its toi in :attr:`~ContinuousNarrowPhase.toi` (float64, same slot), and both objects
 are flagged. The toi is never later than the true one (Tight Inclusion's guarantee); 0 for a
@@ -14,14 +14,23 @@ pair that already meets at ``t = 0``.
 
 Cost: one query of up to 15 primitive pairs a candidate, each a bounded search
 (``max_iterations`` steps); most queries of a swept frame are ruled out by their swept boxes or
-their filters (the coplanarity cubic, the whole box). Three passes: the first runs the discrete
-test at ``t = 0``, the swept boxes and the filters of each candidate
-(:func:`~warp_ccd.geometry.ccd.pair_filter`, a small kernel) and lists the candidates with queries
-left (a few percent), with the mask of those queries; the second searches each such query, one a
-thread, side by side (on a GPU a search in a warp of finished lanes, or one candidate's searches
-one after the other, cost their whole length in latency); the third appends the listed
-candidates. The results are those of one pass (each query is searched on its own,
-deterministically, its filters its first steps).
+their filters (the coplanarity cubic, the whole box). The work runs in passes, so that no warp
+waits on a long search beside finished lanes and no kernel holds the registers of code that few
+of its threads run:
+
+1. per candidate (:func:`_first_pass_kernel`): the discrete test at ``t = 0`` on its common path
+   (:func:`~warp_ccd.geometry.ccd.pair_meets_common`) and the swept-box mask of the 15 queries
+   (:func:`~warp_ccd.geometry.ccd.pair_near_mask`); a row that meets is a hit (toi 0), a row with
+   near queries (or a discrete test left undecided) is listed with its near queries;
+2. per near query (:func:`_filter_pass_kernel`): its filters; the few queries they leave are listed;
+3. per query left (:func:`_search_pass_kernel`): its search, its toi min-ed into its row's;
+4. per listed row (:func:`_last_pass_kernel`): the discrete test at ``t = 1`` when its queries found
+   nothing, and the row appended; rows the common path left undecided go to
+5. :func:`_undecided_pass_kernel`: the whole discrete test (:func:`~warp_ccd.geometry.ccd.pair_meets`).
+
+The results are those of :func:`~warp_ccd.geometry.ccd.triangle_pair_toi` on every candidate
+(each query is searched on its own, deterministically, its filters its first steps; the common
+path's verdicts are the whole test's), which the tests check bit for bit.
 The module is compiled without floating-point contraction (``fuse_fp=False``), as
 :mod:`warp_ccd.geometry.ccd` asks, so that every device gives the same tois.
 """
@@ -33,9 +42,11 @@ import warp as wp
 from ..geometry.ccd import (
     CCD_MAX_ITERATIONS,
     CCD_TOLERANCE,
+    MEETS_UNDECIDED,
     NO_HIT,
     PAIR_QUERIES,
     pair_meets,
+    pair_meets_common,
     pair_near_mask,
     pair_query,
     primitive_toi,
@@ -49,6 +60,20 @@ from .buffers import GrowableBuffer, block_dim_for, block_reserve, reserve_slot,
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["ContinuousNarrowPhase", "continuous_options"]
+
+MAX_REGISTERS = 128
+"""Most registers a thread of the first, filter, last and undecided passes on CUDA (as the discrete
+narrow phase's kernels): two blocks of 256 a multiprocessor, for a few spilled bytes. On the H100 a
+10^5-polyhedra continuous frame took 1.44-1.49 ms with it against 1.59 ms without
+(``bench/results/continuous_cuda0.json`` is measured with it); the search pass keeps its registers
+(a cap of 168 or 192 gave nothing)."""
+
+START_UNDECIDED = wp.constant(1 << PAIR_QUERIES)
+"""Bit of a deferred row's mask (above its queries' bits): the discrete test at ``t = 0`` left it to
+the whole test (:func:`~warp_ccd.geometry.ccd.pair_meets_common`)."""
+
+QUERY_BITS = wp.constant((1 << PAIR_QUERIES) - 1)
+"""The bits of a deferred row's mask that name its near queries."""
 
 
 @wp.func
@@ -81,7 +106,7 @@ def _bit_count(mask: int) -> int:
     return n
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _first_pass_kernel(
     mesh: MeshTopology,
     world_vertex_start: wp.array[Any],
@@ -120,10 +145,13 @@ def _first_pass_kernel(
         c = candidate[k]
         a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex,
                                                                               c)
-        if pair_meets(a0, a1, a2, b0, b1, b2):
+        meets = pair_meets_common(a0, a1, a2, b0, b1, b2)
+        if meets == 1:
             toi = wp.float64(0.0)
         else:  # no near query: no contact, and no discrete hit at t = 1 either (pair_search)
             mask = pair_near_mask(a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e, min_distance)
+            if meets == MEETS_UNDECIDED:
+                mask = mask | START_UNDECIDED  # the last passes decide it
     # Every thread of the block reserves (with 0 items past the candidates): one atomic a block.
     is_hit = int(0)
     if toi <= wp.float64(1.0):
@@ -143,7 +171,7 @@ def _first_pass_kernel(
     if is_deferred != 0 and row < wp.int64(deferred_capacity):
         queries = _bit_count(mask)  # only a stored row's queries: every listed query names a stored row
     first = block_reserve(query_count, lane, queries)
-    if queries != 0:
+    if is_deferred != 0 and row < wp.int64(deferred_capacity):
         i = int(row)
         deferred[i] = wp.vec2i(k, mask)
         deferred_toi[i] = NO_HIT
@@ -166,7 +194,7 @@ def _query_points(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_v
                       wp.vec3d(a0e), wp.vec3d(a1e), wp.vec3d(a2e), wp.vec3d(b0e), wp.vec3d(b1e), wp.vec3d(b2e))
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _filter_pass_kernel(
     mesh: MeshTopology,
     world_vertex_start: wp.array[Any],
@@ -227,7 +255,7 @@ def _search_pass_kernel(
         wp.atomic_min(deferred_toi, entry[0], toi)
 
 
-@wp.kernel
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _last_pass_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
@@ -237,19 +265,75 @@ def _last_pass_kernel(
     deferred_count: wp.array[wp.int64],
     deferred_capacity: int,
     hit_capacity: int,
+    undecided_capacity: int,
+    # Outputs
+    hit: wp.array[wp.vec4i],
+    hit_toi: wp.array[wp.float64],
+    hit_count: wp.array[wp.int64],
+    object_colliding: wp.array[wp.int32],
+    undecided: wp.array[wp.int32],
+    undecided_count: wp.array[wp.int64],
+):
+    """One thread per deferred row: its toi (the discrete test at ``t = 1`` when its queries found
+    none, on its common path), appended as the first pass does; a row whose discrete test at
+    ``t = 0`` or ``t = 1`` only the whole test decides goes to ``undecided``
+    (:func:`_undecided_pass_kernel`)."""
+    i = wp.tid()
+    if i >= used_count(deferred_count, deferred_capacity):
+        return
+    d = deferred[i]
+    c = candidate[d[0]]
+    toi = deferred_toi[i]
+    later = (d[1] & START_UNDECIDED) != 0
+    if not later and toi > wp.float64(1.0):
+        a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
+        b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+        meets = pair_meets_common(a0e, a1e, a2e, b0e, b1e, b2e)
+        if meets == 1:
+            toi = wp.float64(1.0)
+        later = meets == MEETS_UNDECIDED
+    if later:
+        slot = reserve_slot(undecided_count, undecided_capacity)
+        if slot >= 0:
+            undecided[slot] = i
+        return
+    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
+
+
+@wp.kernel(cuda_max_registers=MAX_REGISTERS)
+def _undecided_pass_kernel(
+    mesh: MeshTopology,
+    world_vertex_start: wp.array[Any],
+    world_vertex: wp.array[Any],
+    candidate: wp.array[wp.vec4i],
+    deferred: wp.array[wp.vec2i],
+    deferred_toi: wp.array[wp.float64],
+    undecided: wp.array[wp.int32],
+    undecided_count: wp.array[wp.int64],
+    undecided_capacity: int,
+    hit_capacity: int,
     # Outputs
     hit: wp.array[wp.vec4i],
     hit_toi: wp.array[wp.float64],
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
-    """One thread per deferred row: its toi (the end test when none), appended as the first pass does."""
-    i = wp.tid()
-    if i >= used_count(deferred_count, deferred_capacity):
+    """One thread per row left undecided (a few): the whole discrete test
+    (:func:`~warp_ccd.geometry.ccd.pair_meets`) at ``t = 0`` if the first pass left it, then at
+    ``t = 1`` if its queries found no toi, and the row appended as the first pass does."""
+    j = wp.tid()
+    if j >= used_count(undecided_count, undecided_capacity):
         return
-    c = candidate[deferred[i][0]]
+    i = undecided[j]
+    d = deferred[i]
+    c = candidate[d[0]]
     toi = deferred_toi[i]
-    if toi > wp.float64(1.0):
+    if (d[1] & START_UNDECIDED) != 0:
+        a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
+        b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+        if pair_meets(a0, a1, a2, b0, b1, b2):
+            toi = wp.float64(0.0)
+    if toi > wp.float64(1.0) and (d[1] & QUERY_BITS) != 0:
         a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
         b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
         if pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
@@ -262,6 +346,7 @@ _FIRST = precision_overloads(_first_pass_kernel, _SWEPT)
 _FILTER = precision_overloads(_filter_pass_kernel, _SWEPT)
 _SEARCH = precision_overloads(_search_pass_kernel, _SWEPT)
 _LAST = precision_overloads(_last_pass_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_UNDECIDED = precision_overloads(_undecided_pass_kernel, _SWEPT)
 
 
 def continuous_options(min_distance, tolerance, max_iterations) -> tuple[float, float, int]:
@@ -313,6 +398,7 @@ class ContinuousNarrowPhase:
         self.queries = GrowableBuffer(wp.vec2i, 4 * self.deferred.capacity, self.device, "primitive queries")
         self.searches = GrowableBuffer(wp.vec2i, self.queries.capacity, self.device,
                                        "primitive searches")
+        self.undecided = GrowableBuffer(wp.int32, self.deferred.capacity, self.device, "undecided rows")
         self.deferred_toi = wp.zeros(self.deferred.capacity, dtype=wp.float64, device=self.device)
         self.toi = wp.zeros(self.hits.capacity, dtype=wp.float64, device=self.device)
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
@@ -329,8 +415,8 @@ class ContinuousNarrowPhase:
     @property
     def counters(self) -> list[GrowableBuffer]:
         """The buffers with counters that :meth:`launch` writes (the hits, the deferred candidates,
-        their queries and the queries searched)."""
-        return [self.hits, self.deferred, self.queries, self.searches]
+        their queries, the queries searched and the rows the discrete test's common path left)."""
+        return [self.hits, self.deferred, self.queries, self.searches, self.undecided]
 
     def launch(self, scene, world_vertex_start: wp.array, candidates: GrowableBuffer, *,
                reset_counters: bool = True) -> None:
@@ -350,9 +436,9 @@ class ContinuousNarrowPhase:
         if self.toi.shape[0] != hits.capacity:  # follows the hits' capacity (after a growth, eagerly)
             self.toi = wp.zeros(hits.capacity, dtype=wp.float64, device=d)
         self.object_colliding.zero_()
-        deferred, queries, searches = self.deferred, self.queries, self.searches
+        deferred, queries, searches, undecided = self.deferred, self.queries, self.searches, self.undecided
         if reset_counters:
-            for buffer in (deferred, queries, searches):
+            for buffer in (deferred, queries, searches, undecided):
                 buffer.reset()
         if self.deferred_toi.shape[0] != deferred.capacity:
             self.deferred_toi = wp.zeros(deferred.capacity, dtype=wp.float64, device=d)
@@ -375,5 +461,10 @@ class ContinuousNarrowPhase:
                   outputs=[self.deferred_toi], device=d)
         wp.launch(_LAST[scene.precision], dim=deferred.capacity,
                   inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
-                          deferred.count, deferred.capacity, hits.capacity],
+                          deferred.count, deferred.capacity, hits.capacity, undecided.capacity],
+                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, undecided.data, undecided.count],
+                  device=d)
+        wp.launch(_UNDECIDED[scene.precision], dim=undecided.capacity,
+                  inputs=[*swept, deferred.data, self.deferred_toi, undecided.data, undecided.count, undecided.capacity,
+                          hits.capacity],
                   outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
