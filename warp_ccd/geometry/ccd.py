@@ -274,9 +274,13 @@ def _hull_side(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, b: wp.float64, 
             v = wp.where(k >= 2, _F1, _F0)
             f = wp.vec3d(_value(kind, x0[0], x1[0], t, u, v), _value(kind, x0[1], x1[1], t, u, v),
                          _value(kind, x0[2], x1[2], t, u, v))
-            worst = wp.max(worst, wp.dot(lam, f))
-            scale = wp.max(scale, wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])),
-                                         wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2]))))
+            value = wp.dot(lam, f)
+            size = wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])),
+                          wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])))
+            if not (wp.isfinite(value) and wp.isfinite(size)):
+                return False  # wp.max would pass over a nan
+            worst = wp.max(worst, value)
+            scale = wp.max(scale, size)
     return worst < -(bound + MIRANDA_ROUNDING * scale)
 
 

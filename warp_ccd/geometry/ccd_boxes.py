@@ -284,13 +284,13 @@ def _proves_root(kind: int, x0: MAT34D, x1: MAT34D, lo: wp.vec3d, w: wp.vec3d, e
         jac[ax, 2] = _value(kind, x0[ax], x1[ax], tc, uc, _F1) - _value(kind, x0[ax], x1[ax], tc, uc, _F0)
     a = wp.inverse(jac)
     r = a @ jac
-    worst = _F0
     for i in range(3):
         row = wp.abs(r[i, 0] - wp.where(i == 0, _F1, _F0)) + wp.abs(r[i, 1] - wp.where(i == 1, _F1, _F0)) + \
             wp.abs(r[i, 2] - wp.where(i == 2, _F1, _F0))
-        worst = wp.max(worst, row)
-    if not (worst <= _HALF):  # also false for a singular Jacobian (inverse 0) and for nan
-        return False
+        # Each row on its own (wp.max would pass over a nan): false for a singular Jacobian
+        # (inverse 0) and for nan.
+        if not (row <= _HALF):
+            return False
     for i in range(3):
         ai = wp.vec3d(a[i, 0], a[i, 1], a[i, 2])
         absa = wp.vec3d(wp.abs(ai[0]), wp.abs(ai[1]), wp.abs(ai[2]))

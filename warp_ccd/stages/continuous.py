@@ -428,6 +428,10 @@ class ContinuousNarrowPhase:
             world_vertex_start: ``(V,)`` world vertices at ``t = 0`` (the scene's vector type).
             candidates: ``wp.vec4i`` candidate triangle pairs (the mid phase's, from swept boxes).
             reset_counters: zero the hits' counter first; False when the caller has.
+
+        A buffer of :attr:`counters` that overflows leaves this launch's hits incomplete (rows may
+        be appended with a later toi than their full answer): the caller reads the counters and
+        runs again after they grow, as :class:`~warp_ccd.pipeline.CollisionPipeline` does.
         """
         d = self.device
         hits = self.hits
