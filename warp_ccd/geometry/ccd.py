@@ -261,7 +261,8 @@ def _hull_side(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, b: wp.float64, 
     square's four). ``F`` is affine in ``(u, v)`` at one time and in ``t`` at one ``(u, v)``, so its
     values over the interval and the whole domain lie in the convex hull of those points: then the
     hyperplane ``lam`` separates them all from the origin, and the interval holds no contact."""
-    bound = _F2 * wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])), err) + ERROR_FLOOR
+    abs_lam = wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2]))
+    bound = _F2 * wp.dot(abs_lam, err) + ERROR_FLOOR
     scale = _F0
     worst = -_INF
     corners = 4
@@ -275,8 +276,7 @@ def _hull_side(kind: int, x0: MAT34D, x1: MAT34D, a: wp.float64, b: wp.float64, 
             f = wp.vec3d(_value(kind, x0[0], x1[0], t, u, v), _value(kind, x0[1], x1[1], t, u, v),
                          _value(kind, x0[2], x1[2], t, u, v))
             value = wp.dot(lam, f)
-            size = wp.dot(wp.vec3d(wp.abs(lam[0]), wp.abs(lam[1]), wp.abs(lam[2])),
-                          wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])))
+            size = wp.dot(abs_lam, wp.vec3d(wp.abs(f[0]), wp.abs(f[1]), wp.abs(f[2])))
             if not (wp.isfinite(value) and wp.isfinite(size)):
                 return False  # wp.max would pass over a nan
             worst = wp.max(worst, value)
@@ -393,11 +393,10 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
                         best = found
                         if ran_out != 0:
                             return wp.min(best, b), steps, int(1), int(0)
-            if steps >= max_iterations and not descend:
-                # Out of budget: a collision no earlier than any interval not yet finished.
-                return wp.min(best, b), steps, int(1), int(0)
             if steps >= max_iterations:
-                return wp.min(best, a), steps, int(1), int(0)
+                # Out of budget: a collision no earlier than any interval not yet finished (this
+                # one when it was to be halved, else the ones after it).
+                return wp.min(best, wp.where(descend, a, b)), steps, int(1), int(0)
         if descend:
             wt = wt * _HALF
         else:
@@ -416,23 +415,34 @@ def _coplanar_search(kind: int, c: wp.vec4d, c_err: wp.float64, x0: MAT34D, x1: 
 
 
 @wp.func
-def query_excluded(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64) -> bool:
-    """Whether a query's filters rule out any contact: at ``min_distance = 0`` the coplanarity cubic
-    keeps one sign over ``[0, 1]`` (:func:`_coplanarity`: the four points are never coplanar, most
-    queries of a frame), or ``F`` over the whole box of parameters stays beyond ``min_distance``
-    plus the rounding on one axis."""
+def _filters(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64):
+    """A query's filters: ``(excluded, c, c_err)``, whether they rule out any contact
+    (:func:`query_excluded`), and the coplanarity cubic they computed (at ``min_distance = 0``;
+    zeros otherwise), which the search goes on with."""
+    c = wp.vec4d()
+    c_err = _F0
     if min_distance == _F0:
         c, c_err = _coplanarity(kind, x0, x1)
         if _one_signed_on(c, _F0, _F1, c_err):
-            return True
+            return True, c, c_err
     lo = wp.vec3d(_F0, _F0, _F0)
     w = wp.vec3d(_F1, _F1, _F1)
     for ax in range(3):
         e = ERROR_SCALE * _max_abs4(x0[ax], x1[ax]) + ERROR_FLOOR + min_distance
         fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)
         if fl > e or fh < -e:
-            return True
-    return False
+            return True, c, c_err
+    return False, c, c_err
+
+
+@wp.func
+def query_excluded(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64) -> bool:
+    """Whether a query's filters rule out any contact: at ``min_distance = 0`` the coplanarity cubic
+    keeps one sign over ``[0, 1]`` (:func:`_coplanarity`: the four points are never coplanar, most
+    queries of a frame), or ``F`` over the whole box of parameters stays beyond ``min_distance``
+    plus the rounding on one axis."""
+    excluded, c, c_err = _filters(kind, x0, x1, min_distance)
+    return excluded
 
 
 @wp.func
@@ -450,7 +460,8 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
         t_end: only times before it are searched (:data:`NO_HIT` for all of ``[0, 1]``; a smaller
             value when an earlier query already found that toi).
     """
-    if query_excluded(kind, x0, x1, min_distance):
+    excluded, c, c_err = _filters(kind, x0, x1, min_distance)  # the cubic in world axes, before the rotation
+    if excluded:
         return t_end, int(0)
     err = wp.vec3d()
     for ax in range(3):
@@ -458,10 +469,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
     eps = err + wp.vec3d(min_distance, min_distance, min_distance)
     lo = wp.vec3d(_F0, _F0, _F0)
     w = wp.vec3d(_F1, _F1, _F1)
-    c = wp.vec4d()
-    c_err = _F0
     if min_distance == _F0:
-        c, c_err = _coplanarity(kind, x0, x1)  # in world axes, before the rotation
         # Search in a frame whose third axis is the face's normal (vertex-face) or the edges' common
         # normal (edge-edge): F = 0 does not depend on the frame, and there the distance along the
         # normal rejects times far from the contact whatever the box's extent over the face.
@@ -478,7 +486,7 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
     # Parameter tolerances from the whole box (Tight Inclusion's compute_*_tolerances: the tolerance
     # over three times the longest edge of F's box along each parameter, in the infinity norm;
     # infinite along a parameter F does not depend on); in the contact frame the box is tested again
-    # (the world's axes were, by query_excluded).
+    # (the world's axes were, by _filters).
     longest = wp.vec3d()
     for ax in range(3):
         fl, fh, change = _axis_range(kind, x0[ax], x1[ax], lo, w)

@@ -54,8 +54,9 @@ from ..geometry.ccd import (
 )
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, number_option
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..scene.scene import MeshTopology
 from .buffers import GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
+from .narrow_phase import _pair_triangles
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -79,10 +80,8 @@ QUERY_BITS = wp.constant((1 << PAIR_QUERIES) - 1)
 @wp.func
 def _row_vertices(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any], c: wp.vec4i):
     """The two triangles of row ``c`` at the start and at the end of the motion."""
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
-    a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+    a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex_start, c)
+    a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
     return a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e
 
 
@@ -167,11 +166,12 @@ def _first_pass_kernel(
     if mask != 0:
         is_deferred = 1
     row = block_reserve(deferred_count, lane, is_deferred)
+    stored = is_deferred != 0 and row < wp.int64(deferred_capacity)
     queries = int(0)
-    if is_deferred != 0 and row < wp.int64(deferred_capacity):
+    if stored:
         queries = _bit_count(mask)  # only a stored row's queries: every listed query names a stored row
     first = block_reserve(query_count, lane, queries)
-    if is_deferred != 0 and row < wp.int64(deferred_capacity):
+    if stored:
         i = int(row)
         deferred[i] = wp.vec2i(k, mask)
         deferred_toi[i] = NO_HIT
@@ -286,8 +286,7 @@ def _last_pass_kernel(
     toi = deferred_toi[i]
     later = (d[1] & START_UNDECIDED) != 0
     if not later and toi > wp.float64(1.0):
-        a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-        b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+        a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
         meets = pair_meets_common(a0e, a1e, a2e, b0e, b1e, b2e)
         if meets == 1:
             toi = wp.float64(1.0)
@@ -329,13 +328,11 @@ def _undecided_pass_kernel(
     c = candidate[d[0]]
     toi = deferred_toi[i]
     if (d[1] & START_UNDECIDED) != 0:
-        a0, a1, a2 = mesh_triangle(mesh, world_vertex_start, c[0], c[1])
-        b0, b1, b2 = mesh_triangle(mesh, world_vertex_start, c[2], c[3])
+        a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex_start, c)
         if pair_meets(a0, a1, a2, b0, b1, b2):
             toi = wp.float64(0.0)
     if toi > wp.float64(1.0) and (d[1] & QUERY_BITS) != 0:
-        a0e, a1e, a2e = mesh_triangle(mesh, world_vertex, c[0], c[1])
-        b0e, b1e, b2e = mesh_triangle(mesh, world_vertex, c[2], c[3])
+        a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
         if pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
             toi = wp.float64(1.0)
     _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
