@@ -596,8 +596,10 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         _check_transforms(transforms_end, len(meshes), "transforms_end")
     if vertices_end is not None:  # deforming: world vertices at both ends, computed here
         ends = _vertices_end(meshes, vertices_end)
-        start = _placed(meshes, [np.asarray(v, np.float64) for v, _ in meshes], transforms)
-        end = _placed(meshes, ends, transforms if transforms_end is None else transforms_end, "transforms_end")
+        if transforms is not None:
+            _check_transforms(transforms, len(meshes), "transforms")
+        start = _placed([np.asarray(v, np.float64) for v, _ in meshes], transforms)
+        end = _placed(ends, transforms if transforms_end is None else transforms_end)
         scene = Scene.from_meshes([(v, t) for v, (_, t) in zip(start, meshes)], deforming=True, device=device,
                                   precision=precision)
     else:
@@ -652,10 +654,10 @@ def _check_transforms(transforms, n: int, name: str) -> None:
         raise ValueError(f"{name}: {exc}" if name != "transforms" else str(exc)) from None
 
 
-def _placed(meshes: Sequence, vertices: list[np.ndarray], transforms, name: str = "transforms") -> list[np.ndarray]:
-    """Each mesh's ``vertices`` under its transform (validated), in float64; as they are without one."""
+def _placed(vertices: list[np.ndarray], transforms) -> list[np.ndarray]:
+    """Each mesh's ``vertices`` under its transform (checked by the caller, :func:`_check_transforms`),
+    in float64; as they are without one."""
     if transforms is None:
         return vertices
-    _check_transforms(transforms, len(meshes), name)
     m = np.asarray(transforms, np.float64)
     return [v @ m[i, :3, :3].T + m[i, :3, 3] for i, v in enumerate(vertices)]
