@@ -16,6 +16,9 @@ Compile that module without floating-point contraction, for the same verdict on 
         if geometry.tri_tri_moller(a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2], geometry.TOLERANCE):
             hit[k] = 1
 
+Distance: :func:`tri_tri_distance` gives how far apart two closed triangles are and a closest pair
+of points (0 and a common point when they intersect; :mod:`warp_ccd.geometry.distance`).
+
 Continuous collision: :func:`vertex_face_toi`, :func:`edge_edge_toi` and :func:`triangle_pair_toi`
 give the earliest time in ``[0, 1]`` that linearly moving primitives touch, or :data:`NO_HIT`
 (conservative: never late, never missed; :mod:`warp_ccd.geometry.ccd`).
@@ -26,6 +29,7 @@ Boxes are float32 ``wp.vec3`` corners: :func:`boxes_overlap` tests two closed bo
 
 from .box import BOX_EMPTY, box_lower32, box_upper32, boxes_overlap, vertex_bounds
 from .ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE, NO_HIT, edge_edge_toi, triangle_pair_toi, vertex_face_toi
+from .distance import DISTANCE_ERROR_ULPS, tri_tri_distance
 from .triangle import (
     CONTACT_AREA,
     CONTACT_NONE,
@@ -47,6 +51,7 @@ __all__ = [
     "CONTACT_AREA",
     "CONTACT_NONE",
     "CONTACT_SEGMENT",
+    "DISTANCE_ERROR_ULPS",
     "METHOD_EDGE_FACE",
     "METHOD_MOLLER",
     "NO_HIT",
@@ -56,6 +61,7 @@ __all__ = [
     "boxes_overlap",
     "crossing_depth",
     "edge_edge_toi",
+    "tri_tri_distance",
     "tri_tri_edge_face",
     "tri_tri_moller",
     "tri_tri_segment",
