@@ -6,6 +6,9 @@
   distances below an absolute 1e-6 (on the unnormalised normal), so callers scale scenes up first
   (``scale``): uniform scaling changes no intersection.
 * :func:`triangle_pairs_fcl`: python-fcl's BVH collision with per-triangle contacts.
+* :func:`closed_triangle_distance`: distances of closed triangles (numpy float64), and from it
+  :func:`pair_distance_brute` / :func:`clearance_pairs_brute`, the least distance of mesh pairs over
+  all their triangle pairs (within a reach); :func:`fcl_pair_distance`, python-fcl's.
 """
 
 from __future__ import annotations
@@ -263,3 +266,80 @@ def touching_band(tri_a, tri_b, tol, degenerate_slack=False):
     eps = tolerance_length(tri_a, tri_b, tol)
     slack = degenerate_height(tri_a, tol) + degenerate_height(tri_b, tol) if degenerate_slack else 0.0
     return dist + slack <= 0.25 * eps, dist >= 4.0 * eps
+
+
+# ---------------------------------------------------------------------------------------------
+# Clearance: the least distance of object pairs (numpy float64 brute force, python-fcl)
+
+def _triangle_boxes(v, t):
+    tri = np.asarray(v, np.float64)[np.asarray(t)]
+    return tri, tri.min(axis=1), tri.max(axis=1)
+
+
+def box_gap(lo_a, hi_a, lo_b, hi_b):
+    """Euclidean distance between closed boxes (broadcast), 0 where they overlap."""
+    gap = np.maximum(0.0, np.maximum(lo_a - hi_b, lo_b - hi_a))
+    return np.linalg.norm(gap, axis=-1)
+
+
+def pair_distance_brute(mesh_a, mesh_b, reach: float = np.inf):
+    """Least distance between two meshes (world vertices, triangles), and the triangle pairs that
+    attain it, by :func:`closed_triangle_distance` over every triangle pair whose boxes lie within
+    ``reach`` of each other (a pair farther apart than ``reach`` in its boxes cannot come closer; an
+    infinite ``reach`` tests them all): ``(distance, (K, 2) int rows (tri_a, tri_b) at it)``, or
+    ``(inf, empty)`` when no triangle pair is within ``reach``."""
+    ta, lo_a, hi_a = _triangle_boxes(*mesh_a)
+    tb, lo_b, hi_b = _triangle_boxes(*mesh_b)
+    best, rows = np.inf, []
+    chunk = max(1, 400_000 // max(len(tb), 1))
+    for s in range(0, len(ta), chunk):
+        gap = box_gap(lo_a[s : s + chunk, None], hi_a[s : s + chunk, None], lo_b[None], hi_b[None])
+        i, j = np.nonzero(gap <= reach)
+        if not len(i):
+            continue
+        i = i + s
+        d = closed_triangle_distance(ta[i], tb[j])
+        m = d.min()
+        if m < best:
+            best, rows = m, []
+        if m == best:
+            rows.append(np.stack([i[d == m], j[d == m]], axis=1))
+    return best, (np.concatenate(rows) if rows else np.zeros((0, 2), np.int64))
+
+
+def clearance_pairs_brute(meshes, clearance: float) -> dict:
+    """``{(a, b): least distance}`` of every object pair ``a < b`` within ``clearance`` (float64
+    numpy; object boxes first, then :func:`pair_distance_brute` within the clearance)."""
+    boxes = [_triangle_boxes(v, t) for v, t in meshes]
+    lo = np.array([b[1].min(axis=0) for b in boxes])
+    hi = np.array([b[2].max(axis=0) for b in boxes])
+    out = {}
+    for a in range(len(meshes)):
+        near = np.nonzero(box_gap(lo[a], hi[a], lo, hi) <= clearance)[0]
+        for b in near[near > a]:
+            d, _ = pair_distance_brute(meshes[a], meshes[b], reach=clearance)
+            if d <= clearance:
+                out[(a, int(b))] = d
+    return out
+
+
+def fcl_model(v, t):
+    """A python-fcl collision object of a mesh in world coordinates."""
+    import fcl
+
+    m = fcl.BVHModel()
+    m.beginModel(len(v), len(t))
+    m.addSubModel(np.asarray(v, np.float64), np.asarray(t, np.int64))
+    m.endModel()
+    return fcl.CollisionObject(m, fcl.Transform())
+
+
+def fcl_pair_distance(obj_a, obj_b):
+    """``(distance, nearest points (2, 3), collide)`` by python-fcl: ``fcl.distance`` with nearest
+    points, and ``fcl.collide`` (FCL's mesh distance is not meant for intersecting meshes)."""
+    import fcl
+
+    hit = fcl.collide(obj_a, obj_b, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+    res = fcl.DistanceResult()
+    d = fcl.distance(obj_a, obj_b, fcl.DistanceRequest(enable_nearest_points=True), res)
+    return d, np.array(res.nearest_points, np.float64), hit

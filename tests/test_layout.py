@@ -26,7 +26,7 @@ ROOMS = {
     "geometry": (("warp_ccd.geometry",), ("floor",)),
     "scene": (("warp_ccd.scene",), ("floor", "geometry")),
     "stages": (("warp_ccd.stages",), ("floor", "geometry", "scene")),
-    "pipeline": (("warp_ccd.pipeline",), ("floor", "geometry", "scene", "stages")),
+    "pipeline": (("warp_ccd.pipeline", "warp_ccd.result", "warp_ccd.query"), ("floor", "geometry", "scene", "stages")),
     "output": (("warp_ccd.output",), ("floor",)),
     "usd": (("warp_ccd.usd",), ("floor", "geometry", "scene", "stages", "pipeline", "output")),
     "preview": (("warp_ccd.preview",), ("floor", "geometry", "scene", "stages", "pipeline", "output")),

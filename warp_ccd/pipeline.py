@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from functools import cached_property
 
 import numpy as np
 import warp as wp
@@ -32,14 +31,16 @@ import warp as wp
 from .geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE
 from .geometry.triangle import TOLERANCE
 from .options import integer_option, number_option
+from .result import NEAR_ROWS, CollisionResult
 from .scene.scene import Scene, transforms_to_poses
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
+from .stages.clearance import ClearancePhase
 from .stages.continuous import ContinuousNarrowPhase, continuous_options
 from .stages.frame import CountedFrame, FrameCache, frame_mode
 from .stages.kinds import make_mid_phase, make_narrow_phase
 
-__all__ = ["CollisionPipeline", "CollisionResult", "collide"]
+__all__ = ["CollisionPipeline", "CollisionResult", "collide"]  # CollisionResult: from .result
 
 RIGID_LEAF_SIZE = 1
 """Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 4.3 / 1.65 /
@@ -58,196 +59,7 @@ polyhedra over a step against 66,796 with leaves of 4)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
-with the all-pairs mid phase)."""
-
-
-class CollisionResult:
-    """What one frame found. Arrays are computed on first access and cached.
-
-    A result of :meth:`CollisionPipeline.detect` holds views of the pipeline's device buffers,
-    valid until its next ``detect()`` overwrites them: read what you need first (the numpy
-    properties copy to the host on first access and keep their copy), or keep
-    :meth:`copy`, which owns its arrays.
-
-    Attributes:
-        num_objects: ``N``.
-        timings: per-stage wall times in ms (``refit``, ``broad``, ``mid``, ``narrow``,
-            ``total``) when the pipeline was asked for them, else None.
-        host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
-            waiting for the device), in ms.
-        runs: how many times ``detect()`` ran the frame for it (more than 1 when a buffer grew).
-        device_colliding: ``(N,)`` int32 flags on the device.
-        continuous: whether it is a continuous result (pairs that collide over a motion, with
-            their times of impact: :attr:`triangle_toi`, :attr:`object_toi`, :attr:`toi`).
-
-    Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
-    (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
-    ``device_contained``, ``device_segments``, ``device_toi``: a continuous result's) and the
-    counts it reports.
-    """
-
-    def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
-                 timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained=None, device_segments=None, device_toi=None):
-        self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
-                   int(device_triangle_pairs.shape[0]), {})
-        self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
-                             device_segments=device_segments, device_toi=device_toi,
-                             continuous=device_toi is not None)
-
-    @classmethod
-    def _of_buffers(cls, num_objects: int, rows: dict, device_colliding: wp.array, timings: dict | None,
-                    num_candidates: int, num_broad_pairs: int) -> CollisionResult:
-        """A result over a pipeline's buffers, made in a few steps (it is Python's time of every
-        frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
-        ``device_segments`` and ``device_toi`` to ``(buffer array, count)``, sliced on first access (a
-        view costs Python some 10 us; a name left out is None; ``device_toi`` makes it continuous)."""
-        result = cls.__new__(cls)
-        result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
-                     rows["device_triangle_pairs"][1], rows)
-        result.continuous = "device_toi" in rows
-        return result
-
-    def _hold(self, num_objects: int, device_colliding: wp.array, timings: dict | None, num_candidates: int,
-              num_broad_pairs: int, num_triangle_pairs: int, rows: dict) -> None:
-        """Sets what every result holds (``rows``: the views made on first access, as in :meth:`_of_buffers`)."""
-        self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
-                             num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
-                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows,
-                             continuous=False)
-
-    def _view(self, name: str):
-        held = self._rows.get(name)
-        return None if held is None else held[0][: held[1]]
-
-    @cached_property
-    def device_triangle_pairs(self) -> wp.array:
-        """``(M,)`` ``wp.vec4i`` on the device, unsorted."""
-        return self._view("device_triangle_pairs")
-
-    @cached_property
-    def device_contained(self) -> wp.array | None:
-        """``(K,)`` ``wp.vec2i`` ``(inner, outer)`` pairs on the device, or None without ``containment``."""
-        return self._view("device_contained")
-
-    @cached_property
-    def device_segments(self) -> wp.array | None:
-        """``(M, 2)`` segment end points on the device (rows of :attr:`device_triangle_pairs`), or
-        None without ``segments``."""
-        return self._view("device_segments")
-
-    @cached_property
-    def device_toi(self) -> wp.array | None:
-        """``(M,)`` float64 times of impact in ``[0, 1]`` on the device (rows of
-        :attr:`device_triangle_pairs`), or None for a discrete result."""
-        return self._view("device_toi")
-
-    @cached_property
-    def triangle_toi(self) -> np.ndarray | None:
-        """``(M,)`` float64 time of impact of each row of :attr:`triangle_pairs` (same order): the
-        earliest ``t`` in ``[0, 1]`` at which the two triangles meet (or come within the pipeline's
-        ``min_distance``), never later than the true one; 0 for a pair that meets at the start.
-        None for a discrete result."""
-        if self.device_toi is None:
-            return None
-        self.triangle_pairs  # noqa: B018 (computes the row order)
-        return self.device_toi.numpy()[self._order]
-
-    @cached_property
-    def object_toi(self) -> np.ndarray | None:
-        """``(K,)`` float64 earliest time of impact of each row of :attr:`object_pairs` (the least of
-        its triangle pairs'), or None for a discrete result."""
-        if self.device_toi is None:
-            return None
-        t = self.triangle_pairs
-        out = np.full(len(self.object_pairs), np.inf)
-        if len(t):
-            _, row = np.unique(t[:, [0, 2]], axis=0, return_inverse=True)
-            np.minimum.at(out, row.reshape(-1), self.triangle_toi)
-        return out
-
-    @property
-    def toi(self) -> float:
-        """The earliest time of impact of the frame (``inf`` when nothing collides, and for a
-        discrete result)."""
-        t = self.triangle_toi
-        return float(t.min()) if t is not None and len(t) else float("inf")
-
-    def copy(self) -> "CollisionResult":
-        """The same result with device arrays of its own (valid after the next ``detect()``)."""
-
-        def own(a):
-            return None if a is None else wp.clone(a)
-
-        out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
-                              self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
-                              own(self.device_segments), own(self.device_toi))
-        out.host_ms, out.runs = self.host_ms, self.runs
-        return out
-
-    @property
-    def num_triangle_pairs(self) -> int:
-        """``M``, the number of intersecting triangle pairs."""
-        return self._num_triangle_pairs
-
-    @cached_property
-    def triangle_pairs(self) -> np.ndarray:
-        """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, rows sorted.
-
-        ``tri_a`` is the local triangle index within object ``obj_a``'s mesh.
-        """
-        t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
-        self._order = np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))
-        return t[self._order]
-
-    @cached_property
-    def segments(self) -> np.ndarray | None:
-        """``(M, 2, 3)`` end points of the intersection segment of each row of
-        :attr:`triangle_pairs` (same order; a point when they only touch; NaN for coplanar
-        contacts, whose intersection is an area). None unless asked for with ``segments=True``."""
-        if self.device_segments is None:
-            return None
-        self.triangle_pairs  # noqa: B018 (computes the row order)
-        return self.device_segments.numpy().reshape(-1, 2, 3)[self._order]
-
-    @cached_property
-    def object_pairs(self) -> np.ndarray:
-        """``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, of objects whose surfaces intersect; sorted."""
-        t = self.triangle_pairs
-        if t.shape[0] == 0:
-            return np.zeros((0, 2), np.int32)
-        return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
-
-    @cached_property
-    def containment_pairs(self) -> np.ndarray | None:
-        """``(C, 2)`` int32 rows ``(inner, outer)``: ``inner`` lies wholly inside ``outer`` with no
-        surface intersection; sorted. None unless the pipeline was built with ``containment=True``."""
-        if self.device_contained is None:
-            return None
-        c = self.device_contained.numpy().reshape(-1, 2).astype(np.int32)
-        if len(c) and len(self.triangle_pairs):
-            # Drop pairs whose surfaces intersect: pair keys a * N + b (a < b) looked up in the sorted
-            # keys of the object pairs.
-            n = np.int64(self.num_objects)
-            key = np.minimum(c[:, 0], c[:, 1]).astype(np.int64) * n + np.maximum(c[:, 0], c[:, 1])
-            surface = self.object_pairs[:, 0].astype(np.int64) * n + self.object_pairs[:, 1]
-            c = c[~np.isin(key, surface)].reshape(-1, 2)
-        return c[np.lexsort((c[:, 1], c[:, 0]))]
-
-    @cached_property
-    def colliding(self) -> np.ndarray:
-        """``(N,)`` bool: the object's surface intersects another object's (or, with containment
-        asked for, it contains or lies inside another)."""
-        flags = self.device_colliding.numpy().astype(bool)
-        if self.device_contained is not None:
-            flags[self.containment_pairs.ravel()] = True
-        return flags
-
-    def __repr__(self) -> str:
-        toi = f", toi={self.toi}" if self.continuous else ""
-        return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}{toi}, "
-                f"timings={self.timings})")
-
+with the all-pairs mid phase); a pipeline with a clearance times ``clearance`` too."""
 
 class CollisionPipeline:
     """Persistent collision detection for one :class:`Scene`, every frame on its device.
@@ -278,7 +90,8 @@ class CollisionPipeline:
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs where one object's box holds the other's vertex), in
             :attr:`CollisionResult.containment_pairs`.
-        pair_capacity, candidate_capacity, hit_capacity: initial buffer capacities (they grow).
+        pair_capacity, candidate_capacity, hit_capacity, near_capacity: initial buffer capacities
+            (they grow; ``near_capacity``: the pairs within the clearance).
         front_capacity: initial capacity of the traversal's front of node pairs (``bvh`` mid phase;
             it grows; default four per object).
         rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
@@ -300,12 +113,19 @@ class CollisionPipeline:
         ccd_max_iterations: with ``continuous``, the most boxes one primitive query examines
             (default :data:`~warp_ccd.geometry.ccd.CCD_MAX_ITERATIONS`; past it the answer is a
             conservative collision).
+        clearance: also report every object pair whose surfaces come within this distance (scene
+            units, >= 0), with its least distance, closest points, direction and closest triangle
+            pair (:attr:`CollisionResult.object_pairs` are then those pairs; see
+            :mod:`warp_ccd.stages.clearance`); 0 (default) adds nothing. Not with ``continuous``
+            (whose ``min_distance`` is the clearance over a motion).
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
             scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid phase,
             else an :class:`~warp_ccd.stages.bounds.ObjectBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
+        near_phase: with a clearance, the :class:`~warp_ccd.stages.clearance.ClearancePhase`, else None.
+        clearance: as above.
         counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
@@ -338,11 +158,17 @@ class CollisionPipeline:
         min_distance: float = 0.0,
         ccd_tolerance: float = CCD_TOLERANCE,
         ccd_max_iterations: int = CCD_MAX_ITERATIONS,
+        clearance: float = 0.0,
+        near_capacity: int | None = None,
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         ccd = _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase,
                                 segments, containment)
+        self.clearance = number_option("clearance", clearance, low=0.0)
+        if self.clearance > 0.0 and ccd is not None:
+            raise ValueError("clearance: a continuous pipeline's least distance is its min_distance "
+                             f"(continuous=True), got clearance={clearance!r}")
         mode = frame_mode(scene.device, False if graph is None and timings else graph)
         if graph and timings:
             raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
@@ -374,18 +200,23 @@ class CollisionPipeline:
         self.boxes, self.mid = make_mid_phase(
             mid_phase, scene, leaf_size=leaf_size, margin_rel=margin_rel, cut_depth=cut_depth,
             separating_axes=separating_axes, object_bounds=object_bounds, candidate_capacity=candidate_capacity,
-            front_capacity=front_capacity, world_trees=self.continuous, pad_abs=pad_abs, device=d)
+            front_capacity=front_capacity, world_trees=self.continuous, pad_abs=pad_abs, clearance=self.clearance,
+            device=d)
+        near_capacity = integer_option("near_capacity", near_capacity, low=1, allow_none=True)
+        self.near_phase = (ClearancePhase(n, self.clearance, tolerance=self.narrow.tolerance,
+                                          capacity=near_capacity or max(64, n), device=d)
+                           if self.clearance > 0.0 else None)
         # The motion's start, two arrays: a frame reads one and writes the other (module docs).
         self._starts = [wp.clone(scene.world_vertex), wp.empty_like(scene.world_vertex)] if self.continuous else None
         self._parity = 0
         # One pair slot an object to start with (the scaling scenes hold 0.01-0.13 pairs an object; a
         # crowded frame grows it once): the mid phase keeps a TreePair of 136 bytes a slot beside it.
         self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, n), d, "broad-phase pairs")
-        stages = (self.boxes, self.broad, self.mid, self.narrow)
+        stages = (self.boxes, self.broad, self.mid, self.narrow) + ((self.near_phase,) if self.near_phase else ())
         buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
         # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
-        # mid phase's 2 (its front's count tells little of its candidates'), the narrow phase's 3 (a
-        # shortfall upstream scales the estimates downstream).
+        # mid phase's 2 (its front's count tells little of its candidates'), the narrow phase's 3, the
+        # clearance's 4 (a shortfall upstream scales the estimates downstream).
         flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
@@ -432,11 +263,15 @@ class CollisionPipeline:
                                reset_counters=False)
         else:
             self.narrow.launch(scene, start, self.mid.candidates, reset_counters=False)
-        mark("narrow", t)
+        t = mark("narrow", t)
+        if self.near_phase is not None:
+            self.near_phase.launch(scene, self.pairs, self.mid.candidates, self.narrow.hits, self.boxes.lower,
+                             self.boxes.upper, reset_counters=False)
+            mark("clearance", t)
         if start is not None:
             wp.copy(self._starts[1 - parity], scene.world_vertex)
         if times is not None:
-            times["total"] = sum(times[s] for s in STAGES)
+            times["total"] = sum(times.values())
         self._times = times
 
     def _frame(self, step: float | None) -> CountedFrame:
@@ -502,8 +337,15 @@ class CollisionPipeline:
             rows["device_contained"] = (narrow.contained.data, narrow.contained.last_count)
         if narrow.segments:
             rows["device_segments"] = (narrow.segment, hits.last_count)
+        near = self.near_phase
+        if near is not None:
+            count = near.near.last_count
+            for name, array in zip(NEAR_ROWS, (near.near.data, near.distance, near.point, near.normal,
+                                               near.triangle, near.intersecting)):
+                rows[name] = (array, count)
         result = CollisionResult._of_buffers(scene.num_objects, rows, narrow.object_colliding, self._times,
-                                             self.mid.candidates.last_count, self.pairs.last_count)
+                                             self.mid.candidates.last_count, self.pairs.last_count, self.clearance,
+                                             None if near is None else near.object_near)
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
         result.runs = runs
         return result
@@ -519,9 +361,18 @@ class CollisionPipeline:
         if self.continuous:
             wp.copy(self.world_vertex_start, self.scene.world_vertex)
             no_toi = wp.zeros(0, dtype=wp.float64, device=d)
+        near = None
+        if self.near_phase is not None:
+            s, v = self.scene.scalar_type, self.scene.vec3_type
+            near = dict(zip(NEAR_ROWS, (wp.zeros(0, dtype=wp.vec2i, device=d), wp.zeros(0, dtype=s, device=d),
+                                        wp.zeros((0, 2), dtype=v, device=d), wp.zeros(0, dtype=v, device=d),
+                                        wp.zeros(0, dtype=wp.vec2i, device=d), wp.zeros(0, dtype=wp.int32, device=d))))
+            near["device_near"] = wp.zeros(n, dtype=wp.int32, device=d)
+        stages = (*STAGES, "clearance", "total") if self.near_phase is not None else (*STAGES, "total")
         return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
-                               {s: 0.0 for s in (*STAGES, "total")} if self.timings else None,
-                               device_contained=empty, device_segments=no_segments, device_toi=no_toi)
+                               {s: 0.0 for s in stages} if self.timings else None,
+                               device_contained=empty, device_segments=no_segments, device_toi=no_toi,
+                               clearance=self.clearance, near=near)
 
 
 def _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase: str,
@@ -574,7 +425,9 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
             infinity norm) collide too; with neither end given, a query of the meshes as they are.
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
             ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,
-            ``containment``, ``ccd_tolerance``, ``ccd_max_iterations``, capacities).
+            ``containment``, ``clearance``, ``ccd_tolerance``, ``ccd_max_iterations``, capacities).
+            ``clearance=d`` reports every pair of objects whose surfaces come within ``d`` too, with
+            ``object_distance``, ``closest_points``, ``object_normal``, ``closest_triangles``.
 
     Returns:
         :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``; a

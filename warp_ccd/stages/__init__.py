@@ -31,7 +31,8 @@ from .kinds import (
     make_mid_phase,
     make_narrow_phase,
 )
-from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
+from .mid_phase import MidPhaseBVH
+from .mid_phase_all_pairs import MidPhaseAllPairs
 from .narrow_phase import NarrowPhase
 
 __all__ = [

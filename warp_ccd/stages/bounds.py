@@ -4,7 +4,9 @@
 the box by ``margin_rel`` times its diagonal, so that pairs the narrow phase calls touching (its
 tolerance is relative to the triangles' size, at most the box diagonal) are never culled by the
 broad phase. Cost O(V) work, O(max vertices per object) depth. A continuous frame's boxes are
-swept: the box of an object's vertices at both ends of its motion, padded by a distance too.
+swept: the box of an object's vertices at both ends of its motion, padded by a distance too. With
+a clearance every box is padded by half of it (:func:`pad_boxes`, which the trees' object boxes use
+too).
 """
 
 from typing import Any
@@ -16,7 +18,7 @@ from ..geometry.precision import precision_overloads
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["ObjectBounds"]
+__all__ = ["ObjectBounds", "pad_boxes"]
 
 
 @wp.kernel
@@ -62,6 +64,28 @@ def _swept_bounds_kernel(
     object_upper[i] = box_upper32(wp.vec3d(hi + m) + wp.vec3d(pad_abs))
 
 
+@wp.kernel
+def _pad_boxes_kernel(
+    pad: wp.float64,
+    # Outputs
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+):
+    """One thread per box: every side moved out by ``pad`` (scene units), in float64, rounded outward."""
+    i = wp.tid()
+    lower[i] = box_lower32(wp.vec3d(lower[i]) - wp.vec3d(pad, pad, pad))
+    upper[i] = box_upper32(wp.vec3d(upper[i]) + wp.vec3d(pad, pad, pad))
+
+
+def pad_boxes(lower: wp.array, upper: wp.array, pad: float) -> None:
+    """Moves every side of the boxes ``lower`` / ``upper`` (``(N,)`` ``wp.vec3``) out by ``pad`` (scene
+    units, rounded outward): half a clearance on each object's box, so that objects within the
+    clearance have overlapping boxes. Nothing when ``pad`` is 0."""
+    if pad > 0.0 and lower.shape[0]:
+        wp.launch(_pad_boxes_kernel, dim=lower.shape[0], inputs=[wp.float64(pad)], outputs=[lower, upper],
+                  device=lower.device)
+
+
 _OBJECT_BOUNDS = precision_overloads(_object_bounds_kernel,
                                        lambda s, v, q, t: {"world_vertex": wp.array[v], "margin_rel": s})
 _SWEPT_BOUNDS = precision_overloads(_swept_bounds_kernel, lambda s, v, q, t: {
@@ -77,12 +101,15 @@ class ObjectBounds:
         margin_rel: padding relative to each box's diagonal (the narrow phase's tolerance).
         pad_abs: padding in scene units of a swept box (:meth:`refit` with ``world_vertex_start``:
             a continuous test's least distance plus its tolerance).
+        box_pad: padding in scene units of every box (half a clearance: :func:`pad_boxes`).
     """
 
-    def __init__(self, num_objects: int, *, device=None, margin_rel: float = 0.0, pad_abs: float = 0.0):
+    def __init__(self, num_objects: int, *, device=None, margin_rel: float = 0.0, pad_abs: float = 0.0,
+                 box_pad: float = 0.0):
         self.device = wp.get_device(device)
         self.margin_rel = float(margin_rel)
         self.pad_abs = float(pad_abs)
+        self.box_pad = float(box_pad)
         self.lower = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
         self.upper = wp.zeros(num_objects, dtype=wp.vec3, device=self.device)
 
@@ -102,11 +129,12 @@ class ObjectBounds:
                       inputs=[scene.world_vertex, world_vertex_start, scene.object_vertex_start,
                               scene.scalar_type(self.margin_rel), wp.float64(self.pad_abs)],
                       outputs=[self.lower, self.upper], device=self.device)
-            return
-        wp.launch(
-            _OBJECT_BOUNDS[scene.precision],
-            dim=self.lower.shape[0],
-            inputs=[scene.world_vertex, scene.object_vertex_start, scene.scalar_type(self.margin_rel)],
-            outputs=[self.lower, self.upper],
-            device=self.device,
-        )
+        else:
+            wp.launch(
+                _OBJECT_BOUNDS[scene.precision],
+                dim=self.lower.shape[0],
+                inputs=[scene.world_vertex, scene.object_vertex_start, scene.scalar_type(self.margin_rel)],
+                outputs=[self.lower, self.upper],
+                device=self.device,
+            )
+        pad_boxes(self.lower, self.upper, self.box_pad)

@@ -58,6 +58,7 @@ from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, is_integer
 from ..scene.scene import MeshTopology
+from .bounds import pad_boxes
 from .buffers import packed_upload, upper_bound
 from .bvh_build import CUT_TRIANGLES, TreeBuild
 from .bvh_reference import ShapeTree
@@ -162,12 +163,16 @@ def swept_triangle_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], world
 @wp.func
 def leaf_box_at(mesh: MeshTopology, world_vertex: wp.array[Any], world_vertex_start: wp.array[Any], swept: int,
                 pad_abs: wp.float64, margin_rel: Any, tri_start: int, vertex_start: int, tri: int):
-    """A triangle's box as a leaf's: :func:`triangle_box_at`, or with ``swept`` (a continuous
-    frame's) :func:`swept_triangle_box_at` (``world_vertex_start`` is then read, else not)."""
+    """A triangle's box as a leaf's: :func:`triangle_box_at`, padded by ``pad_abs`` (scene units)
+    when it is positive, or with ``swept`` (a continuous frame's) :func:`swept_triangle_box_at`
+    (``world_vertex_start`` is then read, else not)."""
     if swept != 0:
         return swept_triangle_box_at(mesh, world_vertex, world_vertex_start, margin_rel, pad_abs, tri_start,
                                      vertex_start, tri)
-    return triangle_box_at(mesh, world_vertex, margin_rel, tri_start, vertex_start, tri)
+    lo, hi = triangle_box_at(mesh, world_vertex, margin_rel, tri_start, vertex_start, tri)
+    if pad_abs > wp.float64(0.0):
+        return box_lower32(wp.vec3d(lo) - wp.vec3d(pad_abs)), box_upper32(wp.vec3d(hi) + wp.vec3d(pad_abs))
+    return lo, hi
 
 
 @wp.func
@@ -540,6 +545,9 @@ class SceneBVH:
             traversal's frames are then identities.
         pad_abs: leaf padding in scene units besides ``margin_rel``, with ``world_vertex_start``
             (a continuous test's least distance plus its tolerance).
+        box_pad: padding in scene units of every object box (:attr:`lower`, :attr:`upper`): half a
+            clearance (:func:`~warp_ccd.stages.bounds.pad_boxes`); the trees' boxes are not padded
+            (the traversal pads its tests: :class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`).
 
     Attributes:
         lower, upper: ``(N,)`` object AABBs (float32, world), written by :meth:`refit`.
@@ -551,12 +559,13 @@ class SceneBVH:
         max_triangles, min_triangles: triangles of the largest and of the smallest object's mesh.
         bounds_vertices_max: most vertices of a rigid object whose box comes from its vertices
             (from ``object_bounds``).
-        world_trees, pad_abs: as above.
+        world_trees, pad_abs, box_pad: as above.
     """
 
     def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
-                 small_subtree: int | None = None, world_trees: bool = False, pad_abs: float = 0.0, **renamed):
+                 small_subtree: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
+                 box_pad: float = 0.0, **renamed):
         if renamed:  # instance_refit_max_nodes, as it was called until 0.1
             object_refit_max_nodes = renamed_arguments("SceneBVH", renamed, {
                 "instance_refit_max_nodes": "object_refit_max_nodes"})["object_refit_max_nodes"]
@@ -573,6 +582,7 @@ class SceneBVH:
         self.margin_rel = float(margin_rel)
         self.world_trees = bool(world_trees)
         self.pad_abs = float(pad_abs)
+        self.box_pad = float(box_pad)
         self.leaf_size = int(leaf_size)
         self.cut_depth = int(cut_depth)
         self.object_bounds = object_bounds
@@ -675,9 +685,10 @@ class SceneBVH:
         """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
         return []
 
-    def sweep_args(self, scene, world_vertex_start: wp.array | None) -> list:
-        """:func:`leaf_box_args` of the scene's world vertices and this tree's :attr:`pad_abs`."""
-        return leaf_box_args(scene.world_vertex, world_vertex_start, self.pad_abs)
+    def sweep_args(self, scene, world_vertex_start: wp.array | None, pad_extra: float = 0.0) -> list:
+        """:func:`leaf_box_args` of the scene's world vertices and this tree's :attr:`pad_abs` plus
+        ``pad_extra`` (scene units: half a clearance, for the triangle boxes of whole-object pairs)."""
+        return leaf_box_args(scene.world_vertex, world_vertex_start, self.pad_abs + pad_extra)
 
     def refit(self, scene, world_vertex_start: wp.array | None = None) -> None:
         """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
@@ -701,6 +712,7 @@ class SceneBVH:
                               scene.object_scale, scene.world_vertex, scene.object_vertex_start,
                               self.bounds_vertices_max, margin, scene.scalar_type(WORLD_ERROR_ULPS * eps)],
                       outputs=[self.lower, self.upper], device=self.device)
+        pad_boxes(self.lower, self.upper, self.box_pad)
 
     # Names of 0.1 ("instance" for what is now called an object everywhere), kept one release.
     instance_deforming = renamed_attribute("object_deforming")

@@ -12,7 +12,7 @@ order, on the scene's device, the host reading nothing between them:
    :func:`~warp_ccd.stages.broad_phase.make_broad_phase`): ``launch(lower, upper, pairs)`` writes
    the object pairs whose boxes overlap.
 3. :class:`MidPhaseStage` (:class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`,
-   :class:`~warp_ccd.stages.mid_phase.MidPhaseAllPairs`; made with its bounds stage by
+   :class:`~warp_ccd.stages.mid_phase_all_pairs.MidPhaseAllPairs`; made with its bounds stage by
    :func:`make_mid_phase`): ``launch(scene, pairs, reset_counters=...)`` writes candidate triangle
    pairs into ``candidates``.
 4. :class:`NarrowPhaseStage` (:class:`~warp_ccd.stages.narrow_phase.NarrowPhase`; made by
@@ -38,7 +38,8 @@ from ..options import integer_option
 from .bounds import ObjectBounds
 from .buffers import GrowableBuffer
 from .bvh import LEAF_SIZE_MAX, SceneBVH
-from .mid_phase import MidPhaseAllPairs, MidPhaseBVH
+from .mid_phase import MidPhaseBVH
+from .mid_phase_all_pairs import MidPhaseAllPairs
 from .narrow_phase import NarrowPhase
 
 __all__ = ["MID_METHODS", "BoundsStage", "BroadPhaseStage", "MidPhaseStage", "NarrowPhaseStage", "make_mid_phase",
@@ -138,14 +139,14 @@ class NarrowPhaseStage(Protocol):
 def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, cut_depth: int = 3,
                    separating_axes: int = 6, object_bounds: str | int = "auto", candidate_capacity: int | None = None,
                    front_capacity: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
-                   device=None) -> tuple[BoundsStage, MidPhaseStage]:
+                   clearance: float = 0.0, device=None) -> tuple[BoundsStage, MidPhaseStage]:
     """The mid phase of a method name, with the bounds stage it reads.
 
     Args:
         method: ``"bvh"``: the scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (object boxes, trees
             refit) and :class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`; ``"all_pairs"`` (the
             reference): :class:`~warp_ccd.stages.bounds.ObjectBounds` and
-            :class:`~warp_ccd.stages.mid_phase.MidPhaseAllPairs`.
+            :class:`~warp_ccd.stages.mid_phase_all_pairs.MidPhaseAllPairs`.
         scene: the :class:`~warp_ccd.scene.scene.Scene`.
         leaf_size: triangles per tree leaf, in ``[1, LEAF_SIZE_MAX]`` (checked with either method).
         margin_rel: box padding relative to the boxes' size (the narrow phase's tolerance).
@@ -156,6 +157,8 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
         front_capacity: initial capacity of the traversal's front (>= 1; ``bvh``; default four per object).
         world_trees: every tree in the world, refit each frame (``bvh``; a continuous frame's swept boxes).
         pad_abs: swept boxes' padding in scene units (a continuous test's least distance and tolerance).
+        clearance: candidates within this distance (scene units): object boxes padded by half of it,
+            the traversal's tests by all of it (:class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`).
         device: Warp device (the scene's).
 
     Returns:
@@ -172,10 +175,10 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
     n = scene.num_objects
     if method == "bvh":
         bvh = SceneBVH(scene, leaf_size=leaf_size, margin_rel=margin_rel, cut_depth=cut_depth,
-                       object_bounds=object_bounds, world_trees=world_trees, pad_abs=pad_abs)
+                       object_bounds=object_bounds, world_trees=world_trees, pad_abs=pad_abs, box_pad=0.5 * clearance)
         return bvh, MidPhaseBVH(bvh, capacity=candidate_capacity or max(1024, 16 * n), front_capacity=front_capacity,
-                                separating_axes=separating_axes, device=device)
-    return (ObjectBounds(n, device=device, margin_rel=margin_rel, pad_abs=pad_abs),
+                                separating_axes=separating_axes, clearance=clearance, device=device)
+    return (ObjectBounds(n, device=device, margin_rel=margin_rel, pad_abs=pad_abs, box_pad=0.5 * clearance),
             MidPhaseAllPairs(capacity=candidate_capacity or max(1024, 64 * n), device=device))
 
 

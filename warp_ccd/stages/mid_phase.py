@@ -32,9 +32,8 @@ Both implementations write ``(obj_a, tri_a, obj_b, tri_b)`` rows into a
   three alone). The relative transforms come from the poses in float64, once per pair
   (:func:`_tree_pair`), with a padding that bounds every rounding on the way, so a test never
   rejects what the world vertices would put in contact; a deforming object's frame is the identity.
-* :class:`MidPhaseAllPairs`, the reference: every triangle of ``a`` against every triangle of
-  ``b``. Count per pair, inclusive scan (``wp.utils.array_scan``), then one thread per candidate
-  finds its pair by binary search over the scan. O(sum of m_a m_b) work; for small meshes only.
+* :class:`~warp_ccd.stages.mid_phase_all_pairs.MidPhaseAllPairs`, the reference: every triangle of
+  ``a`` against every triangle of ``b`` (its own module).
 """
 
 from __future__ import annotations
@@ -47,14 +46,14 @@ import warp as wp
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_abs
-from ..options import integer_option
+from ..options import integer_option, number_option
 from ..scene.scene import MeshTopology
-from .buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, upper_bound, used_count
+from .buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, used_count
 from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, leaf_box_at, swept_arg_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-__all__ = ["MidPhase", "MidPhaseAllPairs", "MidPhaseBVH", "TreePair"]
+__all__ = ["MidPhase", "MidPhaseBVH", "TreePair"]
 
 EXPAND_THREADS_PER_SM = 1024
 """Most threads of an expansion launch per streaming multiprocessor on CUDA: the grid is fixed (so
@@ -144,23 +143,26 @@ def _norm_inf(m: wp.mat33d) -> wp.float64:
 
 @wp.func
 def _map_between(rot_a: wp.mat33d, t_a: wp.vec3d, s_a: wp.float64, rot_b: wp.mat33d, t_b: wp.vec3d,
-                 s_b: wp.float64, r_a: wp.float64, r_b: wp.float64, err: wp.float64):
+                 s_b: wp.float64, r_a: wp.float64, r_b: wp.float64, err: wp.float64, clearance: wp.float64):
     """The map from ``b``'s box space to ``a``'s (float32 matrix and shift) and the padding of a
-    test in ``a``'s space: the float32 test's rounding on boxes of radii ``r_a``, ``r_b`` and the
-    world vertices' rounding ``err`` (both objects', world units) brought into ``a``'s space."""
+    test in ``a``'s space: the float32 test's rounding on boxes of radii ``r_a``, ``r_b``, the
+    world vertices' rounding ``err`` (both objects', world units) brought into ``a``'s space, and
+    the ``clearance`` (world units; in ``a``'s space, ``clearance / s_a``: two points that close are
+    no farther apart along any axis)."""
     inv_a = wp.inverse(rot_a)
     m = inv_a * rot_b * (s_b / s_a)
     shift = inv_a * (t_b - t_a) / s_a
     ulp = wp.float64(TEST_ERROR_ULPS) * wp.float64(1.1920929e-07)
-    pad = ulp * (_max_abs(shift) + r_a + _norm_inf(m) * r_b) + err * _norm_inf(inv_a) / s_a
+    pad = ulp * (_max_abs(shift) + r_a + _norm_inf(m) * r_b) + err * _norm_inf(inv_a) / s_a + clearance / s_a
     return wp.mat33(m), wp.vec3(shift), wp.float32(pad) * wp.float32(1.001)
 
 
 @wp.func
 def _tree_pair(tree: TreeView, object_shape: wp.array[wp.int32], object_pose: wp.array[Any],
                object_scale: wp.array[wp.float32], object_deforming: wp.array[wp.int32], world_eps: float,
-               a: int, b: int) -> TreePair:
-    """The :class:`TreePair` of objects ``a < b``."""
+               clearance: wp.float64, a: int, b: int) -> TreePair:
+    """The :class:`TreePair` of objects ``a < b``, its tests padded by ``clearance`` (world units)
+    besides the rounding."""
     la = tree.shape_layout[object_shape[a]]
     lb = tree.shape_layout[object_shape[b]]
     r = TreePair()
@@ -185,11 +187,11 @@ def _tree_pair(tree: TreeView, object_shape: wp.array[wp.int32], object_pose: wp
         err += eps * (_max_abs(t_a) + s_a * _norm_inf(rot_a) * r_a)
     if def_b == 0:
         err += eps * (_max_abs(t_b) + s_b * _norm_inf(rot_b) * r_b)
-    m, shift, pad = _map_between(rot_a, t_a, s_a, rot_b, t_b, s_b, r_a, r_b, err)
+    m, shift, pad = _map_between(rot_a, t_a, s_a, rot_b, t_b, s_b, r_a, r_b, err, clearance)
     r.b_to_a = m
     r.b_to_a_shift = shift
     r.pad_a = pad
-    m, shift, pad = _map_between(rot_b, t_b, s_b, rot_a, t_a, s_a, r_b, r_a, err)
+    m, shift, pad = _map_between(rot_b, t_b, s_b, rot_a, t_a, s_a, r_b, r_a, err, clearance)
     r.a_to_b = m
     r.a_to_b_shift = shift
     r.pad_b = pad
@@ -204,6 +206,7 @@ def _pair_kernel(
     object_scale: wp.array[wp.float32],
     object_deforming: wp.array[wp.int32],
     world_eps: float,
+    clearance: wp.float64,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
     pair_capacity: int,
@@ -222,7 +225,7 @@ def _pair_kernel(
     if k >= used_count(pair_count, pair_capacity):
         return
     p = pair[k]
-    r = _tree_pair(tree, object_shape, object_pose, object_scale, object_deforming, world_eps, p[0], p[1])
+    r = _tree_pair(tree, object_shape, object_pose, object_scale, object_deforming, world_eps, clearance, p[0], p[1])
     tree_pair[k] = r
     pair_rows[k] = wp.vec4i(r.a, r.b, r.tri_a_start, r.tri_b_start)
 
@@ -619,6 +622,11 @@ class MidPhaseBVH(MidPhase):
         separating_axes: 6 (default) tests ``b``'s boxes as the boxes around them in ``a``'s space
             and ``a``'s in ``b``'s; 3 the first alone (more candidates, less arithmetic a test).
         whole_triangles_max: default :data:`WHOLE_TRIANGLES_MAX` up to :data:`WHOLE_OBJECTS_MAX` objects, else 0.
+        clearance: candidates are the triangle pairs whose boxes come within this distance (scene units,
+            >= 0): every test padded by it (a tree's boxes in its object's space by ``clearance /
+            scale``, a whole-object pair's triangle boxes by half of it each), so that no pair of
+            triangles within it is culled (:mod:`warp_ccd.stages.clearance`). 0 (default): pairs whose
+            boxes overlap.
         device: Warp device.
 
     Attributes:
@@ -627,8 +635,8 @@ class MidPhaseBVH(MidPhase):
             b)`` (``wp.vec3i``) between two levels (two halves, one read, one written); its
             counter holds the largest level's count.
         num_levels: expansion launches a frame: the deepest tree's levels less one (at least 1).
-        separating_axes: as above (read at each launch: a captured frame keeps the value it was
-            captured with).
+        separating_axes, clearance: as above (read at each launch: a captured frame keeps the value it
+            was captured with).
         num_blocks, block_dim: the largest grid of an expansion, in blocks, and their size (on the
             CPU one block, of one thread that takes every node pair in turn unless
             ``wp.config.enable_cpu_blocks`` is set); a launch takes at most one thread per slot of
@@ -639,9 +647,11 @@ class MidPhaseBVH(MidPhase):
     """
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
-                 separating_axes: int = 6, whole_triangles_max: int | None = None, device=None):
+                 separating_axes: int = 6, whole_triangles_max: int | None = None, clearance: float = 0.0,
+                 device=None):
         super().__init__(capacity=capacity, device=device)
         self.bvh = bvh
+        self.clearance = number_option("clearance", clearance, low=0.0)
         self.separating_axes = integer_option("separating_axes", separating_axes, choices=SEPARATING_AXES)
         self.num_levels = max(1, bvh.num_levels - 1)
         self.front = GrowableBuffer(wp.vec3i, front_capacity or max(256, 4 * bvh.lower.shape[0]), self.device,
@@ -691,7 +701,8 @@ class MidPhaseBVH(MidPhase):
             per_block = self.block_dim // lanes
             blocks = min(self.num_blocks, (pairs.capacity + per_block - 1) // per_block)
             wp.launch_tiled(_WHOLE[scene.precision], dim=[blocks],
-                            inputs=[scene.topology, *self.bvh.sweep_args(scene, world_vertex_start),
+                            inputs=[scene.topology, *self.bvh.sweep_args(scene, world_vertex_start,
+                                                                         0.5 * self.clearance),
                                     scene.scalar_type(self.bvh.margin_rel),
                                     pairs.data, pairs.count, pairs.capacity, whole, lanes, blocks, cand.capacity],
                             outputs=[cand.data, cand.count], block_dim=self.block_dim, device=d)
@@ -699,8 +710,8 @@ class MidPhaseBVH(MidPhase):
             return  # every pair is a whole-object pair
         wp.launch(_PAIR[scene.precision], dim=pairs.capacity,
                   inputs=[tree, scene.object_shape, scene.object_pose, scene.object_scale,
-                          self.bvh.object_deforming, WORLD_ERROR_ULPS * eps, pairs.data, pairs.count,
-                          pairs.capacity],
+                          self.bvh.object_deforming, WORLD_ERROR_ULPS * eps, wp.float64(self.clearance),
+                          pairs.data, pairs.count, pairs.capacity],
                   outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
         halves = (self.front.data[:cap], self.front.data[cap:])
         for level in range(self.num_levels):
@@ -714,85 +725,3 @@ class MidPhaseBVH(MidPhase):
                         scene.object_triangle_start, whole, blocks, cap, cand.capacity, self.separating_axes],
                 outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
                 block_dim=self.block_dim, device=d)
-
-
-@wp.kernel
-def _all_pairs_count_kernel(
-    pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int64],
-    pair_capacity: int,
-    object_triangle_start: wp.array[wp.int32],
-    # Outputs
-    pair_work: wp.array[wp.int64],
-):
-    """One thread per pair slot: ``m_a * m_b`` triangle pairs, 0 past the counter."""
-    k = wp.tid()
-    if k >= used_count(pair_count, pair_capacity):
-        pair_work[k] = wp.int64(0)
-        return
-    p = pair[k]
-    ma = object_triangle_start[p[0] + 1] - object_triangle_start[p[0]]
-    mb = object_triangle_start[p[1] + 1] - object_triangle_start[p[1]]
-    pair_work[k] = wp.int64(ma) * wp.int64(mb)
-
-
-@wp.kernel
-def _all_pairs_write_kernel(
-    pair: wp.array[wp.vec2i],
-    pair_work: wp.array[wp.int64],
-    pair_work_end: wp.array[wp.int64],
-    object_triangle_start: wp.array[wp.int32],
-    candidate_capacity: int,
-    # Outputs
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-):
-    """One thread per candidate slot: binary search of its pair in the inclusive scan."""
-    c = wp.tid()
-    num_slots = pair_work_end.shape[0]
-    total = pair_work_end[num_slots - 1]
-    if c == 0:
-        candidate_count[0] = total
-    if wp.int64(c) >= total:
-        return
-    lo = upper_bound(pair_work_end, 0, num_slots, wp.int64(c))  # the pair whose block holds c
-    p = pair[lo]
-    local = wp.int64(c) - (pair_work_end[lo] - pair_work[lo])
-    mb = wp.int64(object_triangle_start[p[1] + 1] - object_triangle_start[p[1]])
-    candidate[c] = wp.vec4i(p[0], int(local / mb), p[1], int(local % mb))
-
-
-class MidPhaseAllPairs(MidPhase):
-    """Reference mid phase: all triangle pairs of each broad-phase pair.
-
-    Args:
-        capacity: initial capacity of the candidate buffer (it grows).
-        device: Warp device.
-    """
-
-    def __init__(self, *, capacity: int = 4096, device=None):
-        super().__init__(capacity=capacity, device=device)
-        self._work = None
-
-    @property
-    def counters(self) -> list[GrowableBuffer]:
-        """The buffers with counters that :meth:`launch` writes (the candidates, their counter set
-        by the write kernel), whose counters the caller reads after it."""
-        return [self.candidates]
-
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
-               world_vertex_start: wp.array | None = None) -> None:
-        """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
-        counter is set by the write kernel, so ``reset_counters`` changes nothing, nor ``world_vertex_start``)."""
-        d = self.device
-        if self._work is None or self._work.shape[0] != pairs.capacity:
-            self._work = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
-            self._work_end = wp.zeros(pairs.capacity, dtype=wp.int64, device=d)
-        wp.launch(_all_pairs_count_kernel, dim=pairs.capacity,
-                  inputs=[pairs.data, pairs.count, pairs.capacity, scene.object_triangle_start],
-                  outputs=[self._work], device=d)
-        wp.utils.array_scan(self._work, self._work_end, inclusive=True)
-        wp.launch(_all_pairs_write_kernel, dim=self.candidates.capacity,
-                  inputs=[pairs.data, self._work, self._work_end, scene.object_triangle_start,
-                          self.candidates.capacity],
-                  outputs=[self.candidates.data, self.candidates.count], device=d)

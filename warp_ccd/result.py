@@ -1,0 +1,368 @@
+"""What a frame found: :class:`CollisionResult`, views of a pipeline's device buffers read on demand.
+
+A result of :meth:`~warp_ccd.pipeline.CollisionPipeline.detect` holds the device arrays the frame
+wrote (triangle pairs, flags, and what the options asked for: segments, containment, times of
+impact, the pairs within a clearance) with the counts the frame's one read gave; the host arrays
+(sorted rows, object pairs, distances) are computed on first access and cached.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import warp as wp
+
+__all__ = ["NEAR_ROWS", "CollisionResult", "DistanceResult"]
+
+
+NEAR_ROWS = ("device_near_pairs", "device_near_distance", "device_near_points", "device_near_normal",
+             "device_near_triangles", "device_near_intersecting")
+"""The rows of a result with a clearance (:class:`~warp_ccd.stages.clearance.ClearancePhase`), each
+a device view of one of its arrays, in the order of its ``near`` buffer."""
+
+
+class CollisionResult:
+    """What one frame found. Arrays are computed on first access and cached.
+
+    A result of :meth:`CollisionPipeline.detect` holds views of the pipeline's device buffers,
+    valid until its next ``detect()`` overwrites them: read what you need first (the numpy
+    properties copy to the host on first access and keep their copy), or keep
+    :meth:`copy`, which owns its arrays.
+
+    Attributes:
+        num_objects: ``N``.
+        timings: per-stage wall times in ms (``refit``, ``broad``, ``mid``, ``narrow``,
+            ``total``) when the pipeline was asked for them, else None.
+        host_ms: Python's time in ``detect()`` (launching, reading, building this result; not
+            waiting for the device), in ms.
+        runs: how many times ``detect()`` ran the frame for it (more than 1 when a buffer grew).
+        device_colliding: ``(N,)`` int32 flags on the device.
+        continuous: whether it is a continuous result (pairs that collide over a motion, with
+            their times of impact: :attr:`triangle_toi`, :attr:`object_toi`, :attr:`toi`).
+        clearance: the distance of a result with a clearance (:attr:`object_pairs` are then the
+            pairs within it, with :attr:`object_distance`, :attr:`closest_points`,
+            :attr:`object_normal`, :attr:`closest_triangles`, :attr:`object_intersecting`), else 0.
+        device_near: with a clearance, ``(N,)`` int32 flags on the device (:attr:`near`), else None.
+
+    Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
+    (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
+    ``device_contained``, ``device_segments``, ``device_toi``: a continuous result's; ``near``: a
+    result with a clearance, ``{name: array}`` for each of :data:`NEAR_ROWS` and ``device_near``)
+    and the counts it reports.
+    """
+
+    def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
+                 timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
+                 device_contained=None, device_segments=None, device_toi=None, clearance: float = 0.0,
+                 near: dict | None = None):
+        self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
+                   int(device_triangle_pairs.shape[0]), {})
+        self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
+                             device_segments=device_segments, device_toi=device_toi,
+                             continuous=device_toi is not None)
+        if near is not None:
+            self.__dict__.update(near, clearance=float(clearance))
+
+    @classmethod
+    def _of_buffers(cls, num_objects: int, rows: dict, device_colliding: wp.array, timings: dict | None,
+                    num_candidates: int, num_broad_pairs: int, clearance: float = 0.0,
+                    device_near: wp.array | None = None) -> CollisionResult:
+        """A result over a pipeline's buffers, made in a few steps (it is Python's time of every
+        frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
+        ``device_segments``, ``device_toi`` and :data:`NEAR_ROWS` to ``(buffer array, count)``, sliced
+        on first access (a view costs Python some 10 us; a name left out is None; ``device_toi``
+        makes it continuous, ``device_near_pairs`` one with a ``clearance``)."""
+        result = cls.__new__(cls)
+        result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
+                     rows["device_triangle_pairs"][1], rows)
+        result.continuous = "device_toi" in rows
+        if device_near is not None:
+            result.__dict__.update(clearance=clearance, device_near=device_near)
+        return result
+
+    def _hold(self, num_objects: int, device_colliding: wp.array, timings: dict | None, num_candidates: int,
+              num_broad_pairs: int, num_triangle_pairs: int, rows: dict) -> None:
+        """Sets what every result holds (``rows``: the views made on first access, as in :meth:`_of_buffers`)."""
+        self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
+                             num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
+                             _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows,
+                             continuous=False, clearance=0.0, device_near=None)
+
+    def _view(self, name: str):
+        held = self._rows.get(name)
+        return None if held is None else held[0][: held[1]]
+
+    @cached_property
+    def device_triangle_pairs(self) -> wp.array:
+        """``(M,)`` ``wp.vec4i`` on the device, unsorted."""
+        return self._view("device_triangle_pairs")
+
+    @cached_property
+    def device_contained(self) -> wp.array | None:
+        """``(K,)`` ``wp.vec2i`` ``(inner, outer)`` pairs on the device, or None without ``containment``."""
+        return self._view("device_contained")
+
+    @cached_property
+    def device_segments(self) -> wp.array | None:
+        """``(M, 2)`` segment end points on the device (rows of :attr:`device_triangle_pairs`), or
+        None without ``segments``."""
+        return self._view("device_segments")
+
+    @cached_property
+    def device_near_pairs(self) -> wp.array | None:
+        """With a clearance, ``(K,)`` ``wp.vec2i`` object pairs ``(a, b)``, ``a < b``, within it, on the
+        device, unsorted (the rows of the ``device_near_*`` arrays); else None."""
+        return self._view("device_near_pairs")
+
+    @cached_property
+    def device_near_distance(self) -> wp.array | None:
+        """``(K,)`` least distances (the scene's precision) of :attr:`device_near_pairs`, or None."""
+        return self._view("device_near_distance")
+
+    @cached_property
+    def device_near_points(self) -> wp.array | None:
+        """``(K, 2)`` closest points (on ``a``, on ``b``; the scene's vector type) of
+        :attr:`device_near_pairs`, or None."""
+        return self._view("device_near_points")
+
+    @cached_property
+    def device_near_normal(self) -> wp.array | None:
+        """``(K,)`` unit directions from ``a`` to ``b`` of :attr:`device_near_pairs`, or None."""
+        return self._view("device_near_normal")
+
+    @cached_property
+    def device_near_triangles(self) -> wp.array | None:
+        """``(K,)`` ``wp.vec2i`` closest triangle pairs ``(tri_a, tri_b)`` of :attr:`device_near_pairs`, or None."""
+        return self._view("device_near_triangles")
+
+    @cached_property
+    def device_near_intersecting(self) -> wp.array | None:
+        """``(K,)`` int32, 1 where the pair of :attr:`device_near_pairs` intersects, or None."""
+        return self._view("device_near_intersecting")
+
+    @cached_property
+    def _near_order(self) -> np.ndarray:
+        """Row order of :attr:`device_near_pairs` that sorts the pairs."""
+        p = self.device_near_pairs.numpy().reshape(-1, 2)
+        return np.lexsort((p[:, 1], p[:, 0]))
+
+    def _near_rows(self, name: str, shape: tuple, dtype) -> np.ndarray | None:
+        """Device rows ``name`` (one of :data:`NEAR_ROWS`) in the order of :attr:`object_pairs`, or None."""
+        rows = getattr(self, name)
+        if rows is None:
+            return None
+        return rows.numpy().reshape(-1, *shape).astype(dtype)[self._near_order]
+
+    @cached_property
+    def object_distance(self) -> np.ndarray | None:
+        """With a clearance, ``(K,)`` float64: each row of :attr:`object_pairs`' least distance
+        between the two surfaces (0 for an intersecting pair), scene units; else None."""
+        return self._near_rows("device_near_distance", (), np.float64)
+
+    @cached_property
+    def closest_points(self) -> np.ndarray | None:
+        """With a clearance, ``(K, 2, 3)`` float64: each row of :attr:`object_pairs`' closest points,
+        on ``a`` then on ``b`` (one point of the intersection, twice, for an intersecting pair); else None."""
+        return self._near_rows("device_near_points", (2, 3), np.float64)
+
+    @cached_property
+    def object_normal(self) -> np.ndarray | None:
+        """With a clearance, ``(K, 3)`` float64 unit directions from ``a`` to ``b``: ``(q - p) / |q - p|``
+        from the closest points; for an intersecting pair the direction of least penetration
+        (:mod:`warp_ccd.stages.clearance`); else None."""
+        return self._near_rows("device_near_normal", (3,), np.float64)
+
+    @cached_property
+    def closest_triangles(self) -> np.ndarray | None:
+        """With a clearance, ``(K, 2)`` int32 ``(tri_a, tri_b)``: the triangle pair of each row of
+        :attr:`object_pairs` that attains its distance (local triangle ids); else None."""
+        return self._near_rows("device_near_triangles", (2,), np.int32)
+
+    @cached_property
+    def object_intersecting(self) -> np.ndarray | None:
+        """With a clearance, ``(K,)`` bool: whether the surfaces of each row of :attr:`object_pairs`
+        intersect (then some of its triangle pairs are in :attr:`triangle_pairs`); else None."""
+        return self._near_rows("device_near_intersecting", (), bool)
+
+    @cached_property
+    def near(self) -> np.ndarray | None:
+        """With a clearance, ``(N,)`` bool: the object comes within it of another; else None."""
+        return None if self.device_near is None else self.device_near.numpy().astype(bool)
+
+    @cached_property
+    def device_toi(self) -> wp.array | None:
+        """``(M,)`` float64 times of impact in ``[0, 1]`` on the device (rows of
+        :attr:`device_triangle_pairs`), or None for a discrete result."""
+        return self._view("device_toi")
+
+    @cached_property
+    def triangle_toi(self) -> np.ndarray | None:
+        """``(M,)`` float64 time of impact of each row of :attr:`triangle_pairs` (same order): the
+        earliest ``t`` in ``[0, 1]`` at which the two triangles meet (or come within the pipeline's
+        ``min_distance``), never later than the true one; 0 for a pair that meets at the start.
+        None for a discrete result."""
+        if self.device_toi is None:
+            return None
+        self.triangle_pairs  # noqa: B018 (computes the row order)
+        return self.device_toi.numpy()[self._order]
+
+    @cached_property
+    def object_toi(self) -> np.ndarray | None:
+        """``(K,)`` float64 earliest time of impact of each row of :attr:`object_pairs` (the least of
+        its triangle pairs'), or None for a discrete result."""
+        if self.device_toi is None:
+            return None
+        t = self.triangle_pairs
+        out = np.full(len(self.object_pairs), np.inf)
+        if len(t):
+            _, row = np.unique(t[:, [0, 2]], axis=0, return_inverse=True)
+            np.minimum.at(out, row.reshape(-1), self.triangle_toi)
+        return out
+
+    @property
+    def toi(self) -> float:
+        """The earliest time of impact of the frame (``inf`` when nothing collides, and for a
+        discrete result)."""
+        t = self.triangle_toi
+        return float(t.min()) if t is not None and len(t) else float("inf")
+
+    def copy(self) -> "CollisionResult":
+        """The same result with device arrays of its own (valid after the next ``detect()``)."""
+
+        def own(a):
+            return None if a is None else wp.clone(a)
+
+        near = None
+        if self.device_near is not None:
+            near = {name: own(getattr(self, name)) for name in (*NEAR_ROWS, "device_near")}
+        out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
+                              self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
+                              own(self.device_segments), own(self.device_toi), self.clearance, near)
+        out.host_ms, out.runs = self.host_ms, self.runs
+        return out
+
+    @property
+    def num_triangle_pairs(self) -> int:
+        """``M``, the number of intersecting triangle pairs."""
+        return self._num_triangle_pairs
+
+    @cached_property
+    def triangle_pairs(self) -> np.ndarray:
+        """``(M, 4)`` int32 rows ``(obj_a, tri_a, obj_b, tri_b)``, ``obj_a < obj_b``, rows sorted.
+
+        ``tri_a`` is the local triangle index within object ``obj_a``'s mesh.
+        """
+        t = self.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int32)
+        self._order = np.lexsort((t[:, 3], t[:, 2], t[:, 1], t[:, 0]))
+        return t[self._order]
+
+    @cached_property
+    def segments(self) -> np.ndarray | None:
+        """``(M, 2, 3)`` end points of the intersection segment of each row of
+        :attr:`triangle_pairs` (same order; a point when they only touch; NaN for coplanar
+        contacts, whose intersection is an area). None unless asked for with ``segments=True``."""
+        if self.device_segments is None:
+            return None
+        self.triangle_pairs  # noqa: B018 (computes the row order)
+        return self.device_segments.numpy().reshape(-1, 2, 3)[self._order]
+
+    @cached_property
+    def object_pairs(self) -> np.ndarray:
+        """``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, of objects whose surfaces intersect; sorted.
+        With a clearance, the pairs whose surfaces come within it (the intersecting ones among them)."""
+        if self.device_near is not None:
+            return self._near_rows("device_near_pairs", (2,), np.int32)
+        t = self.triangle_pairs
+        if t.shape[0] == 0:
+            return np.zeros((0, 2), np.int32)
+        return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
+
+    @cached_property
+    def containment_pairs(self) -> np.ndarray | None:
+        """``(C, 2)`` int32 rows ``(inner, outer)``: ``inner`` lies wholly inside ``outer`` with no
+        surface intersection; sorted. None unless the pipeline was built with ``containment=True``."""
+        if self.device_contained is None:
+            return None
+        c = self.device_contained.numpy().reshape(-1, 2).astype(np.int32)
+        if len(c) and len(self.triangle_pairs):
+            # Drop pairs whose surfaces intersect: pair keys a * N + b (a < b) looked up in the sorted
+            # keys of the intersecting object pairs.
+            n = np.int64(self.num_objects)
+            key = np.minimum(c[:, 0], c[:, 1]).astype(np.int64) * n + np.maximum(c[:, 0], c[:, 1])
+            t = self.triangle_pairs
+            surface = t[:, 0].astype(np.int64) * n + t[:, 2]
+            c = c[~np.isin(key, surface)].reshape(-1, 2)
+        return c[np.lexsort((c[:, 1], c[:, 0]))]
+
+    @cached_property
+    def colliding(self) -> np.ndarray:
+        """``(N,)`` bool: the object's surface intersects another object's (or, with containment
+        asked for, it contains or lies inside another)."""
+        flags = self.device_colliding.numpy().astype(bool)
+        if self.device_contained is not None:
+            flags[self.containment_pairs.ravel()] = True
+        return flags
+
+    def __repr__(self) -> str:
+        toi = f", toi={self.toi}" if self.continuous else ""
+        near = ""
+        if self.device_near is not None:
+            near = f", clearance={self.clearance}, near_pairs={len(self.object_pairs)}"
+        return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}{toi}{near}, "
+                f"timings={self.timings})")
+
+
+class DistanceResult:
+    """Least distances of object pairs (:meth:`~warp_ccd.query.DistanceQuery.query`,
+    :func:`~warp_ccd.query.distance`): device arrays, read to the host on first access.
+
+    Attributes:
+        pairs: ``(P, 2)`` int32 rows ``(a, b)`` measured (the ids the caller gave).
+        runs: how many times the query ran (more than 1 when a buffer grew).
+        device_distance, device_points, device_normal, device_triangles: the device arrays, ``(P,)``,
+            ``(P, 2)``, ``(P,)`` and ``(P,)`` ``wp.vec2i``, in the scene's precision (views of the
+            query's buffers: valid until its next query).
+    """
+
+    def __init__(self, pairs: np.ndarray, device_distance: wp.array, device_points: wp.array,
+                 device_normal: wp.array, device_triangles: wp.array, runs: int = 1):
+        self.pairs = np.asarray(pairs, np.int32).reshape(-1, 2)
+        self.device_distance = device_distance
+        self.device_points = device_points
+        self.device_normal = device_normal
+        self.device_triangles = device_triangles
+        self.runs = runs
+
+    @cached_property
+    def distance(self) -> np.ndarray:
+        """``(P,)`` float64 least distance of each pair's surfaces (0 where they intersect), scene units."""
+        return self.device_distance.numpy().astype(np.float64)
+
+    @cached_property
+    def closest_points(self) -> np.ndarray:
+        """``(P, 2, 3)`` float64: a closest point on ``a``, then on ``b`` (one point twice where they intersect)."""
+        return self.device_points.numpy().reshape(-1, 2, 3).astype(np.float64)
+
+    @cached_property
+    def normal(self) -> np.ndarray:
+        """``(P, 3)`` float64 unit directions from ``a`` to ``b``: ``(q - p) / |q - p|``; where the
+        surfaces intersect, from the normals of the closest triangles, ``n_a - n_b`` normalised (zero
+        when that vanishes; :class:`~warp_ccd.pipeline.CollisionPipeline` with a clearance gives the
+        direction of least penetration over the whole crossing)."""
+        return self.device_normal.numpy().reshape(-1, 3).astype(np.float64)
+
+    @cached_property
+    def closest_triangles(self) -> np.ndarray:
+        """``(P, 2)`` int32 ``(tri_a, tri_b)``: the triangle pair that attains each distance (the least
+        such pair by ``tri_a``, then ``tri_b``)."""
+        return self.device_triangles.numpy().reshape(-1, 2).astype(np.int32)
+
+    @cached_property
+    def intersecting(self) -> np.ndarray:
+        """``(P,)`` bool: the pair's surfaces intersect (or touch within the tolerance)."""
+        return self.distance == 0.0
+
+    def __repr__(self) -> str:
+        low = f", least={self.distance.min():.6g}" if len(self.pairs) else ""
+        return f"DistanceResult(pairs={len(self.pairs)}{low}, runs={self.runs})"
