@@ -5,6 +5,8 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 
 >>> import warp_ccd as wc
 >>> res = wc.collide(meshes, transforms)            # one shot
+>>> res = wc.collide(meshes, transforms, clearance=0.01)  # and the pairs within 0.01: distances, points
+>>> far = wc.distance(arm_links, [table])           # least distances however far apart
 >>> scene = wc.Scene.random(1000, seed=0)           # polyhedra in motion
 >>> pipe = wc.CollisionPipeline(scene)
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
@@ -30,6 +32,7 @@ from .geometry import TOLERANCE
 from .geometry.ccd_queries import ccd_queries
 from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
+from .query import DistanceQuery, distance
 from .scene import Scene
 from .stages import broad_phase_pairs
 from .usd import CheckReport, check_usd
@@ -41,12 +44,14 @@ __all__ = [
     "CheckReport",
     "CollisionPipeline",
     "CollisionResult",
+    "DistanceQuery",
     "PrecisionWarning",
     "Scene",
     "broad_phase_pairs",
     "ccd_queries",
     "check_usd",
     "collide",
+    "distance",
 ]
 
 # Names of the top level until 0.1, kept one release: each use warns and reaches its new home.

@@ -9,6 +9,11 @@
    (tree against tree, with :class:`SceneBVH`) or :class:`MidPhaseAllPairs` (the reference, with
    :class:`ObjectBounds`).
 4. Narrow phase (:mod:`~warp_ccd.stages.narrow_phase`): :class:`NarrowPhase`, the exact triangle test.
+5. With a clearance (:mod:`~warp_ccd.stages.clearance`): :class:`ClearancePhase`, the object pairs
+   within it, their least distances, closest points and directions.
+
+Apart from the frame, :class:`TreeDistance` (:mod:`~warp_ccd.stages.tree_distance`) measures the
+least distance of chosen object pairs however far apart (branch and bound over their trees).
 
 What the frame relies on of each kind is a protocol (:class:`BoundsStage`, :class:`BroadPhaseStage`,
 :class:`MidPhaseStage`, :class:`NarrowPhaseStage`, in :mod:`~warp_ccd.stages.kinds`), and a factory
@@ -23,6 +28,7 @@ from .bounds import ObjectBounds
 from .broad_phase import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, make_broad_phase
 from .bvh import SceneBVH
 from .bvh_reference import build_tree
+from .clearance import ClearancePhase
 from .kinds import (
     BoundsStage,
     BroadPhaseStage,
@@ -34,12 +40,14 @@ from .kinds import (
 from .mid_phase import MidPhaseBVH
 from .mid_phase_all_pairs import MidPhaseAllPairs
 from .narrow_phase import NarrowPhase
+from .tree_distance import TreeDistance
 
 __all__ = [
     "BoundsStage",
     "BroadPhaseAllPairs",
     "BroadPhaseSAP",
     "BroadPhaseStage",
+    "ClearancePhase",
     "MidPhaseAllPairs",
     "MidPhaseBVH",
     "MidPhaseStage",
@@ -47,6 +55,7 @@ __all__ = [
     "NarrowPhaseStage",
     "ObjectBounds",
     "SceneBVH",
+    "TreeDistance",
     "broad_phase_pairs",
     "build_tree",
     "make_broad_phase",
