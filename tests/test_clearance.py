@@ -15,11 +15,11 @@ import os
 import numpy as np
 import pytest
 import warp as wp
-from distance_reference import point_on_triangle_sq
 
 import warp_ccd as wc
 from warp_ccd.scene.shapes import cube, icosphere, shape
 
+from distance_reference import point_on_triangle_sq
 from oracles import clearance_pairs_brute, fcl_model, fcl_pair_distance, pair_distance_brute
 
 POLYHEDRA = ("tetrahedron", "cube", "octahedron", "icosahedron", "dodecahedron")

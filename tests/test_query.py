@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-from test_clearance import _box, asset_meshes
 
 import warp_ccd as wc
 from warp_ccd.scene.shapes import icosphere, shape
 
 from oracles import fcl_model, fcl_pair_distance, pair_distance_brute
+from test_clearance import _box, asset_meshes
 
 
 def _check_brute(meshes, res, rel):

@@ -273,6 +273,12 @@ class CollisionResult:
         With a clearance, the pairs whose surfaces come within it (the intersecting ones among them)."""
         if self.device_near is not None:
             return self._near_rows("device_near_pairs", (2,), np.int32)
+        return self.intersecting_pairs
+
+    @cached_property
+    def intersecting_pairs(self) -> np.ndarray:
+        """``(J, 2)`` int32 pairs ``(a, b)``, ``a < b``, of objects whose surfaces intersect (those of
+        :attr:`triangle_pairs`), sorted: :attr:`object_pairs` without a clearance."""
         t = self.triangle_pairs
         if t.shape[0] == 0:
             return np.zeros((0, 2), np.int32)
@@ -290,8 +296,7 @@ class CollisionResult:
             # keys of the intersecting object pairs.
             n = np.int64(self.num_objects)
             key = np.minimum(c[:, 0], c[:, 1]).astype(np.int64) * n + np.maximum(c[:, 0], c[:, 1])
-            t = self.triangle_pairs
-            surface = t[:, 0].astype(np.int64) * n + t[:, 2]
+            surface = self.intersecting_pairs[:, 0].astype(np.int64) * n + self.intersecting_pairs[:, 1]
             c = c[~np.isin(key, surface)].reshape(-1, 2)
         return c[np.lexsort((c[:, 1], c[:, 0]))]
 

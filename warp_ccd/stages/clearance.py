@@ -12,8 +12,10 @@ triangle pair that attains it, the two closest points and a direction, in five k
    slots, at least twice the pairs' capacity, zeroed by one memset), so that a triangle pair finds its
    object pair's slot in a probe or two;
 2. one thread per candidate: the least distance of the two triangles' feature pairs
-   (:func:`~warp_ccd.geometry.distance.closest_features`, the scene's precision, centred), kept
-   with its pair's slot; a distance within ``d`` lowers the pair's least (``atomic_min``);
+   (:func:`~warp_ccd.geometry.distance.closest_features`, the scene's precision, centred; not
+   measured, ``+inf``, where a cheap lower bound, the gap of their boxes or a separating plane of
+   one, passes ``d`` by more than the rounding), kept with its pair's slot; a distance within ``d``
+   lowers the pair's least (``atomic_min``);
 3. one thread per candidate whose distance is its pair's least: the pair's closest triangle pair is
    the least key ``tri_a << 32 | tri_b`` among them (``atomic_min``), the same on every device and
    run whatever order the candidates came in;
@@ -45,6 +47,10 @@ What a row holds (:class:`~warp_ccd.pipeline.CollisionResult`: ``object_distance
   sheet wound both ways, a symmetric crossing; or closest points that coincide without an
   intersection), the direction from the centre of ``a``'s box to ``b``'s (zero when they coincide).
 
+Every device gives the same rows bit for bit (compiled without contraction, ties broken by triangle
+keys), but for the direction of an intersecting pair: its sums are float64 atomic adds, in the order
+the device ran them, so its last bits may vary from run to run on CUDA.
+
 The reported distance is :func:`~warp_ccd.geometry.distance.closest_features`' in the scene's
 precision, within its rounding (:data:`~warp_ccd.geometry.distance.DISTANCE_ERROR_ULPS`) of the exact
 distance of the scene's vertices, a degenerate triangle within its height; a pair is within ``d``
@@ -57,7 +63,7 @@ from typing import Any
 
 import warp as wp
 
-from ..geometry.distance import closest_features
+from ..geometry.distance import DISTANCE_ERROR_ULPS, closest_features, distance_lower_bound
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_edge, _unit_normal
 from ..geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_segment
@@ -75,6 +81,10 @@ KEY_NONE = wp.constant(wp.int64(0x7FFFFFFFFFFFFFFF))
 
 HASH_MULTIPLIER = wp.constant(wp.uint64(0x9E3779B97F4A7C15))
 """Fibonacci hashing: a key times 2^64 over the golden ratio; the table slot is its high bits."""
+
+BOUND_SLACK_ULPS = 4.0 * DISTANCE_ERROR_ULPS
+"""A candidate is measured unless its lower bound passes the clearance by more than this many units in
+the last place of the centred pair's largest coordinate (the bound's and the distance's rounding)."""
 
 DIRECTION_CANCELLED = 1.0e-6
 """An intersecting pair's direction sum shorter than this times the sum of its weights has cancelled
@@ -153,16 +163,35 @@ def _pair_table_kernel(
 
 
 @wp.func
+def _extent(x0: Any, x1: Any, x2: Any):
+    """The largest absolute coordinate of three points."""
+    m = wp.max(wp.max(wp.abs(x0), wp.abs(x1)), wp.abs(x2))
+    return wp.max(wp.max(m[0], m[1]), m[2])
+
+
+@wp.func
 def _row_features(mesh: MeshTopology, world_vertex: wp.array[Any], obj_a: int, tri_a: int, obj_b: int, tri_b: int,
-                  tol: Any):
+                  tol: Any, reach: Any, ulp: wp.float64):
     """The feature distance of two triangles (:func:`~warp_ccd.geometry.distance.closest_features`,
-    centred on their centroid ``o``): ``(distance, p, q, o)``, ``p`` and ``q`` centred."""
+    centred on their centroid ``o``): ``(distance, p, q, o)``, ``p`` and ``q`` centred; ``+inf``
+    without the features when a lower bound (:func:`~warp_ccd.geometry.distance.distance_lower_bound`)
+    shows them farther apart than ``reach`` by more than the rounding of either (:data:`BOUND_SLACK_ULPS`
+    units in the last place, ``ulp``, of the centred pair's largest coordinate)."""
     v0, v1, v2 = mesh_triangle(mesh, world_vertex, obj_a, tri_a)
     u0, u1, u2 = mesh_triangle(mesh, world_vertex, obj_b, tri_b)
     o = (v0 + v1 + v2 + u0 + u1 + u2) / type(tol)(6.0)
     na, degenerate_a = _unit_normal(v0, v1, v2, tol)
     nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
-    d, p, q = closest_features(v0 - o, v1 - o, v2 - o, u0 - o, u1 - o, u2 - o, not degenerate_a, not degenerate_b)
+    a0 = v0 - o
+    a1 = v1 - o
+    a2 = v2 - o
+    b0 = u0 - o
+    b1 = u1 - o
+    b2 = u2 - o
+    slack = type(tol)(wp.float64(BOUND_SLACK_ULPS) * ulp) * wp.max(_extent(a0, a1, a2), _extent(b0, b1, b2))
+    if distance_lower_bound(a0, a1, a2, b0, b1, b2, na, nb, not degenerate_a, not degenerate_b) > reach + slack:
+        return type(tol)(wp.inf), a0, b0, o
+    d, p, q = closest_features(a0, a1, a2, b0, b1, b2, not degenerate_a, not degenerate_b)
     return d, p, q, o
 
 
@@ -177,20 +206,21 @@ def _candidate_distance_kernel(
     table_slot: wp.array[wp.int32],
     tol_rel: wp.float64,
     clearance: wp.float64,
+    ulp: wp.float64,
     # Outputs
     candidate_distance: wp.array[Any],
     candidate_slot: wp.array[wp.int32],
     pair_distance: wp.array[Any],
 ):
-    """One thread per candidate: its feature distance and its object pair's slot; within the
-    clearance, the pair's least distance lowered to it."""
+    """One thread per candidate: its feature distance (``+inf`` when plainly beyond the clearance)
+    and its object pair's slot; within the clearance, the pair's least distance lowered to it."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
     c = candidate[k]
     slot = _find(table_key, table_slot, c[0], c[2])
     tol = type(candidate_distance[k])(tol_rel)
-    d, p, q, o = _row_features(mesh, world_vertex, c[0], c[1], c[2], c[3], tol)
+    d, p, q, o = _row_features(mesh, world_vertex, c[0], c[1], c[2], c[3], tol, type(tol)(clearance), ulp)
     candidate_distance[k] = d
     candidate_slot[k] = slot
     if slot >= 0 and d <= type(d)(clearance):
@@ -205,17 +235,20 @@ def _candidate_argmin_kernel(
     candidate_distance: wp.array[Any],
     candidate_slot: wp.array[wp.int32],
     pair_distance: wp.array[Any],
+    clearance: wp.float64,
     # Outputs
     pair_triangle: wp.array[wp.int64],
 ):
-    """One thread per candidate at its pair's least distance: the pair's triangle key lowered to its own."""
+    """One thread per candidate within the clearance at its pair's least distance: the pair's triangle
+    key lowered to its own."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
     slot = candidate_slot[k]
     if slot < 0:
         return
-    if candidate_distance[k] == pair_distance[slot]:  # an infinite least (none within) matches no finite one
+    d = candidate_distance[k]
+    if d <= type(d)(clearance) and d == pair_distance[slot]:
         c = candidate[k]
         wp.atomic_min(pair_triangle, slot, _triangle_key(c[1], c[3]))
 
@@ -311,7 +344,8 @@ def _finish_kernel(
     tri_a = int(key >> wp.int64(32))
     tri_b = int(key & wp.int64(0xFFFFFFFF))
     tol = type(pair_distance[k])(tol_rel)
-    d, pc, qc, o = _row_features(mesh, world_vertex, p[0], tri_a, p[1], tri_b, tol)
+    d, pc, qc, o = _row_features(mesh, world_vertex, p[0], tri_a, p[1], tri_b, tol, type(tol)(wp.inf),
+                                 wp.float64(0.0))
     normal = _box_direction(object_lower, object_upper, p[0], p[1])
     point_a = pc + o
     point_b = qc + o
@@ -437,6 +471,7 @@ class ClearancePhase:
             self.near.reset()
         self._scratch(scene, pairs, candidates)
         prec = scene.precision
+        ulp = wp.float64(2.0**-53 if prec == "float64" else 2.0**-24)
         tol = wp.float64(self.tolerance)
         clearance = wp.float64(self.clearance)
         table = [self.table_key, self.table_slot]
@@ -447,10 +482,10 @@ class ClearancePhase:
                            self.pair_weight], device=d)
         cand = [candidates.data, candidates.count, candidates.capacity]
         wp.launch(_CANDIDATE_DISTANCE[prec], dim=candidates.capacity,
-                  inputs=[scene.topology, scene.world_vertex, *cand, *table, tol, clearance],
+                  inputs=[scene.topology, scene.world_vertex, *cand, *table, tol, clearance, ulp],
                   outputs=[self.candidate_distance, self.candidate_slot, self.pair_distance], device=d)
         wp.launch(_CANDIDATE_ARGMIN[prec], dim=candidates.capacity,
-                  inputs=[*cand, self.candidate_distance, self.candidate_slot, self.pair_distance],
+                  inputs=[*cand, self.candidate_distance, self.candidate_slot, self.pair_distance, clearance],
                   outputs=[self.pair_triangle], device=d)
         wp.launch(_HIT[prec], dim=hits.capacity,
                   inputs=[scene.topology, scene.world_vertex, hits.data, hits.count, hits.capacity, *table, tol],

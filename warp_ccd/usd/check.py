@@ -22,6 +22,12 @@ instanceable ancestor, PointInstancer instances through the instancer's per-inst
 ``displayColor`` (``vertex`` interpolation); with segments, the intersection segments of every
 frame are one ``BasisCurves`` prim.
 
+**Clearance** (``clearance=D``, :mod:`~warp_ccd.usd.clearance`): the pipeline also reports the prim
+pairs within ``D`` of each other; those a frame does not report as collisions are its *soft clashes*,
+with their least distance, closest points and USD faces (:attr:`FrameContacts.soft_clashes`). In the
+overlay a prim in a soft clash is yellow at that time code (red and orange win), and each soft
+clash's closest points are joined by a curve.
+
 **Continuous** (``continuous=True``, :mod:`~warp_ccd.usd.sweep`): one continuous pipeline more, whose
 every detection covers the linear motion since the previous time code, reports per interval between
 consecutive time codes the prim pairs that touch at some time in it (:attr:`CheckReport.intervals`),
@@ -43,6 +49,16 @@ from ..geometry.triangle import TOLERANCE
 from ..options import number_option
 from ..output import PendingFile, check_output_path
 from ..stages.crossing import CrossingClassifier
+from .clearance import (
+    COLOR_CLEARANCE,
+    COLOR_SOFT_CLASH,
+    SoftClashes,
+    clearance_json,
+    clearance_summary,
+    frame_clearance_json,
+    soft_clash_flags,
+    soft_clashes,
+)
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
 
@@ -68,6 +84,8 @@ class FrameContacts:
         segments: ``(M, 2, 3)`` float64 intersection segments of the rows (the first triangle
             pair of each), or None.
         num_touching: face pairs that only touch (depth <= ``min_depth``) and are not reported.
+        soft_clashes: with a clearance, the :class:`~warp_ccd.usd.clearance.SoftClashes` (prim pairs
+            within it that the frame does not report as collisions), else None.
     """
 
     time: float
@@ -75,6 +93,7 @@ class FrameContacts:
     depth: np.ndarray
     segments: np.ndarray | None = None
     num_touching: int = 0
+    soft_clashes: SoftClashes | None = None
 
     @property
     def object_pairs(self) -> np.ndarray:
@@ -107,6 +126,7 @@ class CheckReport:
             consecutive time codes; None otherwise.
         min_distance: with ``continuous``, the distance within which surfaces count as touching.
         ccd_tolerance: with ``continuous``, the continuous test's distance tolerance.
+        clearance: the distance of soft clashes (0: none sought).
     """
 
     stage: str
@@ -122,6 +142,12 @@ class CheckReport:
     intervals: list | None = None
     min_distance: float = 0.0
     ccd_tolerance: float = 0.0
+    clearance: float = 0.0
+
+    @property
+    def soft_clash(self) -> bool:
+        """Whether any frame has a soft clash (a pair within the clearance not reported as a collision)."""
+        return any(f.soft_clashes is not None and len(f.soft_clashes.object_pairs) > 0 for f in self.frames)
 
     @property
     def tunnelling(self) -> bool:
@@ -145,12 +171,15 @@ class CheckReport:
     def findings(self) -> str | None:
         """What the check found, as the command's exit status reads it: ``"penetrating"`` when a
         pair penetrates, else ``"tunnelling"`` when a continuous check found a pair touching only
-        between time codes, else ``"touching"`` when pairs touch and ``count_touching`` counts them
-        as collisions, else None (exit status 0)."""
+        between time codes, else ``"soft_clash"`` when a pair comes within the clearance, else
+        ``"touching"`` when pairs touch and ``count_touching`` counts them as collisions, else None
+        (exit status 0)."""
         if self.penetrating:
             return "penetrating"
         if self.tunnelling:
             return "tunnelling"
+        if self.soft_clash:
+            return "soft_clash"
         if self.count_touching and self.touching:
             return "touching"
         return None
@@ -199,8 +228,11 @@ class CheckReport:
                     if f.segments is not None:
                         entry["segments"] = np.where(np.isfinite(f.segments[s:e]), f.segments[s:e], None).tolist()
                     pairs.append(entry)
-            frames.append({"time": f.time, "triangle_pairs": int(len(rows)), "touching_pairs": int(f.num_touching),
-                           "pairs": pairs})
+            entry = {"time": f.time, "triangle_pairs": int(len(rows)), "touching_pairs": int(f.num_touching),
+                     "pairs": pairs}
+            if f.soft_clashes is not None:
+                entry["soft_clashes"] = frame_clearance_json(f.soft_clashes, self.object_path)
+            frames.append(entry)
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
         out = {
             "stage": self.stage,
@@ -222,6 +254,9 @@ class CheckReport:
         if self.intervals is not None:
             out["tunnelling"] = self.tunnelling
             out["continuous"] = sweep_json(self.intervals, self.object_path, self.min_distance, self.ccd_tolerance)
+        if self.clearance > 0.0:
+            out["soft_clash"] = self.soft_clash
+            out["clearance"] = clearance_json(self.frames, self.object_path, self.clearance)
         return out
 
     def write_json(self, path) -> str:
@@ -281,6 +316,8 @@ class CheckReport:
                 lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
         if self.intervals is not None:
             lines += sweep_summary(self.intervals, self.object_path, self.min_distance, top)
+        if self.clearance > 0.0:
+            lines += clearance_summary(self.frames, self.object_path, self.clearance, top)
         s = self.seconds
         if s:
             per = s.get("detect", 0.0) / max(n, 1) * 1e3
@@ -317,7 +354,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
               include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
               progress: bool = False, allow_missing: bool = False, continuous: bool = False,
-              min_distance: float = 0.0) -> CheckReport:
+              min_distance: float = 0.0, clearance: float = 0.0) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -344,6 +381,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
             two time codes), and which of them tunnel (:attr:`CheckReport.intervals`).
         min_distance: with ``continuous``, pairs that come within this distance (scene units,
             >= 0) count as touching.
+        clearance: also report, per frame, the prim pairs within this distance (scene units, >= 0)
+            that the frame does not report as collisions: soft clashes (:attr:`FrameContacts.soft_clashes`).
 
     Returns:
         The :class:`CheckReport`.
@@ -361,6 +400,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 
     number_option("min_depth", min_depth, low=0.0)
     number_option("min_distance", min_distance, low=0.0)
+    clearance = number_option("clearance", clearance, low=0.0)
     if min_distance > 0.0 and not continuous:
         raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
     t = time.perf_counter()
@@ -374,7 +414,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
     scene = imp.scene
-    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance)
+    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance, clearance=clearance)
     classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
     # One continuous pipeline for the whole animation: each detect covers the motion since the last.
     sweep = CollisionPipeline(scene, continuous=True, min_distance=min_distance) if continuous else None
@@ -384,7 +424,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         seconds["continuous"] = 0.0
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
-                         count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped))
+                         count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
+                         clearance=clearance)
     if continuous:
         report.intervals = []
         report.min_distance = float(min_distance)
@@ -400,6 +441,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         pairs = res.device_triangle_pairs
         _, depth = classify(pairs)  # 0 where the surfaces only touch
         contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k])
+        if clearance > 0.0:
+            contacts.soft_clashes = soft_clashes(imp, res, contacts.object_pairs)
         t2 = time.perf_counter()
         seconds["set"] += t1 - t
         seconds["detect"] += t_detect - t1
@@ -407,7 +450,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         report.frames.append(contacts)
         if continuous:
             t3 = time.perf_counter()
-            now = res.object_pairs  # the discrete result's, read before it can change
+            now = res.intersecting_pairs  # the discrete result's, read before it can change
             if k == 0:
                 wp.copy(sweep.world_vertex_start, scene.world_vertex)  # the motion starts at the first time code
             else:
@@ -426,7 +469,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 def write_overlay(report: CheckReport, out_path) -> str:
     """Writes a USD layer over the checked stage: penetrating prims in colour per frame (with a
     continuous check, tunnelling prims in orange at the start of the interval, and their
-    ``warpCcd:tunnelling`` attribute), and the intersection segments (when the check kept them) as curves.
+    ``warpCcd:tunnelling`` attribute; with a clearance, prims in a soft clash in yellow), and as
+    curves the intersection segments (when the check kept them) and the soft clashes' closest points.
 
     The layer's only sublayer is the checked stage's file (a relative path when they share a
     folder), so it opens as the animation with the overlay on top. Written to a temporary file
@@ -482,22 +526,24 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
         for k, f in enumerate(report.frames):
             hit[k, f.triangle_pairs[:, [0, 2]].ravel()] = True
         times = [f.time for f in report.frames]
-        # Tunnelling in the interval that starts at a time code (continuous checks): orange there.
+        # Tunnelling in the interval that starts at a time code (continuous checks): orange there; a
+        # soft clash (clearance checks), yellow where neither is.
         tunnel = tunnelling_flags(report.intervals or (), times, n)
-        red, orange = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING)
+        soft = soft_clash_flags(report.frames, n)
+        red, orange, yellow = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING), Gf.Vec3f(*COLOR_SOFT_CLASH)
         with Sdf.ChangeBlock():
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
-            targets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-            for i in np.nonzero((hit | tunnel).any(axis=0))[0].tolist():
+            targets: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+            for i in np.nonzero((hit | tunnel | soft).any(axis=0))[0].tolist():
                 if imp.object_instancer[i] is not None:
                     continue
                 prim = src.GetPrimAtPath(imp.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
-                was_hit, was_tunnel = targets.get(key, (np.zeros(len(times), bool), np.zeros(len(times), bool)))
-                targets[key] = (was_hit | hit[:, i], was_tunnel | tunnel[:, i])
-            for path, (flags, tunnels) in targets.items():
+                was = targets.get(key, (np.zeros(len(times), bool),) * 3)
+                targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i])
+            for path, (flags, tunnels, softs) in targets.items():
                 prim = stage.GetPrimAtPath(path)
                 primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                                                   UsdGeom.Tokens.constant)
@@ -506,8 +552,8 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
                         and len(own.Get()) == 1:
                     clear = own.Get()[0]
-                for tc, f, g in zip(times, flags.tolist(), tunnels.tolist()):
-                    primvar.Set(Vt.Vec3fArray([red if f else orange if g else clear]), tc)
+                for tc, f, g, y in zip(times, flags.tolist(), tunnels.tolist(), softs.tolist()):
+                    primvar.Set(Vt.Vec3fArray([red if f else orange if g else yellow if y else clear]), tc)
                 if report.intervals is not None:
                     flag = prim.CreateAttribute("warpCcd:tunnelling", Sdf.ValueTypeNames.Bool, custom=True)
                     for tc, g in zip(times, tunnels.tolist()):
@@ -516,7 +562,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
             instancer = np.array(imp.object_instancer, dtype=object)
             for path in sorted({p for p in imp.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
-                if not (hit[:, rows] | tunnel[:, rows]).any():
+                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows]).any():
                     continue
                 schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
                 size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
@@ -525,24 +571,31 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                                                                   UsdGeom.Tokens.vertex)
                 for k, tc in enumerate(times):
                     colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
+                    colors[imp.object_instance[rows][soft[k, rows]]] = COLOR_SOFT_CLASH
                     colors[imp.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
                     colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
                     primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
-        # Defined outside the change block: a new prim needs the stage recomposed.
-        curves = None
-        if any(f.segments is not None for f in report.frames):
-            curves = UsdGeom.BasisCurves.Define(stage, "/WarpCcdCheck/Segments")
-            curves.CreateTypeAttr(UsdGeom.Tokens.linear)
-            curves.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*COLOR_SEGMENT)]))
-            world = imp.scene.world_vertex.numpy()
-            lo, hi = world.min(axis=0), world.max(axis=0)
-            curves.CreateWidthsAttr(Vt.FloatArray([float(np.max(hi - lo)) * 2e-3 or 1e-3]))
-            curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
-            counts, points = curves.CreateCurveVertexCountsAttr(), curves.CreatePointsAttr()
-            for f in report.frames:
-                ends = segment_points(f.segments if f.segments is not None else np.zeros((0, 2, 3)))
+        # Defined outside the change block: a new prim needs the stage recomposed. The intersection
+        # segments, and the soft clashes' closest points joined, as time-sampled curves.
+        curves = []
+        world = imp.scene.world_vertex.numpy()
+        width = float(np.max(world.max(axis=0) - world.min(axis=0))) * 2e-3 if len(world) else 0.0
+        for name, color, parts in (("Segments", COLOR_SEGMENT, [f.segments for f in report.frames]),
+                                   ("Clearance", COLOR_CLEARANCE, [None if f.soft_clashes is None
+                                                                   else f.soft_clashes.points for f in report.frames])):
+            if all(p is None for p in parts):
+                continue
+            curve = UsdGeom.BasisCurves.Define(stage, f"/WarpCcdCheck/{name}")
+            curve.CreateTypeAttr(UsdGeom.Tokens.linear)
+            curve.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*color)]))
+            curve.CreateWidthsAttr(Vt.FloatArray([width or 1e-3]))
+            curve.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+            counts, points = curve.CreateCurveVertexCountsAttr(), curve.CreatePointsAttr()
+            for f, part in zip(report.frames, parts):
+                ends = segment_points(part if part is not None else np.zeros((0, 2, 3)))
                 counts.Set(Vt.IntArray.FromNumpy(np.full(len(ends) // 2, 2, np.int32)), f.time)
                 points.Set(Vt.Vec3fArray.FromNumpy(ends), f.time)
+            curves.append(curve)
         del stage, curves  # closed before the sublayer path changes (no recomposition against the wrong folder)
         rel = os.path.relpath(source, os.path.dirname(full))
         if not rel.startswith(".."):  # beside the overlay, or below it: a relative path that moves with both
