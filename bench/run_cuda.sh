@@ -121,7 +121,7 @@ for part in $parts; do
             --frames $frames --warmup 3 --profile --out "$out/clearance_$tag.json" ;;
     distance)
         step python3 -m warp_ccd.bench.distance --device "$device" $distance --gap 0.5 0.01 --frames $frames \
-            --warmup 3 --out "$out/distance_$tag.json" ;;
+            --warmup 3 --profile --out "$out/distance_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
             "host, usd, ccd, continuous, clearance, distance)" >&2

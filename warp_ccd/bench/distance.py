@@ -8,13 +8,15 @@ with ``--warmup`` untimed runs first, min and median of ``--frames`` runs:
 * ``query``: :meth:`~warp_ccd.query.DistanceQuery.query` with the trees built (on CUDA one replayed
   graph), synchronised; the persistent form, as a user asks again after moving the objects;
 * ``one_shot``: :func:`~warp_ccd.query.distance` from numpy meshes: scene, validation, tree builds,
-  query;
+  query; ``one_shot_phases_ms`` splits it: the scene, the query's set-up (trees, buffers), its first
+  query (eager), each synchronised;
 * ``fcl_query``: python-fcl's ``fcl.distance`` (nearest points) on its two BVH models (OBBRSS),
   built before; ``fcl_build``: building the two models (``BVHModel``, ``beginModel`` ..
   ``endModel``); ``fcl_one_shot`` = build + query.
 
 Each row also gives the two distances and their difference (the same pair of meshes), and the ratios
-``fcl_query / query`` and ``fcl_one_shot / one_shot``.
+``fcl_query / query`` and ``fcl_one_shot / one_shot``; with ``--profile`` (CUDA), an eager query's
+kernels, GPU ms each (``wp.timing``), and their sum.
 
     python -m warp_ccd.bench.distance --device cuda:0 --triangles 1e4 1e5 --gap 0.5 0.01 \\
         --out bench/results/distance_cuda0.json
@@ -31,6 +33,7 @@ import numpy as np
 import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import _blob
+from warp_ccd.bench.profile_frame import activities
 from warp_ccd.bench.timing import synced_ms
 
 
@@ -88,6 +91,23 @@ def run(triangles: int, gap: float, args, device) -> dict:
         if k >= args.warmup:
             one.append(ms)
     row.update(_stats("one_shot", one))
+    # Where a one-shot call's time goes: the scene (validation, precision check, upload), the query's
+    # set-up (the trees built, buffers), the first query (eager); each synchronised, medians of 3.
+    phases = {"scene": [], "setup": [], "query": []}
+    for _ in range(3):
+        made = {}
+        phases["scene"].append(synced_ms(lambda: made.setdefault("scene", wc.Scene.from_meshes(
+            meshes, device=device, precision=args.precision)), device))
+        phases["setup"].append(synced_ms(lambda: made.setdefault("query", wc.DistanceQuery(made["scene"], [[0, 1]])),
+                                         device))
+        phases["query"].append(synced_ms(made["query"].query, device))
+    row["one_shot_phases_ms"] = {k: float(np.median(v)) for k, v in phases.items()}
+    if args.profile and device.is_cuda:  # one eager query kernel by kernel
+        eager = wc.DistanceQuery(scene, [[0, 1]], graph=False)
+        eager.query()
+        acts = activities(None, 5, run=eager.query)
+        row["query_activities"] = acts[:10]
+        row["query_kernels_ms"] = float(sum(a["ms"] for a in acts))
     if not args.no_fcl:
         try:
             builds, queries = [], []
@@ -123,6 +143,7 @@ def main(argv=None) -> int:
                         help="gaps between the two meshes' bounding spheres (radius 1)")
     parser.add_argument("--precision", choices=("float32", "float64"), default="float32")
     parser.add_argument("--no-fcl", action="store_true", help="leave python-fcl out")
+    parser.add_argument("--profile", action="store_true", help="one eager query kernel by kernel (CUDA)")
     add_run_options(parser, frames=20, warmup=3, seed=0, out_help="JSON file (default: none)")
     args, device, document = start(parser, argv)
     for n in args.triangles:

@@ -39,13 +39,17 @@ KINDS = {wp.TIMING_KERNEL: "kernel", wp.TIMING_KERNEL_BUILTIN: "kernel (warp)", 
          wp.TIMING_MEMSET: "memset", wp.TIMING_GRAPH: "graph"}
 
 
-def activities(pipe: CollisionPipeline, count: int = 10) -> list[dict]:
-    """``count`` eager frames, activity by activity: ``{"name", "kind", "count", "ms"}`` per name,
-    ``ms`` the median over the frames of its time in a frame, slowest first."""
+def activities(pipe: CollisionPipeline | None, count: int = 10, run=None) -> list[dict]:
+    """``count`` eager frames of ``pipe`` (or calls of ``run()``, eager work of another kind), activity
+    by activity: ``{"name", "kind", "count", "ms"}`` per name, ``ms`` the median over the frames of its
+    time in a frame, slowest first."""
     per_frame = []
     for _ in range(count):
         wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-        pipe.detect(advance=DT)
+        if run is None:
+            pipe.detect(advance=DT)
+        else:
+            run()
         frame = {}
         for r in wp.timing_end():
             row = frame.setdefault(r.name, {"name": r.name, "kind": KINDS.get(r.filter, str(r.filter)), "count": 0,

@@ -113,10 +113,16 @@ def shape_radius(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     return radius
 
 
+SIZE_SAMPLE = 4096
+"""Most triangles of one shape whose longest edges give its median (:func:`triangle_size`): a bigger
+shape's are evenly spaced through it, so that a scene of big meshes costs its check little."""
+
+
 def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
                   triangle_start: np.ndarray, object_shape: np.ndarray, object_scale=None) -> float:
     """The scene's typical triangle size: the median, over its objects' triangles, of each
-    triangle's longest edge (each shape's median taken once, times each object's scale).
+    triangle's longest edge (each shape's median taken once, over at most :data:`SIZE_SAMPLE` of
+    its triangles evenly spaced through it, times each object's scale).
 
     Triangles of zero size (every vertex the same point) count for nothing.
 
@@ -137,6 +143,12 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
         return 0.0
     tcount = np.diff(tstart)
     owner = np.repeat(np.arange(len(tcount)), tcount)
+    if tcount.max() > SIZE_SAMPLE:  # big shapes: evenly spaced triangles (the k-th where k * SAMPLE / m steps)
+        local = np.arange(len(tri)) - tstart[owner]
+        m = tcount[owner]
+        pick = (m <= SIZE_SAMPLE) | ((local * SIZE_SAMPLE) % m < SIZE_SAMPLE)
+        tri, owner = tri[pick], owner[pick]
+        tcount = np.bincount(owner, minlength=len(tcount))
     v = np.asarray(vertices)
     longest = np.empty(len(tri))
     step = 1 << 20  # triangles a block: bounded temporaries for scenes of millions
