@@ -95,7 +95,7 @@ class DistanceQuery:
         self._frames = FrameCache(self.counter_read, mode)
 
     def _launch(self) -> None:
-        self.bvh.refit(self.scene)
+        self.bvh.refit(self.scene, object_boxes=False)  # deforming trees; no broad phase needs boxes
         self.stage.launch(self.scene, self.pairs)
 
     def query(self) -> DistanceResult:

@@ -47,7 +47,7 @@ from .triangle import CONTACT_NONE, CONTACT_SEGMENT, tri_tri_segment
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["DISTANCE_ERROR_ULPS", "closest_features", "distance_lower_bound", "tri_tri_distance",
+__all__ = ["DISTANCE_ERROR_ULPS", "closest_features", "distance_lower_bound", "feature_distance", "tri_tri_distance",
            "tri_tri_distance_batch_kernel"]
 
 DISTANCE_ERROR_ULPS = 16.0
@@ -148,13 +148,31 @@ def tri_tri_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_r
     if kind == CONTACT_SEGMENT:
         m = (s0 + s1) * type(tol)(0.5)
         return zero, m, m
+    d, p, q, o = _centred_features(v0, v1, v2, u0, u1, u2, tol)
+    if kind != CONTACT_NONE:  # a coplanar overlap: the closest pair found is a point of it
+        m = (p + q) * type(tol)(0.5) + o
+        return zero, m, m
+    return d, p + o, q + o
+
+
+@wp.func
+def _centred_features(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol: Any):
+    """:func:`closest_features` on the pair centred on its centroid ``o``, degenerate triangles by
+    ``tol``: ``(distance, p, q, o)``, ``p`` and ``q`` centred."""
     o = (v0 + v1 + v2 + u0 + u1 + u2) / type(tol)(6.0)
     na, degenerate_a = _unit_normal(v0, v1, v2, tol)
     nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
     d, p, q = closest_features(v0 - o, v1 - o, v2 - o, u0 - o, u1 - o, u2 - o, not degenerate_a, not degenerate_b)
-    if kind != CONTACT_NONE:  # a coplanar overlap: the closest pair found is a point of it
-        m = (p + q) * type(tol)(0.5) + o
-        return zero, m, m
+    return d, p, q, o
+
+
+@wp.func
+def feature_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol: Any):
+    """:func:`closest_features` of two triangles as :func:`tri_tri_distance` computes it (centred on
+    the pair's centroid, degenerate triangles by ``tol``, the vertices' precision): ``(distance, p,
+    q)`` in the input frame. Their distance where they do not intersect (the same bits as
+    :func:`tri_tri_distance`'s), else the distance of two of their points: an upper bound always."""
+    d, p, q, o = _centred_features(v0, v1, v2, u0, u1, u2, tol)
     return d, p + o, q + o
 
 

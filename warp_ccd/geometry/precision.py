@@ -143,12 +143,12 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
         return 0.0
     tcount = np.diff(tstart)
     owner = np.repeat(np.arange(len(tcount)), tcount)
-    if tcount.max() > SIZE_SAMPLE:  # big shapes: evenly spaced triangles (the k-th where k * SAMPLE / m steps)
-        local = np.arange(len(tri)) - tstart[owner]
-        m = tcount[owner]
-        pick = (m <= SIZE_SAMPLE) | ((local * SIZE_SAMPLE) % m < SIZE_SAMPLE)
-        tri, owner = tri[pick], owner[pick]
-        tcount = np.bincount(owner, minlength=len(tcount))
+    if tcount.max() > SIZE_SAMPLE:  # big shapes: triangles (j * m) // SAMPLE, j < SAMPLE, evenly spaced
+        taken = np.minimum(tcount, SIZE_SAMPLE)
+        shape = np.repeat(np.arange(len(tcount)), taken)
+        j = np.arange(len(shape)) - np.repeat(np.cumsum(taken) - taken, taken)
+        local = np.where(tcount[shape] > SIZE_SAMPLE, (j * tcount[shape]) // SIZE_SAMPLE, j)
+        tri, owner, tcount = tri[tstart[shape] + local], shape, taken
     v = np.asarray(vertices)
     longest = np.empty(len(tri))
     step = 1 << 20  # triangles a block: bounded temporaries for scenes of millions

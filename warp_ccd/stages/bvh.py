@@ -690,7 +690,7 @@ class SceneBVH:
         ``pad_extra`` (scene units: half a clearance, for the triangle boxes of whole-object pairs)."""
         return leaf_box_args(scene.world_vertex, world_vertex_start, self.pad_abs + pad_extra)
 
-    def refit(self, scene, world_vertex_start: wp.array | None = None) -> None:
+    def refit(self, scene, world_vertex_start: wp.array | None = None, object_boxes: bool = True) -> None:
         """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
         roots are their object boxes), then the rigid objects' boxes (see ``object_bounds``).
 
@@ -699,13 +699,15 @@ class SceneBVH:
             world_vertex_start: ``(V,)`` world vertices at the start of a linear motion that ends at
                 ``scene.world_vertex`` (the scene's vector type): leaf boxes are then the triangles'
                 swept boxes, padded by :attr:`pad_abs` too (``world_trees`` only).
+            object_boxes: also the rigid objects' boxes (a caller without a broad phase, such as a
+                distance query walking the trees alone, leaves them out).
         """
         if world_vertex_start is not None and self.rigid_object.shape[0]:
             raise ValueError("world_vertex_start: swept boxes need every tree in the world (world_trees=True)")
         margin = scene.scalar_type(self.margin_rel)
         self.refit_plan.launch(scene.topology, scene.world_vertex, self.tree, margin, scene.precision, self.lower,
                                self.upper, world_vertex_start, self.pad_abs)
-        if self.rigid_object.shape[0]:
+        if self.rigid_object.shape[0] and object_boxes:
             eps = float(np.finfo(np.float64 if scene.precision == "float64" else np.float32).eps)
             wp.launch(_RIGID_BOUNDS[scene.precision], dim=self.rigid_object.shape[0],
                       inputs=[self.tree, self.rigid_object, scene.object_shape, scene.object_pose,

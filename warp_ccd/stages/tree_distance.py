@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from ..geometry.distance import DISTANCE_ERROR_ULPS, tri_tri_distance
+from ..geometry.distance import DISTANCE_ERROR_ULPS, feature_distance, tri_tri_distance
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _unit_normal
 from ..geometry.triangle import TOLERANCE
@@ -115,11 +115,18 @@ def _measure(mesh: MeshTopology, world_vertex: wp.array[Any], r: TreePair, k: in
              listed_distance: wp.array[Any], listed_count: wp.array[wp.int64], leaf: bool):
     """The exact distance of triangles ``tri_a`` of ``a`` and ``tri_b`` of ``b`` (pair ``k``): it
     lowers the pair's bound; measured at a pair of leaves (``leaf``), it is listed when it is at most
-    the bound it met. (An inner node pair's triangles are measured again at their leaves: a bound
-    they set is never dropped there.)"""
+    the bound it met. An inner node pair's triangles give only their feature distance
+    (:func:`~warp_ccd.geometry.distance.feature_distance`: the same bits as the exact distance of
+    triangles that do not intersect, a bound above it for those that do), and are measured again at
+    their leaves, whose pair a bound they set never drops."""
     v0, v1, v2 = mesh_triangle(mesh, world_vertex, r.a, tri_a)
     u0, u1, u2 = mesh_triangle(mesh, world_vertex, r.b, tri_b)
-    d, p, q = tri_tri_distance(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel))
+    tol = type(v0[0])(tol_rel)
+    d = type(tol)(0.0)
+    if leaf:
+        d, p, q = tri_tri_distance(v0, v1, v2, u0, u1, u2, tol)
+    else:
+        d, p, q = feature_distance(v0, v1, v2, u0, u1, u2, tol)
     if d <= wp.atomic_min(upper, k, d) and leaf:
         slot = reserve_slot(listed_count, listed_capacity)
         if slot >= 0:
