@@ -31,24 +31,12 @@ CLEARANCE = 0.15
 
 
 def asset_meshes(name: str) -> list:
-    """The meshes of one of newton's example assets, fanned into triangles, in the stage's frame."""
-    from pxr import Usd, UsdGeom
+    """The meshes of one of newton's example assets, as this package's USD reader gives them."""
+    from warp_ccd.usd import scene_from_usd
 
     folder = os.path.join(os.path.dirname(importlib.util.find_spec("newton").origin), "examples", "assets")
-    stage = Usd.Stage.Open(os.path.join(folder, name))
-    cache = UsdGeom.XformCache()
-    out = []
-    for prim in stage.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
-            mesh = UsdGeom.Mesh(prim)
-            v = np.array(mesh.GetPointsAttr().Get(), np.float64)
-            counts = np.array(mesh.GetFaceVertexCountsAttr().Get())
-            idx = np.array(mesh.GetFaceVertexIndicesAttr().Get())
-            starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-            tris = [[idx[s], idx[s + k], idx[s + k + 1]] for s, c in zip(starts, counts) for k in range(1, c - 1)]
-            m = np.array(cache.GetLocalToWorldTransform(prim), np.float64)
-            out.append((v @ m[:3, :3] + m[3, :3], np.array(tris, np.int32)))
-    return out
+    return [(v.astype(np.float64), t) for v, t in scene_from_usd(os.path.join(folder, name), device="cpu",
+                                                                   precision="float64").world_meshes()]
 
 
 def scene() -> list:

@@ -292,23 +292,12 @@ def _newton_asset(name: str) -> str:
 
 
 def asset_meshes(name: str) -> list:
-    """The meshes of a newton example asset, fanned into triangles, in its stage's frame (float64)."""
-    from pxr import Usd, UsdGeom
+    """The meshes of a newton example asset, as this package's USD reader gives them (polygons fanned
+    into triangles, placed by their world transforms at the stage's first time code), float64."""
+    from warp_ccd.usd import scene_from_usd
 
-    stage = Usd.Stage.Open(_newton_asset(name))
-    out = []
-    cache = UsdGeom.XformCache()
-    for prim in stage.Traverse():
-        if prim.IsA(UsdGeom.Mesh):
-            mesh = UsdGeom.Mesh(prim)
-            v = np.array(mesh.GetPointsAttr().Get(), np.float64)
-            counts = np.array(mesh.GetFaceVertexCountsAttr().Get())
-            idx = np.array(mesh.GetFaceVertexIndicesAttr().Get())
-            starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-            tris = [[idx[s], idx[s + k], idx[s + k + 1]] for s, c in zip(starts, counts) for k in range(1, c - 1)]
-            m = np.array(cache.GetLocalToWorldTransform(prim), np.float64)
-            out.append((v @ m[:3, :3] + m[3, :3], np.array(tris, np.int32)))
-    return out
+    return [(v.astype(np.float64), t) for v, t in scene_from_usd(_newton_asset(name), device="cpu",
+                                                                   precision="float64").world_meshes()]
 
 
 @pytest.mark.slow

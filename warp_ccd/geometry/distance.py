@@ -47,7 +47,8 @@ from .triangle import CONTACT_NONE, CONTACT_SEGMENT, tri_tri_segment
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["DISTANCE_ERROR_ULPS", "closest_features", "distance_lower_bound", "feature_distance", "tri_tri_distance",
+__all__ = ["DISTANCE_ERROR_ULPS", "centred_features", "closest_features", "distance_lower_bound", "feature_distance",
+           "tri_tri_distance",
            "tri_tri_distance_batch_kernel"]
 
 DISTANCE_ERROR_ULPS = 16.0
@@ -148,7 +149,7 @@ def tri_tri_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_r
     if kind == CONTACT_SEGMENT:
         m = (s0 + s1) * type(tol)(0.5)
         return zero, m, m
-    d, p, q, o = _centred_features(v0, v1, v2, u0, u1, u2, tol)
+    d, p, q, o = centred_features(v0, v1, v2, u0, u1, u2, tol, type(tol)(wp.inf), zero)
     if kind != CONTACT_NONE:  # a coplanar overlap: the closest pair found is a point of it
         m = (p + q) * type(tol)(0.5) + o
         return zero, m, m
@@ -156,13 +157,32 @@ def tri_tri_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_r
 
 
 @wp.func
-def _centred_features(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol: Any):
+def _extent(x0: Any, x1: Any, x2: Any):
+    """The largest absolute coordinate of three points."""
+    m = wp.max(wp.max(wp.abs(x0), wp.abs(x1)), wp.abs(x2))
+    return wp.max(wp.max(m[0], m[1]), m[2])
+
+
+@wp.func
+def centred_features(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol: Any, reach: Any, slack: Any):
     """:func:`closest_features` on the pair centred on its centroid ``o``, degenerate triangles by
-    ``tol``: ``(distance, p, q, o)``, ``p`` and ``q`` centred."""
+    ``tol``: ``(distance, p, q, o)``, ``p`` and ``q`` centred. With a finite ``reach``, a pair whose
+    :func:`distance_lower_bound` passes it by more than ``slack`` times the centred pair's largest
+    coordinate (the rounding of either) is not measured: ``+inf``."""
     o = (v0 + v1 + v2 + u0 + u1 + u2) / type(tol)(6.0)
     na, degenerate_a = _unit_normal(v0, v1, v2, tol)
     nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
-    d, p, q = closest_features(v0 - o, v1 - o, v2 - o, u0 - o, u1 - o, u2 - o, not degenerate_a, not degenerate_b)
+    a0 = v0 - o
+    a1 = v1 - o
+    a2 = v2 - o
+    b0 = u0 - o
+    b1 = u1 - o
+    b2 = u2 - o
+    if reach < type(tol)(wp.inf):
+        margin = slack * wp.max(_extent(a0, a1, a2), _extent(b0, b1, b2))
+        if distance_lower_bound(a0, a1, a2, b0, b1, b2, na, nb, not degenerate_a, not degenerate_b) > reach + margin:
+            return type(tol)(wp.inf), a0, b0, o
+    d, p, q = closest_features(a0, a1, a2, b0, b1, b2, not degenerate_a, not degenerate_b)
     return d, p, q, o
 
 
@@ -172,7 +192,7 @@ def feature_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol: 
     the pair's centroid, degenerate triangles by ``tol``, the vertices' precision): ``(distance, p,
     q)`` in the input frame. Their distance where they do not intersect (the same bits as
     :func:`tri_tri_distance`'s), else the distance of two of their points: an upper bound always."""
-    d, p, q, o = _centred_features(v0, v1, v2, u0, u1, u2, tol)
+    d, p, q, o = centred_features(v0, v1, v2, u0, u1, u2, tol, type(tol)(wp.inf), type(tol)(0.0))
     return d, p + o, q + o
 
 

@@ -63,7 +63,7 @@ from typing import Any
 
 import warp as wp
 
-from ..geometry.distance import DISTANCE_ERROR_ULPS, closest_features, distance_lower_bound
+from ..geometry.distance import DISTANCE_ERROR_ULPS, centred_features
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_edge, _unit_normal
 from ..geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_segment
@@ -163,36 +163,15 @@ def _pair_table_kernel(
 
 
 @wp.func
-def _extent(x0: Any, x1: Any, x2: Any):
-    """The largest absolute coordinate of three points."""
-    m = wp.max(wp.max(wp.abs(x0), wp.abs(x1)), wp.abs(x2))
-    return wp.max(wp.max(m[0], m[1]), m[2])
-
-
-@wp.func
 def _row_features(mesh: MeshTopology, world_vertex: wp.array[Any], obj_a: int, tri_a: int, obj_b: int, tri_b: int,
                   tol: Any, reach: Any, ulp: wp.float64):
-    """The feature distance of two triangles (:func:`~warp_ccd.geometry.distance.closest_features`,
-    centred on their centroid ``o``): ``(distance, p, q, o)``, ``p`` and ``q`` centred; ``+inf``
-    without the features when a lower bound (:func:`~warp_ccd.geometry.distance.distance_lower_bound`)
-    shows them farther apart than ``reach`` by more than the rounding of either (:data:`BOUND_SLACK_ULPS`
-    units in the last place, ``ulp``, of the centred pair's largest coordinate)."""
+    """The feature distance of two triangles (:func:`~warp_ccd.geometry.distance.centred_features`):
+    ``(distance, p, q, o)``, ``p`` and ``q`` centred on ``o``; ``+inf`` without the features when a
+    lower bound shows them farther apart than ``reach`` by more than the rounding of either
+    (:data:`BOUND_SLACK_ULPS` units in the last place, ``ulp``, of the centred pair's largest coordinate)."""
     v0, v1, v2 = mesh_triangle(mesh, world_vertex, obj_a, tri_a)
     u0, u1, u2 = mesh_triangle(mesh, world_vertex, obj_b, tri_b)
-    o = (v0 + v1 + v2 + u0 + u1 + u2) / type(tol)(6.0)
-    na, degenerate_a = _unit_normal(v0, v1, v2, tol)
-    nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
-    a0 = v0 - o
-    a1 = v1 - o
-    a2 = v2 - o
-    b0 = u0 - o
-    b1 = u1 - o
-    b2 = u2 - o
-    slack = type(tol)(wp.float64(BOUND_SLACK_ULPS) * ulp) * wp.max(_extent(a0, a1, a2), _extent(b0, b1, b2))
-    if distance_lower_bound(a0, a1, a2, b0, b1, b2, na, nb, not degenerate_a, not degenerate_b) > reach + slack:
-        return type(tol)(wp.inf), a0, b0, o
-    d, p, q = closest_features(a0, a1, a2, b0, b1, b2, not degenerate_a, not degenerate_b)
-    return d, p, q, o
+    return centred_features(v0, v1, v2, u0, u1, u2, tol, reach, type(tol)(wp.float64(BOUND_SLACK_ULPS) * ulp))
 
 
 @wp.kernel

@@ -205,9 +205,10 @@ def _descend_kernel(
     listed_count: wp.array[wp.int64],
 ):
     """One level of the walk: each node pair ``(k, na, nb)`` of ``front_in`` (with ``roots``, entry
-    ``k`` is pair ``k``'s roots) still within pair ``k``'s bound lowers it by the distance of two of
-    its vertices, opens both nodes (a leaf stays itself) and keeps the child pairs within the bound:
-    pairs of leaves are measured (:func:`_leaf_pairs`), the others go to ``front_out``."""
+    ``k`` is pair ``k``'s roots) still within pair ``k``'s bound lowers it by the feature distance
+    of the nodes' first triangles (:func:`_measure`), opens both nodes (a leaf stays itself) and
+    keeps the child pairs within the bound: pairs of leaves are measured (:func:`_leaf_pairs`), the
+    others go to ``front_out``."""
     block, lane = wp.tid()
     width = wp.block_dim()
     n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
