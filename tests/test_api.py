@@ -201,3 +201,13 @@ def test_importing_the_package_needs_no_io_library():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_mid_phase_all_pairs_old_path_warns():
+    """MidPhaseAllPairs left stages.mid_phase for a module of its own: the old path warns one release."""
+    from warp_ccd.stages import mid_phase, mid_phase_all_pairs
+
+    with pytest.warns(DeprecationWarning, match="mid_phase.MidPhaseAllPairs is deprecated"):
+        got = mid_phase.MidPhaseAllPairs
+    assert got is mid_phase_all_pairs.MidPhaseAllPairs
+

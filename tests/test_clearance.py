@@ -19,7 +19,7 @@ import warp as wp
 import warp_ccd as wc
 from warp_ccd.scene.shapes import cube, icosphere, shape
 
-from distance_reference import point_on_triangle_sq
+from distance_reference import point_on_triangle_sq, triangle_distance
 from oracles import clearance_pairs_brute, fcl_model, fcl_pair_distance, pair_distance_brute
 
 POLYHEDRA = ("tetrahedron", "cube", "octahedron", "icosahedron", "dodecahedron")
@@ -217,6 +217,32 @@ def test_crate_sunk_in_a_floor_points_up(device):
     assert res.object_intersecting[0] and np.dot(res.object_normal[0], line) > 0.995
 
 
+def test_a_vertex_over_a_thin_face(device):
+    """Regressions: a vertex over a thin face near its long edge. The closest point is inside the face
+    (Ericson's products of dot products put it on the long edge, 8% too far in float32), and a float64
+    pair exactly at its distance is within a clearance 3.6e-14 above it (a separating plane of a thin
+    float64 triangle, its normal turned by rounding, once ruled it out)."""
+    t = np.array([[0, 1, 2]])
+    a = np.array([[-0.43159768, 0.2970944, 0.392432], [-0.5148065, 0.30719745, 1.0361987],
+                  [-0.48223013, 0.3030965, 0.78469718]], np.float32).astype(np.float64)
+    b = np.array([[-0.47163823, 0.30197608, 0.70325524], [-0.07324737, 0.1646561, 0.65398103],
+                  [-0.4165917, 0.64257765, 0.80794746]], np.float32).astype(np.float64)
+    exact = triangle_distance(a, b)
+    res = wc.collide([(a, t), (b, t)], clearance=exact * 1.04, device=device)
+    assert len(res.object_pairs) == 1 and abs(res.object_distance[0] - exact) < 1e-7  # float32: a few ulp of 0.6
+    assert abs(wc.distance((a, t), (b, t), device=device).distance[0] - exact) < 1e-7
+    a = np.array([[0.7377085886946386, 0.2681399586948865, -0.00685661240229396],
+                  [0.21585915675600886, 0.8136754425040781, -0.4091521293082436],
+                  [0.4575276673616038, 0.5609208199260912, -0.22287543121586423]])
+    b = np.array([[0.3956497574918546, 0.5308514168645914, -0.1387253408841634],
+                  [0.14524018957587825, 0.7799267059524224, 0.09634177434454608],
+                  [0.29576023442622357, 0.2033509600073351, -0.02574067847368741]])
+    for mid in ("bvh", "all_pairs"):
+        res = wc.collide([(a, t), (b, t)], clearance=0.10664512417501185, mid_phase=mid, precision="float64",
+                         device=device)
+        assert len(res.object_pairs) == 1 and abs(res.object_distance[0] - 0.10664512417497554) < 1e-15
+
+
 def test_far_from_the_origin_in_float64(device):
     a = _box([0, 0, 0], [1, 1, 1])
     b = _box([1.25, 0.0, 0.0], [2.25, 1, 1])
@@ -245,7 +271,7 @@ def test_empty_and_single_object(device):
     assert one.object_pairs.shape == (0, 2) and one.near.tolist() == [False]
 
 
-@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), True, "0.1"])
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), True, "0.1", 1e39])
 def test_bad_clearance_is_refused(device, bad):
     scene = polyhedra_scene(device, "float32", n=3)
     with pytest.raises(ValueError, match="clearance"):

@@ -87,6 +87,28 @@ def _degenerate(rng, n):
     return a, b
 
 
+def _thin_faces(rng, n):
+    """A vertex of ``b`` over a thin face of ``a`` (twice its area 1e-5 to 1e-2 of its longest edge
+    squared), near its long edge, 1e-4 to 1e-1 above it: the closest point is inside the face."""
+    p0 = rng.uniform(-1, 1, (n, 3))
+    along = rng.normal(size=(n, 3))
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    p1 = p0 + along * rng.uniform(0.5, 1.0, (n, 1))
+    across = np.cross(along, rng.normal(size=(n, 3)))
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    edge = np.linalg.norm(p1 - p0, axis=1, keepdims=True)
+    p2 = p0 + (p1 - p0) * rng.uniform(0.3, 0.7, (n, 1)) + across * edge * 10.0 ** rng.uniform(-5, -2, (n, 1))
+    normal = np.cross(p1 - p0, p2 - p0)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    c = 0.4 * p0 + 0.3 * p1 + 0.3 * p2 + normal * 10.0 ** rng.uniform(-4, -1, (n, 1))
+    side = rng.normal(size=(n, 3))
+    side -= np.sum(side * normal, axis=1, keepdims=True) * normal
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    a = np.stack([p0, p1, p2], axis=1)
+    b = np.stack([c, c + 0.3 * side + 0.3 * normal, c - 0.3 * side + 0.2 * normal], axis=1)
+    return a, b
+
+
 def _far(rng, n):
     a, b = _apart(rng, n)
     offset = rng.normal(size=(n, 1, 3)) * 1e3
@@ -99,6 +121,7 @@ SETS = {
     "near_parallel": _near_parallel,
     "coplanar": _coplanar,
     "slivers": _slivers,
+    "thin_faces": _thin_faces,
     "degenerate": _degenerate,
     "far": _far,
     "tiny": lambda rng, n: _apart(rng, n, scale=1e-6),

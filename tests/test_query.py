@@ -155,3 +155,18 @@ def test_bad_meshes_are_named(device):
         wc.distance([(v, t)], [(v + 3, t), (v, t + 1000)], device=device)
     with pytest.raises(ValueError, match="transforms_a"):
         wc.distance([(v, t)], [(v + 3, t)], transforms_a=np.eye(4)[None].repeat(2, 0), device=device)
+
+
+def test_no_pairs_and_copies(device):
+    v, t = icosphere(1)
+    none = wc.distance([(v, t), (v + 3, t)], pairs=[], device=device)
+    assert none.pairs.shape == (0, 2) and none.distance.shape == (0,)
+    scene = wc.Scene.from_meshes([(v, t), (v + 3, t)], device=device)
+    query = wc.DistanceQuery(scene)
+    kept = query.query().copy()
+    poses = scene.object_pose.numpy()
+    poses[1, 0] = 5.0
+    scene.set_poses(wp.array(poses, dtype=wp.transform, device=device))
+    moved = query.query()
+    assert moved.distance[0] > kept.distance[0] + 1.9
+

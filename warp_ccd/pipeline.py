@@ -35,7 +35,7 @@ from .result import NEAR_ROWS, CollisionResult
 from .scene.scene import Scene, transforms_to_poses
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
-from .stages.clearance import ClearancePhase
+from .stages.clearance import CLEARANCE_MAX, ClearancePhase
 from .stages.continuous import ContinuousNarrowPhase, continuous_options
 from .stages.frame import CountedFrame, FrameCache, frame_mode
 from .stages.kinds import make_mid_phase, make_narrow_phase
@@ -114,7 +114,7 @@ class CollisionPipeline:
             (default :data:`~warp_ccd.geometry.ccd.CCD_MAX_ITERATIONS`; past it the answer is a
             conservative collision).
         clearance: also report every object pair whose surfaces come within this distance (scene
-            units, >= 0), with its least distance, closest points, direction and closest triangle
+            units, in ``[0, 1e37]``), with its least distance, closest points, direction and closest triangle
             pair (:attr:`CollisionResult.object_pairs` are then those pairs; see
             :mod:`warp_ccd.stages.clearance`); 0 (default) adds nothing. Not with ``continuous``
             (whose ``min_distance`` is the clearance over a motion).
@@ -165,7 +165,7 @@ class CollisionPipeline:
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         ccd = _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase,
                                 segments, containment)
-        self.clearance = number_option("clearance", clearance, low=0.0)
+        self.clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
         if self.clearance > 0.0 and ccd is not None:
             raise ValueError("clearance: a continuous pipeline's least distance is its min_distance "
                              f"(continuous=True), got clearance={clearance!r}")

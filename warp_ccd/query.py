@@ -31,6 +31,8 @@ __all__ = ["DistanceQuery", "distance"]
 def _pairs_array(pairs, num_objects: int, distinct: bool = True) -> np.ndarray:
     """``pairs`` as a checked ``(P, 2)`` int32 array of ids below ``num_objects`` (``a != b`` when ``distinct``)."""
     p = np.asarray(pairs)
+    if p.size == 0:
+        p = p.reshape(0, 2).astype(np.int64)
     if p.ndim != 2 or p.shape[1] != 2 or (p.size and not np.issubdtype(p.dtype, np.integer)):
         raise ValueError(f"pairs: expected a (P, 2) array of integer object ids, got {p.dtype} {p.shape}")
     p = p.astype(np.int64)

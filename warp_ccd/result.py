@@ -363,6 +363,11 @@ class DistanceResult:
         such pair by ``tri_a``, then ``tri_b``)."""
         return self.device_triangles.numpy().reshape(-1, 2).astype(np.int32)
 
+    def copy(self) -> "DistanceResult":
+        """The same result with device arrays of its own (valid after the query's next ``query()``)."""
+        return DistanceResult(self.pairs.copy(), wp.clone(self.device_distance), wp.clone(self.device_points),
+                              wp.clone(self.device_normal), wp.clone(self.device_triangles), self.runs)
+
     @cached_property
     def intersecting(self) -> np.ndarray:
         """``(P,)`` bool: the pair's surfaces intersect (or touch within the tolerance)."""

@@ -74,7 +74,10 @@ from .buffers import GrowableBuffer, reserve_slot, used_count
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["ClearancePhase", "DIRECTION_CANCELLED"]
+__all__ = ["CLEARANCE_MAX", "ClearancePhase", "DIRECTION_CANCELLED", "bound_slacks"]
+
+CLEARANCE_MAX = 1.0e37
+"""The largest clearance (scene units): object boxes, float32, are padded by half of it."""
 
 KEY_NONE = wp.constant(wp.int64(0x7FFFFFFFFFFFFFFF))
 """A pair's triangle key before any triangle pair lowered it."""
@@ -84,7 +87,8 @@ HASH_MULTIPLIER = wp.constant(wp.uint64(0x9E3779B97F4A7C15))
 
 BOUND_SLACK_ULPS = 4.0 * DISTANCE_ERROR_ULPS
 """A candidate is measured unless its lower bound passes the clearance by more than this many units in
-the last place of the centred pair's largest coordinate (the bound's and the distance's rounding)."""
+the last place of the centred pair's largest coordinate (the bound's and the distance's rounding;
+a plane's bound in float64 more: :func:`bound_slacks`)."""
 
 DIRECTION_CANCELLED = 1.0e-6
 """An intersecting pair's direction sum shorter than this times the sum of its weights has cancelled
@@ -164,14 +168,29 @@ def _pair_table_kernel(
 
 @wp.func
 def _row_features(mesh: MeshTopology, world_vertex: wp.array[Any], obj_a: int, tri_a: int, obj_b: int, tri_b: int,
-                  tol: Any, reach: Any, ulp: wp.float64):
+                  tol: Any, reach: Any, slack: wp.float64, plane_slack: wp.float64):
     """The feature distance of two triangles (:func:`~warp_ccd.geometry.distance.centred_features`):
     ``(distance, p, q, o)``, ``p`` and ``q`` centred on ``o``; ``+inf`` without the features when a
-    lower bound shows them farther apart than ``reach`` by more than the rounding of either
-    (:data:`BOUND_SLACK_ULPS` units in the last place, ``ulp``, of the centred pair's largest coordinate)."""
+    lower bound shows them farther apart than ``reach`` by more than its rounding (``slack`` and
+    ``plane_slack``: :func:`bound_slacks`)."""
     v0, v1, v2 = mesh_triangle(mesh, world_vertex, obj_a, tri_a)
     u0, u1, u2 = mesh_triangle(mesh, world_vertex, obj_b, tri_b)
-    return centred_features(v0, v1, v2, u0, u1, u2, tol, reach, type(tol)(wp.float64(BOUND_SLACK_ULPS) * ulp))
+    return centred_features(v0, v1, v2, u0, u1, u2, tol, reach, type(tol)(slack), type(tol)(plane_slack))
+
+
+def bound_slacks(precision: str, tolerance: float) -> tuple[float, float]:
+    """``(slack, plane_slack)`` of the lower bound that spares a candidate its feature distances
+    (:func:`~warp_ccd.geometry.distance.centred_features`), per unit of the centred pair's largest
+    coordinate: :data:`BOUND_SLACK_ULPS` units in the last place for the box gap, and for a plane as
+    much in float32 (its normal exact in float64 from float32 vertices), in float64 that plus the
+    turn of a normal of float64 vertices, up to a unit in the last place over the triangle's
+    doubled area in units of its longest edge squared, which is at least ``tolerance`` for a face
+    that is not degenerate (4x that); no plane at all with a tolerance of 0 in float64."""
+    ulp = 2.0**-53 if precision == "float64" else 2.0**-24
+    slack = BOUND_SLACK_ULPS * ulp
+    if precision != "float64":
+        return slack, slack
+    return slack, (slack + 4.0 * ulp / tolerance) if tolerance > 0.0 else float("inf")
 
 
 @wp.kernel
@@ -185,7 +204,8 @@ def _candidate_distance_kernel(
     table_slot: wp.array[wp.int32],
     tol_rel: wp.float64,
     clearance: wp.float64,
-    ulp: wp.float64,
+    slack: wp.float64,
+    plane_slack: wp.float64,
     # Outputs
     candidate_distance: wp.array[Any],
     candidate_slot: wp.array[wp.int32],
@@ -199,7 +219,8 @@ def _candidate_distance_kernel(
     c = candidate[k]
     slot = _find(table_key, table_slot, c[0], c[2])
     tol = type(candidate_distance[k])(tol_rel)
-    d, p, q, o = _row_features(mesh, world_vertex, c[0], c[1], c[2], c[3], tol, type(tol)(clearance), ulp)
+    d, p, q, o = _row_features(mesh, world_vertex, c[0], c[1], c[2], c[3], tol, type(tol)(clearance), slack,
+                               plane_slack)
     candidate_distance[k] = d
     candidate_slot[k] = slot
     if slot >= 0 and d <= type(d)(clearance):
@@ -324,7 +345,7 @@ def _finish_kernel(
     tri_b = int(key & wp.int64(0xFFFFFFFF))
     tol = type(pair_distance[k])(tol_rel)
     d, pc, qc, o = _row_features(mesh, world_vertex, p[0], tri_a, p[1], tri_b, tol, type(tol)(wp.inf),
-                                 wp.float64(0.0))
+                                 wp.float64(0.0), wp.float64(0.0))
     normal = _box_direction(object_lower, object_upper, p[0], p[1])
     point_a = pc + o
     point_b = qc + o
@@ -391,7 +412,7 @@ class ClearancePhase:
 
     def __init__(self, num_objects: int, clearance: float, *, tolerance: float = TOLERANCE, capacity: int = 256,
                  device=None):
-        self.clearance = number_option("clearance", clearance, low=0.0, low_open=True)
+        self.clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX, low_open=True)
         self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
         self.device = wp.get_device(device)
         self.near = GrowableBuffer(wp.vec2i, capacity, self.device, "object pairs within the clearance")
@@ -450,7 +471,7 @@ class ClearancePhase:
             self.near.reset()
         self._scratch(scene, pairs, candidates)
         prec = scene.precision
-        ulp = wp.float64(2.0**-53 if prec == "float64" else 2.0**-24)
+        slack, plane_slack = bound_slacks(prec, self.tolerance)
         tol = wp.float64(self.tolerance)
         clearance = wp.float64(self.clearance)
         table = [self.table_key, self.table_slot]
@@ -461,7 +482,8 @@ class ClearancePhase:
                            self.pair_weight], device=d)
         cand = [candidates.data, candidates.count, candidates.capacity]
         wp.launch(_CANDIDATE_DISTANCE[prec], dim=candidates.capacity,
-                  inputs=[scene.topology, scene.world_vertex, *cand, *table, tol, clearance, ulp],
+                  inputs=[scene.topology, scene.world_vertex, *cand, *table, tol, clearance, wp.float64(slack),
+                          wp.float64(plane_slack)],
                   outputs=[self.candidate_distance, self.candidate_slot, self.pair_distance], device=d)
         wp.launch(_CANDIDATE_ARGMIN[prec], dim=candidates.capacity,
                   inputs=[*cand, self.candidate_distance, self.candidate_slot, self.pair_distance, clearance],

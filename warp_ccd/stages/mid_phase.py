@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._deprecated import module_aliases
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_abs
@@ -54,6 +55,9 @@ from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, l
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhase", "MidPhaseBVH", "TreePair"]
+
+# MidPhaseAllPairs moved to its own module (stages.mid_phase_all_pairs); its old path warns one release.
+__getattr__ = module_aliases(__name__, {"MidPhaseAllPairs": "warp_ccd.stages.mid_phase_all_pairs:MidPhaseAllPairs"})
 
 EXPAND_THREADS_PER_SM = 1024
 """Most threads of an expansion launch per streaming multiprocessor on CUDA: the grid is fixed (so

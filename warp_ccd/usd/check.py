@@ -48,6 +48,7 @@ import numpy as np
 from ..geometry.triangle import TOLERANCE
 from ..options import number_option
 from ..output import PendingFile, check_output_path
+from ..stages.clearance import CLEARANCE_MAX
 from ..stages.crossing import CrossingClassifier
 from .clearance import (
     COLOR_CLEARANCE,
@@ -400,7 +401,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 
     number_option("min_depth", min_depth, low=0.0)
     number_option("min_distance", min_distance, low=0.0)
-    clearance = number_option("clearance", clearance, low=0.0)
+    clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
     if min_distance > 0.0 and not continuous:
         raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
     t = time.perf_counter()
