@@ -10,7 +10,7 @@ a triangle's unit normal and whether it is degenerate (:func:`_unit_normal`), an
 triangle closest to a point (:func:`_closest_on_triangle`, Ericson 5.1.5).
 
 Warp generics: ``Any``-typed ``wp.vec3`` or ``wp.vec3d`` arguments, computed in their precision,
-literals as ``type(x)(0.5)``. A function is
+literals as ``type(x)(0.5)`` (:func:`_closest_on_triangle` takes ``wp.vec3d`` only). A function is
 compiled into the module of the kernel that calls it, with that module's options (see
 :mod:`~warp_ccd.geometry.triangle` on ``fuse_fp``). The names carry an underscore: they serve this
 package's geometry and stage modules; the device functions for a user's kernels are those of
@@ -408,11 +408,11 @@ def _edges_meet(
 
 
 @wp.func
-def _closest_on_triangle(p: Any, a: Any, b: Any, c: Any):
+def _closest_on_triangle(p: wp.vec3d, a: wp.vec3d, b: wp.vec3d, c: wp.vec3d):
     """Closest point of triangle ``abc`` to ``p`` and its feature: 0 the face, 1-3 vertex 0-2,
     4-6 edge 0-2 (edge ``k`` joins vertices ``k`` and ``k + 1``). Ericson, Real-Time Collision
-    Detection, 5.1.5. The triangle must not be degenerate (its face region divides by its area)."""
-    zero = type(p[0])(0.0)
+    Detection, 5.1.5."""
+    zero = wp.float64(0.0)
     ab = b - a
     ac = c - a
     ap = p - a
@@ -439,5 +439,5 @@ def _closest_on_triangle(p: Any, a: Any, b: Any, c: Any):
     va = d3 * d6 - d5 * d4
     if va <= zero and (d4 - d3) >= zero and (d5 - d6) >= zero:
         return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), 5
-    denom = type(p[0])(1.0) / (va + vb + vc)
+    denom = wp.float64(1.0) / (va + vb + vc)
     return a + ab * (vb * denom) + ac * (vc * denom), 0
