@@ -262,11 +262,11 @@ def test_no_sampled_points_are_closer(coords, weights):
     """Property: the distance is at most that of any two points of the triangles (convex combinations)."""
     tri = np.array(coords, np.float32).reshape(2, 3, 3)
     d, pts = run_distance(tri[:1], tri[1:], "float64", DEFAULT_DEVICE)
-    w = np.array(weights).reshape(4, 10)
+    w = np.array(weights).reshape(4, 10) + 1e-3  # positive: every combination below is a point of its triangle
     bound = 16 * 2.0**-53 * (np.abs(tri).max() + 1)
     for i in range(0, 10, 2):
-        wa = w[0:3, i] / max(w[0:3, i].sum(), 1e-12)
-        wb = w[1:4, i + 1] / max(w[1:4, i + 1].sum(), 1e-12)
+        wa = w[0:3, i] / w[0:3, i].sum()
+        wb = w[1:4, i + 1] / w[1:4, i + 1].sum()
         x = wa @ tri[0].astype(np.float64)
         y = wb @ tri[1].astype(np.float64)
         assert d[0] <= np.linalg.norm(x - y) + bound
