@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from warp_ccd.bench.peers import fcl_bvh
+
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 
@@ -118,10 +120,7 @@ def triangle_pairs_fcl(meshes) -> np.ndarray:
 
     objs, index = [], {}
     for i, (v, t) in enumerate(meshes):
-        m = fcl.BVHModel()
-        m.beginModel(len(v), len(t))
-        m.addSubModel(np.asarray(v, np.float64), np.asarray(t, np.int64))
-        m.endModel()
+        m = fcl_bvh(v, t)
         index[id(m)] = i
         objs.append((m, fcl.CollisionObject(m, fcl.Transform())))
     mgr = fcl.DynamicAABBTreeCollisionManager()
@@ -327,11 +326,7 @@ def fcl_model(v, t):
     """A python-fcl collision object of a mesh in world coordinates."""
     import fcl
 
-    m = fcl.BVHModel()
-    m.beginModel(len(v), len(t))
-    m.addSubModel(np.asarray(v, np.float64), np.asarray(t, np.int64))
-    m.endModel()
-    return fcl.CollisionObject(m, fcl.Transform())
+    return fcl.CollisionObject(fcl_bvh(v, t), fcl.Transform())
 
 
 def fcl_pair_distance(obj_a, obj_b):

@@ -23,7 +23,7 @@ from warp_ccd.geometry.distance import DISTANCE_ERROR_ULPS, tri_tri_distance_bat
 import distance_digests
 from conftest import DEFAULT_DEVICE
 from distance_reference import point_on_triangle_sq, triangle_distance
-from oracles import closed_triangle_distance, degenerate_height
+from oracles import closed_triangle_distance, degenerate_height, fcl_model
 
 TYPES = {"float32": (wp.vec3, wp.float32, np.float32, 2.0**-24),
          "float64": (wp.vec3d, wp.float64, np.float64, 2.0**-53)}
@@ -241,13 +241,7 @@ def test_python_fcl_distance_agrees(device):
     a, b, exact = a[:60], b[:60], exact[:60]
     d, pts = run_distance(a, b, "float64", device)
     for k in range(len(a)):
-        models = []
-        for tri in (a[k], b[k]):
-            m = fcl.BVHModel()
-            m.beginModel(3, 1)
-            m.addSubModel(tri.astype(np.float64), np.array([[0, 1, 2]]))
-            m.endModel()
-            models.append(fcl.CollisionObject(m, fcl.Transform()))
+        models = [fcl_model(tri, [[0, 1, 2]]) for tri in (a[k], b[k])]
         req = fcl.DistanceRequest(enable_nearest_points=True)
         res = fcl.DistanceResult()
         got = fcl.distance(models[0], models[1], req, res)

@@ -42,6 +42,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
+from warp_ccd.bench.peers import fcl_bvh
 from warp_ccd.bench.report import environment
 from warp_ccd.bench.timing import synced_ms
 from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild
@@ -236,10 +237,7 @@ def fcl_one_shot(meshes, transforms) -> np.ndarray:
 
     objects, owner = [], {}
     for i, ((v, t), m) in enumerate(zip(meshes, transforms)):
-        model = fcl.BVHModel()
-        model.beginModel(len(v), len(t))
-        model.addSubModel(np.asarray(v, np.float64), np.asarray(t, np.int32))
-        model.endModel()
+        model = fcl_bvh(v, t)
         objects.append((model, fcl.CollisionObject(model, fcl.Transform(m[:3, :3], m[:3, 3]))))
         owner[id(model)] = i
     manager = fcl.DynamicAABBTreeCollisionManager()

@@ -33,6 +33,7 @@ import numpy as np
 import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import _blob
+from warp_ccd.bench.peers import fcl_bvh
 from warp_ccd.bench.profile_frame import activities
 from warp_ccd.bench.timing import synced_ms
 
@@ -54,14 +55,7 @@ def blob_pair(triangles: int, gap: float, seed: int) -> list:
 def _fcl_models(meshes):
     import fcl
 
-    objs = []
-    for v, t in meshes:
-        m = fcl.BVHModel()
-        m.beginModel(len(v), len(t))
-        m.addSubModel(np.asarray(v, np.float64), np.asarray(t, np.int64))
-        m.endModel()
-        objs.append(fcl.CollisionObject(m, fcl.Transform()))
-    return objs
+    return [fcl.CollisionObject(fcl_bvh(v, t), fcl.Transform()) for v, t in meshes]
 
 
 def _fcl_distance(objs) -> float:

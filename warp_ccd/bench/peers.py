@@ -50,6 +50,7 @@ from ..stages.buffers import GrowableBuffer, emit_pair, reserve_slot
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = [
+    "fcl_bvh",
     "FclPipeline",
     "NewtonBroadPhaseSAP",
     "PeerUnavailable",
@@ -57,6 +58,17 @@ __all__ = [
     "WarpMeshPipeline",
     "scene_triangle_vertex_index",
 ]
+
+
+def fcl_bvh(vertices, triangles):
+    """A python-fcl ``BVHModel`` (its default OBBRSS) of one mesh: float64 vertices, int64 triangles."""
+    import fcl
+
+    model = fcl.BVHModel()
+    model.beginModel(len(vertices), len(triangles))
+    model.addSubModel(np.asarray(vertices, np.float64), np.asarray(triangles, np.int64))
+    model.endModel()
+    return model
 
 
 class PeerUnavailable(RuntimeError):
@@ -239,11 +251,7 @@ class FclPipeline:
         for i in range(scene.num_objects):
             v, t = scene.shape_meshes[scene.object_shape_np[i]]
             # Scale in float32 first, as the scene's world-vertex kernel does.
-            v = (v * np.float32(scene.object_scale_np[i])).astype(np.float64)
-            model = fcl.BVHModel()
-            model.beginModel(len(v), len(t))
-            model.addSubModel(v, t.astype(np.int64))
-            model.endModel()
+            model = fcl_bvh((v * np.float32(scene.object_scale_np[i])).astype(np.float64), t)
             self._object_of[id(model)] = i
             self.objects.append((model, fcl.CollisionObject(model, fcl.Transform())))
         self._set_transforms()
