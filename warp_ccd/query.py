@@ -28,17 +28,23 @@ from .stages.tree_distance import TreeDistance
 __all__ = ["DistanceQuery", "distance"]
 
 
-def _pairs_array(pairs, num_objects: int, distinct: bool = True) -> np.ndarray:
-    """``pairs`` as a checked ``(P, 2)`` int32 array of ids below ``num_objects`` (``a != b`` when ``distinct``)."""
+def _pairs_array(pairs, num_objects: int, sets: tuple | None = None) -> np.ndarray:
+    """``pairs`` as a checked ``(P, 2)`` int32 array of ids ``a != b`` below ``num_objects``; with
+    ``sets``, ``(n_a, n_b)``, rows ``(i, j)`` of one set against another instead."""
     p = np.asarray(pairs)
     if p.size == 0:
         p = p.reshape(0, 2).astype(np.int64)
     if p.ndim != 2 or p.shape[1] != 2 or (p.size and not np.issubdtype(p.dtype, np.integer)):
         raise ValueError(f"pairs: expected a (P, 2) array of integer object ids, got {p.dtype} {p.shape}")
     p = p.astype(np.int64)
+    if sets is not None:
+        if p.size and (p.min() < 0 or p[:, 0].max() >= sets[0] or p[:, 1].max() >= sets[1]):
+            raise ValueError(f"pairs: rows (i, j) need 0 <= i < {sets[0]} (meshes_a) and 0 <= j < {sets[1]} "
+                             f"(meshes_b), got {p.min()}..{p.max()}")
+        return p.astype(np.int32)
     if p.size and (p.min() < 0 or p.max() >= num_objects):
         raise ValueError(f"pairs: object ids must lie in [0, {num_objects}), got {p.min()}..{p.max()}")
-    same = np.nonzero(p[:, 0] == p[:, 1])[0] if p.size and distinct else []
+    same = np.nonzero(p[:, 0] == p[:, 1])[0] if p.size else []
     if len(same):
         raise ValueError(f"pairs: row {int(same[0])} pairs object {int(p[same[0], 0])} with itself")
     return p.astype(np.int32)
@@ -174,9 +180,7 @@ def distance(meshes_a, meshes_b=None, transforms_a=None, transforms_b=None, *, p
             i, j = np.meshgrid(np.arange(n_a), np.arange(len(b)), indexing="ij")
             rows = np.stack([i.ravel(), j.ravel()], axis=1)
         else:
-            rows = _pairs_array(pairs, max(n_a, len(b)), distinct=False)
-            if rows[:, 0].max(initial=-1) >= n_a or rows[:, 1].max(initial=-1) >= len(b):
-                raise ValueError(f"pairs: rows (i, j) need i < {n_a} (meshes_a) and j < {len(b)} (meshes_b)")
+            rows = _pairs_array(pairs, n_a + len(b), sets=(n_a, len(b)))
         ids = rows + [0, n_a]
     query = DistanceQuery(scene, ids, tolerance=tolerance)
     result = query.query()
