@@ -7,6 +7,7 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> res = wc.collide(meshes, transforms)            # one shot
 >>> res = wc.collide(meshes, transforms, clearance=0.01)  # and the pairs within 0.01: distances, points
 >>> far = wc.distance(arm_links, [table])           # least distances however far apart
+>>> folds = wc.self_intersections(vertices, triangles)  # one mesh through itself
 >>> scene = wc.Scene.random(1000, seed=0)           # polyhedra in motion
 >>> pipe = wc.CollisionPipeline(scene)
 >>> scene.advance(1 / 60); res = pipe.detect()      # every frame
@@ -32,7 +33,7 @@ from .geometry import TOLERANCE
 from .geometry.ccd_queries import ccd_queries
 from .geometry.precision import PrecisionWarning
 from .pipeline import CollisionPipeline, CollisionResult, collide
-from .query import DistanceQuery, distance
+from .query import DistanceQuery, distance, self_intersections
 from .scene import Scene
 from .stages import broad_phase_pairs
 from .usd import CheckReport, check_usd
@@ -52,6 +53,7 @@ __all__ = [
     "check_usd",
     "collide",
     "distance",
+    "self_intersections",
 ]
 
 # Names of the top level until 0.1, kept one release: each use warns and reaches its new home.

@@ -35,10 +35,12 @@ from .result import NEAR_ROWS, CollisionResult
 from .scene.scene import Scene, transforms_to_poses
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
+from .stages.bvh import SceneBVH
 from .stages.clearance import CLEARANCE_MAX, ClearancePhase
 from .stages.continuous import ContinuousNarrowPhase, continuous_options
 from .stages.frame import CountedFrame, FrameCache, frame_mode
 from .stages.kinds import make_mid_phase, make_narrow_phase
+from .stages.self_intersection import SelfIntersection
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]  # CollisionResult: from .result
 
@@ -118,6 +120,12 @@ class CollisionPipeline:
             pair (:attr:`CollisionResult.object_pairs` are then those pairs; see
             :mod:`warp_ccd.stages.clearance`); 0 (default) adds nothing. Not with ``continuous``
             (whose ``min_distance`` is the clearance over a motion).
+        self_intersections: also report the triangles of each object that meet each other beyond the
+            vertices they share (:attr:`CollisionResult.self_pairs`, :attr:`CollisionResult.self_colliding`;
+            see :mod:`warp_ccd.stages.self_intersection`): a rigid object's from its shape, computed once
+            at construction, a deforming object's every frame. With the ``bvh`` mid phase, not with
+            ``continuous``.
+        self_capacity: initial capacity of the self-intersecting triangle pairs (it grows).
 
     Attributes:
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
@@ -125,6 +133,8 @@ class CollisionPipeline:
             else an :class:`~warp_ccd.stages.bounds.ObjectBounds`.
         broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
         near_phase: with a clearance, the :class:`~warp_ccd.stages.clearance.ClearancePhase`, else None.
+        self_phase: with ``self_intersections``, the
+            :class:`~warp_ccd.stages.self_intersection.SelfIntersection`, else None.
         clearance: as above.
         counter_read: the :class:`~warp_ccd.stages.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
@@ -160,6 +170,8 @@ class CollisionPipeline:
         ccd_max_iterations: int = CCD_MAX_ITERATIONS,
         clearance: float = 0.0,
         near_capacity: int | None = None,
+        self_intersections: bool = False,
+        self_capacity: int | None = None,
     ):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
@@ -206,6 +218,19 @@ class CollisionPipeline:
         self.near_phase = (ClearancePhase(n, self.clearance, tolerance=self.narrow.tolerance,
                                           capacity=near_capacity or max(64, n), device=d)
                            if self.clearance > 0.0 else None)
+        if not isinstance(self_intersections, (bool, np.bool_)):
+            raise ValueError(f"self_intersections must be True or False, got {self_intersections!r}")
+        self.self_phase = None
+        if self_intersections:
+            if self.continuous:
+                raise ValueError("self_intersections: a continuous pipeline does not report self-intersections "
+                                 "(continuous=True)")
+            if not isinstance(self.boxes, SceneBVH):
+                raise ValueError(f"self_intersections: needs the trees of the bvh mid phase, "
+                                 f"got mid_phase={mid_phase!r}")
+            self.self_phase = SelfIntersection(
+                scene, self.boxes, tolerance=self.narrow.tolerance, device=d,
+                hit_capacity=integer_option("self_capacity", self_capacity, low=1, allow_none=True))
         # The motion's start, two arrays: a frame reads one and writes the other (module docs).
         self._starts = [wp.clone(scene.world_vertex), wp.empty_like(scene.world_vertex)] if self.continuous else None
         self._parity = 0
@@ -218,6 +243,9 @@ class CollisionPipeline:
         # mid phase's 2 (its front's count tells little of its candidates'), the narrow phase's 3, the
         # clearance's 4 (a shortfall upstream scales the estimates downstream).
         flow = [1, *(k if k > 1 else 0 for k, stage in enumerate(stages) for _ in stage.counters)]
+        if self.self_phase is not None:  # work of its own: it neither grows with the others nor they with it
+            buffers += self.self_phase.counters
+            flow += [None] * len(self.self_phase.counters)
         self.counter_read = CounterRead(buffers, d, stages=flow)
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
         self.rebuilds = 0
@@ -254,6 +282,13 @@ class CollisionPipeline:
         t = time.perf_counter()
         self.boxes.refit(scene, **sweep)
         t = mark("refit", t)
+        if scene.num_objects < 2:  # one object: its self-intersections alone (detect() asks only then)
+            self.self_phase.launch(scene)
+            mark("self", t)
+            if times is not None:
+                times.update({stage: 0.0 for stage in STAGES[1:]}, total=sum(times.values()))
+            self._times = times
+            return
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
         t = mark("broad", t)
         self.mid.launch(scene, self.pairs, reset_counters=False, **sweep)
@@ -267,7 +302,10 @@ class CollisionPipeline:
         if self.near_phase is not None:
             self.near_phase.launch(scene, self.pairs, self.mid.candidates, self.narrow.hits, self.boxes.lower,
                              self.boxes.upper, reset_counters=False)
-            mark("clearance", t)
+            t = mark("clearance", t)
+        if self.self_phase is not None:
+            self.self_phase.launch(scene)
+            mark("self", t)
         if start is not None:
             wp.copy(self._starts[1 - parity], scene.world_vertex)
         if times is not None:
@@ -308,7 +346,7 @@ class CollisionPipeline:
         start = time.perf_counter()
         scene = self.scene
         step = None if advance is None else scene.advance_host(advance)
-        if scene.num_objects < 2:
+        if scene.num_objects < 2 and (self.self_phase is None or scene.num_objects == 0):
             return self._no_pairs(step)
         if self.rebuild_every:
             self._detects += 1
@@ -343,6 +381,9 @@ class CollisionPipeline:
             for name, array in zip(NEAR_ROWS, (near.near.data, near.distance, near.point, near.normal,
                                                near.triangle, near.intersecting)):
                 rows[name] = (array, count)
+        if self.self_phase is not None:
+            rows["device_self_pairs"] = (self.self_phase.hits.data, self.self_phase.hits.last_count)
+            rows["device_self_colliding"] = (self.self_phase.object_flag, scene.num_objects)
         result = CollisionResult._of_buffers(scene.num_objects, rows, narrow.object_colliding, self._times,
                                              self.mid.candidates.last_count, self.pairs.last_count, self.clearance,
                                              None if near is None else near.object_near)
@@ -369,10 +410,14 @@ class CollisionPipeline:
                                         wp.zeros(0, dtype=wp.vec2i, device=d), wp.zeros(0, dtype=wp.int32, device=d))))
             near["device_near"] = wp.zeros(n, dtype=wp.int32, device=d)
         stages = (*STAGES, "clearance", "total") if self.near_phase is not None else (*STAGES, "total")
+        if self.self_phase is not None:
+            stages = (*stages[:-1], "self", "total")
+        no_self = None if self.self_phase is None else (wp.zeros(0, dtype=wp.vec3i, device=d),
+                                                        wp.zeros(n, dtype=wp.int32, device=d))
         return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                {s: 0.0 for s in stages} if self.timings else None,
                                device_contained=empty, device_segments=no_segments, device_toi=no_toi,
-                               clearance=self.clearance, near=near)
+                               clearance=self.clearance, near=near, self_rows=no_self)
 
 
 def _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase: str,

@@ -1,4 +1,5 @@
-"""Least distances between objects however far apart: :class:`DistanceQuery` and :func:`distance`.
+"""Queries over meshes beyond a frame's pairs: least distances however far apart (:class:`DistanceQuery`,
+:func:`distance`) and one mesh's self-intersections (:func:`self_intersections`).
 
 Where a pipeline with a clearance (:class:`~warp_ccd.pipeline.CollisionPipeline` ``clearance=d``) reports
 the pairs of a scene within ``d``, a distance query answers "how far is the arm from the table" for
@@ -23,9 +24,10 @@ from .scene.shapes import validate_meshes
 from .stages.buffers import CounterRead, GrowableBuffer
 from .stages.bvh import SceneBVH
 from .stages.frame import FrameCache, frame_mode
+from .stages.self_intersection import SelfIntersection
 from .stages.tree_distance import TreeDistance
 
-__all__ = ["DistanceQuery", "distance"]
+__all__ = ["DistanceQuery", "distance", "self_intersections"]
 
 
 def _pairs_array(pairs, num_objects: int, sets: tuple | None = None) -> np.ndarray:
@@ -186,3 +188,33 @@ def distance(meshes_a, meshes_b=None, transforms_a=None, transforms_b=None, *, p
     result = query.query()
     result.pairs = rows.astype(np.int32)
     return result
+
+
+def self_intersections(vertices, triangles, *, device=None, precision: str = "float32", tolerance: float = TOLERANCE,
+                       leaf_size: int = 1) -> np.ndarray:
+    """The pairs of triangles of one mesh that meet other than through the vertices they share (a cloth
+    folded through itself, a scan or a boolean result with self-intersections).
+
+    Triangles sharing an edge meet only where they overlap beyond it (a fold flat onto itself), triangles
+    sharing a vertex only where they meet somewhere else; vertices at exactly one position are one vertex
+    (:func:`~warp_ccd.stages.self_intersection.weld_vertices`); the test and its tolerance:
+    :func:`~warp_ccd.geometry.adjacent.tri_tri_self`.
+
+    Args:
+        vertices: ``(n, 3)`` float vertices.
+        triangles: ``(m, 3)`` int vertex indices.
+        device: Warp device (default: Warp's default device).
+        precision: ``"float32"`` or ``"float64"`` (vertices and the test).
+        tolerance: relative tolerance of the triangle test (touching within it counts).
+        leaf_size: triangles per tree leaf.
+
+    Returns:
+        ``(M, 2)`` int32 rows ``(tri_a, tri_b)``, ``tri_a < tri_b``, sorted.
+
+    Raises:
+        ValueError / TypeError: naming the problem with the mesh.
+    """
+    scene = Scene.from_meshes([(vertices, triangles)], device=device, precision=precision)
+    bvh = SceneBVH(scene, leaf_size=integer_option("leaf_size", leaf_size, low=1, high=256), margin_rel=tolerance)
+    stage = SelfIntersection(scene, bvh, tolerance=tolerance)
+    return np.ascontiguousarray(stage.shape_rows[:, 1:])

@@ -44,18 +44,21 @@ class CollisionResult:
             pairs within it, with :attr:`object_distance`, :attr:`closest_points`,
             :attr:`object_normal`, :attr:`closest_triangles`, :attr:`object_intersecting`), else 0.
         device_near: with a clearance, ``(N,)`` int32 flags on the device (:attr:`near`), else None.
+        device_self_pairs, device_self_colliding: with self-intersections, ``(M,)`` ``wp.vec3i`` rows
+            ``(object, tri_a, tri_b)`` (unsorted) and ``(N,)`` int32 flags on the device, else None.
 
     Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
     (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
     ``device_contained``, ``device_segments``, ``device_toi``: a continuous result's; ``near``: a
-    result with a clearance, ``{name: array}`` for each of :data:`NEAR_ROWS` and ``device_near``)
+    result with a clearance, ``{name: array}`` for each of :data:`NEAR_ROWS` and ``device_near``;
+    ``self_rows``: a result with self-intersections, ``(device_self_pairs, device_self_colliding)``)
     and the counts it reports.
     """
 
     def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
                  device_contained=None, device_segments=None, device_toi=None, clearance: float = 0.0,
-                 near: dict | None = None):
+                 near: dict | None = None, self_rows: tuple | None = None):
         self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
                    int(device_triangle_pairs.shape[0]), {})
         self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
@@ -63,6 +66,8 @@ class CollisionResult:
                              continuous=device_toi is not None)
         if near is not None:
             self.__dict__.update(near, clearance=float(clearance))
+        if self_rows is not None:
+            self.__dict__.update(device_self_pairs=self_rows[0], device_self_colliding=self_rows[1])
 
     @classmethod
     def _of_buffers(cls, num_objects: int, rows: dict, device_colliding: wp.array, timings: dict | None,
@@ -70,9 +75,10 @@ class CollisionResult:
                     device_near: wp.array | None = None) -> CollisionResult:
         """A result over a pipeline's buffers, made in a few steps (it is Python's time of every
         frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
-        ``device_segments``, ``device_toi`` and :data:`NEAR_ROWS` to ``(buffer array, count)``, sliced
-        on first access (a view costs Python some 10 us; a name left out is None; ``device_toi``
-        makes it continuous, ``device_near_pairs`` one with a ``clearance``)."""
+        ``device_segments``, ``device_toi``, :data:`NEAR_ROWS`, ``device_self_pairs`` and
+        ``device_self_colliding`` to ``(buffer array, count)``, sliced on first access (a view costs
+        Python some 10 us; a name left out is None; ``device_toi`` makes it continuous,
+        ``device_near_pairs`` one with a ``clearance``)."""
         result = cls.__new__(cls)
         result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
                      rows["device_triangle_pairs"][1], rows)
@@ -97,6 +103,34 @@ class CollisionResult:
     def device_triangle_pairs(self) -> wp.array:
         """``(M,)`` ``wp.vec4i`` on the device, unsorted."""
         return self._view("device_triangle_pairs")
+
+    @cached_property
+    def device_self_pairs(self) -> wp.array | None:
+        """``(M,)`` ``wp.vec3i`` rows ``(object, tri_a, tri_b)`` on the device, unsorted; None without
+        ``self_intersections``."""
+        return self._view("device_self_pairs")
+
+    @cached_property
+    def device_self_colliding(self) -> wp.array | None:
+        """``(N,)`` int32 flags on the device: the object intersects itself; None without ``self_intersections``."""
+        return self._view("device_self_colliding")
+
+    @cached_property
+    def self_pairs(self) -> np.ndarray | None:
+        """``(M, 3)`` int32 rows ``(object, tri_a, tri_b)``, ``tri_a < tri_b`` (local triangle ids), rows
+        sorted: triangles of one object that meet beyond the vertices they share
+        (:func:`~warp_ccd.geometry.adjacent.tri_tri_self`). None without ``self_intersections``."""
+        if self.device_self_pairs is None:
+            return None
+        t = self.device_self_pairs.numpy().reshape(-1, 3).astype(np.int32)
+        return t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
+
+    @cached_property
+    def self_colliding(self) -> np.ndarray | None:
+        """``(N,)`` bool: the object intersects itself; None without ``self_intersections``."""
+        if self.device_self_colliding is None:
+            return None
+        return self.device_self_colliding.numpy().astype(bool)
 
     @cached_property
     def device_contained(self) -> wp.array | None:
@@ -236,9 +270,12 @@ class CollisionResult:
         near = None
         if self.device_near is not None:
             near = {name: own(getattr(self, name)) for name in (*NEAR_ROWS, "device_near")}
+        self_rows = None
+        if self.device_self_pairs is not None:
+            self_rows = (own(self.device_self_pairs), own(self.device_self_colliding))
         out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
                               self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
-                              own(self.device_segments), own(self.device_toi), self.clearance, near)
+                              own(self.device_segments), own(self.device_toi), self.clearance, near, self_rows)
         out.host_ms, out.runs = self.host_ms, self.runs
         return out
 
@@ -314,6 +351,8 @@ class CollisionResult:
         near = ""
         if self.device_near is not None:
             near = f", clearance={self.clearance}, near_pairs={len(self.object_pairs)}"
+        if self.device_self_pairs is not None:
+            near += f", self_pairs={self.device_self_pairs.shape[0]}"
         return (f"CollisionResult(objects={self.num_objects}, triangle_pairs={self.num_triangle_pairs}{toi}{near}, "
                 f"timings={self.timings})")
 

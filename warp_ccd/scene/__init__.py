@@ -4,7 +4,8 @@ their motion, and the flat device arrays every stage reads (:class:`Scene`).
 >>> from warp_ccd.scene import Scene, shape, icosphere
 >>> scene = Scene([shape("cube"), icosphere(2)], [0, 1, 1], poses=poses)   # 3 objects of 2 shapes
 
-Modules: :mod:`~warp_ccd.scene.shapes` (seed polyhedra, icospheres, mesh validation),
+Modules: :mod:`~warp_ccd.scene.shapes` (seed polyhedra, icospheres, a cloth sheet, a self-intersecting
+torus, mesh validation),
 :mod:`~warp_ccd.scene.motion` (inclined-ellipse motion, one kernel for every pose),
 :mod:`~warp_ccd.scene.scene` (:class:`Scene`, the :class:`MeshTopology` struct kernels read).
 Imports Warp, numpy and :mod:`warp_ccd.geometry` only.
@@ -12,7 +13,7 @@ Imports Warp, numpy and :mod:`warp_ccd.geometry` only.
 
 from .motion import EllipseMotion
 from .scene import MeshTopology, Scene, matrix_to_quat, mesh_triangle, transforms_to_poses
-from .shapes import SHAPES, MeshSet, icosphere, shape, validate_mesh, validate_meshes
+from .shapes import SHAPES, MeshSet, figure_eight_torus, icosphere, shape, sheet, validate_mesh, validate_meshes
 
 __all__ = [
     "SHAPES",
@@ -20,10 +21,12 @@ __all__ = [
     "MeshSet",
     "MeshTopology",
     "Scene",
+    "figure_eight_torus",
     "icosphere",
     "matrix_to_quat",
     "mesh_triangle",
     "shape",
+    "sheet",
     "transforms_to_poses",
     "validate_mesh",
     "validate_meshes",

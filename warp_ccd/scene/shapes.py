@@ -19,6 +19,8 @@ from ..options import integer_option
 
 __all__ = [
     "SHAPES",
+    "figure_eight_torus",
+    "sheet",
     "cube",
     "dodecahedron",
     "icosahedron",
@@ -157,6 +159,47 @@ def icosphere(level: int = 1) -> tuple[np.ndarray, np.ndarray]:
             new += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
         t = new
     return _finish(np.asarray(v), t)
+
+
+def sheet(n: int = 32, size: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """A square cloth sheet in the z = 0 plane: an ``n x n`` grid of vertices over ``[0, size]^2``, each
+    cell two triangles (``2 (n - 1)^2`` in all; ``n = 72``: 10,082).
+
+    Returns:
+        ``(vertices (n * n, 3) float32, triangles (2 (n - 1)^2, 3) int32)``; vertex ``i * n + j`` lies
+        at ``(j, i) * size / (n - 1)``.
+    """
+    integer_option("sheet: n", n, low=2, high=46341)
+    x, y = np.meshgrid(np.linspace(0.0, size, n), np.linspace(0.0, size, n))
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    a = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    t = np.concatenate([np.stack([a, a + 1, a + n], 1), np.stack([a + 1, a + n + 1, a + n], 1)])
+    return v.astype(np.float32), t.reshape(2, -1, 3).transpose(1, 0, 2).reshape(-1, 3).astype(np.int32)
+
+
+def figure_eight_torus(nu: int = 64, nv: int = 32, radius: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """A closed tube whose cross-section is a figure eight, swept around a circle: a torus that passes
+    through itself along the circle where the eight crosses itself (a self-intersecting test mesh).
+
+    Args:
+        nu: segments around the circle; nv: around the cross-section (even: the crossing falls between
+            vertices, not on them).
+        radius: of the circle (the eight is 2 wide, 1 high).
+
+    Returns:
+        ``(vertices (nu * nv, 3) float32, triangles (2 nu nv, 3) int32)``.
+    """
+    integer_option("figure_eight_torus: nu", nu, low=3, high=1 << 15)
+    integer_option("figure_eight_torus: nv", nv, low=4, high=1 << 15)
+    u = np.linspace(0.0, 2.0 * np.pi, nu, endpoint=False)[:, None]
+    w = (np.arange(nv)[None, :] + 0.5) * 2.0 * np.pi / nv
+    r = radius + np.sin(w)  # the eight (sin w, sin w cos w) in the plane of the circle's radius and z
+    v = np.stack([r * np.cos(u), r * np.sin(u), np.sin(w) * np.cos(w) + 0.0 * u], axis=2).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a, b = i * nv + j, ((i + 1) % nu) * nv + j
+    c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+    t = np.stack([np.stack([a, b, c], -1), np.stack([a, c, d], -1)], axis=2).reshape(-1, 3)
+    return v.astype(np.float32), t.astype(np.int32)
 
 
 SHAPES = {

@@ -261,7 +261,8 @@ class CounterRead:
             buffer is filled from the items of buffers of lower stages). When a buffer overflows
             by a factor ``r``, those of later stages counted only the items that came through,
             so they grow to ``r`` times their count too: the next run usually fits everything,
-            where growing one stage per run would take a run per stage.
+            where growing one stage per run would take a run per stage. None for a buffer of
+            work that does not flow from the others (it neither grows with them nor they with it).
 
     Attributes:
         block: ``(len(buffers),)`` int64 counters on the device.
@@ -274,7 +275,7 @@ class CounterRead:
         self.buffers = list(buffers)
         if stages is not None and len(stages) != len(self.buffers):
             raise ValueError(f"stages: expected {len(self.buffers)} entries, got {len(stages)}")
-        self.stages = None if stages is None else [int(x) for x in stages]
+        self.stages = None if stages is None else [None if x is None else int(x) for x in stages]
         self.device = wp.get_device(device)
         k = max(1, len(self.buffers))
         self.block = wp.zeros(k, dtype=wp.int64, device=self.device)
@@ -355,6 +356,9 @@ class CounterRead:
         """Grows the buffers downstream of those that overflowed (``short``: slot -> count over
         capacity) as if their counts scaled by the same factor."""
         for k, (b, c) in enumerate(zip(self.buffers, counts)):
-            r = max((x for j, x in short.items() if self.stages[j] < self.stages[k]), default=1.0)
+            if self.stages[k] is None:
+                continue
+            r = max((x for j, x in short.items() if self.stages[j] is not None and self.stages[j] < self.stages[k]),
+                    default=1.0)
             if r > 1.0 and b.ensure(min(COUNT_LIMIT - 1, int(c * r) + 1)):
                 b.fitted = False
