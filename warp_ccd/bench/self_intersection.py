@@ -1,0 +1,160 @@
+"""Benchmark: self-intersection of one large mesh, and deforming cloth scenes frame by frame.
+
+**One mesh** (``--mesh-triangles``, about 1.3M by default): a figure-eight torus (it crosses itself all
+around its circle) and an icosphere (none), each
+
+* as a deforming object of a :class:`~warp_ccd.pipeline.CollisionPipeline` with
+  ``self_intersections=True``: a frame refits its tree and walks it against itself (on CUDA one replayed
+  graph): ``frame`` ms, min and median over ``--frames`` after ``--warmup``;
+* one-shot :func:`warp_ccd.self_intersections` (scene, tree build, walk, read): ``one_shot`` ms;
+* pymeshlab's ``compute_selection_by_self_intersections_per_face`` on the CPU, in the same process
+  (``--peer-runs`` runs; skipped with a note when pymeshlab is missing): ``pymeshlab`` ms, the ratio
+  against the frame, and whether it selects the faces of our pairs that share at most one vertex
+  (VCG's test skips triangles sharing an edge).
+
+**Cloth** (``--sheets``): ``k`` deforming sheets of ``--sheet-n``² vertices (72: 10,082 triangles),
+each crumpled and folded through itself, stacked in overlapping piles so that sheets cross each other
+too. Frames of a pipeline with ``self_intersections=True`` (self plus pairwise) against one without
+(pairwise alone), on the same vertices: min and median ms, pairs found.
+
+    python -m warp_ccd.bench.self_intersection --device cuda:0 --sheets 1e2 1e3 1e4 \\
+        --out bench/results/self_intersection_cuda0.json
+"""
+
+from __future__ import annotations
+
+import gc
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
+import warp_ccd as wc
+from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
+from warp_ccd.bench.timing import synced_ms
+from warp_ccd.scene import figure_eight_torus, icosphere, sheet
+
+
+def _stats(values) -> dict:
+    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
+
+
+def crumpled_sheets(k: int, n: int, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``k`` sheets of ``n x n`` vertices, each with random heights (amplitude 0.03 of its unit size)
+    and its right part folded back over the rest and lifted (it passes through itself), placed in piles
+    of four whose sheets overlap by half (so they cross each other), piles on a square grid."""
+    rng = np.random.default_rng(seed)
+    v0, t = sheet(n)
+    v0 = v0.astype(np.float64)
+    f = v0[:, 0] > 0.5
+    v0[f, 0] = 1.0 + 0.37 / (n - 1) - v0[f, 0]
+    side = int(np.ceil(np.sqrt(max(1, k) / 4)))
+    out = []
+    for i in range(k):
+        v = v0.copy()
+        v[:, 2] = 0.03 * rng.standard_normal(len(v)) + np.where(f, 0.01, 0.0) + 0.02 * (i % 4)
+        pile = i // 4
+        v[:, 0] += 1.5 * (pile % side) + 0.12 * (i % 4)
+        v[:, 1] += 1.5 * (pile // side)
+        out.append((v, t))
+    return out
+
+
+def _frames(pipe, args, device) -> list[float]:
+    for _ in range(args.warmup):
+        pipe.detect()
+    return [synced_ms(pipe.detect, device) for _ in range(args.frames)]
+
+
+def one_mesh(name: str, mesh, args, device) -> dict:
+    """The row of one mesh: pipeline frame, one-shot call, pymeshlab."""
+    v, t = mesh
+    row = {"mesh": name, "triangles": int(len(t))}
+    scene = wc.Scene.from_meshes([(v, t)], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene, self_intersections=True)
+    row["frame"] = _stats(_frames(pipe, args, device))
+    res = pipe.detect()
+    pairs = res.self_pairs[:, 1:]
+    row["self_pairs"] = int(len(pairs))
+    row["candidates"] = int(pipe.self_phase.traversal.candidates.last_count)
+    del pipe, scene
+    gc.collect()
+    shots = []
+    for _ in range(max(1, args.one_shot_runs)):
+        wp.synchronize_device(device)
+        t0 = time.perf_counter()
+        got = wc.self_intersections(v, t, device=device)
+        shots.append((time.perf_counter() - t0) * 1e3)
+    row["one_shot"] = _stats(shots)
+    row["one_shot_equal"] = bool(np.array_equal(got, pairs))
+    try:
+        import pymeshlab
+    except ImportError:
+        row["pymeshlab"] = "skipped: pymeshlab is not installed"
+        return row
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.asarray(v, np.float64), np.asarray(t, np.int32)))
+    peer = []
+    for _ in range(max(1, args.peer_runs)):
+        t0 = time.perf_counter()
+        ms.compute_selection_by_self_intersections_per_face()
+        peer.append((time.perf_counter() - t0) * 1e3)
+    theirs = np.nonzero(ms.current_mesh().face_selection_array())[0]
+    shared = (t[pairs[:, 0]][:, :, None] == t[pairs[:, 1]][:, None, :]).any(axis=2).sum(axis=1)
+    row["pymeshlab"] = _stats(peer)
+    row["pymeshlab_faces"] = int(len(theirs))
+    row["pymeshlab_same_faces"] = bool(np.array_equal(np.unique(pairs[shared <= 1]), theirs))
+    row["speedup_frame_vs_pymeshlab"] = row["pymeshlab"]["ms_min"] / row["frame"]["ms_median"]
+    row["speedup_one_shot_vs_pymeshlab"] = row["pymeshlab"]["ms_min"] / row["one_shot"]["ms_median"]
+    return row
+
+
+def cloth(k: int, args, device) -> dict:
+    """The row of ``k`` sheets: frames with and without self-intersections."""
+    meshes = crumpled_sheets(k, args.sheet_n, args.seed)
+    scene = wc.Scene.from_meshes(meshes, deforming=True, device=device)
+    row = {"sheets": k, "triangles": int(scene.num_triangles)}
+    both = wc.CollisionPipeline(scene, self_intersections=True)
+    pairwise = wc.CollisionPipeline(scene)
+    row["self_plus_pairwise"] = _stats(_frames(both, args, device))
+    row["pairwise"] = _stats(_frames(pairwise, args, device))
+    res = both.detect()
+    row["self_pairs"] = int(len(res.self_pairs))
+    row["self_colliding"] = int(res.self_colliding.sum())
+    row["object_pairs"] = int(len(res.object_pairs))
+    row["ratio"] = row["self_plus_pairwise"]["ms_median"] / row["pairwise"]["ms_median"]
+    return row
+
+
+def main(argv=None) -> int:
+    parser = bench_parser(__doc__)
+    add_run_options(parser, frames=20, warmup=3)
+    parser.add_argument("--mesh-triangles", type=float, default=1.3e6,
+                        help="triangles of the one-mesh cases (about; 0: none)")
+    parser.add_argument("--sheets", type=float, nargs="*", default=[1e2, 1e3])
+    parser.add_argument("--sheet-n", type=int, default=72, help="vertices along a sheet's side (72: 10,082 triangles)")
+    parser.add_argument("--peer-runs", type=int, default=1)
+    parser.add_argument("--one-shot-runs", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args, device, document = start(parser, argv)
+    m = int(args.mesh_triangles)
+    if m > 0:
+        nv = max(4, 2 * int(np.sqrt(m / 8)))  # figure-eight torus: 2 nu nv triangles, nu = 2 nv
+        level = max(0, int(round(np.log(max(m, 20) / 20) / np.log(4))))
+        for name, mesh in (("figure_eight_torus", figure_eight_torus(2 * nv, nv)), ("icosphere", icosphere(level))):
+            add_row(document, {"case": "mesh", **one_mesh(name, mesh, args, device)})
+            gc.collect()
+    for k in args.sheets:
+        try:
+            row = cloth(int(k), args, device)
+        except (MemoryError, RuntimeError) as exc:  # too big for the device: say so, go on
+            row = {"sheets": int(k), "error": str(exc)[:300]}
+        add_row(document, {"case": "cloth", **row})
+        gc.collect()
+    write_result(args.out, document)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
