@@ -11,8 +11,9 @@ Subcommands:
   summary table, optionally a JSON report, a USD overlay and a picture of the worst frame; with
   ``--continuous``, also the prim pairs that touch between consecutive time codes, and which of them
   tunnel (no end frame shows them); with ``--clearance D``, the prim pairs closer than ``D`` (soft
-  clashes). Exit status 0 when nothing penetrates, 1 when something does (or tunnels, or comes
-  within the clearance, or, with ``--count-touching``, touches), 2 when the input or the arguments are bad,
+  clashes); with ``--self``, the prims that pass through themselves. Exit status 0 when nothing
+  penetrates, 1 when something does (or tunnels, or passes through itself, or comes within the
+  clearance, or, with ``--count-touching``, touches), 2 when the input or the arguments are bad,
   3 on an internal error, so that it can gate a pipeline. No output may be the input or one of its
   layers; every output is written to a temporary file and all are moved into place at the end, so a
   failed run writes nothing.
@@ -61,6 +62,8 @@ CONTINUOUS_KERNEL_MODULES = ("warp_ccd.stages.continuous",)
 """The modules whose Warp kernels ``check --continuous`` runs besides."""
 CLEARANCE_KERNEL_MODULES = ("warp_ccd.stages.clearance",)
 """The modules whose Warp kernels ``check --clearance`` runs besides."""
+SELF_KERNEL_MODULES = ("warp_ccd.stages.self_intersection",)
+"""The modules whose Warp kernels ``check --self`` runs besides."""
 
 _DASH_VALUE = re.compile(r"-\.?\d")
 """A value that starts like a negative number (``-5:10``), which argparse would take for an option."""
@@ -144,7 +147,9 @@ def _build_parser() -> OneLineParser:
         "moving linearly), marked tunnelling where neither end frame shows them. "
         "With --clearance D, also the prim pairs closer than D (soft clashes), with their least distance and "
         "closest points. "
-        "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or comes within --clearance, or "
+        "With --self, also the prims that pass through themselves, as pairs of their faces with a depth. "
+        "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or passes through itself with --self, "
+        "or comes within --clearance, or "
         "touches with --count-touching), 2 bad arguments or input, 3 an internal error.",
     )
     check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
@@ -172,6 +177,10 @@ def _build_parser() -> OneLineParser:
                        help="also report the prim pairs whose surfaces come within D scene units and are not "
                        "colliding (soft clashes), with their least distance and closest points; a finding like a "
                        "penetration (default: %(default)s, none)")
+    check.add_argument("--self", dest="self_intersections", action="store_true",
+                       help="also report the prims that pass through themselves (triangles of one mesh meeting beyond "
+                       "the vertices they share: a cloth through itself, overlapping bodies in one CAD mesh), as "
+                       "pairs of their faces with a depth; a finding like a penetration")
     check.add_argument("--report", default=None, metavar="REPORT.json", help="write the JSON report here")
     check.add_argument("--usd-out", default=None, metavar="OVERLAY.usd",
                        help="write a layer over IN.usd with the penetrating prims in colour per frame")
@@ -404,6 +413,7 @@ def _run_check(args) -> int:
 
     modules = (CHECK_KERNEL_MODULES + (CONTINUOUS_KERNEL_MODULES if args.continuous else ())
                + (CLEARANCE_KERNEL_MODULES if args.clearance > 0.0 else ())
+               + (SELF_KERNEL_MODULES if args.self_intersections else ())
                + (("warp_ccd.preview",) if args.preview is not None else ()))
     for name in modules:
         importlib.import_module(name)
@@ -421,7 +431,8 @@ def _run_check(args) -> int:
                                include_invisible=args.include_invisible,
                                include_purposes=tuple(args.include_purpose), progress=True,
                                allow_missing=args.allow_missing, continuous=args.continuous,
-                               min_distance=args.min_distance, clearance=args.clearance)
+                               min_distance=args.min_distance, clearance=args.clearance,
+                               self_intersections=args.self_intersections)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)

@@ -32,7 +32,7 @@ import warp as wp
 from ..geometry.adjacent import tri_tri_self
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
-from ..geometry.triangle import TOLERANCE
+from ..geometry.triangle import TOLERANCE, crossing_depth
 from ..options import number_option
 from ..scene.scene import MeshTopology, mesh_triangle
 from .buffers import BLOCK_DIM, CounterRead, GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
@@ -293,6 +293,27 @@ _NARROW = precision_overloads(_self_narrow_kernel, lambda s, v, q, t: {"vertex":
 
 
 @wp.kernel
+def _self_depth_kernel(
+    topology: MeshTopology,
+    vertex: wp.array[Any],
+    tol_rel: wp.float64,
+    row: wp.array[wp.vec3i],
+    # Outputs
+    depth: wp.array[wp.float64],
+):
+    """One thread per row ``(object, tri_a, tri_b)``: how deep the two triangles cross
+    (:func:`~warp_ccd.geometry.triangle.crossing_depth`, scene units; 0 for a fold or a touch)."""
+    k = wp.tid()
+    r = row[k]
+    a0, a1, a2 = mesh_triangle(topology, vertex, r[0], r[1])
+    b0, b1, b2 = mesh_triangle(topology, vertex, r[0], r[2])
+    depth[k] = wp.float64(crossing_depth(a0, a1, a2, b0, b1, b2, type(a0[0])(tol_rel)))
+
+
+_DEPTH = precision_overloads(_self_depth_kernel, lambda s, v, q, t: {"vertex": wp.array[v]})
+
+
+@wp.kernel
 def _rigid_rows_kernel(
     rigid_object: wp.array[wp.int32],
     object_shape: wp.array[wp.int32],
@@ -460,6 +481,20 @@ class SelfIntersection:
     def counters(self) -> list[GrowableBuffer]:
         """The deforming traversal's front, candidates and hits (rigid objects' rows are hits too)."""
         return self.traversal.counters
+
+    def depth(self, scene, rows: np.ndarray) -> np.ndarray:
+        """``(M,)`` float64 crossing depths (scene units) of rows ``(object, tri_a, tri_b)`` on the scene's
+        world vertices now (:func:`~warp_ccd.geometry.triangle.crossing_depth`; 0 for a fold flat onto
+        itself). Waits for the device."""
+        rows = np.ascontiguousarray(np.asarray(rows, np.int32).reshape(-1, 3))
+        if len(rows) == 0:
+            return np.zeros(0)
+        out = wp.empty(len(rows), dtype=wp.float64, device=self.device)
+        wp.launch(_DEPTH[scene.precision], dim=len(rows),
+                  inputs=[scene.topology, scene.world_vertex, wp.float64(self.tolerance),
+                          wp.array(rows, dtype=wp.vec3i, device=self.device)],
+                  outputs=[out], device=self.device)
+        return out.numpy()
 
     def launch(self, scene) -> None:
         """Enqueues the frame's rows: the rigid objects' (their shapes'), then the deforming objects'

@@ -28,6 +28,11 @@ with their least distance, closest points and USD faces (:attr:`FrameContacts.so
 overlay a prim in a soft clash is yellow at that time code (red and orange win), and each soft
 clash's closest points are joined by a curve.
 
+**Self-intersection** (``self_intersections=True``, :mod:`~warp_ccd.usd.self_intersection`): the pipeline
+also reports each prim's own triangles that meet beyond the vertices they share, as pairs of its USD
+faces with their depth (:attr:`FrameContacts.self_intersections`). In the overlay a prim through itself
+is magenta at that time code (red and orange win).
+
 **Continuous** (``continuous=True``, :mod:`~warp_ccd.usd.sweep`): one continuous pipeline more, whose
 every detection covers the linear motion since the previous time code, reports per interval between
 consecutive time codes the prim pairs that touch at some time in it (:attr:`CheckReport.intervals`),
@@ -61,6 +66,15 @@ from .clearance import (
     soft_clashes,
 )
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
+from .self_intersection import (
+    COLOR_SELF,
+    SelfIntersections,
+    frame_self_json,
+    self_flags,
+    self_json,
+    self_summary,
+)
+from .self_intersection import self_intersections as find_self_intersections
 from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
 
 __all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
@@ -87,6 +101,8 @@ class FrameContacts:
         num_touching: face pairs that only touch (depth <= ``min_depth``) and are not reported.
         soft_clashes: with a clearance, the :class:`~warp_ccd.usd.clearance.SoftClashes` (prim pairs
             within it that the frame does not report as collisions), else None.
+        self_intersections: with ``self_intersections``, the
+            :class:`~warp_ccd.usd.self_intersection.SelfIntersections` (prims through themselves), else None.
     """
 
     time: float
@@ -95,6 +111,7 @@ class FrameContacts:
     segments: np.ndarray | None = None
     num_touching: int = 0
     soft_clashes: SoftClashes | None = None
+    self_intersections: SelfIntersections | None = None
 
     @property
     def object_pairs(self) -> np.ndarray:
@@ -128,6 +145,7 @@ class CheckReport:
         min_distance: with ``continuous``, the distance within which surfaces count as touching.
         ccd_tolerance: with ``continuous``, the continuous test's distance tolerance.
         clearance: the distance of soft clashes (0: none sought).
+        self_checked: whether self-intersections were sought.
     """
 
     stage: str
@@ -144,6 +162,13 @@ class CheckReport:
     min_distance: float = 0.0
     ccd_tolerance: float = 0.0
     clearance: float = 0.0
+    self_checked: bool = False
+
+    @property
+    def self_intersecting(self) -> bool:
+        """Whether any frame has a prim that intersects itself (``self_intersections`` checks)."""
+        return any(f.self_intersections is not None and len(f.self_intersections.face_pairs) > 0
+                   for f in self.frames)
 
     @property
     def soft_clash(self) -> bool:
@@ -172,13 +197,16 @@ class CheckReport:
     def findings(self) -> str | None:
         """What the check found, as the command's exit status reads it: ``"penetrating"`` when a
         pair penetrates, else ``"tunnelling"`` when a continuous check found a pair touching only
-        between time codes, else ``"soft_clash"`` when a pair comes within the clearance, else
+        between time codes, else ``"self_intersecting"`` when a prim passes through itself, else
+        ``"soft_clash"`` when a pair comes within the clearance, else
         ``"touching"`` when pairs touch and ``count_touching`` counts them as collisions, else None
         (exit status 0)."""
         if self.penetrating:
             return "penetrating"
         if self.tunnelling:
             return "tunnelling"
+        if self.self_intersecting:
+            return "self_intersecting"
         if self.soft_clash:
             return "soft_clash"
         if self.count_touching and self.touching:
@@ -233,6 +261,8 @@ class CheckReport:
                      "pairs": pairs}
             if f.soft_clashes is not None:
                 entry["soft_clashes"] = frame_clearance_json(f.soft_clashes, self.object_path)
+            if f.self_intersections is not None:
+                entry["self_intersections"] = frame_self_json(f.self_intersections, self.object_path)
             frames.append(entry)
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
         out = {
@@ -258,6 +288,9 @@ class CheckReport:
         if self.clearance > 0.0:
             out["soft_clash"] = self.soft_clash
             out["clearance"] = clearance_json(self.frames, self.object_path, self.clearance)
+        if self.self_checked:
+            out["self_intersecting"] = self.self_intersecting
+            out["self_intersections"] = self_json(self.frames, self.object_path)
         return out
 
     def write_json(self, path) -> str:
@@ -319,6 +352,8 @@ class CheckReport:
             lines += sweep_summary(self.intervals, self.object_path, self.min_distance, top)
         if self.clearance > 0.0:
             lines += clearance_summary(self.frames, self.object_path, self.clearance, top)
+        if self.self_checked:
+            lines += self_summary(self.frames, self.object_path, top)
         s = self.seconds
         if s:
             per = s.get("detect", 0.0) / max(n, 1) * 1e3
@@ -355,7 +390,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
               include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
               progress: bool = False, allow_missing: bool = False, continuous: bool = False,
-              min_distance: float = 0.0, clearance: float = 0.0) -> CheckReport:
+              min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -384,6 +419,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
             >= 0) count as touching.
         clearance: also report, per frame, the prim pairs within this distance (scene units, >= 0)
             that the frame does not report as collisions: soft clashes (:attr:`FrameContacts.soft_clashes`).
+        self_intersections: also report, per frame, the prims that pass through themselves, as pairs of
+            their USD faces with a depth (:attr:`FrameContacts.self_intersections`).
 
     Returns:
         The :class:`CheckReport`.
@@ -415,7 +452,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
     scene = imp.scene
-    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance, clearance=clearance)
+    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance, clearance=clearance,
+                             self_intersections=bool(self_intersections))
     classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
     # One continuous pipeline for the whole animation: each detect covers the motion since the last.
     sweep = CollisionPipeline(scene, continuous=True, min_distance=min_distance) if continuous else None
@@ -426,7 +464,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
                          count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
-                         clearance=clearance)
+                         clearance=clearance, self_checked=bool(self_intersections))
     if continuous:
         report.intervals = []
         report.min_distance = float(min_distance)
@@ -444,6 +482,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k])
         if clearance > 0.0:
             contacts.soft_clashes = soft_clashes(imp, res, contacts.object_pairs)
+        if self_intersections:
+            contacts.self_intersections = find_self_intersections(imp, res, pipe.self_phase)
         t2 = time.perf_counter()
         seconds["set"] += t1 - t
         seconds["detect"] += t_detect - t1
@@ -531,20 +571,22 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
         # soft clash (clearance checks), yellow where neither is.
         tunnel = tunnelling_flags(report.intervals or (), times, n)
         soft = soft_clash_flags(report.frames, n)
+        mine = self_flags(report.frames, n)  # a prim through itself (self checks): magenta, after red and orange
         red, orange, yellow = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING), Gf.Vec3f(*COLOR_SOFT_CLASH)
+        magenta = Gf.Vec3f(*COLOR_SELF)
         with Sdf.ChangeBlock():
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
-            targets: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-            for i in np.nonzero((hit | tunnel | soft).any(axis=0))[0].tolist():
+            targets: dict[str, tuple[np.ndarray, ...]] = {}
+            for i in np.nonzero((hit | tunnel | soft | mine).any(axis=0))[0].tolist():
                 if imp.object_instancer[i] is not None:
                     continue
                 prim = src.GetPrimAtPath(imp.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
-                was = targets.get(key, (np.zeros(len(times), bool),) * 3)
-                targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i])
-            for path, (flags, tunnels, softs) in targets.items():
+                was = targets.get(key, (np.zeros(len(times), bool),) * 4)
+                targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i], was[3] | mine[:, i])
+            for path, (flags, tunnels, softs, selfs) in targets.items():
                 prim = stage.GetPrimAtPath(path)
                 primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                                                   UsdGeom.Tokens.constant)
@@ -553,8 +595,9 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
                         and len(own.Get()) == 1:
                     clear = own.Get()[0]
-                for tc, f, g, y in zip(times, flags.tolist(), tunnels.tolist(), softs.tolist()):
-                    primvar.Set(Vt.Vec3fArray([red if f else orange if g else yellow if y else clear]), tc)
+                for tc, f, g, m, y in zip(times, flags.tolist(), tunnels.tolist(), selfs.tolist(), softs.tolist()):
+                    color = red if f else orange if g else magenta if m else yellow if y else clear
+                    primvar.Set(Vt.Vec3fArray([color]), tc)
                 if report.intervals is not None:
                     flag = prim.CreateAttribute("warpCcd:tunnelling", Sdf.ValueTypeNames.Bool, custom=True)
                     for tc, g in zip(times, tunnels.tolist()):
@@ -563,7 +606,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
             instancer = np.array(imp.object_instancer, dtype=object)
             for path in sorted({p for p in imp.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
-                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows]).any():
+                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows]).any():
                     continue
                 schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
                 size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
@@ -573,6 +616,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 for k, tc in enumerate(times):
                     colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
                     colors[imp.object_instance[rows][soft[k, rows]]] = COLOR_SOFT_CLASH
+                    colors[imp.object_instance[rows][mine[k, rows]]] = COLOR_SELF
                     colors[imp.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
                     colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
                     primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
