@@ -90,8 +90,8 @@ def one_mesh(name: str, mesh, args, device) -> dict:
     row["one_shot_equal"] = bool(np.array_equal(got, pairs))
     try:
         import pymeshlab
-    except ImportError:
-        row["pymeshlab"] = "skipped: pymeshlab is not installed"
+    except (ImportError, OSError) as exc:  # not installed, or its Qt libraries lack libGL
+        row["pymeshlab"] = f"skipped: pymeshlab does not load here ({str(exc)[:120]})"
         return row
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(v, np.float64), np.asarray(t, np.int32)))
@@ -144,13 +144,15 @@ def main(argv=None) -> int:
         level = max(0, int(round(np.log(max(m, 20) / 20) / np.log(4))))
         for name, mesh in (("figure_eight_torus", figure_eight_torus(2 * nv, nv)), ("icosphere", icosphere(level))):
             add_row(document, {"case": "mesh", **one_mesh(name, mesh, args, device)})
+            write_result(args.out, document)  # each row as it comes: a later case may not finish
             gc.collect()
     for k in args.sheets:
         try:
             row = cloth(int(k), args, device)
-        except (MemoryError, RuntimeError) as exc:  # too big for the device: say so, go on
+        except (MemoryError, RuntimeError, OverflowError) as exc:  # too big for the device: say so, go on
             row = {"sheets": int(k), "error": str(exc)[:300]}
         add_row(document, {"case": "cloth", **row})
+        write_result(args.out, document)
         gc.collect()
     write_result(args.out, document)
     return 0
