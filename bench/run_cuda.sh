@@ -14,7 +14,7 @@
 # continuous frame against the discrete frame of the same scene up to 1e6 polyhedra (continuous_<tag>.json);
 # then clearance: the clearance frame against the discrete one up to 1e6 polyhedra (clearance_<tag>.json), and
 # the least distance of two meshes of 1e4 and 1e5 triangles against python-fcl with its builds (distance_<tag>.json);
-# then self-intersection: one 1.3M-triangle mesh against pymeshlab, and 1e2 to 3e3 deforming 10k-triangle
+# then self-intersection: one 1.3M-triangle mesh against pymeshlab, and 1e2 to 1e3 deforming 10k-triangle
 # sheets per frame, self plus pairwise (self_intersection_<tag>.json).
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
@@ -44,7 +44,7 @@ if [ -n "${SMOKE:-}" ]; then
     usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
     mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
     ccd="--queries 4000 --objects 100 --ipctk-queries 1000 --repeats 2"; continuous="100 300"
-    clearance="100 300"; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --sheet-n 20"
+    clearance="100 300"; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --crumpled 4 --sheet-n 20"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests=${TESTS:-tests}
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
@@ -53,7 +53,7 @@ else
     mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
     staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
     ccd="--queries 1e7 --objects 1e4 --ipctk-queries 2e4 --repeats 10"; continuous="1e3 1e4 1e5 1e6"
-    clearance="1e3 1e4 1e5 1e6"; distance="--triangles 1e4 1e5"; selfargs="--mesh-triangles 1.3e6 --sheets 1e2 1e3 3e3"
+    clearance="1e3 1e4 1e5 1e6"; distance="--triangles 1e4 1e5"; selfargs="--mesh-triangles 1.3e6 --sheets 1e2 1e3 --crumpled 1e2"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
