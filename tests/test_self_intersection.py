@@ -95,7 +95,7 @@ def test_far_from_origin_and_scaled(device):
             assert got.tolist() == expected, (name, scale, shift)
 
 
-def _newton_meshes(name: str) -> list:
+def _newton_meshes(name: str, device=None) -> list:
     import importlib.util
     import os
 
@@ -105,7 +105,7 @@ def _newton_meshes(name: str) -> list:
     from warp_ccd.usd import scene_from_usd
 
     path = os.path.join(os.path.dirname(spec.origin), "examples", "assets", name)
-    scene = scene_from_usd(path, device="cpu", precision="float64")
+    scene = scene_from_usd(path, device=device, precision="float64")
     return [(v.astype(np.float64), t) for v, t in scene.world_meshes()]
 
 
@@ -129,7 +129,7 @@ def test_real_meshes(device):
     found = {}
     for name in ("bunny.usd", "bear.usd", "unisex_shirt.usd", "rj45_plug.usd", "crazyflie.usd"):
         found[name] = 0
-        for v, t in _newton_meshes(name):
+        for v, t in _newton_meshes(name, device):
             got = wc.self_intersections(v, t, device=device, precision="float64")
             assert got.tolist() == _reference(v, t).tolist(), name
             found[name] += len(got)
