@@ -317,12 +317,12 @@ def _newton_asset(name: str) -> str:
     return os.path.join(os.path.dirname(spec.origin), "examples", "assets", name)
 
 
-def asset_meshes(name: str) -> list:
+def asset_meshes(name: str, device=None) -> list:
     """The meshes of a newton example asset, as this package's USD reader gives them (polygons fanned
     into triangles, placed by their world transforms at the stage's first time code), float64."""
     from warp_ccd.usd import scene_from_usd
 
-    return [(v.astype(np.float64), t) for v, t in scene_from_usd(_newton_asset(name), device="cpu",
+    return [(v.astype(np.float64), t) for v, t in scene_from_usd(_newton_asset(name), device=device,
                                                                    precision="float64").world_meshes()]
 
 
@@ -332,8 +332,8 @@ def test_real_meshes_against_fcl_and_brute_force(device):
     bunny's size: the same pairs and distances as python-fcl; the brute force over triangle pairs
     within reach agrees on the bunny's pairs."""
     pytest.importorskip("fcl")
-    bunny = asset_meshes("bunny.usd")
-    parts = asset_meshes("rj45_plug.usd")
+    bunny = asset_meshes("bunny.usd", device)
+    parts = asset_meshes("rj45_plug.usd", device)
     meshes = list(bunny)
     bv = bunny[0][0]
     centre = bv.mean(axis=0)

@@ -82,8 +82,8 @@ def test_python_fcl_agrees_on_real_meshes(device):
     """The scanned bunny against the RJ45 plug's CAD parts, metres apart: python-fcl's distances and
     nearest points."""
     pytest.importorskip("fcl")
-    bunny = asset_meshes("bunny.usd")
-    parts = asset_meshes("rj45_plug.usd")
+    bunny = asset_meshes("bunny.usd", device)
+    parts = asset_meshes("rj45_plug.usd", device)
     placed = [((v - v.mean(axis=0)) * 10.0 + [1.5 + k, 2.0 - 0.5 * k, 0.4 * k], t) for k, (v, t) in enumerate(parts)]
     res = wc.distance(bunny, placed, device=device, precision="float64")
     objs_a = [fcl_model(v, t) for v, t in bunny]
