@@ -172,7 +172,7 @@ def test_sheets_property(seed, n, amplitude, fold):
     """Random sheets, flat or crumpled, folded or not: the same pairs as the exact brute force."""
     v, t = crumpled_sheet(n, seed, fold=fold, amplitude=amplitude)
     v = v.astype(np.float32).astype(np.float64)
-    assert wc.self_intersections(v, t, device="cpu").tolist() == _reference(v, t).tolist()
+    assert wc.self_intersections(v, t).tolist() == _reference(v, t).tolist()
 
 
 def test_against_pymeshlab(device):
