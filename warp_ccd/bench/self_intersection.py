@@ -77,17 +77,34 @@ def _frames(pipe, args, device) -> list[float]:
     return [synced_ms(pipe.detect, device) for _ in range(args.frames)]
 
 
+def _profile(scene, args) -> list[dict]:
+    """The slowest activities of an eager frame (median of 3) of a self-intersecting pipeline, rounded."""
+    from warp_ccd.bench.profile_frame import activities
+
+    pipe = wc.CollisionPipeline(scene, self_intersections=True, graph=False, leaf_size=args.leaf_size)
+    pipe.detect()
+    rows = activities(None, 3, run=pipe.detect)
+    return [{"name": r["name"][:60], "count": r["count"], "ms": round(r["ms"], 4)} for r in rows[:10]]
+
+
+def _counts(pipe) -> dict:
+    walk = pipe.self_phase.traversal
+    return {"candidates": int(walk.candidates.last_count), "front_peak": int(walk.front.last_count)}
+
+
 def one_mesh(name: str, mesh, args, device) -> dict:
     """The row of one mesh: pipeline frame, one-shot call, pymeshlab."""
     v, t = mesh
-    row = {"mesh": name, "triangles": int(len(t))}
+    row = {"mesh": name, "triangles": int(len(t)), "leaf_size": args.leaf_size}
     scene = wc.Scene.from_meshes([(v, t)], deforming=True, device=device)
-    pipe = wc.CollisionPipeline(scene, self_intersections=True)
+    pipe = wc.CollisionPipeline(scene, self_intersections=True, leaf_size=args.leaf_size)
     row["frame"] = _stats(_frames(pipe, args, device))
     res = pipe.detect()
     pairs = res.self_pairs[:, 1:]
     row["self_pairs"] = int(len(pairs))
-    row["candidates"] = int(pipe.self_phase.traversal.candidates.last_count)
+    row.update(_counts(pipe))
+    if args.profile:
+        row["activities"] = _profile(scene, args)
     del pipe, scene
     gc.collect()
     shots = []
@@ -124,9 +141,9 @@ def cloth(k: int, kind: str, args, device) -> dict:
     """The row of ``k`` sheets of ``kind`` (:func:`crumpled_sheets`): frames with and without self-intersections."""
     meshes = crumpled_sheets(k, args.sheet_n, args.seed, kind)
     scene = wc.Scene.from_meshes(meshes, deforming=True, device=device)
-    row = {"sheets": k, "kind": kind, "triangles": int(scene.num_triangles)}
-    both = wc.CollisionPipeline(scene, self_intersections=True)
-    pairwise = wc.CollisionPipeline(scene)
+    row = {"sheets": k, "kind": kind, "triangles": int(scene.num_triangles), "leaf_size": args.leaf_size}
+    both = wc.CollisionPipeline(scene, self_intersections=True, leaf_size=args.leaf_size)
+    pairwise = wc.CollisionPipeline(scene, leaf_size=args.leaf_size)
     row["self_plus_pairwise"] = _stats(_frames(both, args, device))
     row["pairwise"] = _stats(_frames(pairwise, args, device))
     res = both.detect()
@@ -134,6 +151,9 @@ def cloth(k: int, kind: str, args, device) -> dict:
     row["self_colliding"] = int(res.self_colliding.sum())
     row["object_pairs"] = int(len(res.object_pairs))
     row["ratio"] = row["self_plus_pairwise"]["ms_median"] / row["pairwise"]["ms_median"]
+    row.update(_counts(both))
+    if args.profile:
+        row["activities"] = _profile(scene, args)
     return row
 
 
@@ -148,6 +168,8 @@ def main(argv=None) -> int:
     parser.add_argument("--peer-runs", type=int, default=1)
     parser.add_argument("--one-shot-runs", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--leaf-size", type=int, default=None, help="triangles per leaf (default: the pipeline's)")
+    parser.add_argument("--profile", action="store_true", help="each row: the slowest activities of an eager frame")
     args, device, document = start(parser, argv)
     m = int(args.mesh_triangles)
     if m > 0:

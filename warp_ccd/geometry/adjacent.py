@@ -71,6 +71,13 @@ def _segment_meets(p: Any, q: Any, a0: Any, a1: Any, a2: Any, na: Any, degenerat
     if degenerate:
         s0, s1 = _span(a0, a1, a2)
         return _segments_within(p, q, s0, s1, eps)
+    # Wholly beyond eps on one side of the plane: no meeting (the first clip of the section below, by
+    # the same arithmetic, before its edge normals are made).
+    zero = type(eps)(0.0)
+    rp = wp.dot(na, p - a0)
+    rq = wp.dot(na, q - a0)
+    if (rp > eps and rq > eps) or (rp < zero - eps and rq < zero - eps):
+        return False
     m0, m1, m2 = _edge_normals(a0, a1, a2, na)
     hit, x, y = _segment_triangle_section(p, q, a0, a1, a2, na, m0, m1, m2, eps)
     return hit

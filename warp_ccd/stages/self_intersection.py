@@ -253,6 +253,26 @@ def _welded(topology: MeshTopology, shape_vertex_start: wp.array[wp.int32], weld
     return wp.vec3i(weld[base + idx[0]], weld[base + idx[1]], weld[base + idx[2]])
 
 
+@wp.func
+def _boxes_apart(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any, tol_rel: wp.float64) -> bool:
+    """Whether the triangles' boxes lie apart by more than twice ``tol_rel`` times the larger box's
+    largest extent on some axis: then they are farther apart than the test's ``eps`` (``tol_rel`` times
+    the longest edge, at most sqrt(3) times that extent) and cannot meet. A candidate of a leaf of
+    several triangles is mostly such a pair."""
+    lo_a = wp.min(wp.min(a0, a1), a2)
+    hi_a = wp.max(wp.max(a0, a1), a2)
+    lo_b = wp.min(wp.min(b0, b1), b2)
+    hi_b = wp.max(wp.max(b0, b1), b2)
+    ea = hi_a - lo_a
+    eb = hi_b - lo_b
+    extent = wp.max(wp.max(wp.max(ea[0], ea[1]), ea[2]), wp.max(wp.max(eb[0], eb[1]), eb[2]))
+    pad = type(extent)(tol_rel * wp.float64(2.002)) * extent
+    for i in range(3):
+        if lo_a[i] > hi_b[i] + pad or lo_b[i] > hi_a[i] + pad:
+            return True
+    return False
+
+
 @wp.kernel
 def _self_narrow_kernel(
     topology: MeshTopology,
@@ -280,6 +300,8 @@ def _self_narrow_kernel(
     shape = topology.object_shape[obj]
     a0, a1, a2 = mesh_triangle(topology, vertex, obj, c[1])
     b0, b1, b2 = mesh_triangle(topology, vertex, obj, c[2])
+    if _boxes_apart(a0, a1, a2, b0, b1, b2, tol_rel):
+        return
     ia = _welded(topology, shape_vertex_start, weld, shape, c[1])
     ib = _welded(topology, shape_vertex_start, weld, shape, c[2])
     if tri_tri_self(a0, a1, a2, b0, b1, b2, ia, ib, tol_rel):
