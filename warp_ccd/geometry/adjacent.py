@@ -36,7 +36,7 @@ from typing import Any
 
 import warp as wp
 
-from .primitives import _edge_normals, _segment_triangle_section, _segments_within, _span
+from .primitives import _clip, _edge, _segments_within, _span
 from .triangle import _centre_pair, tri_tri_moller
 
 __all__ = ["shared_vertices", "tri_tri_self"]
@@ -71,16 +71,30 @@ def _segment_meets(p: Any, q: Any, a0: Any, a1: Any, a2: Any, na: Any, degenerat
     if degenerate:
         s0, s1 = _span(a0, a1, a2)
         return _segments_within(p, q, s0, s1, eps)
-    # Wholly beyond eps on one side of the plane: no meeting (the first clip of the section below, by
-    # the same arithmetic, before its edge normals are made).
+    # The verdict of _segment_triangle_section (same arithmetic, step by step), each edge normal made
+    # only when its clip is reached: most neighbours are turned away by the plane or the first edges.
     zero = type(eps)(0.0)
     rp = wp.dot(na, p - a0)
     rq = wp.dot(na, q - a0)
-    if (rp > eps and rq > eps) or (rp < zero - eps and rq < zero - eps):
+    lo, hi = _clip(eps - rp, eps - rq, zero, type(eps)(1.0))
+    lo, hi = _clip(eps + rp, eps + rq, lo, hi)
+    if lo > hi:
         return False
-    m0, m1, m2 = _edge_normals(a0, a1, a2, na)
-    hit, x, y = _segment_triangle_section(p, q, a0, a1, a2, na, m0, m1, m2, eps)
-    return hit
+    wide_lo = lo
+    wide_hi = hi
+    for i in range(3):
+        u, v = _edge(a0, a1, a2, i)
+        m = wp.normalize(wp.cross(na, v - u))  # _edge_normals' i-th
+        fp = wp.dot(m, p - u)
+        fq = wp.dot(m, q - u)
+        lo, hi = _clip(fp, fq, lo, hi)
+        wide_lo, wide_hi = _clip(fp + eps, fq + eps, wide_lo, wide_hi)
+        if wide_lo > wide_hi:
+            return False
+    if lo > hi:
+        return _segments_within(p, q, a0, a1, eps) or _segments_within(p, q, a1, a2, eps) or _segments_within(
+            p, q, a2, a0, eps)
+    return True
 
 
 @wp.func
