@@ -5,8 +5,10 @@ mesh meet other than through their shared vertices (ids after welding coincident
 
 * they share none: their exact distance (the least over each edge of one against the other triangle,
   0 where an edge crosses it) is within ``eps = tol * L`` (``L`` the longest edge of the two);
-* they share one vertex ``p``: the edge opposite ``p`` of one is within ``eps`` of the other triangle
-  (of the segment it spans when it is degenerate);
+* they share one vertex ``p``: the edge opposite ``p`` of one is within ``eps`` of the other triangle;
+  a degenerate one is the segment it spans, whose halves from ``p`` are tested (a far end within ``eps``
+  of the other triangle, or the half within ``eps`` of its edge opposite ``p``; two degenerate ones: an
+  end within ``eps`` of the other's half), and the other's opposite edge against its span;
 * they share an edge ``pq`` (thirds ``r``, ``s``): ``r`` within ``eps`` of ``pqs``, ``s`` of ``pqr``, or
   segment ``pr`` of ``qs``, or ``qr`` of ``ps``; a degenerate triangle (twice its area at most
   ``tol * L^2``) meets the other only where both are degenerate and reach beyond one end of the edge;
@@ -24,7 +26,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from distance_reference import _add, _cross, _dot, _mul, _sub, point_triangle_sq, segment_segment_sq
+from distance_reference import _add, _cross, _dot, _mul, _sub, point_segment_sq, point_triangle_sq, segment_segment_sq
 
 
 def _seg_tri_sq(p, q, a, b, c):
@@ -92,11 +94,21 @@ def pair_meets(ta, tb, ia, ib, tol: float) -> bool:
     if k == 1:
         pa = ia.index(shared[0])
         pb = ib.index(shared[0])
+        p = a[pa]
         opp_a = (a[(pa + 1) % 3], a[(pa + 2) % 3])
         opp_b = (b[(pb + 1) % 3], b[(pb + 2) % 3])
-        da = segment_segment_sq(*opp_a, *_span(b)) if deg_b else _seg_tri_sq(*opp_a, *b)
-        db = segment_segment_sq(*opp_b, *_span(a)) if deg_a else _seg_tri_sq(*opp_b, *a)
-        return min(da, db) <= eps_sq
+        if not deg_a and not deg_b:
+            return min(_seg_tri_sq(*opp_a, *b), _seg_tri_sq(*opp_b, *a)) <= eps_sq
+        # A degenerate triangle: the halves of its span from the shared vertex (never the vertex itself).
+        halves_a = [e for e in _span(a) if e != p]
+        halves_b = [e for e in _span(b) if e != p]
+        if deg_a and deg_b:
+            return any(point_segment_sq(e, p, f) <= eps_sq or point_segment_sq(f, p, e) <= eps_sq
+                       for e in halves_a for f in halves_b)
+        d, t, opp_t, halves = (a, b, opp_b, halves_a) if deg_a else (b, a, opp_a, halves_b)
+        if segment_segment_sq(*opp_t, *_span(d)) <= eps_sq:
+            return True
+        return any(point_triangle_sq(e, *t) <= eps_sq or segment_segment_sq(p, e, *opp_t) <= eps_sq for e in halves)
     r_i = next(i for i in range(3) if ia[i] not in ib)
     s_i = next(i for i in range(3) if ib[i] not in ia)
     r, p, q = a[r_i], a[(r_i + 1) % 3], a[(r_i + 2) % 3]

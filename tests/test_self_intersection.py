@@ -67,6 +67,14 @@ CRAFTED = {
                             [[0, 1, 2], [3, 4, 5]], [[0, 1]]),
     "split_vertices_flat": ([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0, 0, 0], [1, 0, 0], [0.3, -0.6, 0]],
                             [[0, 1, 2], [3, 4, 5]], []),
+    # A sliver whose middle vertex is shared, its span crossing the neighbour's plane only there (and, in
+    # the neighbour's plane, running into it beyond the vertex).
+    "sliver_through_vertex": ([[0, 0, 0], [-1, 0, -1], [1, 0, 1], [1, 1, 0], [0, 1, 1]], [[0, 1, 2], [0, 3, 4]], []),
+    "sliver_through_vertex_in_plane": ([[0, 0, 0], [-1, -1, 0], [1, 1, 0], [1, 0, 0], [0, 2, 0]],
+                                       [[0, 1, 2], [0, 3, 4]], [[0, 1]]),
+    "sliver_end_at_vertex": ([[0, 0, 0], [0.5, 0.5, 0], [1, 1, 0], [1, 0, 0], [0, -1, 0]], [[0, 1, 2], [0, 3, 4]], []),
+    "two_slivers_along": ([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0.5, 0, 0], [3, 0, 0]], [[0, 1, 2], [0, 3, 4]], [[0, 1]]),
+    "two_slivers_apart": ([[0, 0, 0], [1, 0, 0], [2, 0, 0], [-0.5, 0, 0], [-3, 0, 0]], [[0, 1, 2], [0, 3, 4]], []),
     # A polygon fanned from a corner collinear with the next two: a sliver along the next triangle's edge.
     "fan_sliver": ([[0, 0, 0], [1, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3], [0, 3, 4]], []),
     "slivers_beyond_edge": ([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], [[0, 1, 2], [0, 1, 3]], [[0, 1]]),
@@ -248,6 +256,40 @@ def test_pipeline_options_and_errors(device):
         wc.self_intersections(np.zeros((3, 3)), [[0, 1, 5]])
     with pytest.raises(ValueError):
         wc.self_intersections([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+
+
+def test_one_object_with_clearance_and_timings(device):
+    """One object: its self-intersections alone, the clearance's rows empty, every stage timed."""
+    v, t = crumpled_sheet(8, 0)
+    expect = _reference(v, t)
+    for deforming in (False, True):
+        scene = wc.Scene.from_meshes([(v, t)], deforming=deforming, device=device)
+        res = wc.CollisionPipeline(scene, self_intersections=True, clearance=0.1, timings=True).detect()
+        assert res.self_pairs[:, 1:].tolist() == expect.tolist() and res.self_colliding.tolist() == [True]
+        assert len(res.object_pairs) == 0 and len(res.object_distance) == 0
+        assert {"refit", "self", "clearance", "total"} <= set(res.timings)
+        assert res.copy().self_pairs.tolist() == res.self_pairs.tolist()
+
+
+@pytest.mark.parametrize("tol", [TOL, 0.05])
+def test_unshared_pairs_as_between_objects(device, tol):
+    """Two triangles sharing no vertex meet in one mesh exactly when they do as two objects (Möller's
+    test, whose coplanar pairs touch up to sqrt(2) eps: the candidates' box filter must keep them), on
+    random pairs and on coplanar pairs just beyond ``eps`` across the diagonal of their boxes."""
+    rng = np.random.default_rng(5)
+    a = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 0]], np.float64)  # the longest edge: the box's diagonal
+    cases = []
+    for _ in range(60):
+        b = rng.uniform(-1, 1, (3, 3))
+        cases.append((a, b * rng.uniform(0.2, 2) + rng.choice([0.0, 1.0]) * rng.normal(size=3)))
+        gap = rng.uniform(1.0, 1.45) * tol * 2**0.5  # beyond eps = tol * sqrt(2), within sqrt(2) eps
+        side = np.array([-1.0, 1.0, 0.0]) / 2**0.5  # away from the diagonal, in the plane
+        cases.append((a, a @ np.diag([-1, -1, 1]) + [1, 1, 0] + side * gap + [0, 0, rng.uniform(-0.5, 0.5) * tol]))
+    for x, y in cases:
+        mesh = (np.concatenate([x, y]), np.array([[0, 1, 2], [3, 4, 5]]))
+        pair = wc.collide([(x, [[0, 1, 2]]), (y, [[0, 1, 2]])], device=device, precision="float64", tolerance=tol)
+        got = wc.self_intersections(*mesh, device=device, precision="float64", tolerance=tol)
+        assert (len(got) == 1) == (len(pair.object_pairs) == 1), (x, y)
 
 
 def test_weld_vertices():

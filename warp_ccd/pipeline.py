@@ -291,7 +291,10 @@ class CollisionPipeline:
             self.self_phase.launch(scene)
             mark("self", t)
             if times is not None:
-                times.update({stage: 0.0 for stage in STAGES[1:]}, total=sum(times.values()))
+                times.update({stage: 0.0 for stage in STAGES[1:]})
+                if self.near_phase is not None:
+                    times["clearance"] = 0.0
+                times["total"] = sum(times.values())
             self._times = times
             return
         self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
@@ -370,6 +373,14 @@ class CollisionPipeline:
             grew = frame.run_once()
             wait_ms += frame.wait_ms
             runs += 1
+        if scene.num_objects < 2:  # one object: its self-intersections alone
+            phase = self.self_phase
+            result = self._no_pairs(None, self_rows=(phase.hits.data[: phase.hits.last_count], phase.object_flag))
+            if self._times is not None:
+                result.timings = self._times
+            result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
+            result.runs = runs
+            return result
         narrow = self.narrow
         hits = narrow.hits
         rows = {"device_triangle_pairs": (hits.data, hits.last_count)}
@@ -396,8 +407,9 @@ class CollisionPipeline:
         result.runs = runs
         return result
 
-    def _no_pairs(self, step: float | None) -> CollisionResult:
-        """The result of a scene of fewer than two objects (moved by ``step`` first, when given)."""
+    def _no_pairs(self, step: float | None, self_rows: tuple | None = None) -> CollisionResult:
+        """The result of a scene of fewer than two objects (moved by ``step`` first, when given); with
+        ``self_rows``, the frame's ``(device_self_pairs, device_self_colliding)`` (one object's)."""
         n, d = self.scene.num_objects, self.device
         if step is not None:
             self.scene.enqueue_advance(step)
@@ -417,8 +429,9 @@ class CollisionPipeline:
         stages = (*STAGES, "clearance", "total") if self.near_phase is not None else (*STAGES, "total")
         if self.self_phase is not None:
             stages = (*stages[:-1], "self", "total")
-        no_self = None if self.self_phase is None else (wp.zeros(0, dtype=wp.vec3i, device=d),
-                                                        wp.zeros(n, dtype=wp.int32, device=d))
+        no_self = self_rows
+        if self_rows is None and self.self_phase is not None:
+            no_self = (wp.zeros(0, dtype=wp.vec3i, device=d), wp.zeros(n, dtype=wp.int32, device=d))
         return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
                                {s: 0.0 for s in stages} if self.timings else None,
                                device_contained=empty, device_segments=no_segments, device_toi=no_toi,

@@ -20,12 +20,18 @@ positions, so a triangle's neighbours never touch it merely by being its neighbo
 
 Each test is within ``eps`` (:mod:`warp_ccd.geometry.triangle`'s tolerance: ``tol_rel`` times the longest
 edge of the two, vertices centred on the pair), so touching counts as between objects. A degenerate
-triangle is the segment it spans (as there): with one shared vertex, its opposite edge is tested against
-the other's face or, when both are degenerate, against the other's span; with a shared edge, a degenerate
-triangle lies along the edge's line, which the other meets only in the edge: no intersection, unless both
-are degenerate and reach beyond the same end of the edge. A triangle with a repeated vertex id (a
-segment or a point by construction) that shares a vertex with the other is taken to meet it only where
-both have the same three ids.
+triangle is the segment it spans (as there): with one shared vertex, the halves of its span from the
+vertex (the span may run through it: a sliver whose middle vertex is shared) are tested, each's far end
+against the other's face and the half across the other's opposite edge (and that edge against the span),
+or, when both are degenerate, each half along the other's; with a shared edge, a degenerate triangle lies
+along the edge's line, which the other meets only in the edge: no intersection, unless both are
+degenerate and reach beyond the same end of the edge. (A shared edge shorter than the tolerance is
+outside these rules: a triangle on it is degenerate whatever its direction, and is taken to lie along
+it.) A triangle with a repeated vertex id (a segment or a point by construction) that shares a vertex
+with the other is taken to meet it only where both have the same three ids.
+
+Vertex ids come from the mesh as stored; a deforming object's are welded from its shape's vertices
+(the rest pose): copies of a vertex that come apart later are still one vertex.
 
 Every verdict is made of the building blocks of :mod:`warp_ccd.geometry.primitives` (add, multiply,
 divide, square root), so every device gives the same one when the calling module is compiled without
@@ -112,6 +118,40 @@ def _beyond_both(p: Any, q: Any, r: Any, s: Any, eps: Any) -> bool:
 
 
 @wp.func
+def _halves_meet(p: Any, e: Any, q: Any, f: Any, eps: Any) -> bool:
+    """Two segments ``pe`` and ``qf`` from one vertex (``p`` and ``q`` its two copies): whether they
+    meet beyond it, one running along the other (an end within ``eps`` of the other segment). A
+    segment that is the vertex alone (``e`` at ``p``) meets nothing beyond it."""
+    zero = type(eps)(0.0)
+    if wp.length_sq(e - p) == zero or wp.length_sq(f - q) == zero:
+        return False
+    return _segments_within(e, e, q, f, eps) or _segments_within(f, f, p, e, eps)
+
+
+@wp.func
+def _segment_and_face(p: Any, d0: Any, d1: Any, d2: Any, q: Any, y1: Any, y2: Any, f0: Any, f1: Any, f2: Any,
+                      nf: Any, eps: Any) -> bool:
+    """A degenerate triangle ``d`` (the segment it spans) and a triangle ``f = (q, y1, y2)`` sharing the
+    vertex ``p`` (``q`` in ``f``): whether they meet beyond it. ``f``'s edge opposite the vertex against
+    the span; then each half of the span from the vertex: its far end within ``eps`` of ``f``, or the half
+    across ``f``'s opposite edge (a segment from a vertex of ``f`` that goes into ``f`` leaves it there or
+    ends inside). The span may run through the vertex (a sliver whose middle vertex is shared): its
+    halves, not the span, are tested, so the vertex itself is never found."""
+    s0, s1 = _span(d0, d1, d2)
+    if _segments_within(y1, y2, s0, s1, eps):
+        return True
+    zero = type(eps)(0.0)
+    for i in range(2):
+        e = s0
+        if i == 1:
+            e = s1
+        if wp.length_sq(e - p) > zero:
+            if _segment_meets(e, e, f0, f1, f2, nf, False, eps) or _segments_within(p, e, y1, y2, eps):
+                return True
+    return False
+
+
+@wp.func
 def tri_tri_self(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, ia: wp.vec3i, ib: wp.vec3i,
                  tol_rel: Any) -> bool:
     """Whether two triangles of one mesh meet other than through the vertices they share (module docs).
@@ -143,9 +183,18 @@ def tri_tri_self(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, ia: wp.ve
         kb = wp.where(_has(ia, ib[0]) == 1, 0, wp.where(_has(ia, ib[1]) == 1, 1, 2))
         p, x1, x2 = _rotate(a0, a1, a2, ka)
         q, y1, y2 = _rotate(b0, b1, b2, kb)
-        if _segment_meets(x1, x2, b0, b1, b2, nb, degenerate_b, eps):
-            return True
-        return _segment_meets(y1, y2, a0, a1, a2, na, degenerate_a, eps)
+        if not degenerate_a and not degenerate_b:
+            if _segment_meets(x1, x2, b0, b1, b2, nb, False, eps):
+                return True
+            return _segment_meets(y1, y2, a0, a1, a2, na, False, eps)
+        if degenerate_a and degenerate_b:  # two segments through the vertex: one along the other
+            s0, s1 = _span(a0, a1, a2)
+            t0, t1 = _span(b0, b1, b2)
+            return (_halves_meet(p, s0, q, t0, eps) or _halves_meet(p, s0, q, t1, eps)
+                    or _halves_meet(p, s1, q, t0, eps) or _halves_meet(p, s1, q, t1, eps))
+        if degenerate_a:
+            return _segment_and_face(p, a0, a1, a2, q, y1, y2, b0, b1, b2, nb, eps)
+        return _segment_and_face(q, b0, b1, b2, p, x1, x2, a0, a1, a2, na, eps)
     # k == 2: a = (p, q, r) with r its vertex not in b; b's vertex not in a is s.
     ka = wp.where(_has(ib, ia[0]) == 0, 0, wp.where(_has(ib, ia[1]) == 0, 1, 2))
     kb = wp.where(_has(ia, ib[0]) == 0, 0, wp.where(_has(ia, ib[1]) == 0, 1, 2))

@@ -255,9 +255,10 @@ def _welded(topology: MeshTopology, shape_vertex_start: wp.array[wp.int32], weld
 
 @wp.func
 def _boxes_apart(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any, tol_rel: wp.float64) -> bool:
-    """Whether the triangles' boxes lie apart by more than twice ``tol_rel`` times the larger box's
-    largest extent on some axis: then they are farther apart than the test's ``eps`` (``tol_rel`` times
-    the longest edge, at most sqrt(3) times that extent) and cannot meet. A candidate of a leaf of
+    """Whether the triangles' boxes lie apart by more than 2.5 ``tol_rel`` times the larger box's
+    largest extent on some axis: then they are farther apart than the test ever accepts (``eps``,
+    ``tol_rel`` times the longest edge, at most sqrt(3) times that extent; coplanar pairs touch up to
+    sqrt(2) ``eps``, at most 2.45 ``tol_rel`` times the extent) and cannot meet. A candidate of a leaf of
     several triangles is mostly such a pair."""
     lo_a = wp.min(wp.min(a0, a1), a2)
     hi_a = wp.max(wp.max(a0, a1), a2)
@@ -266,7 +267,7 @@ def _boxes_apart(a0: Any, a1: Any, a2: Any, b0: Any, b1: Any, b2: Any, tol_rel: 
     ea = hi_a - lo_a
     eb = hi_b - lo_b
     extent = wp.max(wp.max(wp.max(ea[0], ea[1]), ea[2]), wp.max(wp.max(eb[0], eb[1]), eb[2]))
-    pad = type(extent)(tol_rel * wp.float64(2.002)) * extent
+    pad = type(extent)(tol_rel * wp.float64(2.5)) * extent
     for i in range(3):
         if lo_a[i] > hi_b[i] + pad or lo_b[i] > hi_a[i] + pad:
             return True
