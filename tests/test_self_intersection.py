@@ -1,5 +1,7 @@
 """Self-intersection (:func:`warp_ccd.self_intersections`, the pipeline's ``self_pairs``) against the exact
-brute force (:mod:`self_reference`) and pymeshlab, on every device.
+brute force (:mod:`self_reference`, the rules in rational arithmetic), the exact intersection of closed
+triangles (:mod:`exact_intersection`, which knows none of the rules: random pairs on an integer grid,
+sharing 0, 1 or 2 vertices, coplanar or degenerate) and pymeshlab, on every device.
 
 Crafted: a fold flat onto itself along a shared edge, folds to the other side and bent, two triangles
 sharing a vertex and crossing beyond it, or meeting only there, coplanar wedges at a shared vertex,
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from exact_intersection import meets_beyond
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from self_reference import pair_meets, reference_self_pairs
@@ -290,6 +293,57 @@ def test_unshared_pairs_as_between_objects(device, tol):
         pair = wc.collide([(x, [[0, 1, 2]]), (y, [[0, 1, 2]])], device=device, precision="float64", tolerance=tol)
         got = wc.self_intersections(*mesh, device=device, precision="float64", tolerance=tol)
         assert (len(got) == 1) == (len(pair.object_pairs) == 1), (x, y)
+
+
+def _grid_pairs(rng, shared: int, count: int, flat: bool, degenerate: bool = False):
+    """``count`` pairs of triangles on the integer grid [-2, 2]^3 (the plane z = 0 when ``flat``) sharing
+    ``shared`` vertices: ``(ta, tb, ids_a, ids_b)``; non-degenerate, or with ``degenerate`` at least one
+    of three collinear points (a segment)."""
+    out = []
+    while len(out) < count:
+        pts = rng.integers(-2, 3, (6 - shared, 3)).astype(float)
+        if flat:
+            pts[:, 2] = 0.0
+        if len({tuple(p) for p in pts}) < len(pts):
+            continue
+        ids_a = [0, 1, 2]
+        ids_b = list(range(shared)) + list(range(3, 6 - shared))
+        rng.shuffle(ids_b)
+        ta, tb = pts[ids_a], pts[ids_b]
+        flat_tris = [np.linalg.norm(np.cross(t[1] - t[0], t[2] - t[0])) == 0 for t in (ta, tb)]
+        if any(flat_tris) != degenerate:
+            continue
+        out.append((ta, tb, ids_a, ids_b))
+    return out
+
+
+@pytest.mark.parametrize("shared", [0, 1, 2])
+@pytest.mark.parametrize("kind", ["space", "flat", "degenerate"])
+def test_grid_pairs_against_exact_intersection(device, shared, kind):
+    """Random pairs of triangles on a small integer grid (coplanar throughout when flat; with a segment,
+    three collinear points, when degenerate), sharing 0, 1 or 2 vertices: a pair self-intersects exactly
+    when the exact intersection of the two closed sets holds a point beyond what they share
+    (:mod:`exact_intersection`, which knows none of the rules). On such coordinates every gap dwarfs
+    the tolerance."""
+    rng = np.random.default_rng(100 * shared + len(kind))
+    flat = kind == "flat" or (kind == "degenerate" and shared == 2)
+    pairs = _grid_pairs(rng, shared, 300, flat, degenerate=kind == "degenerate")
+    vertices, triangles, expected = [], [], []
+    for i, (ta, tb, ia, ib) in enumerate(pairs):
+        n = 6 - shared
+        local = np.zeros((n, 3))
+        local[ia] = ta
+        local[ib] = tb
+        base = len(vertices) and sum(len(v) for v in vertices)
+        vertices.append(local + [100.0 * i, 0.0, 0.0])
+        triangles += [[base + k for k in ia], [base + k for k in ib]]
+        shared_points = [ta[k] for k in range(3) if ia[k] in ib]
+        if meets_beyond(ta, tb, shared_points):
+            expected.append([2 * i, 2 * i + 1])
+    got = wc.self_intersections(np.concatenate(vertices), np.array(triangles), device=device, precision="float64")
+    assert got.tolist() == expected
+    least = 3 if kind == "degenerate" else 10
+    assert least < len(expected) < len(pairs) - least  # both verdicts represented
 
 
 def test_weld_vertices():
