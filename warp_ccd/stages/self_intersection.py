@@ -38,7 +38,7 @@ from ..scene.scene import MeshTopology, mesh_triangle
 from .buffers import BLOCK_DIM, CounterRead, GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
 from .bvh import SceneBVH, TreeView
 from .frame import FrameCache
-from .mid_phase import CHILD_LEAF, CHILD_NONE, CHILD_PUSH, EXPAND_THREADS_PER_SM
+from .mid_phase import CHILD_LEAF, CHILD_NONE, CHILD_PUSH, EXPAND_THREADS_PER_SM, _is_push, _push
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -102,18 +102,6 @@ def _self_rows(tree: TreeView, node_start: int, kind: int, xa: int, xb: int) -> 
     if kind == CHILD_LEAF:
         return tree.node_triangle[node_start + xa][1] * tree.node_triangle[node_start + xb][1]
     return 0
-
-
-@wp.func
-def _self_push(front_out: wp.array[wp.vec3i], front_capacity: int, slot: wp.int64, kind: int, k: int, xa: int,
-               xb: int) -> wp.int64:
-    """Writes a child pair of kind :data:`~warp_ccd.stages.mid_phase.CHILD_PUSH` into the front at
-    ``slot`` (below the capacity); returns the next slot."""
-    if kind != CHILD_PUSH:
-        return slot
-    if slot < wp.int64(front_capacity):
-        front_out[int(slot)] = wp.vec3i(k, xa, xb)
-    return slot + wp.int64(1)
 
 
 @wp.func
@@ -224,17 +212,16 @@ def _self_expand_kernel(
                     k10 = _self_child(tree, slot, node_start, xa1, xb0)
                     if cb[0] >= 0:
                         k11 = _self_child(tree, slot, node_start, xa1, xb1)
-        num_push = (wp.where(k00 == CHILD_PUSH, 1, 0) + wp.where(k01 == CHILD_PUSH, 1, 0)
-                    + wp.where(k10 == CHILD_PUSH, 1, 0) + wp.where(k11 == CHILD_PUSH, 1, 0))
+        num_push = _is_push(k00) + _is_push(k01) + _is_push(k10) + _is_push(k11)
         rows = (_self_rows(tree, node_start, k00, xa0, xb0) + _self_rows(tree, node_start, k01, xa0, xb1)
                 + _self_rows(tree, node_start, k10, xa1, xb0) + _self_rows(tree, node_start, k11, xa1, xb1))
         slot_f = block_reserve(front_out_count, lane, num_push)
         if lane == width - 1:
             wp.atomic_max(front_peak, 0, slot_f + wp.int64(num_push))
-        slot_f = _self_push(front_out, front_capacity, slot_f, k00, k, xa0, xb0)
-        slot_f = _self_push(front_out, front_capacity, slot_f, k01, k, xa0, xb1)
-        slot_f = _self_push(front_out, front_capacity, slot_f, k10, k, xa1, xb0)
-        slot_f = _self_push(front_out, front_capacity, slot_f, k11, k, xa1, xb1)
+        slot_f = _push(front_out, front_capacity, slot_f, k00, k, xa0, xb0)
+        slot_f = _push(front_out, front_capacity, slot_f, k01, k, xa0, xb1)
+        slot_f = _push(front_out, front_capacity, slot_f, k10, k, xa1, xb0)
+        slot_f = _push(front_out, front_capacity, slot_f, k11, k, xa1, xb1)
         slot_c = block_reserve(candidate_count, lane, rows)
         if rows > 0:
             slot_c = _self_emit(tree, obj, node_start, tri_start, k00, xa0, xb0, slot_c, candidate, candidate_capacity)
