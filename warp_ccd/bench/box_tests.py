@@ -31,6 +31,7 @@ import warp as wp
 
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.meshes import parse_triangles
+from warp_ccd.bench.timing import ms_stats
 from warp_ccd.geometry.precision import PRECISIONS
 from warp_ccd.pipeline import STAGES, CollisionPipeline
 from warp_ccd.scene.scene import Scene
@@ -59,9 +60,6 @@ def _case(text: str) -> tuple[str, int]:
         raise argparse.ArgumentTypeError(f"{text!r}: expected TRIANGLES:N, e.g. poly:1e5 ({exc})") from None
     return spec, n
 
-
-def _stats(values: list) -> dict:
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
 def _set_grid(pipe: CollisionPipeline, threads_per_sm: int) -> None:
@@ -124,7 +122,7 @@ def run(spec: str, n: int, args, device, registers: int, pairs_by_case: dict) ->
             raise SystemExit(f"{spec}:{n} {options} threads={threads}: other triangle pairs than the first combination")
         base = {"triangles": spec, "n_objects": n, **options, "threads_per_sm": threads, "max_registers": registers,
                 **counts}
-        rows.append({**base, "stage": "frame", **_stats(frames)})
+        rows.append({**base, "stage": "frame", **ms_stats(frames)})
         timed = CollisionPipeline(scene, timings=True, **options)
         _set_grid(timed, threads)
         stages = {s: [] for s in (*STAGES, "total")}
@@ -134,12 +132,12 @@ def run(spec: str, n: int, args, device, registers: int, pairs_by_case: dict) ->
             if k >= args.warmup:
                 for s in stages:
                     stages[s].append(t[s])
-        rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
+        rows += [{**base, "stage": s, **ms_stats(v)} for s, v in stages.items()]
         frame_ms = rows[-len(stages) - 1]["ms_median"]
         print(f"{spec:>6} {n:>9,}  axes {axes}  bounds {str(bounds):<8}  leaf {leaf or '-'}  threads/SM {threads:>5}"
               f"  registers {registers or '-':>3}"
               f"  frame {frame_ms:8.3f} ms"
-              f"  mid {_stats(stages['mid'])['ms_median']:7.3f}  refit {_stats(stages['refit'])['ms_median']:7.3f}"
+              f"  mid {ms_stats(stages['mid'])['ms_median']:7.3f}  refit {ms_stats(stages['refit'])['ms_median']:7.3f}"
               f"  broad pairs {counts['broad_pairs']:>9,}  candidates {counts['candidates']:>11,}"
               f"  touch tests {counts['touch_tests'] or 0:>10,}  hits {counts['triangle_pairs']:>10,}", flush=True)
     return rows

@@ -30,13 +30,10 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.timing import synced_ms
+from warp_ccd.bench.timing import ms_stats, synced_ms
 
 DT = 1.0 / 60.0
 
-
-def _stats(values) -> dict:
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
 def _profile(scene, d: float, frames: int = 5) -> dict:
@@ -72,12 +69,12 @@ def run(n: int, clearances: list[float], args, device) -> list[dict]:
                 pairs[key].append(len(res.object_pairs))
                 last[key] = res
     base = {"n_objects": n, "triangles": scene.num_triangles, "graph": discrete.graph}
-    rows = [{**base, "method": "discrete", "frames": args.frames, **_stats(times["discrete"]),
+    rows = [{**base, "method": "discrete", "frames": args.frames, **ms_stats(times["discrete"]),
              "object_pairs_per_frame": float(np.mean(pairs["discrete"])),
              "candidates_last": last["discrete"].num_candidates}]
     text = f"{n:>9,} objects: discrete {rows[0]['ms_median']:8.3f} ms ({rows[0]['object_pairs_per_frame']:.1f} pairs)"
     for d in clearances:
-        row = {**base, "method": "clearance", "clearance": d, "frames": args.frames, **_stats(times[d]),
+        row = {**base, "method": "clearance", "clearance": d, "frames": args.frames, **ms_stats(times[d]),
                "ratio_median": float(np.median(times[d]) / np.median(times["discrete"])),
                "object_pairs_per_frame": float(np.mean(pairs[d])),
                "intersecting_last": int(last[d].object_intersecting.sum()),

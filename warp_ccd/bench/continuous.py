@@ -39,7 +39,7 @@ import warp as wp
 import warp_ccd as wc
 from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.profile_frame import activities
-from warp_ccd.bench.timing import synced_ms
+from warp_ccd.bench.timing import ms_stats, synced_ms
 
 DT = 1.0 / 60.0
 
@@ -48,9 +48,6 @@ def _keys(pairs: np.ndarray, n: int) -> np.ndarray:
     """Object pairs ``(K, 2)`` as sorted int64 keys."""
     return np.unique(pairs[:, 0].astype(np.int64) * n + pairs[:, 1]) if len(pairs) else np.zeros(0, np.int64)
 
-
-def _stats(values) -> dict:
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
 def _free_gb(device) -> float | None:
@@ -123,8 +120,9 @@ def run(n: int, args, device, notes: list) -> list[dict]:
         if not times[method]:
             continue
         res = last[method]
-        row = {**base, "method": method, "frames": len(times[method]), "graph": graph[method], **_stats(times[method]),
-               "object_pairs_per_frame": float(np.mean(pairs[method])), "object_pairs_last": len(res.object_pairs),
+        row = {**base, "method": method, "frames": len(times[method]), "graph": graph[method],
+               **ms_stats(times[method]), "object_pairs_per_frame": float(np.mean(pairs[method])),
+               "object_pairs_last": len(res.object_pairs),
                "triangle_pairs_last": res.num_triangle_pairs, "candidates_last": res.num_candidates}
         if method == "continuous":
             row["ratio_median"] = row["ms_median"] / rows[0]["ms_median"]

@@ -39,7 +39,7 @@ from warp_ccd.bench.command import add_run_options, bench_parser, start, write_r
 from warp_ccd.bench.compare import compare_triangle_pairs
 from warp_ccd.bench.methods import DevicePeerMethod
 from warp_ccd.bench.peers import WarpMeshPipeline
-from warp_ccd.bench.timing import synced_ms
+from warp_ccd.bench.timing import ms_stats, synced_ms
 from warp_ccd.pipeline import STAGES
 
 DT = 1.0 / 60.0
@@ -89,9 +89,6 @@ def deforming_scene(n: int, level: int, seed: int, device) -> tuple:
     return scene, mover
 
 
-def _stats(values) -> dict:
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
-
 
 def run(n: int, args, device) -> list[dict]:
     """Rows for one object count: ours at each leaf size, then the built-in peer."""
@@ -132,9 +129,9 @@ def run(n: int, args, device) -> list[dict]:
         elif not np.array_equal(res.triangle_pairs, truth):
             raise SystemExit(f"{n} objects, leaf {leaf}: other triangle pairs than leaf {args.leaf_sizes[0]}")
         base = {"method": "warp_ccd", "n_objects": n, "leaf_size": leaf, **counts}
-        rows.append({**base, "stage": "frame", **_stats(frames)})
-        rows.append({**base, "stage": "refit_kernels", **_stats(refits)})
-        rows += [{**base, "stage": s, **_stats(v)} for s, v in stages.items()]
+        rows.append({**base, "stage": "frame", **ms_stats(frames)})
+        rows.append({**base, "stage": "refit_kernels", **ms_stats(refits)})
+        rows += [{**base, "stage": s, **ms_stats(v)} for s, v in stages.items()]
         print(f"{n:>8,} leaf {leaf}: frame {np.median(frames):8.3f} ms, refit {np.median(refits):7.3f} ms (graph), "
               + ", ".join(f"{s} {np.median(v):.3f}" for s, v in stages.items())
               + f"; {counts['object_pairs']} object pairs, {counts['candidates']:,} candidates", flush=True)
@@ -151,8 +148,8 @@ def run(n: int, args, device) -> list[dict]:
     check = compare_triangle_pairs(scene, "warp_ccd", truth, "warp_builtin", pairs)
     base = {"method": "warp_builtin", "n_objects": n, "leaf_size": None, "object_pairs": check.object_pairs[1],
             "triangle_pairs": len(pairs), "candidates": None, "check": check.to_dict()}
-    rows.append({**base, "stage": "detect", **_stats(detect)})
-    rows.append({**base, "stage": "refit", **_stats(refit)})
+    rows.append({**base, "stage": "detect", **ms_stats(detect)})
+    rows.append({**base, "stage": "refit", **ms_stats(refit)})
     print(f"{n:>8,} built-in: detect {np.median(detect):8.3f} ms, refit {np.median(refit):7.3f} ms (eager); "
           f"{check.summary()}", flush=True)
     return rows

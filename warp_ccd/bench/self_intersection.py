@@ -33,12 +33,8 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.timing import synced_ms
+from warp_ccd.bench.timing import ms_stats, synced_ms
 from warp_ccd.scene import figure_eight_torus, icosphere, sheet
-
-
-def _stats(values) -> dict:
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
 def crumpled_sheets(k: int, n: int, seed: int = 0, kind: str = "crumpled") -> list[tuple[np.ndarray, np.ndarray]]:
@@ -98,7 +94,7 @@ def one_mesh(name: str, mesh, args, device) -> dict:
     row = {"mesh": name, "triangles": int(len(t)), "leaf_size": args.leaf_size}
     scene = wc.Scene.from_meshes([(v, t)], deforming=True, device=device)
     pipe = wc.CollisionPipeline(scene, self_intersections=True, leaf_size=args.leaf_size)
-    row["frame"] = _stats(_frames(pipe, args, device))
+    row["frame"] = ms_stats(_frames(pipe, args, device))
     res = pipe.detect()
     pairs = res.self_pairs[:, 1:]
     row["self_pairs"] = int(len(pairs))
@@ -113,7 +109,7 @@ def one_mesh(name: str, mesh, args, device) -> dict:
         t0 = time.perf_counter()
         got = wc.self_intersections(v, t, device=device)
         shots.append((time.perf_counter() - t0) * 1e3)
-    row["one_shot"] = _stats(shots)
+    row["one_shot"] = ms_stats(shots)
     row["one_shot_equal"] = bool(np.array_equal(got, pairs))
     try:
         import pymeshlab
@@ -129,7 +125,7 @@ def one_mesh(name: str, mesh, args, device) -> dict:
         peer.append((time.perf_counter() - t0) * 1e3)
     theirs = np.nonzero(ms.current_mesh().face_selection_array())[0]
     shared = (t[pairs[:, 0]][:, :, None] == t[pairs[:, 1]][:, None, :]).any(axis=2).sum(axis=1)
-    row["pymeshlab"] = _stats(peer)
+    row["pymeshlab"] = ms_stats(peer)
     row["pymeshlab_faces"] = int(len(theirs))
     row["pymeshlab_same_faces"] = bool(np.array_equal(np.unique(pairs[shared <= 1]), theirs))
     row["speedup_frame_vs_pymeshlab"] = row["pymeshlab"]["ms_min"] / row["frame"]["ms_median"]
@@ -144,8 +140,8 @@ def cloth(k: int, kind: str, args, device) -> dict:
     row = {"sheets": k, "kind": kind, "triangles": int(scene.num_triangles), "leaf_size": args.leaf_size}
     both = wc.CollisionPipeline(scene, self_intersections=True, leaf_size=args.leaf_size)
     pairwise = wc.CollisionPipeline(scene, leaf_size=args.leaf_size)
-    row["self_plus_pairwise"] = _stats(_frames(both, args, device))
-    row["pairwise"] = _stats(_frames(pairwise, args, device))
+    row["self_plus_pairwise"] = ms_stats(_frames(both, args, device))
+    row["pairwise"] = ms_stats(_frames(pairwise, args, device))
     res = both.detect()
     row["self_pairs"] = int(len(res.self_pairs))
     row["self_colliding"] = int(res.self_colliding.sum())

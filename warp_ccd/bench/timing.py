@@ -23,7 +23,12 @@ import warp as wp
 from ..stages.buffers import CounterRead
 from ..stages.frame import MODES, CountedFrame
 
-__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "detect_frames", "run_stages", "synced_ms"]
+__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "detect_frames", "ms_stats", "run_stages", "synced_ms"]
+
+
+def ms_stats(values) -> dict:
+    """``{"ms_min", "ms_median"}`` of timings in ms (a benchmark row's numbers)."""
+    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
 
 
 def synced_ms(fn, device) -> float:
