@@ -24,6 +24,8 @@ import warp_ccd as wc
 from warp_ccd.scene import figure_eight_torus, icosphere, sheet
 from warp_ccd.stages.self_intersection import weld_vertices
 
+from test_clearance import asset_meshes
+
 TOL = wc.TOLERANCE
 
 
@@ -106,20 +108,6 @@ def test_far_from_origin_and_scaled(device):
             assert got.tolist() == expected, (name, scale, shift)
 
 
-def _newton_meshes(name: str, device=None) -> list:
-    import importlib.util
-    import os
-
-    spec = importlib.util.find_spec("newton")
-    if spec is None:
-        pytest.skip("newton is not installed (its example assets hold the bunny and the CAD parts)")
-    from warp_ccd.usd import scene_from_usd
-
-    path = os.path.join(os.path.dirname(spec.origin), "examples", "assets", name)
-    scene = scene_from_usd(path, device=device, precision="float64")
-    return [(v.astype(np.float64), t) for v, t in scene.world_meshes()]
-
-
 def test_closed_meshes_without_defects(device):
     """Icospheres, a copy with every triangle's vertices split (as STL stores them), the polyhedra: 0."""
     meshes = [icosphere(level) for level in (0, 2, 4)] + [wc.scene.shape(n) for n in wc.scene.SHAPES]
@@ -140,7 +128,7 @@ def test_real_meshes(device):
     found = {}
     for name in ("bunny.usd", "bear.usd", "unisex_shirt.usd", "rj45_plug.usd", "crazyflie.usd"):
         found[name] = 0
-        for v, t in _newton_meshes(name, device):
+        for v, t in asset_meshes(name, device):
             got = wc.self_intersections(v, t, device=device, precision="float64")
             assert got.tolist() == _reference(v, t).tolist(), name
             found[name] += len(got)
