@@ -26,6 +26,7 @@ The API in levels: this module holds what a user of :func:`collide`, :class:`Sce
 """
 
 import importlib
+from typing import Any
 
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
 from ._deprecated import install_moved_modules, module_aliases, warn_renamed
@@ -91,13 +92,13 @@ install_moved_modules({f"warp_ccd.{old}": tuple(f"warp_ccd.{h}" for h in homes)
                        for old, homes in _MOVED_MODULES.items()})
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name in _MOVED_MODULES:  # wc.narrow_phase, as the package's attribute it was
         return importlib.import_module(f"warp_ccd.{name}")
     return _moved_name(name)
 
 
-def _scene_from_usd(cls, *args, **kwargs):
+def _scene_from_usd(cls: type[Scene], *args: Any, **kwargs: Any) -> Scene:
     """Deprecated: :func:`warp_ccd.usd.scene_from_usd` (the scene room does not read USD)."""
     warn_renamed("Scene.from_usd", "warp_ccd.usd.scene_from_usd", stacklevel=3)
     return usd.scene_from_usd(*args, **kwargs)

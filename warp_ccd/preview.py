@@ -16,11 +16,19 @@ file renamed into place when complete).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 import warp as wp
 
+from ._typing import ArrayLike, DeviceLike, PathLike
 from .options import integer_option, number_option
 from .output import PendingFile, check_output_path
+
+if TYPE_CHECKING:
+    from .result import CollisionResult
+    from .scene.scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -100,7 +108,7 @@ def _camera_axes(view_direction) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return forward, right, np.cross(right, forward)
 
 
-def mesh_triangle_indices(scene) -> tuple[np.ndarray, np.ndarray]:
+def mesh_triangle_indices(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """Flat triangle list over all objects of a scene, into its concatenated world vertices.
 
     Args:
@@ -127,7 +135,7 @@ def mesh_triangle_indices(scene) -> tuple[np.ndarray, np.ndarray]:
     return tri.reshape(-1).astype(np.int32), triangle_object.astype(np.int32)
 
 
-def validate_preview_path(path) -> tuple[str, str]:
+def validate_preview_path(path: PathLike) -> tuple[str, str]:
     """Checks that a preview image can be written at ``path``, without writing it.
 
     Returns:
@@ -149,7 +157,8 @@ class PreviewRenderer:
 
     Args:
         scene: a :class:`~warp_ccd.scene.scene.Scene`; its world vertices are read at each :meth:`render`.
-        width, height: image size in pixels.
+        width: image width in pixels.
+        height: image height in pixels.
         fov: vertical field of view in degrees.
         view_direction: ``(3,)`` direction from the scene centre towards the camera.
         margin: room left around the first frame's vertices (1: tight), for the motion to come.
@@ -161,8 +170,9 @@ class PreviewRenderer:
     background_top = (0.93, 0.95, 0.98)
     background_bottom = (0.62, 0.67, 0.75)
 
-    def __init__(self, scene, width: int = 640, height: int = 480, *, fov: float = 40.0,
-                 view_direction=(1.0, 0.75, 1.35), margin: float = 1.1, device=None):
+    def __init__(self, scene: Scene, width: int = 640, height: int = 480, *, fov: float = 40.0,
+                 view_direction: ArrayLike = (1.0, 0.75, 1.35), margin: float = 1.1,
+                 device: DeviceLike = None) -> None:
         integer_option("width", width, low=1)
         integer_option("height", height, low=1)
         number_option("fov (degrees)", fov, low=1.0, high=170.0, high_open=True)
@@ -200,7 +210,7 @@ class PreviewRenderer:
         radius = float(np.sqrt(np.max(np.sum(rel**2, axis=1))))
         self.max_distance = distance + 2.0 * float(margin) * radius + 1.0
 
-    def render(self, colliding=None) -> np.ndarray:
+    def render(self, colliding: ArrayLike | CollisionResult | None = None) -> np.ndarray:
         """Ray-casts the scene's current world vertices.
 
         Args:
@@ -265,13 +275,15 @@ class PreviewRenderer:
         return (np.clip(img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-def render_frame(scene, colliding=None, width: int = 640, height: int = 480, device=None) -> np.ndarray:
+def render_frame(scene: Scene, colliding: ArrayLike | CollisionResult | None = None, width: int = 640,
+                 height: int = 480, device: DeviceLike = None) -> np.ndarray:
     """Renders the scene's current frame (a one-off :class:`PreviewRenderer`).
 
     Args:
         scene: a :class:`~warp_ccd.scene.scene.Scene`.
         colliding: ``(N,)`` bool flags or a :class:`~warp_ccd.pipeline.CollisionResult`; None: none.
-        width, height: image size in pixels.
+        width: image width in pixels.
+        height: image height in pixels.
         device: Warp device of the ray casting (default: the scene's).
 
     Returns:
@@ -280,7 +292,7 @@ def render_frame(scene, colliding=None, width: int = 640, height: int = 480, dev
     return PreviewRenderer(scene, width, height, device=device).render(colliding)
 
 
-def save_preview(frames, path, *, fps: float = 30.0) -> str:
+def save_preview(frames: np.ndarray | Sequence[np.ndarray], path: PathLike, *, fps: float = 30.0) -> str:
     """Writes one frame as PNG or several as an animated GIF (looping), through a temporary file
     moved into place (:func:`prepare_preview`).
 
@@ -299,7 +311,8 @@ def save_preview(frames, path, *, fps: float = 30.0) -> str:
     return prepare_preview(frames, path, fps=fps).commit()
 
 
-def prepare_preview(frames, path, *, fps: float = 30.0) -> PendingFile:
+def prepare_preview(frames: np.ndarray | Sequence[np.ndarray], path: PathLike, *,
+                    fps: float = 30.0) -> PendingFile:
     """Writes the picture of :func:`save_preview` to a temporary file beside ``path``, not yet in place.
 
     Args:

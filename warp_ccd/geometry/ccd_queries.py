@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._typing import ArrayLike, DeviceLike
 from ..options import integer_option, number_option
 from .ccd import (
     CCD_KINDS,
@@ -138,15 +139,15 @@ def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tole
               outputs=[toi], device=device)
 
 
-def ccd_queries(kind: str, x0, x1, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
-                max_iterations: int = CCD_MAX_ITERATIONS, device=None) -> tuple[np.ndarray, np.ndarray]:
+def ccd_queries(kind: str, x0: ArrayLike, x1: ArrayLike, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
+                max_iterations: int = CCD_MAX_ITERATIONS, device: DeviceLike = None) -> tuple[np.ndarray, np.ndarray]:
     """Continuous collision of many moving vertex-face or edge-edge pairs.
 
     Args:
         kind: ``"vertex_face"`` (rows p, f0, f1, f2) or ``"edge_edge"`` (rows ea0, ea1, eb0, eb1).
-        x0, x1: ``(n, 4, 3)`` float32 or float64 points at ``t = 0`` and ``t = 1`` (numpy, or Warp
-            arrays of that shape or ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d``); every vertex moves
-            linearly between them.
+        x0: ``(n, 4, 3)`` float32 or float64 points at ``t = 0`` (numpy, or Warp arrays of that shape
+            or ``(n, 4)`` ``wp.vec3`` / ``wp.vec3d``); every vertex moves linearly to its point of ``x1``.
+        x1: the same points at ``t = 1``, in the same form as ``x0``.
         min_distance: minimum separation (>= 0, same units; infinity norm).
         tolerance: distance tolerance of a query (> 0; a false positive comes within about it).
         max_iterations: most boxes one query examines (>= 1; past it the answer is conservative).

@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from .._deprecated import renamed_arguments
+from .._typing import ArrayLike, DeviceLike
 from ..geometry.precision import precision_overloads, precision_types
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -96,7 +97,8 @@ class EllipseMotion:
         precision: ``"float32"`` or ``"float64"``: type of the centres and of the poses written.
     """
 
-    def __init__(self, centre, axes, orbit, tilt, spin_axis, spin, base, device=None, precision: str = "float32"):
+    def __init__(self, centre: ArrayLike, axes: ArrayLike, orbit: ArrayLike, tilt: ArrayLike, spin_axis: ArrayLike,
+                 spin: ArrayLike, base: ArrayLike, device: DeviceLike = None, precision: str = "float32") -> None:
         self.scalar_type, vec, _, _ = precision_types(precision)
         self.device = wp.get_device(device)
         self.num_objects = len(centre)
@@ -118,7 +120,7 @@ class EllipseMotion:
         radius: np.ndarray,
         *,
         orbit_scale: float = 2.0,
-        device=None,
+        device: DeviceLike = None,
         precision: str = "float32",
     ) -> "EllipseMotion":
         """Random ellipses around given centres.
@@ -141,7 +143,8 @@ class EllipseMotion:
             precision=precision,
         )
 
-    def launch(self, time, object_pose: wp.array = None, step: float = 0.0, **renamed) -> None:
+    def launch(self, time: float | wp.array, object_pose: wp.array | None = None, step: float = 0.0,
+               **renamed: Any) -> None:
         """Writes the poses of all objects at ``time + step`` (seconds) into ``object_pose`` ``(N,)``.
 
         Args:

@@ -13,8 +13,11 @@ malformed data reach a kernel.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
+from .._typing import ArrayLike
 from ..options import integer_option
 
 __all__ = [
@@ -227,7 +230,8 @@ def shape(name: str) -> tuple[np.ndarray, np.ndarray]:
     raise ValueError(f"unknown shape {name!r}; known shapes: {known}")
 
 
-def validate_mesh(vertices, triangles, name: str = "mesh", dtype=np.float32) -> tuple[np.ndarray, np.ndarray]:
+def validate_mesh(vertices: ArrayLike, triangles: ArrayLike, name: str = "mesh",
+                  dtype: type[np.floating] = np.float32) -> tuple[np.ndarray, np.ndarray]:
     """Checks one triangle mesh and returns it as contiguous ``dtype`` / int32 arrays.
 
     Args:
@@ -292,7 +296,7 @@ class MeshSet:
     """
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
-                 triangle_start: np.ndarray):
+                 triangle_start: np.ndarray) -> None:
         self.vertices = vertices
         self.triangles = triangles
         self.vertex_start = vertex_start
@@ -314,7 +318,8 @@ class MeshSet:
         return list(zip(vs, ts))
 
 
-def validate_meshes(meshes, labels=None, kind: str = "mesh", dtype=np.float32) -> MeshSet:
+def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: ArrayLike | None = None, kind: str = "mesh",
+                    dtype: type[np.floating] = np.float32) -> MeshSet:
     """Checks many triangle meshes at once (the checks of :func:`validate_mesh`, vectorised over
     their concatenation) and packs them.
 

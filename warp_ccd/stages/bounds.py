@@ -13,8 +13,10 @@ from typing import Any
 
 import warp as wp
 
+from .._typing import DeviceLike
 from ..geometry.box import box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
+from ..scene.scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -104,8 +106,8 @@ class ObjectBounds:
         box_pad: padding in scene units of every box (half a clearance: :func:`pad_boxes`).
     """
 
-    def __init__(self, num_objects: int, *, device=None, margin_rel: float = 0.0, pad_abs: float = 0.0,
-                 box_pad: float = 0.0):
+    def __init__(self, num_objects: int, *, device: DeviceLike = None, margin_rel: float = 0.0, pad_abs: float = 0.0,
+                 box_pad: float = 0.0) -> None:
         self.device = wp.get_device(device)
         self.margin_rel = float(margin_rel)
         self.pad_abs = float(pad_abs)
@@ -118,7 +120,7 @@ class ObjectBounds:
         """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
         return []
 
-    def refit(self, scene, world_vertex_start: wp.array | None = None) -> None:
+    def refit(self, scene: Scene, world_vertex_start: wp.array | None = None) -> None:
         """Computes the boxes from ``scene.world_vertex`` and ``scene.object_vertex_start``; with
         ``world_vertex_start`` (``(V,)``, the scene's vector type), the boxes swept over the linear
         motion from it to ``scene.world_vertex``, padded by :attr:`pad_abs` too."""

@@ -57,7 +57,7 @@ from .._deprecated import renamed_arguments, renamed_attribute
 from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..options import integer_option, is_integer
-from ..scene.scene import MeshTopology
+from ..scene.scene import MeshTopology, Scene
 from .bounds import pad_boxes
 from .buffers import packed_upload, upper_bound
 from .bvh_build import CUT_TRIANGLES, TreeBuild
@@ -562,10 +562,10 @@ class SceneBVH:
         world_trees, pad_abs, box_pad: as above.
     """
 
-    def __init__(self, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
+    def __init__(self, scene: Scene, *, leaf_size: int = 1, margin_rel: float = 0.0, object_refit_max_nodes: int = 255,
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
                  small_subtree: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
-                 box_pad: float = 0.0, **renamed):
+                 box_pad: float = 0.0, **renamed: Any) -> None:
         if renamed:  # instance_refit_max_nodes, as it was called until 0.1
             object_refit_max_nodes = renamed_arguments("SceneBVH", renamed, {
                 "instance_refit_max_nodes": "object_refit_max_nodes"})["object_refit_max_nodes"]
@@ -662,7 +662,7 @@ class SceneBVH:
         self.upper = wp.zeros(n, dtype=wp.vec3, device=d)
         self._refit_shapes(scene)
 
-    def _refit_shapes(self, scene) -> None:
+    def _refit_shapes(self, scene: Scene) -> None:
         """The shape-space boxes of the shapes of rigid objects, from the shapes' own vertices."""
         self._shape_plan.launch(self._shape_topology, scene.shape_vertex, self._shape_tree,
                                 scene.scalar_type(self.margin_rel), scene.precision, self._shape_lower,
@@ -672,7 +672,7 @@ class SceneBVH:
         """Shape ``s``'s tree as host arrays (reads the device; for tests and inspection)."""
         return self.build.shape_tree(s)
 
-    def rebuild(self, scene) -> None:
+    def rebuild(self, scene: Scene) -> None:
         """Rebuilds the triangle order of every shape of a deforming object from that object's world
         vertices (for deforming meshes whose refit trees have loosened; a shape shared with rigid
         objects gets its shape-space boxes again); the layout, and so every array and captured
@@ -685,12 +685,12 @@ class SceneBVH:
         """Buffers with counters that :meth:`refit` writes: none (its arrays have fixed sizes)."""
         return []
 
-    def sweep_args(self, scene, world_vertex_start: wp.array | None, pad_extra: float = 0.0) -> list:
+    def sweep_args(self, scene: Scene, world_vertex_start: wp.array | None, pad_extra: float = 0.0) -> list:
         """:func:`leaf_box_args` of the scene's world vertices and this tree's :attr:`pad_abs` plus
         ``pad_extra`` (scene units: half a clearance, for the triangle boxes of whole-object pairs)."""
         return leaf_box_args(scene.world_vertex, world_vertex_start, self.pad_abs + pad_extra)
 
-    def refit(self, scene, world_vertex_start: wp.array | None = None, object_boxes: bool = True) -> None:
+    def refit(self, scene: Scene, world_vertex_start: wp.array | None = None, object_boxes: bool = True) -> None:
         """The frame's boxes: the deforming objects' trees refit from ``scene.world_vertex`` (their
         roots are their object boxes), then the rigid objects' boxes (see ``object_bounds``).
 

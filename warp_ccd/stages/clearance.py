@@ -63,12 +63,13 @@ from typing import Any
 
 import warp as wp
 
+from .._typing import DeviceLike
 from ..geometry.distance import DISTANCE_ERROR_ULPS, centred_features
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_edge, _unit_normal
 from ..geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_segment
 from ..options import number_option
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from .buffers import GrowableBuffer, reserve_slot, used_count
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
@@ -411,7 +412,7 @@ class ClearancePhase:
     """
 
     def __init__(self, num_objects: int, clearance: float, *, tolerance: float = TOLERANCE, capacity: int = 256,
-                 device=None):
+                 device: DeviceLike = None) -> None:
         self.clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX, low_open=True)
         self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
         self.device = wp.get_device(device)
@@ -426,7 +427,7 @@ class ClearancePhase:
         """The buffers with counters that :meth:`launch` resets and writes: :attr:`near`."""
         return [self.near]
 
-    def _scratch(self, scene, pairs: GrowableBuffer, candidates: GrowableBuffer) -> None:
+    def _scratch(self, scene: Scene, pairs: GrowableBuffer, candidates: GrowableBuffer) -> None:
         """Allocates what follows the capacities of the rows, the pairs and the candidates."""
         d = self.device
         scalar, vec = scene.scalar_type, scene.vec3_type
@@ -454,7 +455,7 @@ class ClearancePhase:
             self.candidate_distance = wp.zeros(candidates.capacity, dtype=scalar, device=d)
             self.candidate_slot = wp.zeros(candidates.capacity, dtype=wp.int32, device=d)
 
-    def launch(self, scene, pairs: GrowableBuffer, candidates: GrowableBuffer, hits: GrowableBuffer,
+    def launch(self, scene: Scene, pairs: GrowableBuffer, candidates: GrowableBuffer, hits: GrowableBuffer,
                object_lower: wp.array, object_upper: wp.array, *, reset_counters: bool = True) -> None:
         """Writes the rows of the object ``pairs`` of ``scene`` within the clearance (host reads nothing).
 
@@ -463,7 +464,8 @@ class ClearancePhase:
             pairs: the broad phase's object pairs (boxes padded by half the clearance).
             candidates: the mid phase's candidate triangle pairs (its tests padded by the clearance).
             hits: the narrow phase's intersecting triangle pairs.
-            object_lower, object_upper: the ``(N,)`` object boxes (their centres: a fallback direction).
+            object_lower: the ``(N,)`` lower corners of the object boxes (their centres: a fallback direction).
+            object_upper: the ``(N,)`` upper corners of the object boxes.
             reset_counters: zero :attr:`near`'s counter first; False when the caller has.
         """
         d = self.device

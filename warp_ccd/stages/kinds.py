@@ -33,8 +33,10 @@ from typing import Protocol, runtime_checkable
 
 import warp as wp
 
+from .._typing import DeviceLike
 from ..geometry.triangle import TOLERANCE
 from ..options import integer_option
+from ..scene.scene import Scene
 from .bounds import ObjectBounds
 from .buffers import GrowableBuffer
 from .bvh import LEAF_SIZE_MAX, SceneBVH
@@ -64,7 +66,7 @@ class BoundsStage(Protocol):
     @property
     def counters(self) -> list[GrowableBuffer]: ...
 
-    def refit(self, scene) -> None:
+    def refit(self, scene: Scene) -> None:
         """Writes :attr:`lower` and :attr:`upper` from ``scene``'s world vertices (host reads nothing).
         A continuous frame calls ``refit(scene, world_vertex_start)``: swept boxes, over the motion
         from those vertices to the scene's."""
@@ -100,7 +102,7 @@ class MidPhaseStage(Protocol):
     @property
     def counters(self) -> list[GrowableBuffer]: ...
 
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
+    def launch(self, scene: Scene, pairs: GrowableBuffer, *, reset_counters: bool = True) -> None:
         """Writes the candidates of the object ``pairs`` of ``scene`` (``reset_counters=False``:
         the caller has zeroed :attr:`counters`; a continuous frame passes ``world_vertex_start`` too)."""
 
@@ -128,7 +130,7 @@ class NarrowPhaseStage(Protocol):
     @property
     def counters(self) -> list[GrowableBuffer]: ...
 
-    def launch(self, scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
+    def launch(self, scene: Scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
                object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
                reset_counters: bool = True) -> None:
         """Tests the ``candidates`` of ``scene``, writing :attr:`hits` and :attr:`object_colliding`
@@ -136,10 +138,10 @@ class NarrowPhaseStage(Protocol):
         boxes are the broad phase's input and output, needed with containment."""
 
 
-def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float = 0.0, cut_depth: int = 3,
+def make_mid_phase(method: str, scene: Scene, *, leaf_size: int = 1, margin_rel: float = 0.0, cut_depth: int = 3,
                    separating_axes: int = 6, object_bounds: str | int = "auto", candidate_capacity: int | None = None,
                    front_capacity: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
-                   clearance: float = 0.0, device=None) -> tuple[BoundsStage, MidPhaseStage]:
+                   clearance: float = 0.0, device: DeviceLike = None) -> tuple[BoundsStage, MidPhaseStage]:
     """The mid phase of a method name, with the bounds stage it reads.
 
     Args:
@@ -150,8 +152,10 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
         scene: the :class:`~warp_ccd.scene.scene.Scene`.
         leaf_size: triangles per tree leaf, in ``[1, LEAF_SIZE_MAX]`` (checked with either method).
         margin_rel: box padding relative to the boxes' size (the narrow phase's tolerance).
-        cut_depth, separating_axes, object_bounds: options of the trees and their traversal (``bvh``;
-            see :class:`~warp_ccd.stages.bvh.SceneBVH`, :class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`).
+        cut_depth: least level of each tree's cut (``bvh``; see :class:`~warp_ccd.stages.bvh.SceneBVH`).
+        separating_axes: axes of the traversal's box test (``bvh``; see
+            :class:`~warp_ccd.stages.mid_phase.MidPhaseBVH`).
+        object_bounds: how a rigid object's box is made (``bvh``; see :class:`~warp_ccd.stages.bvh.SceneBVH`).
         candidate_capacity: initial capacity of the candidates (>= 1; default 16 an object with
             ``bvh``, 64 with ``all_pairs``, at least 1,024).
         front_capacity: initial capacity of the traversal's front (>= 1; ``bvh``; default four per object).
@@ -184,7 +188,7 @@ def make_mid_phase(method: str, scene, *, leaf_size: int = 1, margin_rel: float 
 
 def make_narrow_phase(method: str, num_objects: int, *, tolerance: float = TOLERANCE,
                       hit_capacity: int | None = None, segments: bool = False, containment: bool = False,
-                      device=None) -> NarrowPhaseStage:
+                      device: DeviceLike = None) -> NarrowPhaseStage:
     """The narrow phase of a method name: a :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
 
     Args:
@@ -193,7 +197,9 @@ def make_narrow_phase(method: str, num_objects: int, *, tolerance: float = TOLER
         num_objects: ``N``.
         tolerance: relative tolerance of touching contacts, in ``[0, 0.1)``.
         hit_capacity: initial capacity of the hits (>= 1; default four an object, at least 256).
-        segments, containment, device: as for :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
+        segments: as for :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
+        containment: as for :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
+        device: as for :class:`~warp_ccd.stages.narrow_phase.NarrowPhase`.
 
     Raises:
         ValueError: an unknown method (the message lists the known ones), or a bad option (naming it;

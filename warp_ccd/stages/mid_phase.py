@@ -44,11 +44,12 @@ import numpy as np
 import warp as wp
 
 from .._deprecated import module_aliases
+from .._typing import DeviceLike
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _max_abs
 from ..options import integer_option, number_option
-from ..scene.scene import MeshTopology
+from ..scene.scene import MeshTopology, Scene
 from .buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, used_count
 from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix, box_radius, leaf_box_at, swept_arg_types
 
@@ -589,7 +590,7 @@ class MidPhase:
         whole_lanes: threads per whole-object pair (default :data:`WHOLE_LANES`; a power of two up to 256).
     """
 
-    def __init__(self, *, capacity: int = 4096, device=None):
+    def __init__(self, *, capacity: int = 4096, device: DeviceLike = None) -> None:
         self.device = wp.get_device(device)
         self.candidates = GrowableBuffer(wp.vec4i, capacity, self.device, "candidate triangle pairs")
         self.whole_triangles_max = 0
@@ -652,7 +653,7 @@ class MidPhaseBVH(MidPhase):
 
     def __init__(self, bvh: SceneBVH, *, capacity: int = 4096, front_capacity: int | None = None,
                  separating_axes: int = 6, whole_triangles_max: int | None = None, clearance: float = 0.0,
-                 device=None):
+                 device: DeviceLike = None) -> None:
         super().__init__(capacity=capacity, device=device)
         self.bvh = bvh
         self.clearance = number_option("clearance", clearance, low=0.0)
@@ -676,7 +677,7 @@ class MidPhaseBVH(MidPhase):
         reads after it: the front (its largest level), then the candidates."""
         return [self.front, self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
+    def launch(self, scene: Scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
                world_vertex_start: wp.array | None = None) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates`.
 

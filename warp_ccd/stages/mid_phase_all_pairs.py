@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from .._typing import DeviceLike
+from ..scene.scene import Scene
 from .buffers import GrowableBuffer, upper_bound, used_count
 from .mid_phase import MidPhase
 
@@ -72,7 +74,7 @@ class MidPhaseAllPairs(MidPhase):
         device: Warp device.
     """
 
-    def __init__(self, *, capacity: int = 4096, device=None):
+    def __init__(self, *, capacity: int = 4096, device: DeviceLike = None) -> None:
         super().__init__(capacity=capacity, device=device)
         self._work = None
 
@@ -82,7 +84,7 @@ class MidPhaseAllPairs(MidPhase):
         by the write kernel), whose counters the caller reads after it."""
         return [self.candidates]
 
-    def launch(self, scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
+    def launch(self, scene: Scene, pairs: GrowableBuffer, *, reset_counters: bool = True,
                world_vertex_start: wp.array | None = None) -> None:
         """Writes candidates of the object ``pairs`` of ``scene`` into :attr:`candidates` (its
         counter is set by the write kernel, so ``reset_counters`` changes nothing, nor ``world_vertex_start``)."""

@@ -33,6 +33,7 @@ from typing import Any
 
 import warp as wp
 
+from .._typing import DeviceLike
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _edges_near_face, _unit_normal
 from ..geometry.triangle import (
@@ -51,7 +52,7 @@ from ..geometry.triangle import (
     tri_tri_segment,
 )
 from ..options import number_option
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from .buffers import GrowableBuffer, reserve_slot, used_count
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
@@ -371,7 +372,8 @@ class NarrowPhase:
     """
 
     def __init__(self, num_objects: int, *, method: str = "moller", tolerance: float = TOLERANCE,
-                 capacity: int = 1024, segments: bool = False, containment: bool = False, device=None):
+                 capacity: int = 1024, segments: bool = False, containment: bool = False,
+                 device: DeviceLike = None) -> None:
         if method not in NARROW_METHODS:
             raise ValueError(f"narrow_phase must be one of {sorted(NARROW_METHODS)}, got {method!r}")
         number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
@@ -396,7 +398,7 @@ class NarrowPhase:
         their counters after it."""
         return [b for b in (self.hits, self.touch, self.rare, self.contained) if b is not None]
 
-    def launch(self, scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
+    def launch(self, scene: Scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
                object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
                reset_counters: bool = True) -> None:
         """Tests the candidates of ``scene``: resets and writes the hits and the flags, and the
@@ -405,8 +407,9 @@ class NarrowPhase:
         Args:
             scene: the :class:`~warp_ccd.scene.scene.Scene` (its world vertices now).
             candidates: ``wp.vec4i`` candidate triangle pairs.
-            object_pairs, object_lower, object_upper: the broad phase's object pairs and the
-                ``(N,)`` object boxes it saw (needed with ``containment``).
+            object_pairs: the broad phase's object pairs (needed with ``containment``).
+            object_lower: the ``(N,)`` lower corners of the object boxes it saw (needed with ``containment``).
+            object_upper: the ``(N,)`` upper corners of those boxes (needed with ``containment``).
             reset_counters: zero the counters of :attr:`counters` first; False when the caller
                 has zeroed them already (a frame zeroes all its counters with one memset).
         """

@@ -38,12 +38,13 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._typing import DeviceLike
 from ..geometry.distance import DISTANCE_ERROR_ULPS, feature_distance, tri_tri_distance
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _unit_normal
 from ..geometry.triangle import TOLERANCE
 from ..options import number_option
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from .buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
 from .bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix
 from .mid_phase import _PAIR, EXPAND_THREADS_PER_SM, TreePair, _is_leaf
@@ -462,7 +463,8 @@ class TreeDistance:
         bvh: the scene's :class:`~warp_ccd.stages.bvh.SceneBVH` (refit before each launch).
         tolerance: relative tolerance of the triangle tests (intersecting or touching triangles are
             at distance 0; which triangles are degenerate).
-        front_capacity, listed_capacity: initial capacities (they grow).
+        front_capacity: initial capacity of :attr:`front` (it grows).
+        listed_capacity: initial capacity of :attr:`listed` (it grows).
         device: Warp device.
 
     Attributes:
@@ -476,7 +478,7 @@ class TreeDistance:
     """
 
     def __init__(self, bvh: SceneBVH, *, tolerance: float = TOLERANCE, front_capacity: int = 1024,
-                 listed_capacity: int = 1024, device=None):
+                 listed_capacity: int = 1024, device: DeviceLike = None) -> None:
         self.bvh = bvh
         self.device = wp.get_device(device)
         self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
@@ -495,7 +497,7 @@ class TreeDistance:
         """The buffers with counters that :meth:`launch` writes: the front (its largest level), the list."""
         return [self.front, self.listed]
 
-    def _scratch(self, scene, pairs: GrowableBuffer) -> None:
+    def _scratch(self, scene: Scene, pairs: GrowableBuffer) -> None:
         d = self.device
         if self._pairs_for != (pairs.capacity, scene.precision):
             self._pairs_for = (pairs.capacity, scene.precision)
@@ -512,7 +514,7 @@ class TreeDistance:
             self._listed_for = (self.listed.capacity, scene.precision)
             self.listed_distance = wp.zeros(self.listed.capacity, dtype=scene.scalar_type, device=d)
 
-    def launch(self, scene, pairs: GrowableBuffer) -> None:
+    def launch(self, scene: Scene, pairs: GrowableBuffer) -> None:
         """The least distance of every object pair ``(a, b)`` of ``pairs`` (``a != b``), into
         :attr:`distance`, :attr:`point`, :attr:`normal`, :attr:`triangle` (host reads nothing; the
         caller resets and reads :attr:`counters` and runs again when a buffer grew)."""

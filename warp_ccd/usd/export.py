@@ -37,12 +37,19 @@ copy of ``16 N`` points. A deforming scene costs a Python loop over its objects 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import warp as wp
 
+from .._typing import ArrayLike, PathLike
 from ..geometry.box import vertex_bounds
 from ..options import integer_option, number_option
 from ..output import PendingFile, check_output_path
+
+if TYPE_CHECKING:
+    from ..result import CollisionResult
+    from ..scene.scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -173,8 +180,8 @@ class UsdAnimationWriter:
         ValueError: bad path (see :func:`validate_stage_path`) or bad option.
     """
 
-    def __init__(self, path, scene, *, fps: float = 60.0, aabb: bool = False, segments: bool = False,
-                 up_axis: str = "Y", meters_per_unit: float = 1.0):
+    def __init__(self, path: PathLike, scene: Scene, *, fps: float = 60.0, aabb: bool = False, segments: bool = False,
+                 up_axis: str = "Y", meters_per_unit: float = 1.0) -> None:
         self.path, self._ext = validate_stage_path(path)
         number_option("fps", fps, low=0.0, low_open=True)
         if up_axis not in ("Y", "Z"):
@@ -304,7 +311,7 @@ class UsdAnimationWriter:
             raise ValueError(f"colliding: expected shape ({self.num_objects},), got {flags.shape}")
         return flags.astype(bool)
 
-    def add_frame(self, frame_index: int, result=None) -> None:
+    def add_frame(self, frame_index: int, result: CollisionResult | ArrayLike | None = None) -> None:
         """Records the scene's current poses and the frame's collision flags at time code ``frame_index``.
 
         Args:

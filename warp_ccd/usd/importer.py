@@ -58,10 +58,13 @@ import os
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._typing import DeviceLike, PathLike
 from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
 from ..options import integer_option
 from ..scene.scene import Scene
@@ -69,6 +72,9 @@ from ..scene.shapes import MeshSet
 from .meshes import MeshData, read_mesh
 from .poses import finite_matrix_poses, matrix_poses, similarity_split
 from .stage import MAX_FRAMES, open_stage
+
+if TYPE_CHECKING:
+    from pxr import Usd
 
 __all__ = ["PARALLEL_LOOKUPS", "UsdMeshImport", "scene_from_usd"]
 
@@ -166,9 +172,10 @@ class UsdMeshImport:
             at the triangles' size.
     """
 
-    def __init__(self, stage_or_path, *, prims=None, times=None, include_invisible: bool = False,
-                 include_purposes=(), device=None, precision: str = "float32", workers: int | None = None,
-                 progress: bool = False):
+    def __init__(self, stage_or_path: Usd.Stage | PathLike, *, prims: str | Sequence[str] | None = None,
+                 times: Sequence[float] | np.ndarray | None = None, include_invisible: bool = False,
+                 include_purposes: Sequence[str] = (), device: DeviceLike = None, precision: str = "float32",
+                 workers: int | None = None, progress: bool = False) -> None:
         from pxr import Usd
 
         self._start = time.perf_counter()
@@ -679,8 +686,9 @@ class UsdMeshImport:
         return self.triangle_face[self.scene.shape_triangle_start_np[s] + triangles]
 
 
-def scene_from_usd(stage_or_path, *, prims=None, time=None, device=None, precision: str = "float32",
-                   **options) -> Scene:
+def scene_from_usd(stage_or_path: Usd.Stage | PathLike, *, prims: str | Sequence[str] | None = None,
+                   time: float | None = None, device: DeviceLike = None, precision: str = "float32",
+                   **options: Any) -> Scene:
     """A scene of the meshes of a USD stage, at one time code (see :class:`UsdMeshImport`).
 
     Every ``UsdGeom.Mesh`` under ``prims`` (instance proxies and PointInstancer instances

@@ -11,8 +11,15 @@ check. ``pxr`` is imported inside the functions.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .._typing import PathLike
+
+if TYPE_CHECKING:
+    from pxr import Usd
 
 __all__ = ["MAX_FRAMES", "layer_files", "missing_layers", "open_stage", "require_layers", "stage_time_codes"]
 
@@ -20,7 +27,7 @@ MAX_FRAMES = 10**6
 """The most time codes one read takes (every one is looked up, and its poses kept, up front)."""
 
 
-def open_stage(stage_or_path):
+def open_stage(stage_or_path: Usd.Stage | PathLike) -> Usd.Stage:
     """A ``Usd.Stage`` from a stage or a file path.
 
     Raises:
@@ -135,7 +142,7 @@ def layer_files(stage) -> list[str]:
     return sorted(found)
 
 
-def stage_time_codes(stage, frames=None) -> np.ndarray:
+def stage_time_codes(stage: Usd.Stage, frames: float | Sequence[float] | slice | None = None) -> np.ndarray:
     """The time codes to check.
 
     Args:
