@@ -19,18 +19,29 @@ warning.
 """
 
 from .._deprecated import module_aliases
-from .check import CheckReport, FrameContacts, check_usd, write_overlay
+from .check import (
+    REPORT_SCHEMA_PATH,
+    SCHEMA_VERSION,
+    CheckReport,
+    FrameContacts,
+    check_usd,
+    report_schema,
+    write_overlay,
+)
 from .export import UsdAnimationWriter
 from .importer import UsdMeshImport, scene_from_usd
 from .stage import open_stage, stage_time_codes
 
 __all__ = [
+    "REPORT_SCHEMA_PATH",
+    "SCHEMA_VERSION",
     "CheckReport",
     "FrameContacts",
     "UsdAnimationWriter",
     "UsdMeshImport",
     "check_usd",
     "open_stage",
+    "report_schema",
     "scene_from_usd",
     "stage_time_codes",
     "write_overlay",

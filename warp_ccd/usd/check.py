@@ -39,6 +39,20 @@ consecutive time codes the prim pairs that touch at some time in it (:attr:`Chec
 and marks *tunnelling* those that neither end frame shows intersecting. In the overlay a prim that
 tunnels in the interval starting at a time code is orange there (red still wins: it penetrates), and
 its ``warpCcd:tunnelling`` attribute is true there.
+
+**Duplicates** (``duplicates=True``, :mod:`~warp_ccd.usd.duplicates`): a pair the detection reports whose
+world-space triangle sets coincide (the same geometry placed twice at the same place, a common fault of CAD
+exports) is a *duplicate* at that frame (:attr:`FrameContacts.duplicates`), not a touching or penetrating
+pair: its rows leave the frame's collisions (and it is no soft clash). In the overlay a duplicate prim is
+blue at that time code (red, orange and magenta win). A finding after self-intersections.
+
+**The JSON report** (:meth:`CheckReport.to_json`) carries ``"schema_version"`` (:data:`SCHEMA_VERSION`) and
+follows the JSON Schema (draft 2020-12) shipped beside this module, ``report.schema.json``
+(:data:`REPORT_SCHEMA_PATH`; :func:`report_schema` returns it as a dict). Every object in it lists its
+fields (``additionalProperties: false``), so a report with a field the schema does not know fails
+validation. The version's policy: the minor number grows when optional fields are added (a reader of
+``1.x`` reads every later ``1.y``), the major number when a field is removed or changes its meaning or
+type.
 """
 
 from __future__ import annotations
@@ -47,6 +61,7 @@ import json
 import os
 import time
 from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
 
@@ -65,6 +80,15 @@ from .clearance import (
     soft_clash_flags,
     soft_clashes,
 )
+from .duplicates import (
+    COLOR_DUPLICATE,
+    REL_TOL,
+    duplicate_flags,
+    duplicate_pairs,
+    duplicates_json,
+    duplicates_summary,
+    frame_duplicates_json,
+)
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
 from .self_intersection import (
     COLOR_SELF,
@@ -77,12 +101,35 @@ from .self_intersection import (
 from .self_intersection import self_intersections as find_self_intersections
 from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
 
-__all__ = ["CheckReport", "FrameContacts", "check_usd", "prepare_overlay", "write_overlay"]
+__all__ = ["REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts", "check_usd", "prepare_overlay",
+           "report_schema", "write_overlay"]
+
+SCHEMA_VERSION = "1.0"
+"""The version of the JSON report's layout (``"schema_version"`` in it): ``MAJOR.MINOR``, the minor number
+raised when optional fields are added, the major one when a field is removed or changes meaning or type."""
+REPORT_SCHEMA_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "report.schema.json")
+"""The JSON Schema (draft 2020-12) of :meth:`CheckReport.to_json`, shipped with the package."""
 
 COLOR_PENETRATING = COLOR_COLLIDING
 """displayColor of a prim while it penetrates another (the animation writer's colliding colour)."""
 COLOR_CLEAR = COLOR_FREE
 """displayColor of a coloured prim in frames where it penetrates nothing (when it had no constant colour)."""
+
+
+@cache
+def _schema_text() -> str:
+    with open(REPORT_SCHEMA_PATH, encoding="utf-8") as fh:
+        return fh.read()
+
+
+def report_schema() -> dict:
+    """The JSON Schema (draft 2020-12) that every :meth:`CheckReport.to_json` (and ``warp-ccd check
+    --report``) follows, as a new dict (a caller may change it).
+
+    >>> import jsonschema
+    >>> jsonschema.validate(report.to_json(), report_schema())
+    """
+    return json.loads(_schema_text())
 
 
 @dataclass
@@ -103,6 +150,9 @@ class FrameContacts:
             within it that the frame does not report as collisions), else None.
         self_intersections: with ``self_intersections``, the
             :class:`~warp_ccd.usd.self_intersection.SelfIntersections` (prims through themselves), else None.
+        duplicates: with ``duplicates``, ``(D, 2)`` int32 object pairs ``(a, b)``, ``a < b``, sorted, whose
+            meshes coincide at this time code (:mod:`~warp_ccd.usd.duplicates`; their rows are not in
+            ``triangle_pairs`` nor counted in ``num_touching``), else None.
     """
 
     time: float
@@ -112,6 +162,7 @@ class FrameContacts:
     num_touching: int = 0
     soft_clashes: SoftClashes | None = None
     self_intersections: SelfIntersections | None = None
+    duplicates: np.ndarray | None = None
 
     @property
     def object_pairs(self) -> np.ndarray:
@@ -146,6 +197,7 @@ class CheckReport:
         ccd_tolerance: with ``continuous``, the continuous test's distance tolerance.
         clearance: the distance of soft clashes (0: none sought).
         self_checked: whether self-intersections were sought.
+        duplicates_checked: whether duplicates (coincident meshes) were sought.
     """
 
     stage: str
@@ -163,6 +215,12 @@ class CheckReport:
     ccd_tolerance: float = 0.0
     clearance: float = 0.0
     self_checked: bool = False
+    duplicates_checked: bool = False
+
+    @property
+    def duplicated(self) -> bool:
+        """Whether any frame has a pair of coincident meshes (``duplicates`` checks)."""
+        return any(f.duplicates is not None and len(f.duplicates) > 0 for f in self.frames)
 
     @property
     def self_intersecting(self) -> bool:
@@ -198,6 +256,7 @@ class CheckReport:
         """What the check found, as the command's exit status reads it: ``"penetrating"`` when a
         pair penetrates, else ``"tunnelling"`` when a continuous check found a pair touching only
         between time codes, else ``"self_intersecting"`` when a prim passes through itself, else
+        ``"duplicates"`` when two prims' meshes coincide (``duplicates`` checks), else
         ``"soft_clash"`` when a pair comes within the clearance, else
         ``"touching"`` when pairs touch and ``count_touching`` counts them as collisions, else None
         (exit status 0)."""
@@ -207,6 +266,8 @@ class CheckReport:
             return "tunnelling"
         if self.self_intersecting:
             return "self_intersecting"
+        if self.duplicated:
+            return "duplicates"
         if self.soft_clash:
             return "soft_clash"
         if self.count_touching and self.touching:
@@ -242,7 +303,9 @@ class CheckReport:
         return sorted(stats.values(), key=lambda s: (-s["frames"], s["first"], s["a"], s["b"]))
 
     def to_json(self) -> dict:
-        """The report as JSON-ready data: prims by path, faces by their USD face index."""
+        """The report as JSON-ready data: prims by path, faces by their USD face index.
+
+        It follows :func:`report_schema` (its ``"schema_version"`` is :data:`SCHEMA_VERSION`)."""
         frames = []
         for f in self.frames:
             pairs = []
@@ -263,9 +326,12 @@ class CheckReport:
                 entry["soft_clashes"] = frame_clearance_json(f.soft_clashes, self.object_path)
             if f.self_intersections is not None:
                 entry["self_intersections"] = frame_self_json(f.self_intersections, self.object_path)
+            if f.duplicates is not None:
+                entry["duplicates"] = frame_duplicates_json(f.duplicates, self.object_path)
             frames.append(entry)
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
         out = {
+            "schema_version": SCHEMA_VERSION,
             "stage": self.stage,
             "findings": self.findings,
             "penetrating": self.penetrating,
@@ -291,7 +357,14 @@ class CheckReport:
         if self.self_checked:
             out["self_intersecting"] = self.self_intersecting
             out["self_intersections"] = self_json(self.frames, self.object_path)
+        if self.duplicates_checked:
+            out["duplicated"] = self.duplicated
+            out["duplicates"] = duplicates_json(self.frames, self.object_path, REL_TOL)
         return out
+
+    def json_text(self) -> str:
+        """:meth:`to_json` as the text the report file holds (what ``--report -`` prints), newline-terminated."""
+        return json.dumps(self.to_json(), indent=1) + "\n"
 
     def write_json(self, path) -> str:
         """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place.
@@ -309,10 +382,11 @@ class CheckReport:
             moves it to ``path``, :meth:`~warp_ccd.output.PendingFile.discard` removes it.
         """
         full, _ = check_output_path(path, (".json",), "report")
+        text = self.json_text()
         pending = PendingFile(full)
         try:
-            with open(pending.temp_path, "w") as fh:
-                json.dump(self.to_json(), fh, indent=1)
+            with open(pending.temp_path, "w", encoding="utf-8") as fh:
+                fh.write(text)
         except BaseException:
             pending.discard()
             raise
@@ -354,6 +428,8 @@ class CheckReport:
             lines += clearance_summary(self.frames, self.object_path, self.clearance, top)
         if self.self_checked:
             lines += self_summary(self.frames, self.object_path, top)
+        if self.duplicates_checked:
+            lines += duplicates_summary(self.frames, self.object_path, top)
         s = self.seconds
         if s:
             per = s.get("detect", 0.0) / max(n, 1) * 1e3
@@ -365,11 +441,21 @@ class CheckReport:
 
 
 def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
-                    time_code: float) -> FrameContacts:
+                    time_code: float, duplicates: bool = False) -> FrameContacts:
     """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
-    penetrating ones kept, the others counted."""
+    penetrating ones kept, the others counted. With ``duplicates``, the object pairs whose meshes
+    coincide are found among the rows' pairs and their rows left out."""
     rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
     seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
+    dup = None
+    if duplicates:
+        dup = duplicate_pairs(imp.scene, np.unique(rows[:, [0, 2]], axis=0)) if len(rows) else np.zeros((0, 2),
+                                                                                                       np.int32)
+        if len(dup):
+            n = imp.scene.num_objects
+            gone = np.isin(rows[:, 0] * n + rows[:, 2], dup[:, 0].astype(np.int64) * n + dup[:, 1])
+            rows, depth = rows[~gone], depth[~gone]
+            seg = seg[~gone] if seg is not None else None
     faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
                       imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
     if len(faces):
@@ -383,14 +469,15 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
         seg = seg[order][first] if seg is not None else None
     keep = np.ones(len(faces), bool) if count_touching else depth > min_depth
     return FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
-                         seg[keep] if seg is not None else None, int((~keep).sum()))
+                         seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup)
 
 
 def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision: str = "float32",
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
               include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
               progress: bool = False, allow_missing: bool = False, continuous: bool = False,
-              min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False) -> CheckReport:
+              min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False,
+              duplicates: bool = False) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -421,6 +508,9 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
             that the frame does not report as collisions: soft clashes (:attr:`FrameContacts.soft_clashes`).
         self_intersections: also report, per frame, the prims that pass through themselves, as pairs of
             their USD faces with a depth (:attr:`FrameContacts.self_intersections`).
+        duplicates: report, per frame, the pairs whose meshes coincide (the same triangles at the same
+            place, :mod:`~warp_ccd.usd.duplicates`) as duplicates (:attr:`FrameContacts.duplicates`) instead
+            of as collisions.
 
     Returns:
         The :class:`CheckReport`.
@@ -464,7 +554,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
                          count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
-                         clearance=clearance, self_checked=bool(self_intersections))
+                         clearance=clearance, self_checked=bool(self_intersections),
+                         duplicates_checked=bool(duplicates))
     if continuous:
         report.intervals = []
         report.min_distance = float(min_distance)
@@ -479,9 +570,13 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         t_detect = time.perf_counter()
         pairs = res.device_triangle_pairs
         _, depth = classify(pairs)  # 0 where the surfaces only touch
-        contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k])
+        contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k],
+                                   bool(duplicates))
         if clearance > 0.0:
-            contacts.soft_clashes = soft_clashes(imp, res, contacts.object_pairs)
+            reported = contacts.object_pairs
+            if contacts.duplicates is not None and len(contacts.duplicates):  # a duplicate is no soft clash
+                reported = np.unique(np.concatenate([reported, contacts.duplicates]), axis=0)
+            contacts.soft_clashes = soft_clashes(imp, res, reported)
         if self_intersections:
             contacts.self_intersections = find_self_intersections(imp, res, pipe.self_phase)
         t2 = time.perf_counter()
@@ -510,7 +605,8 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
 def write_overlay(report: CheckReport, out_path) -> str:
     """Writes a USD layer over the checked stage: penetrating prims in colour per frame (with a
     continuous check, tunnelling prims in orange at the start of the interval, and their
-    ``warpCcd:tunnelling`` attribute; with a clearance, prims in a soft clash in yellow), and as
+    ``warpCcd:tunnelling`` attribute; with a clearance, prims in a soft clash in yellow; with
+    duplicates, prims that coincide with another in blue), and as
     curves the intersection segments (when the check kept them) and the soft clashes' closest points.
 
     The layer's only sublayer is the checked stage's file (a relative path when they share a
@@ -572,21 +668,23 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
         tunnel = tunnelling_flags(report.intervals or (), times, n)
         soft = soft_clash_flags(report.frames, n)
         mine = self_flags(report.frames, n)  # a prim through itself (self checks): magenta, after red and orange
+        twin = duplicate_flags(report.frames, n)  # a duplicate (duplicates checks): blue, after magenta
         red, orange, yellow = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING), Gf.Vec3f(*COLOR_SOFT_CLASH)
-        magenta = Gf.Vec3f(*COLOR_SELF)
+        magenta, blue = Gf.Vec3f(*COLOR_SELF), Gf.Vec3f(*COLOR_DUPLICATE)
         with Sdf.ChangeBlock():
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
             targets: dict[str, tuple[np.ndarray, ...]] = {}
-            for i in np.nonzero((hit | tunnel | soft | mine).any(axis=0))[0].tolist():
+            for i in np.nonzero((hit | tunnel | soft | mine | twin).any(axis=0))[0].tolist():
                 if imp.object_instancer[i] is not None:
                     continue
                 prim = src.GetPrimAtPath(imp.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
-                was = targets.get(key, (np.zeros(len(times), bool),) * 4)
-                targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i], was[3] | mine[:, i])
-            for path, (flags, tunnels, softs, selfs) in targets.items():
+                was = targets.get(key, (np.zeros(len(times), bool),) * 5)
+                targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i], was[3] | mine[:, i],
+                                was[4] | twin[:, i])
+            for path, (flags, tunnels, softs, selfs, twins) in targets.items():
                 prim = stage.GetPrimAtPath(path)
                 primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                                                   UsdGeom.Tokens.constant)
@@ -595,8 +693,9 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
                         and len(own.Get()) == 1:
                     clear = own.Get()[0]
-                for tc, f, g, m, y in zip(times, flags.tolist(), tunnels.tolist(), selfs.tolist(), softs.tolist()):
-                    color = red if f else orange if g else magenta if m else yellow if y else clear
+                for tc, f, g, m, d, y in zip(times, flags.tolist(), tunnels.tolist(), selfs.tolist(), twins.tolist(),
+                                             softs.tolist()):
+                    color = red if f else orange if g else magenta if m else blue if d else yellow if y else clear
                     primvar.Set(Vt.Vec3fArray([color]), tc)
                 if report.intervals is not None:
                     flag = prim.CreateAttribute("warpCcd:tunnelling", Sdf.ValueTypeNames.Bool, custom=True)
@@ -606,7 +705,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
             instancer = np.array(imp.object_instancer, dtype=object)
             for path in sorted({p for p in imp.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
-                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows]).any():
+                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows] | twin[:, rows]).any():
                     continue
                 schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
                 size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
@@ -616,6 +715,7 @@ def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
                 for k, tc in enumerate(times):
                     colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
                     colors[imp.object_instance[rows][soft[k, rows]]] = COLOR_SOFT_CLASH
+                    colors[imp.object_instance[rows][twin[k, rows]]] = COLOR_DUPLICATE
                     colors[imp.object_instance[rows][mine[k, rows]]] = COLOR_SELF
                     colors[imp.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
                     colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
