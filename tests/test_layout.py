@@ -22,7 +22,7 @@ PACKAGE = os.path.join(ROOT, "warp_ccd")
 
 ROOMS = {
     # room: (module prefixes, rooms it may import besides itself)
-    "floor": (("warp_ccd._deprecated", "warp_ccd._typing", "warp_ccd.options"), ()),
+    "floor": (("warp_ccd._arrays", "warp_ccd._deprecated", "warp_ccd._typing", "warp_ccd.options"), ()),
     "geometry": (("warp_ccd.geometry",), ("floor",)),
     "scene": (("warp_ccd.scene",), ("floor", "geometry")),
     "stages": (("warp_ccd.stages",), ("floor", "geometry", "scene")),

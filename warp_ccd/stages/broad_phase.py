@@ -37,6 +37,14 @@ Sweep and prune, as run on the device each frame:
    there), so no pair is reported twice and none is lost; a block's pairs are reserved with one
    atomic add. The same threads test the boxes against the big-box list.
 
+Worlds and filters (a scene's :class:`~warp_ccd.scene.filter.CollisionFilter`, passed to ``launch``):
+a box's world slot is the high part of its keys' cell field (``slot * ny * nz + cell``), so the one sort
+puts every world's cells apart and the one sweep never meets a box of another world, whether the worlds
+lie apart or on top of each other; each world's grid is sized for its share of the boxes
+(:func:`~warp_ccd.stages.sap_grid.sap_world_bits`). Boxes of world -1 go to the big-box list (tested
+against every box). Groups, masks and excluded pairs are tested on each overlapping pair before it is
+written (:func:`~warp_ccd.scene.filter.pair_allowed`): a filtered pair costs nothing after the broad phase.
+
 Four launches per frame (statistics with the layout, emit, sort, sweep); O(N) work plus the output,
 O(log N)-depth sort; everything stays on the device and the host reads nothing, so the frame can
 be a CUDA graph (:meth:`BroadPhase.find_pairs`). A small scene (``all_pairs_max``, 2,048 boxes on
@@ -50,21 +58,37 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .._arrays import ArrayLike, DeviceLike, host_array
 from .._deprecated import module_aliases
 from ..geometry.box import BOX_EMPTY, boxes_overlap
 from ..options import integer_option
+from ..scene.filter import CollisionFilter, PairFilter, inactive_filter, pair_allowed
 from .buffers import (
     ITEM_LIST_SIZE,
     CounterRead,
     GrowableBuffer,
     block_dim_for,
     block_reserve,
-    device_fence,
     emit_pair,
     used_count,
     vec_items,
 )
 from .frame import CountedFrame, FrameCache, frame_mode
+from .sap_grid import (  # noqa: F401 (KEY_PAD, GRID_CELLS_MAX, ...: the grid's names, read here by tests too)
+    GRID_CELLS_MAX,
+    KEY_BITS_MAX,
+    KEY_PAD,
+    Q_BITS_MIN,
+    SMALL_SCENE_BOXES,
+    STATS_BLOCK,
+    STATS_CPU_BLOCK_BOXES,
+    SapGrid,
+    _cell,
+    _quantise,
+    _sap_stats_kernel,
+    sap_key_bits,
+    sap_world_bits,
+)
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -91,12 +115,14 @@ tests all pairs in one launch."""
 def _all_pairs_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
+    pair_filter: PairFilter,
     pair_capacity: int,
     # Outputs
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """One thread per pair index ``k``: pair ``(j, i)`` with ``k = i (i - 1) / 2 + j``, ``j < i``."""
+    """One thread per pair index ``k``: pair ``(j, i)`` with ``k = i (i - 1) / 2 + j``, ``j < i``,
+    when the boxes overlap and the filter lets it through."""
     k = wp.int64(wp.tid())
     one = wp.float64(1.0)
     i = wp.int64((one + wp.sqrt(one + wp.float64(8.0) * wp.float64(k))) * wp.float64(0.5))
@@ -108,7 +134,18 @@ def _all_pairs_kernel(
     a = int(j)
     b = int(i)
     if boxes_overlap(lower[a], upper[a], lower[b], upper[b]):
-        emit_pair(a, b, pair, pair_count, pair_capacity)
+        if pair_allowed(pair_filter, a, b):
+            emit_pair(a, b, pair, pair_count, pair_capacity)
+
+
+def _device_filter(pair_filter, device) -> PairFilter:
+    """The :class:`~warp_ccd.scene.filter.PairFilter` struct of a filter, or one that lets every
+    pair through."""
+    if pair_filter is None or not pair_filter.active:
+        return inactive_filter(device)
+    if pair_filter.device != device:
+        raise ValueError(f"pair_filter: on {pair_filter.device}, the broad phase on {device}")
+    return pair_filter.device_filter
 
 
 class BroadPhase:
@@ -135,9 +172,10 @@ class BroadPhase:
         """The buffers of its own with counters that ``launch`` writes, besides ``pairs``."""
         return []
 
-    def find_pairs(self, lower: wp.array, upper: wp.array) -> wp.array:
+    def find_pairs(self, lower: wp.array, upper: wp.array, pair_filter=None) -> wp.array:
         """Overlapping pairs of the ``(N,)`` closed boxes ``lower``/``upper`` (``wp.vec3`` on this
         device), as one frame: launch, one counter read, grow and rerun if a buffer overflowed.
+        ``pair_filter``: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the boxes, or None.
 
         Returns:
             ``(K,)`` ``wp.vec2i`` pairs ``(a, b)``, ``a < b``, unsorted: a view of :attr:`pairs`,
@@ -157,7 +195,8 @@ class BroadPhase:
         if self.pairs is None:
             self.pairs = GrowableBuffer(wp.vec2i, max(64, 4 * n), self.device, "broad-phase pairs")
             self._frames = FrameCache(CounterRead([self.pairs, *self.counters], self.device), self.mode)
-        self._frames.get((lower.ptr, upper.ptr, n), lambda: self.launch(lower, upper, self.pairs)).run()
+        self._frames.get((lower.ptr, upper.ptr, n, id(pair_filter)),
+                         lambda: self.launch(lower, upper, self.pairs, pair_filter)).run()
         return self.pairs.held()
 
 
@@ -169,10 +208,16 @@ class BroadPhaseAllPairs(BroadPhase):
         graph: as for :class:`BroadPhase`.
     """
 
-    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes ``lower``/``upper`` into ``pairs``.
 
         The caller resets ``pairs`` (or not, to append) and checks its counter afterwards.
+
+        Args:
+            lower, upper: ``(N,)`` ``wp.vec3`` closed boxes.
+            pairs: the output buffer.
+            pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the ``N`` boxes' objects
+                (worlds, groups, excluded pairs), or None (every overlapping pair).
         """
         n = lower.shape[0]
         if n > ALL_PAIRS_LIMIT:
@@ -183,243 +228,14 @@ class BroadPhaseAllPairs(BroadPhase):
         wp.launch(
             _all_pairs_kernel,
             dim=num_pairs,
-            inputs=[lower, upper, pairs.capacity],
+            inputs=[lower, upper, _device_filter(pair_filter, self.device), pairs.capacity],
             outputs=[pairs.data, pairs.count],
             device=self.device,
         )
 
 
 # ---------------------------------------------------------------------------------------------
-# Sweep and prune on a grid
-
-
-@wp.struct
-class SapGrid:
-    """Per-frame layout chosen on the device: sweep axis, perpendicular grid, key quantisation."""
-
-    axis: int
-    ay: int
-    az: int
-    origin_y: float
-    origin_z: float
-    inv_cell_y: float
-    inv_cell_z: float
-    ny: int
-    nz: int
-    axis_min: wp.float64
-    qscale: wp.float64
-    q_max: wp.float64
-    q_bits: int
-
-
-KEY_PAD = wp.constant(wp.int32(2147483647))
-"""Sort key of unused entries (the largest int32): its low bits are all ones, so it sorts after
-every real entry (whose cell bits never are) whatever the number of key bits sorted."""
-
-GRID_CELLS_MAX = wp.constant(32768)
-"""Most grid cells along each axis of the grid perpendicular to the sweep axis."""
-
-KEY_BITS_MAX = 31
-"""Bits of a sort key (int32, sign bit unused): ``cell_bits + q_bits``."""
-
-Q_BITS_MIN = 8
-"""Fewest bits of the quantised lower bound in a key."""
-
-SMALL_SCENE_BOXES = 16384
-"""Most boxes whose keys are sorted on 16 bits (see :func:`sap_key_bits`)."""
-
-
-def sap_key_bits(num_boxes: int) -> tuple[int, int]:
-    """``(cell_bits, q_bits)`` of the int32 sort keys for ``num_boxes`` boxes: key =
-    ``cell << q_bits | q``, sorted on its low ``cell_bits + q_bits <= 31`` bits only. Boxes spread
-    over a volume fill a grid column per cell width, about ``N**(2/3)`` cells in the plane: the
-    grid gets fewer than ``2**cell_bits = 2 * N**(2/3)`` cells (coarser when the scene needs
-    more); the lower bounds along the sweep axis are quantised to ``q_bits`` bits, about 16
-    quanta per box of a column of ``N**(1/3)``: order within a quantum only costs box tests,
-    never a pair. 26 bits at 10^6 boxes, 23 at 10^5.
-
-    Up to :data:`SMALL_SCENE_BOXES` boxes the keys have 16 bits (8 + 8: at most 255 cells), two
-    radix passes: on an H100 a third pass costs 0.017 ms at 2 x 10^4 keys (0.047 ms for 16 bits,
-    0.064 for 20, sort alone in a graph), more than the sweep loses to columns a few times fuller.
-    """
-    if num_boxes <= SMALL_SCENE_BOXES:
-        return Q_BITS_MIN, Q_BITS_MIN
-    log_n = max(1, int(num_boxes - 1).bit_length())
-    cell_bits = min(KEY_BITS_MAX - Q_BITS_MIN, max(4, -(-2 * log_n // 3) + 1))
-    q_bits = min(KEY_BITS_MAX - cell_bits, max(Q_BITS_MIN, -(-log_n // 3) + 4))
-    return cell_bits, q_bits
-
-
-STATS_BLOCK = 256
-"""Threads per block of the statistics pass: each block reduces its threads' values in shared
-memory (Warp tiles, two reductions of vectors) and adds them to the accumulators with one atomic
-per value."""
-
-STATS_CPU_BLOCK_BOXES = 4096
-"""Boxes per block of the statistics pass on the CPU (on CUDA one a thread, 256 a block): Warp runs
-a CPU block as one thread (256 with ``wp.config.enable_cpu_blocks``), whose reductions cost more
-than its boxes; a few blocks keep the last-block layout in use there too."""
-
-vec6f = wp.types.vector(length=6, dtype=wp.float32)
-vec9d = wp.types.vector(length=9, dtype=wp.float64)
-
-
-@wp.func
-def _cell_size(mean_extent: float, span: float, cell_scale: float, max_cells: float) -> float:
-    cell = cell_scale * mean_extent
-    cell = wp.max(cell, span / max_cells)
-    if cell <= 0.0:
-        cell = 1.0
-    return cell
-
-
-@wp.func
-def _sap_setup(
-    num_boxes: int,
-    cell_scale: float,
-    cell_limit: int,
-    q_bits: int,
-    stat_lo: wp.array[wp.float32],
-    stat_hi: wp.array[wp.float32],
-    stat_sum: wp.array[wp.float64],
-    big_count: wp.array[wp.int32],
-    entry_count: wp.array[wp.int64],
-    grid: wp.array[SapGrid],
-):
-    """One thread, once every block has added its statistics: sweep axis of greatest centre
-    variance, grid of the other two axes with fewer than ``cell_limit`` cells, key quantisation
-    to ``q_bits`` bits. Reads the accumulators by exchanging them with their empty values (atomics:
-    the values other blocks added, and empty for the next frame); empties the big-box list and
-    the entry counter for this frame."""
-    lo = wp.vec3()
-    hi = wp.vec3()
-    for k in range(3):
-        lo[k] = wp.atomic_exch(stat_lo, k, BOX_EMPTY)
-        hi[k] = wp.atomic_exch(stat_hi, k, -BOX_EMPTY)
-    sums = vec9d()
-    for k in range(9):
-        sums[k] = wp.atomic_exch(stat_sum, k, wp.float64(0.0))
-    inv_n = wp.float64(1.0) / wp.float64(wp.max(num_boxes, 1))
-    best = int(0)
-    best_var = wp.float64(-1.0)
-    for k in range(3):
-        mean = sums[k] * inv_n
-        var = sums[3 + k] * inv_n - mean * mean
-        if var > best_var:
-            best_var = var
-            best = k
-    g = SapGrid()
-    g.axis = best
-    g.ay = (best + 1) % 3
-    g.az = (best + 2) % 3
-    max_cells = float(GRID_CELLS_MAX - 1)
-    span_y = hi[g.ay] - lo[g.ay]
-    span_z = hi[g.az] - lo[g.az]
-    cell_y = _cell_size(float(sums[6 + g.ay] * inv_n), span_y, cell_scale, max_cells)
-    cell_z = _cell_size(float(sums[6 + g.az] * inv_n), span_z, cell_scale, max_cells)
-    ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
-    nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
-    while ny * nz >= cell_limit:  # coarser cells until the ids fit their bits
-        cell_y = cell_y * 1.5
-        cell_z = cell_z * 1.5
-        ny = wp.min(int(span_y / cell_y) + 1, GRID_CELLS_MAX)
-        nz = wp.min(int(span_z / cell_z) + 1, GRID_CELLS_MAX)
-    g.origin_y = lo[g.ay]
-    g.origin_z = lo[g.az]
-    g.inv_cell_y = 1.0 / cell_y
-    g.inv_cell_z = 1.0 / cell_z
-    g.ny = ny
-    g.nz = nz
-    g.axis_min = wp.float64(lo[best])
-    g.q_bits = q_bits
-    g.q_max = wp.float64((1 << q_bits) - 1)
-    span = wp.float64(hi[best]) - g.axis_min
-    g.qscale = wp.float64(0.0)
-    if span > wp.float64(0.0):
-        g.qscale = g.q_max / span
-    grid[0] = g
-    big_count[0] = 0
-    entry_count[0] = wp.int64(0)
-
-
-@wp.kernel
-def _sap_stats_kernel(
-    lower: wp.array[wp.vec3],
-    upper: wp.array[wp.vec3],
-    num_boxes: int,
-    num_blocks: int,
-    entry_capacity: int,
-    cell_scale: float,
-    cell_limit: int,
-    q_bits: int,
-    # Outputs
-    stat_lo: wp.array[wp.float32],
-    stat_hi: wp.array[wp.float32],
-    stat_sum: wp.array[wp.float64],
-    blocks_done: wp.array[wp.int32],
-    entry_key: wp.array[wp.int32],
-    big_count: wp.array[wp.int32],
-    entry_count: wp.array[wp.int64],
-    grid: wp.array[SapGrid],
-):
-    """Strided pass over the boxes by ``num_blocks`` blocks: scene bounds (``stat_lo``/``stat_hi``,
-    3 each) and sums (``stat_sum``, 9: centres, squared centres, extents per axis), reduced per
-    block, then one atomic per value per block, into accumulators that the previous frame (or the
-    constructor) left empty. The same threads fill the entry keys with the padding key (the emit
-    kernel overwrites the slots this frame's entries use). The last block to finish (counted in
-    ``blocks_done``, fenced) lays out this frame's grid (:func:`_sap_setup`) and empties the
-    accumulators and ``blocks_done`` for the next."""
-    block, lane = wp.tid()
-    width = wp.block_dim()
-    bounds = vec6f(BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY, BOX_EMPTY)  # (lo, -hi): both by min
-    sums = vec9d()  # centres, squared centres, extents
-    i = block * width + lane
-    stride = num_blocks * width
-    while i < num_boxes:
-        a = lower[i]
-        b = upper[i]
-        bounds = wp.min(bounds, vec6f(a[0], a[1], a[2], -b[0], -b[1], -b[2]))
-        c = wp.vec3d(wp.float64(0.5) * (wp.float64(a[0]) + wp.float64(b[0])),
-                     wp.float64(0.5) * (wp.float64(a[1]) + wp.float64(b[1])),
-                     wp.float64(0.5) * (wp.float64(a[2]) + wp.float64(b[2])))
-        sums = sums + vec9d(c[0], c[1], c[2], c[0] * c[0], c[1] * c[1], c[2] * c[2], wp.float64(b[0] - a[0]),
-                            wp.float64(b[1] - a[1]), wp.float64(b[2] - a[2]))
-        i += stride
-    e = block * width + lane
-    while e < entry_capacity:
-        entry_key[e] = KEY_PAD
-        e += stride
-    # Two block reductions (of vectors), then one atomic per value.
-    block_bounds = wp.tile_extract(wp.tile_reduce(wp.min, wp.tile(bounds, preserve_type=True)), 0)
-    block_sums = wp.tile_extract(wp.tile_sum(wp.tile(sums, preserve_type=True)), 0)
-    if lane == 0:
-        for k in range(3):
-            wp.atomic_min(stat_lo, k, block_bounds[k])
-            wp.atomic_max(stat_hi, k, -block_bounds[3 + k])
-        for k in range(9):
-            wp.atomic_add(stat_sum, k, block_sums[k])
-        device_fence()  # this block's sums are visible before its count
-        if wp.atomic_add(blocks_done, 0, 1) == num_blocks - 1:
-            device_fence()
-            _sap_setup(num_boxes, cell_scale, cell_limit, q_bits, stat_lo, stat_hi, stat_sum, big_count, entry_count,
-                       grid)
-            blocks_done[0] = 0
-
-
-@wp.func
-def _cell(x: float, origin: float, inv_cell: float, count: int) -> int:
-    """Monotonic cell coordinate of ``x``, clamped to ``[0, count)``."""
-    c = wp.floor((x - origin) * inv_cell)
-    c = wp.clamp(c, 0.0, float(count - 1))
-    return int(c)
-
-
-@wp.func
-def _quantise(x: float, g: SapGrid) -> int:
-    """Monotonic quantisation of ``x`` along the sweep axis to ``g.q_bits`` bits."""
-    q = wp.floor((wp.float64(x) - g.axis_min) * g.qscale)
-    q = wp.clamp(q, wp.float64(0.0), g.q_max)
-    return int(q)
+# Sweep and prune on a grid (its layout and keys: warp_ccd.stages.sap_grid)
 
 
 @wp.kernel
@@ -428,6 +244,7 @@ def _sap_emit_kernel(
     upper: wp.array[wp.vec3],
     num_boxes: int,
     grid: wp.array[SapGrid],
+    pair_filter: PairFilter,
     max_cells_per_box: int,
     entry_capacity: int,
     # Outputs
@@ -440,8 +257,9 @@ def _sap_emit_kernel(
 ):
     """One thread per box: one (key, box) entry per grid cell it covers, in slots its block
     reserves with one atomic add (the sort orders them), or, covering more than
-    ``max_cells_per_box`` cells, none and a place in the big list; ``box_cells`` records the
-    count (0 for a big box)."""
+    ``max_cells_per_box`` cells or in world -1, none and a place in the big list; ``box_cells``
+    records the count (0 for a big box). A box's cells are those of its world's slot: cell id
+    ``slot * ny * nz + cell``."""
     block, lane = wp.tid()
     i = block * wp.block_dim() + lane
     g = grid[0]
@@ -451,6 +269,7 @@ def _sap_emit_kernel(
     z1 = int(-1)
     q = int(0)
     cells = int(0)
+    world_base = int(0)
     if i < num_boxes:
         lo = lower[i]
         hi = upper[i]
@@ -460,7 +279,11 @@ def _sap_emit_kernel(
         z1 = _cell(hi[g.az], g.origin_z, g.inv_cell_z, g.nz)
         cells = (y1 - y0 + 1) * (z1 - z0 + 1)
         q = _quantise(lo[g.axis], g)
-        if cells > max_cells_per_box:
+        wslot = int(0)
+        if pair_filter.use_world != 0:
+            wslot = pair_filter.object_world[i]
+        world_base = wslot * g.ny * g.nz
+        if cells > max_cells_per_box or wslot < 0:
             cells = 0
             big_box[wp.atomic_add(big_count, 0, 1)] = i
         box_cells[i] = cells
@@ -469,7 +292,7 @@ def _sap_emit_kernel(
         for y in range(y0, y1 + 1):
             for z in range(z0, z1 + 1):
                 if slot < wp.int64(entry_capacity):
-                    entry_key[int(slot)] = ((y * g.nz + z) << g.q_bits) | q
+                    entry_key[int(slot)] = ((world_base + y * g.nz + z) << g.q_bits) | q
                     entry_box[int(slot)] = i
                 slot += wp.int64(1)
 
@@ -481,14 +304,16 @@ def _sweep_entry(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     g: SapGrid,
+    pair_filter: PairFilter,
     entry_key: wp.array[wp.int32],
     entry_box: wp.array[wp.int32],
     pair_capacity: int,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """Sorted entry ``e`` sweeps forward within its cell: the boxes of the pairs it owns, the
-    first :data:`ITEM_LIST_SIZE` gathered (returned with their number), any more emitted at once."""
+    """Sorted entry ``e`` sweeps forward within its cell (of its world): the boxes of the pairs it
+    owns that the filter lets through, the first :data:`ITEM_LIST_SIZE` gathered (returned with their
+    number), any more emitted at once."""
     found = vec_items()
     num_found = int(0)
     key = entry_key[e]
@@ -498,8 +323,9 @@ def _sweep_entry(
     lo_i = lower[i]
     hi_i = upper[i]
     q_hi = _quantise(hi_i[g.axis], g)
-    cy = cell / g.nz
-    cz = cell - cy * g.nz
+    plane = cell % (g.ny * g.nz)  # the cell within its world's grid
+    cy = plane / g.nz
+    cz = plane - cy * g.nz
     for f in range(e + 1, total):
         key_f = entry_key[f]
         if (key_f >> g.q_bits) != cell:
@@ -513,7 +339,7 @@ def _sweep_entry(
             # Report from the cell holding the lower corner of the intersection only.
             oy = _cell(wp.max(lo_i[g.ay], lo_j[g.ay]), g.origin_y, g.inv_cell_y, g.ny)
             oz = _cell(wp.max(lo_i[g.az], lo_j[g.az]), g.origin_z, g.inv_cell_z, g.nz)
-            if oy == cy and oz == cz:
+            if oy == cy and oz == cz and pair_allowed(pair_filter, i, j):
                 if num_found < ITEM_LIST_SIZE:
                     found[num_found] = j
                     num_found += 1
@@ -530,11 +356,12 @@ def _big_box_pairs(
     box_cells: wp.array[wp.int32],
     big_box: wp.array[wp.int32],
     nb: int,
+    pair_filter: PairFilter,
     pair_capacity: int,
     pair: wp.array[wp.vec2i],
     pair_count: wp.array[wp.int64],
 ):
-    """Box ``j`` against every big box ``i`` (a pair of two big boxes once)."""
+    """Box ``j`` against every big box ``i`` (a pair of two big boxes once), the filter's pairs."""
     lo_j = lower[j]
     hi_j = upper[j]
     j_big = box_cells[j] == 0
@@ -543,7 +370,8 @@ def _big_box_pairs(
         if i == j or (j_big and j < i):
             continue
         if boxes_overlap(lower[i], upper[i], lo_j, hi_j):
-            emit_pair(i, j, pair, pair_count, pair_capacity)
+            if pair_allowed(pair_filter, i, j):
+                emit_pair(i, j, pair, pair_count, pair_capacity)
 
 
 @wp.kernel
@@ -551,6 +379,7 @@ def _sap_sweep_kernel(
     lower: wp.array[wp.vec3],
     upper: wp.array[wp.vec3],
     grid: wp.array[SapGrid],
+    pair_filter: PairFilter,
     entry_key: wp.array[wp.int32],
     entry_box: wp.array[wp.int32],
     entry_count: wp.array[wp.int64],
@@ -574,8 +403,8 @@ def _sap_sweep_kernel(
     i = int(0)
     if t < total:
         i = entry_box[t]
-        found, num_found = _sweep_entry(t, total, lower, upper, grid[0], entry_key, entry_box, pair_capacity, pair,
-                                        pair_count)
+        found, num_found = _sweep_entry(t, total, lower, upper, grid[0], pair_filter, entry_key, entry_box,
+                                        pair_capacity, pair, pair_count)
     slot = block_reserve(pair_count, lane, num_found)
     for m in range(num_found):
         if slot < wp.int64(pair_capacity):
@@ -583,7 +412,7 @@ def _sap_sweep_kernel(
         slot += wp.int64(1)
     nb = big_count[0]
     if nb > 0 and t < lower.shape[0]:
-        _big_box_pairs(t, lower, upper, box_cells, big_box, nb, pair_capacity, pair, pair_count)
+        _big_box_pairs(t, lower, upper, box_cells, big_box, nb, pair_filter, pair_capacity, pair, pair_count)
 
 
 class BroadPhaseSAP(BroadPhase):
@@ -650,19 +479,28 @@ class BroadPhaseSAP(BroadPhase):
         reads after it (besides ``pairs``): the grid entries (their counter emptied by a kernel)."""
         return [self.entry]
 
-    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
         Four launches: statistics (with the padding of the keys and the grid layout), emit, sort
         (of the key bits in use), sweep. The caller resets ``pairs`` (or not, to append). After
         the frame, check ``pairs`` and :attr:`counters`; if a counter passed its capacity,
         ``ensure`` it and launch again (:func:`find_pairs` does).
+
+        Args:
+            lower, upper: ``(N,)`` ``wp.vec3`` closed boxes.
+            pairs: the output buffer.
+            pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the ``N`` boxes' objects,
+                or None. Its worlds are sorted and swept in the same launches (a world's slot is the
+                high part of its entries' keys, :func:`sap_world_bits`); its groups, masks and
+                excluded pairs are tested on each overlapping pair before it is written.
         """
         n = lower.shape[0]
         self._resize(n)
+        pf = _device_filter(pair_filter, self.device)
         if n <= self.all_pairs_max:  # no grid entries: their counter stays as the frame's reset left it
             if n >= 2:
-                wp.launch(_all_pairs_kernel, dim=n * (n - 1) // 2, inputs=[lower, upper, pairs.capacity],
+                wp.launch(_all_pairs_kernel, dim=n * (n - 1) // 2, inputs=[lower, upper, pf, pairs.capacity],
                           outputs=[pairs.data, pairs.count], device=self.device)
             return
         if n < 2:
@@ -671,21 +509,23 @@ class BroadPhaseSAP(BroadPhase):
         d = self.device
         key, box = self._entry_arrays()
         cap = self.entry.capacity
-        cell_bits, q_bits = sap_key_bits(n)
+        worlds = pair_filter.num_worlds if pair_filter is not None and pair_filter.use_world else 1
+        cell_limit, cell_bits, q_bits = sap_world_bits(n, worlds)
         per_block = STATS_BLOCK if d.is_cuda else STATS_CPU_BLOCK_BOXES
         blocks = max(1, min(self.stats_blocks, -(-n // per_block)))
         wp.launch_tiled(_sap_stats_kernel, dim=[blocks],
-                        inputs=[lower, upper, n, blocks, cap, self.cell_scale, (1 << cell_bits) - 1, q_bits],
+                        inputs=[lower, upper, n, blocks, cap, self.cell_scale, cell_limit, q_bits],
                         outputs=[self.stat_lo, self.stat_hi, self.stat_sum, self.blocks_done, key, self.big_count,
                                  self.entry.count, self.grid], block_dim=STATS_BLOCK, device=d)
         width = block_dim_for(d)
         wp.launch_tiled(_sap_emit_kernel, dim=[-(-n // width)],
-                        inputs=[lower, upper, n, self.grid, self.max_cells_per_box, cap],
+                        inputs=[lower, upper, n, self.grid, pf, self.max_cells_per_box, cap],
                         outputs=[self.box_cells, self.big_box, self.big_count, key, box, self.entry.count],
                         block_dim=width, device=d)
         wp.utils.radix_sort_pairs(key, box, cap, end_bit=cell_bits + q_bits)
         wp.launch_tiled(_sap_sweep_kernel, dim=[-(-max(n, cap) // width)],
-                        inputs=[lower, upper, self.grid, key, box, self.entry.count, cap, self.box_cells, self.big_box,
+                        inputs=[lower, upper, self.grid, pf, key, box, self.entry.count, cap, self.box_cells,
+                                self.big_box,
                                 self.big_count, pairs.capacity],
                         outputs=[pairs.data, pairs.count], block_dim=width, device=d)
 
@@ -712,7 +552,7 @@ def make_broad_phase(method: str, *, device=None, graph: bool | None = None) -> 
     return BROAD_METHODS[method](device=device, graph=graph)
 
 
-def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> int:
+def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> int:
     """Runs a broad phase until its buffers hold everything; returns the number of pairs.
 
     Resets ``pairs``, launches, reads the counters of ``pairs`` and of the broad phase's own
@@ -724,9 +564,12 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -
             buffers of its own).
         lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
         pairs: ``wp.vec2i`` output buffer.
+        pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the boxes, or None.
     """
     reader = CounterRead([pairs, *getattr(broad, "counters", [])], pairs.device)
-    return CountedFrame(lambda: broad.launch(lower, upper, pairs), reader).run()[0]
+    launch = (lambda: broad.launch(lower, upper, pairs)) if pair_filter is None else (
+        lambda: broad.launch(lower, upper, pairs, pair_filter))
+    return CountedFrame(launch, reader).run()[0]
 
 
 def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
@@ -753,7 +596,9 @@ def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
     return f32
 
 
-def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndarray:
+def broad_phase_pairs(lower: ArrayLike, upper: ArrayLike, method: str = "sap", device: DeviceLike = None, *,
+                      world: ArrayLike | None = None, group: ArrayLike | None = None, mask: ArrayLike | None = None,
+                      exclude_pairs: ArrayLike | None = None) -> np.ndarray:
     """Overlapping pairs among ``N`` closed axis-aligned boxes.
 
     Args:
@@ -762,6 +607,9 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
             rounded outward to float32 (a pair may be added, never lost).
         method: ``"sap"`` (default) or ``"all_pairs"`` (the reference; ``"nxn"`` is an alias).
         device: Warp device (default: Warp's default device).
+        world, group, mask, exclude_pairs: filters of the boxes (see
+            :class:`~warp_ccd.scene.filter.CollisionFilter`): ``(N,)`` world ids (``-1`` pairs with
+            every world), ``(N,)`` 32-bit groups and masks, ``(E, 2)`` pairs that never pair.
 
     Returns:
         ``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, rows sorted.
@@ -769,8 +617,8 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
     Raises:
         ValueError: bad shapes, non-finite values, ``lower > upper``, unknown method.
     """
-    lo = _boxes_to_float32(lower, "lower", -1)
-    hi = _boxes_to_float32(upper, "upper", +1)
+    lo = _boxes_to_float32(host_array(lower, "lower"), "lower", -1)
+    hi = _boxes_to_float32(host_array(upper, "upper"), "upper", +1)
     if lo.shape != hi.shape:
         raise ValueError(f"lower and upper: shapes differ, {lo.shape} and {hi.shape}")
     bad = (lo > hi).any(axis=1)
@@ -780,9 +628,12 @@ def broad_phase_pairs(lower, upper, method: str = "sap", device=None) -> np.ndar
     device = wp.get_device(device)
     bp = make_broad_phase(method, device=device, graph=False)  # one frame: nothing to replay
     n = lo.shape[0]
+    filters = (world, group, mask, exclude_pairs)
+    pair_filter = None if all(f is None for f in filters) else CollisionFilter(
+        n, world=world, group=group, mask=mask, exclude_pairs=exclude_pairs, device=device)
     if n < 2:
         return np.zeros((0, 2), np.int32)
     wlo = wp.array(lo, dtype=wp.vec3, device=device)
     whi = wp.array(hi, dtype=wp.vec3, device=device)
-    out = bp.find_pairs(wlo, whi).numpy().reshape(-1, 2).astype(np.int32)
+    out = bp.find_pairs(wlo, whi, pair_filter).numpy().reshape(-1, 2).astype(np.int32)
     return out[np.lexsort((out[:, 1], out[:, 0]))]
