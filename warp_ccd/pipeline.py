@@ -24,15 +24,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import warp as wp
 
+from ._arrays import ArrayLike, DeviceLike, host_array
 from .geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE
 from .geometry.triangle import TOLERANCE
 from .options import integer_option, number_option
 from .result import NEAR_ROWS, CollisionResult
-from .scene.scene import Scene, transforms_to_poses
+from .scene.scene import Scene, quat_to_matrix, transforms_to_poses
 from .stages.broad_phase import make_broad_phase
 from .stages.buffers import CounterRead, GrowableBuffer
 from .stages.bvh import SceneBVH
@@ -251,7 +253,9 @@ class CollisionPipeline:
         if self.self_phase is not None:  # work of its own: it neither grows with the others nor they with it
             buffers += self.self_phase.counters
             flow += [None] * len(self.self_phase.counters)
-        self.counter_read = CounterRead(buffers, d, stages=flow)
+        self.counter_read = CounterRead(buffers, d, stages=flow, watch=scene.input_check.fault)
+        f = scene.collision_filter
+        self._object_world = None if f is None or not f.use_world else f.object_world
         self._frames = FrameCache(self.counter_read, mode)  # by advance step (None: detection alone)
         self.rebuilds = 0
         self._detects = 0
@@ -297,7 +301,10 @@ class CollisionPipeline:
                 times["total"] = sum(times.values())
             self._times = times
             return
-        self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
+        if scene.collision_filter is None:
+            self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
+        else:
+            self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs, scene.collision_filter)
         t = mark("broad", t)
         self.mid.launch(scene, self.pairs, reset_counters=False, **sweep)
         t = mark("mid", t)
@@ -366,6 +373,8 @@ class CollisionPipeline:
                 self.rebuilds += 1
         frame = self._frame(step)
         grew = frame.run_once()
+        if self.counter_read.watched:  # the device-side inputs (set_poses, ...) were bad
+            scene.input_check.raise_for(self.counter_read.watched)
         wait_ms = frame.wait_ms
         runs = 1
         while grew:  # a buffer grew: detect again on the same world vertices (and the same start)
@@ -405,6 +414,7 @@ class CollisionPipeline:
                                              None if near is None else near.object_near)
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
         result.runs = runs
+        result.object_world = self._object_world
         return result
 
     def _no_pairs(self, step: float | None, self_rows: tuple | None = None) -> CollisionResult:
@@ -467,14 +477,19 @@ def _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iteration
     return options
 
 
-def collide(meshes: Sequence, transforms=None, device=None, precision: str = "float32", *, transforms_end=None,
-            vertices_end=None, min_distance: float = 0.0, **options) -> CollisionResult:
+def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: DeviceLike = None,
+            precision: str = "float32", *, transforms_end: ArrayLike | None = None,
+            vertices_end: Sequence | None = None, min_distance: float = 0.0, world: ArrayLike | None = None,
+            group: ArrayLike | None = None, mask: ArrayLike | None = None, exclude_pairs: ArrayLike | None = None,
+            **options: Any) -> CollisionResult:
     """One-shot collision detection among meshes (like trimesh's ``CollisionManager``), at one
     moment or over a motion.
 
     Args:
         meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
-        transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
+        transforms: ``(N, 4, 4)`` rigid transforms or ``(N, 7)`` poses (position, then quaternion
+            ``x, y, z, w``), or None when vertices are in world space. Arrays anywhere: numpy, Warp,
+            torch, JAX, CuPy.
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test in
             double precision (for scenes far from the origin).
@@ -486,6 +501,12 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
             continuous detection of deforming meshes.
         min_distance: continuous detection: pairs that come within this distance (scene units,
             infinity norm) collide too; with neither end given, a query of the meshes as they are.
+        world: ``(N,)`` world id of each object: objects of different worlds never pair; ``-1`` pairs
+            with every world (:class:`~warp_ccd.scene.scene.Scene`). The result's :attr:`pair_world
+            <warp_ccd.result.CollisionResult.pair_world>` gives each pair's world.
+        group, mask: ``(N,)`` 32-bit collision groups and masks: a pair collides when
+            ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero.
+        exclude_pairs: ``(E, 2)`` object indices of pairs that never collide.
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
             ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,
             ``containment``, ``clearance``, ``ccd_tolerance``, ``ccd_max_iterations``, capacities).
@@ -504,6 +525,7 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
             ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd.scene.scene.Scene.from_meshes>`).
     """
     min_distance = number_option("min_distance", min_distance, low=0.0)
+    filters = {"world": world, "group": group, "mask": mask, "exclude_pairs": exclude_pairs}
     continuous = transforms_end is not None or vertices_end is not None or min_distance > 0.0
     if continuous:
         options["continuous"] = True
@@ -514,12 +536,13 @@ def collide(meshes: Sequence, transforms=None, device=None, precision: str = "fl
         ends = _vertices_end(meshes, vertices_end)
         if transforms is not None:
             _check_transforms(transforms, len(meshes), "transforms")
-        start = _placed([np.asarray(v, np.float64) for v, _ in meshes], transforms)
+        start = _placed([np.asarray(host_array(v, f"mesh {i}"), np.float64) for i, (v, _) in enumerate(meshes)],
+                        transforms)
         end = _placed(ends, transforms if transforms_end is None else transforms_end)
         scene = Scene.from_meshes([(v, t) for v, (_, t) in zip(start, meshes)], deforming=True, device=device,
-                                  precision=precision)
+                                  precision=precision, **filters)
     else:
-        scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision)
+        scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision, **filters)
     # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
     # every object pair of a small scene or 32 pairs an object, 8 bytes each; one candidate a
     # triangle per triangle of a leaf, 16 bytes each, a node pair of the front a triangle, 24 bytes,
@@ -549,7 +572,7 @@ def _vertices_end(meshes: Sequence, vertices_end) -> list[np.ndarray]:
     out = []
     for i, (v, (v0, _)) in enumerate(zip(vertices_end, meshes)):
         try:
-            a = np.asarray(v, dtype=np.float64)
+            a = np.asarray(host_array(v, f"vertices_end: mesh {i}"), dtype=np.float64)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"vertices_end: mesh {i}: not an array of numbers ({exc})") from None
         shape = np.shape(v0)
@@ -575,5 +598,6 @@ def _placed(vertices: list[np.ndarray], transforms) -> list[np.ndarray]:
     in float64; as they are without one."""
     if transforms is None:
         return vertices
-    m = np.asarray(transforms, np.float64)
-    return [v @ m[i, :3, :3].T + m[i, :3, 3] for i, v in enumerate(vertices)]
+    poses = transforms_to_poses(transforms, len(vertices))
+    rot = quat_to_matrix(poses[:, 3:])
+    return [v @ rot[i].T + poses[i, :3] for i, v in enumerate(vertices)]

@@ -46,6 +46,11 @@ class CollisionResult:
         device_near: with a clearance, ``(N,)`` int32 flags on the device (:attr:`near`), else None.
         device_self_pairs, device_self_colliding: with self-intersections, ``(M,)`` ``wp.vec3i`` rows
             ``(object, tri_a, tri_b)`` (unsorted) and ``(N,)`` int32 flags on the device, else None.
+        object_world: ``(N,)`` int64 world id of each object (a scene built with ``world=``), else
+            None (one world); :attr:`pair_world` gives each object pair's.
+
+    Every ``device_*`` array is a ``wp.array``: hand it to torch, JAX or CuPy without a copy through
+    DLPack (``torch.from_dlpack(res.device_colliding)``) or with ``wp.to_torch``.
 
     Made by :meth:`CollisionPipeline.detect`; made directly, it takes device arrays
     (``device_triangle_pairs`` ``(M,)`` ``wp.vec4i``, ``device_colliding``, and optionally
@@ -93,7 +98,7 @@ class CollisionResult:
         self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
                              num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
                              _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows,
-                             continuous=False, clearance=0.0, device_near=None)
+                             continuous=False, clearance=0.0, device_near=None, object_world=None)
 
     def _view(self, name: str):
         held = self._rows.get(name)
@@ -276,8 +281,17 @@ class CollisionResult:
         out = CollisionResult(self.num_objects, own(self.device_triangle_pairs), own(self.device_colliding),
                               self.timings, self.num_candidates, self.num_broad_pairs, own(self.device_contained),
                               own(self.device_segments), own(self.device_toi), self.clearance, near, self_rows)
-        out.host_ms, out.runs = self.host_ms, self.runs
+        out.host_ms, out.runs, out.object_world = self.host_ms, self.runs, self.object_world
         return out
+
+    @cached_property
+    def pair_world(self) -> np.ndarray:
+        """``(K,)`` int64 world id of each row of :attr:`object_pairs`: its objects' world (the one not
+        in world ``-1`` when one is; ``-1`` when both are); zeros for a scene without worlds."""
+        p = self.object_pairs
+        if self.object_world is None:
+            return np.zeros(len(p), np.int64)
+        return np.maximum(self.object_world[p[:, 0]], self.object_world[p[:, 1]]).astype(np.int64)
 
     @property
     def num_triangle_pairs(self) -> int:

@@ -7,16 +7,28 @@ their motion, and the flat device arrays every stage reads (:class:`Scene`).
 Modules: :mod:`~warp_ccd.scene.shapes` (seed polyhedra, icospheres, a cloth sheet, a self-intersecting
 torus, mesh validation),
 :mod:`~warp_ccd.scene.motion` (inclined-ellipse motion, one kernel for every pose),
-:mod:`~warp_ccd.scene.scene` (:class:`Scene`, the :class:`MeshTopology` struct kernels read).
+:mod:`~warp_ccd.scene.scene` (:class:`Scene`, the :class:`MeshTopology` struct kernels read),
+:mod:`~warp_ccd.scene.filter` (worlds, collision groups and masks, excluded pairs: which pairs may collide),
+:mod:`~warp_ccd.scene.inputs` (poses, transforms and world vertices read from device arrays, checked on the device).
 Imports Warp, numpy and :mod:`warp_ccd.geometry` only.
 """
 
+from .filter import CollisionFilter
 from .motion import EllipseMotion
-from .scene import MeshTopology, Scene, matrix_to_quat, mesh_triangle, transforms_to_poses
+from .scene import (
+    MeshTopology,
+    Scene,
+    matrix_to_quat,
+    mesh_triangle,
+    poses_to_rows,
+    quat_to_matrix,
+    transforms_to_poses,
+)
 from .shapes import SHAPES, MeshSet, figure_eight_torus, icosphere, shape, sheet, validate_mesh, validate_meshes
 
 __all__ = [
     "SHAPES",
+    "CollisionFilter",
     "EllipseMotion",
     "MeshSet",
     "MeshTopology",
@@ -25,6 +37,8 @@ __all__ = [
     "icosphere",
     "matrix_to_quat",
     "mesh_triangle",
+    "poses_to_rows",
+    "quat_to_matrix",
     "shape",
     "sheet",
     "transforms_to_poses",

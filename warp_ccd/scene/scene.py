@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from .._arrays import ArrayLike, DeviceLike, device_view, host_array, is_device_array
 from .._deprecated import renamed_arguments, renamed_attribute
 from ..geometry.precision import (
     coordinate_message,
@@ -40,6 +41,8 @@ from ..geometry.precision import (
     triangle_size,
 )
 from ..options import integer_option, number_option
+from .filter import CollisionFilter
+from .inputs import InputCheck
 from .motion import EllipseMotion, advance_time
 from .shapes import MeshSet, validate_meshes
 from .shapes import shape as _named_shape
@@ -48,7 +51,8 @@ from .shapes import shape as _named_shape
 # bits on every device (the narrow phase's verdicts then agree too).
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["MeshTopology", "Scene", "matrix_to_quat", "mesh_triangle", "transforms_to_poses"]
+__all__ = ["QUAT_TOLERANCE", "MeshTopology", "Scene", "matrix_to_quat", "mesh_triangle", "poses_to_rows",
+           "quat_to_matrix", "transforms_to_poses"]
 
 
 @wp.struct
@@ -107,6 +111,23 @@ def _vertex_to_float32_kernel(src: wp.array[wp.vec3d], dst: wp.array[wp.vec3]):
     dst[v] = wp.vec3(src[v])
 
 
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions to rotation matrices.
+
+    Args:
+        q: ``(N, 4)`` unit quaternions ``(x, y, z, w)`` (Warp's order).
+
+    Returns:
+        ``(N, 3, 3)`` float64 rotation matrices acting on column vectors.
+    """
+    x, y, z, w = np.asarray(q, np.float64).reshape(-1, 4).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=1)
+
+
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     """Rotation matrices to unit quaternions.
 
@@ -146,12 +167,56 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
-def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> np.ndarray:
-    """Validates rigid 4x4 transforms and converts them to ``wp.transform`` rows.
+QUAT_TOLERANCE = 1e-3
+"""How far from 1 the norm of a given quaternion may be (it is then normalised)."""
+
+
+def poses_to_rows(poses: ArrayLike, num_objects: int, *, name: str = "poses") -> np.ndarray:
+    """Validates ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` (Warp's order) and normalises
+    their quaternions.
 
     Args:
-        transforms: ``(N, 4, 4)`` array-like; each a rotation (orthonormal, determinant +1, within
-            ``tol``) and a translation, bottom row ``(0, 0, 0, 1)``.
+        poses: ``(N, 7)`` array-like.
+        num_objects: expected ``N``.
+        name: the argument's name, for errors.
+
+    Returns:
+        ``(N, 7)`` float64 rows.
+
+    Raises:
+        ValueError: naming the first bad row.
+    """
+    try:
+        p = np.asarray(host_array(poses, name), dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: not an array of numbers ({exc})") from None
+    if p.shape != (num_objects, 7):
+        raise ValueError(f"{name}: expected shape ({num_objects}, 7) for {num_objects} objects, got {p.shape}")
+    finite = np.isfinite(p).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"{name}: row {int(np.argmin(finite))} is not finite")
+    norm = np.linalg.norm(p[:, 3:], axis=1)
+    bad = np.abs(norm - 1.0) > QUAT_TOLERANCE
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"{name}: row {i} has a quaternion of norm {norm[i]:.6g}, not unit (x, y, z, w)")
+    out = p.copy()
+    out[:, 3:] /= norm[:, None]
+    with np.errstate(over="ignore"):
+        if not np.isfinite(out.astype(np.float32)).all():
+            raise ValueError(f"{name}: translations overflow float32")
+    return out
+
+
+def transforms_to_poses(transforms: ArrayLike, num_objects: int, *, tol: float = 1e-4) -> np.ndarray:
+    """Validates rigid transforms and converts them to ``wp.transform`` rows.
+
+    Args:
+        transforms: ``(N, 4, 4)`` array-like, each a rotation (orthonormal, determinant +1, within
+            ``tol``) and a translation, bottom row ``(0, 0, 0, 1)``; or ``(N, 7)`` poses
+            ``(px, py, pz, qx, qy, qz, qw)`` (position, then quaternion x, y, z, w: Warp's order), each
+            quaternion unit within :data:`QUAT_TOLERANCE` (then normalised). Any array of
+            :data:`~warp_ccd._arrays.ArrayLike` (torch, JAX, CuPy, Warp).
         num_objects: expected ``N``.
         tol: tolerance of the rigidity checks.
 
@@ -162,11 +227,14 @@ def transforms_to_poses(transforms, num_objects: int, *, tol: float = 1e-4) -> n
         ValueError: naming the first bad transform and what is wrong with it.
     """
     try:
-        m = np.asarray(transforms, dtype=np.float64)
+        m = np.asarray(host_array(transforms, "transforms"), dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"transforms: not an array of numbers ({exc})") from None
+    if m.ndim == 2 and m.shape[-1] == 7:
+        return poses_to_rows(m, num_objects, name="transforms")
     if m.shape != (num_objects, 4, 4):
-        raise ValueError(f"transforms: expected shape ({num_objects}, 4, 4) for {num_objects} objects, got {m.shape}")
+        raise ValueError(f"transforms: expected shape ({num_objects}, 4, 4) or ({num_objects}, 7) for "
+                         f"{num_objects} objects, got {m.shape}")
     if num_objects == 0:
         return np.zeros((0, 7), np.float64)
     finite = np.isfinite(m).all(axis=(1, 2))
@@ -226,6 +294,14 @@ def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | No
                          "use precision='float64'")
 
 
+def _deforming_flags(deforming: bool | ArrayLike, n: int) -> np.ndarray:
+    """``deforming`` as a bool or an ``(n,)`` bool array, or ValueError."""
+    flags = host_array(deforming, "deforming")
+    if flags.dtype != bool or flags.shape not in ((), (n,)):
+        raise ValueError(f"deforming: expected a bool or ({n},) bools, got {flags.dtype} {flags.shape}")
+    return flags
+
+
 class Scene:
     """Shapes, objects, poses and world vertices of ``N`` objects on one device.
 
@@ -246,27 +322,42 @@ class Scene:
         precision: ``"float32"`` (default) or ``"float64"``: type of shape vertices, poses and
             world vertices, and of the exact triangle test. Object and node boxes stay float32,
             rounded outward.
+        world: ``(N,)`` integer world id of each object: objects of different worlds never pair, world
+            ``-1`` pairs with every world (thousands of environments in one scene, one launch each
+            stage). None: one world.
+        group, mask: ``(N,)`` 32-bit collision group and mask of each object: a pair collides when
+            ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero. None: every bit set.
+        exclude_pairs: ``(E, 2)`` object indices of pairs that never collide (meant to touch).
+            The filters apply in the broad phase (:mod:`warp_ccd.scene.filter`).
 
     Attributes:
         scalar_type, vec3_type, transform_type: the Warp types of its precision
             (:func:`~warp_ccd.geometry.precision.precision_types`).
         topology: the :class:`MeshTopology` struct kernels take beside ``world_vertex``.
         time_device: ``(1,)`` float64, the motion's time on the device (see :attr:`time`).
+        collision_filter: the :class:`~warp_ccd.scene.filter.CollisionFilter` of ``world``, ``group``,
+            ``mask`` and ``exclude_pairs``, or None when none is given.
+        input_check: the :class:`~warp_ccd.scene.inputs.InputCheck` of device-side inputs (its fault
+            is raised by the pipeline's next ``detect()``, or by :meth:`check_inputs`).
     """
 
     def __init__(
         self,
-        shapes: Sequence,
-        object_shape=None,
+        shapes: Sequence | MeshSet,
+        object_shape: ArrayLike = None,
         *,
-        object_scale=None,
-        poses=None,
+        object_scale: ArrayLike | None = None,
+        poses: ArrayLike | None = None,
         motion: EllipseMotion | None = None,
-        deforming=False,
-        device=None,
+        deforming: bool | ArrayLike = False,
+        device: DeviceLike = None,
         precision: str = "float32",
-        **renamed,
-    ):
+        world: ArrayLike | None = None,
+        group: ArrayLike | None = None,
+        mask: ArrayLike | None = None,
+        exclude_pairs: ArrayLike | None = None,
+        **renamed: Any,
+    ) -> None:
         if renamed:  # instance_shape / instance_scale, as they were called until 0.1
             given = renamed_arguments("Scene", renamed, {"instance_shape": "object_shape",
                                                           "instance_scale": "object_scale"})
@@ -287,7 +378,7 @@ class Scene:
             packed = validate_meshes(list(shapes), kind="shape", dtype=fdtype)
         self.shapes = packed
         num_shapes = len(packed)
-        inst = np.asarray(object_shape)
+        inst = host_array(object_shape, "object_shape")
         if inst.ndim != 1 or (inst.size and not np.issubdtype(inst.dtype, np.integer)):
             raise ValueError(
                 f"object_shape: expected a 1-D array of integer shape ids, got {inst.dtype} {inst.shape}")
@@ -297,29 +388,26 @@ class Scene:
         n = inst.size
         self.num_objects = n
         self.num_shapes = num_shapes
-        mask = np.asarray(deforming)
-        if mask.dtype != bool or mask.shape not in ((), (n,)):
-            raise ValueError(f"deforming: expected a bool or ({n},) bools, got {mask.dtype} {mask.shape}")
-        self.object_deforming_np = np.broadcast_to(mask, (n,)).copy()
+        flags = _deforming_flags(deforming, n)
+        self.object_deforming_np = np.broadcast_to(flags, (n,)).copy()
         """``(N,)`` bool: the objects whose world vertices the caller writes."""
-        self.deforming = bool(self.object_deforming_np.any()) or (mask.ndim == 0 and bool(mask))
+        self.deforming = bool(self.object_deforming_np.any()) or (flags.ndim == 0 and bool(flags))
         self.motion = motion
         if motion is not None and motion.num_objects != n:
             raise ValueError(f"motion: has {motion.num_objects} objects, scene has {n}")
         if motion is not None and motion.precision != precision:
             raise ValueError(f"motion: precision {motion.precision}, scene {precision}")
 
-        scale = np.ones(n, np.float32) if object_scale is None else np.asarray(object_scale, np.float32)
+        scale = np.ones(n, np.float32) if object_scale is None else np.asarray(
+            host_array(object_scale, "object_scale"), np.float32)
         if scale.shape != (n,) or not np.isfinite(scale).all() or (scale <= 0).any():
             raise ValueError(f"object_scale: expected ({n},) finite positive values")
         if poses is None:
             poses = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], np.float64), (n, 1))
-        poses = np.asarray(poses, fdtype)
-        if poses.shape != (n, 7):
-            raise ValueError(f"poses: expected shape ({n}, 7), got {poses.shape}")
-        bad = ~np.isfinite(poses).all(axis=1) | (np.abs(np.linalg.norm(poses[:, 3:], axis=1) - 1.0) > 1e-3)
-        if bad.any():
-            raise ValueError(f"poses: row {int(np.argmax(bad))} is not finite or its quaternion is not unit")
+        poses = poses_to_rows(poses, n).astype(fdtype)
+        filters = (world, group, mask, exclude_pairs)
+        self.collision_filter = None if all(f is None for f in filters) else CollisionFilter(
+            n, world=world, group=group, mask=mask, exclude_pairs=exclude_pairs, device=device)
 
         # Host-side topology (static): offsets of shapes and objects.
         shape_nv = np.diff(packed.vertex_start)
@@ -360,6 +448,7 @@ class Scene:
         self.topology.object_triangle_start = self.object_triangle_start
         self._time = 0.0
         self.time_device = wp.zeros(1, dtype=wp.float64, device=d)
+        self.input_check = InputCheck(d)
         if motion is not None:
             motion.launch(self.time_device, self.object_pose)
         self.pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
@@ -419,18 +508,32 @@ class Scene:
 
     @classmethod
     def from_meshes(
-        cls, meshes: Sequence, transforms=None, *, deforming: bool = False, device=None, precision: str = "float32"
+        cls,
+        meshes: Sequence,
+        transforms: ArrayLike | None = None,
+        *,
+        deforming: bool | ArrayLike = False,
+        device: DeviceLike = None,
+        precision: str = "float32",
+        world: ArrayLike | None = None,
+        group: ArrayLike | None = None,
+        mask: ArrayLike | None = None,
+        exclude_pairs: ArrayLike | None = None,
     ) -> "Scene":
         """A scene of user meshes, one object per mesh.
 
         Meshes passed as the very same array objects share one shape (instancing).
 
         Args:
-            meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``.
-            transforms: ``(N, 4, 4)`` rigid transforms, or None when vertices are in world space.
-            deforming: the caller will write world vertices every frame (:meth:`set_world_vertices`).
+            meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)`` (numpy, torch, JAX,
+                CuPy or Warp arrays).
+            transforms: ``(N, 4, 4)`` rigid transforms or ``(N, 7)`` poses (position, then quaternion
+                ``x, y, z, w``), or None when vertices are in world space.
+            deforming: True when the caller will write every object's world vertices each frame
+                (:meth:`set_world_vertices`), or an ``(N,)`` bool mask of those objects.
             device: Warp device.
             precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
+            world, group, mask, exclude_pairs: the collision filters (see :class:`Scene`).
 
         Raises:
             ValueError: a bad mesh or transform (naming it), or world vertices too far from the
@@ -447,7 +550,8 @@ class Scene:
             i = pairs.index(False)
             raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(meshes[i]).__name__}")
         n = len(meshes)
-        if deforming or n == 0:
+        flags = _deforming_flags(deforming, n)
+        if flags.any() or n == 0:
             source = np.arange(n)
             inst = source
         else:  # the very same arrays share one shape, numbered in order of first use
@@ -458,16 +562,17 @@ class Scene:
             rank[by_use] = np.arange(len(by_use))
             source = first[by_use]
             inst = rank[inverse.reshape(-1)]
-        packed = validate_meshes([meshes[i] for i in source], labels=source, kind="mesh", dtype=np.float64)
+        packed = validate_meshes([tuple(host_array(a, f"mesh {i}") for a in meshes[i]) for i in source],
+                                 labels=source, kind="mesh", dtype=np.float64)
         poses = None
         if transforms is not None:
-            if deforming:
+            if flags.ndim == 0 and flags:
                 raise ValueError("transforms: a deforming scene takes world vertices, not transforms")
             poses = transforms_to_poses(transforms, n)
         precision_types(precision)  # a bad precision named before the guard's message
         _check_coordinates(packed, np.asarray(inst, np.int64), poses, precision)
-        return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=deforming, device=device,
-                   precision=precision)
+        return cls(packed, np.asarray(inst, np.int64), poses=poses, deforming=flags, device=device,
+                   precision=precision, world=world, group=group, mask=mask, exclude_pairs=exclude_pairs)
 
     # ------------------------------------------------------------------ motion
     def update_world_vertices(self) -> None:
@@ -543,42 +648,86 @@ class Scene:
         advance_time(self.time_device, dt)
         self.update_world_vertices()
 
-    def set_transforms(self, transforms) -> None:
-        """Places the objects with ``(N, 4, 4)`` rigid transforms (validated) and updates world vertices."""
+    def set_transforms(self, transforms: ArrayLike) -> None:
+        """Places the objects with rigid transforms, then updates world vertices.
+
+        Args:
+            transforms: ``(N, 4, 4)`` rigid transforms or ``(N, 7)`` poses (position, then quaternion
+                ``x, y, z, w``). An array already on this scene's device (a ``wp.array``, or a torch,
+                JAX or CuPy array through DLPack or ``__cuda_array_interface__``) is read in place by a
+                kernel that checks it (no copy through the host: a bad row is raised by the next
+                ``detect()`` or :meth:`check_inputs`); a host array is checked here, then uploaded.
+
+        Raises:
+            ValueError: a deforming scene, a bad shape, or (host arrays) the first bad transform.
+        """
         if self.deforming:
             raise ValueError("set_transforms: a deforming scene takes world vertices")
-        poses = transforms_to_poses(transforms, self.num_objects)
-        self.object_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
+        if is_device_array(transforms):
+            self._device_poses(transforms, "set_transforms", matrices=True)
+        else:
+            poses = transforms_to_poses(transforms, self.num_objects)
+            self.object_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
 
-    def set_poses(self, poses: wp.array) -> None:
-        """Copies ``(N,)`` poses already on this device (``wp.transform``, or ``wp.transformd`` for a
-        float64 scene), then updates world vertices."""
-        t = self.transform_type
-        if not isinstance(poses, wp.array) or poses.dtype != t or poses.shape != (self.num_objects,):
-            raise ValueError(f"set_poses: expected a wp.array of {self.num_objects} {t.__name__}")
-        if poses.device != self.device:
-            raise ValueError(f"set_poses: poses are on {poses.device}, the scene on {self.device}")
-        wp.copy(self.object_pose, poses)
+    def set_poses(self, poses: ArrayLike) -> None:
+        """Places the objects with ``(N, 7)`` poses (position, then quaternion ``x, y, z, w``: Warp's
+        order), then updates world vertices.
+
+        Args:
+            poses: ``(N, 7)`` float32 or float64 rows, or ``(N,)`` ``wp.transform`` /
+                ``wp.transformd``. An array on this scene's device (Warp, torch, JAX, CuPy) is read in
+                place and checked by a kernel (see :meth:`set_transforms`); a host array is checked
+                here, then uploaded.
+
+        Raises:
+            ValueError: a bad shape, an array on another device than a CUDA scene's host, or (host
+                arrays) the first bad row.
+        """
+        if is_device_array(poses):
+            self._device_poses(poses, "set_poses", matrices=False)
+        else:
+            rows = poses_to_rows(poses, self.num_objects, name="set_poses")
+            self.object_pose.assign(rows.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
 
-    def set_world_vertices(self, vertices) -> None:
-        """Writes world vertices ``(V, 3)`` of all objects, concatenated (deforming meshes; a rigid
-        object's must be where its pose puts it, as :meth:`pose_world_vertices` computes).
+    def _device_poses(self, x, source: str, matrices: bool) -> None:
+        """Enqueues the kernel that reads poses (or, with ``matrices``, ``(N, 4, 4)`` transforms too)
+        from a device array into :attr:`object_pose`, checking them (:mod:`warp_ccd.scene.inputs`)."""
+        view = device_view(x, source, self.device)
+        n = self.num_objects
+        out = self.object_pose.view(self.scalar_type)
+        if view.shape == (n, 7):
+            self.input_check.poses(view, out, source)
+        elif matrices and view.shape == (n, 4, 4):
+            self.input_check.matrices(view, out, source)
+        else:
+            shapes = f"({n}, 4, 4) or ({n}, 7)" if matrices else f"({n}, 7)"
+            raise ValueError(f"{source}: expected shape {shapes}, got {view.shape}")
 
-        Accepts a numpy array (validated: shape and finiteness) or a ``wp.array`` of the scene's
-        vector type (``wp.vec3``, or ``wp.vec3d`` at float64) on this device (copied as is).
+    def set_world_vertices(self, vertices: ArrayLike) -> None:
+        """Writes world vertices of all objects, concatenated (deforming meshes; a rigid object's must
+        be where its pose puts it, as :meth:`pose_world_vertices` computes).
+
+        Args:
+            vertices: ``(V, 3)`` float32 or float64, or ``(V,)`` ``wp.vec3`` / ``wp.vec3d``. An array
+                on this scene's device (Warp, torch, JAX, CuPy) is read in place and checked by a
+                kernel (no copy through the host; a vertex that is not finite is raised by the next
+                ``detect()`` or :meth:`check_inputs`); a host array is checked here (shape,
+                finiteness), then uploaded.
+
+        Raises:
+            ValueError: a rigid scene, a bad shape, or (host arrays) the first vertex not finite.
         """
         if not self.deforming:
             raise ValueError("set_world_vertices: this scene's objects are rigid, placed by their poses "
                              "(set_transforms, set_poses); build it with deforming=True to write world vertices")
-        if isinstance(vertices, wp.array):
-            vec3 = self.vec3_type
-            if vertices.dtype != vec3 or vertices.shape != (self.num_world_vertices,):
-                raise ValueError(f"set_world_vertices: expected {self.num_world_vertices} {vec3.__name__}")
-            if vertices.device != self.device:
-                raise ValueError(f"set_world_vertices: vertices are on {vertices.device}, the scene on {self.device}")
-            wp.copy(self.world_vertex, vertices)
+        if is_device_array(vertices):
+            view = device_view(vertices, "set_world_vertices", self.device)
+            if view.shape != (self.num_world_vertices, 3):
+                raise ValueError(f"set_world_vertices: expected shape ({self.num_world_vertices}, 3) "
+                                 f"(or {self.num_world_vertices} {self.vec3_type.__name__}), got {view.shape}")
+            self.input_check.vertices(view, self.world_vertex.view(self.scalar_type), "set_world_vertices")
             return
         v = np.asarray(vertices, dtype=np.float64)
         if v.shape != (self.num_world_vertices, 3):
@@ -592,6 +741,21 @@ class Scene:
         if not np.isfinite(v).all():
             raise ValueError("set_world_vertices: vertices overflow float32")
         self.world_vertex.assign(v)
+
+    def check_inputs(self) -> None:
+        """Waits for the device and raises the fault of device-side inputs now (a pipeline's
+        ``detect()`` raises it at the end of its frame, with no extra wait).
+
+        Raises:
+            ValueError: naming the setter, the row and the problem.
+        """
+        self.input_check.check()
+
+    @property
+    def object_world(self) -> np.ndarray:
+        """``(N,)`` int64 world id of each object (zeros when the scene has no worlds)."""
+        f = self.collision_filter
+        return np.zeros(self.num_objects, np.int64) if f is None else f.object_world
 
     # ------------------------------------------------------------------ views
     @cached_property

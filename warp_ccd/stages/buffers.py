@@ -237,9 +237,14 @@ class GrowableBuffer:
 
 
 @wp.kernel
-def _publish_counters_kernel(block: wp.array[wp.int64], host: wp.array[wp.int64]):
-    """Counter ``k`` into host memory (pinned, mapped into the device's address space)."""
-    host[wp.tid()] = block[wp.tid()]
+def _publish_counters_kernel(block: wp.array[wp.int64], watch: wp.array[wp.int64], host: wp.array[wp.int64]):
+    """Counter ``k`` into host memory (pinned, mapped into the device's address space); the last
+    thread publishes the watched value."""
+    k = wp.tid()
+    if k < block.shape[0]:
+        host[k] = block[k]
+    else:
+        host[k] = watch[0]
 
 
 class CounterRead:
@@ -263,15 +268,20 @@ class CounterRead:
             so they grow to ``r`` times their count too: the next run usually fits everything,
             where growing one stage per run would take a run per stage. None for a buffer of
             work that does not flow from the others (it neither grows with them nor they with it).
+        watch: optional ``(1,)`` int64 device array published with the counters (by the same kernel)
+            and never reset by the reader: a scene's input fault (:class:`~warp_ccd.scene.inputs.InputCheck`),
+            read in :attr:`watched` after each frame.
 
     Attributes:
         block: ``(len(buffers),)`` int64 counters on the device.
         counts: the counts of the last :meth:`finish`.
+        watched: the value of ``watch`` at the end of the last frame (0 without one).
         generation: counts the new storages of its buffers (and counters adopted away by a later
             reader): a graph captured at one generation is stale at the next.
     """
 
-    def __init__(self, buffers: Sequence[GrowableBuffer], device, stages: Sequence[int] | None = None):
+    def __init__(self, buffers: Sequence[GrowableBuffer], device, stages: Sequence[int] | None = None,
+                 watch: wp.array | None = None):
         self.buffers = list(buffers)
         if stages is not None and len(stages) != len(self.buffers):
             raise ValueError(f"stages: expected {len(self.buffers)} entries, got {len(stages)}")
@@ -279,20 +289,23 @@ class CounterRead:
         self.device = wp.get_device(device)
         k = max(1, len(self.buffers))
         self.block = wp.zeros(k, dtype=wp.int64, device=self.device)
+        self.watch = watch if watch is not None else wp.zeros(1, dtype=wp.int64, device=self.device)
+        self.watched = 0
         self.generation = 0
         for slot, b in enumerate(self.buffers):
             wp.copy(self.block, b.count, dest_offset=slot, src_offset=0, count=1)
             b.count = self.block[slot : slot + 1]
             b.mark_stale()  # its counter moved out of the former readers' block
             b.readers.add(self)
-        self.host = wp.zeros(k, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        self.host = wp.zeros(k + 1, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         # The pinned block as the device sees it: with unified addressing, pinned host memory is
         # mapped at the same address (else None: a copy node instead).
         self._host_mapped = self.host
         if self.device.is_cuda:
-            self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k,), device=self.device)
+            self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k + 1,), device=self.device)
                                  if self.device.is_uva else None)
         self._host_view = self.host.numpy()[: len(self.buffers)]  # made once: a frame's read is a tolist()
+        self._host_watch = self.host.numpy()[k:]
         self.counts = [0] * len(self.buffers)
 
     def _strays(self) -> list[tuple[int, GrowableBuffer]]:
@@ -313,10 +326,11 @@ class CounterRead:
         addressing gets the copy."""
         if self.buffers:
             if self._host_mapped is not None:
-                wp.launch(_publish_counters_kernel, dim=len(self.buffers), inputs=[self.block],
+                wp.launch(_publish_counters_kernel, dim=self.block.shape[0] + 1, inputs=[self.block, self.watch],
                           outputs=[self._host_mapped], device=self.device)
             else:
                 wp.copy(self.host, self.block, count=len(self.buffers))
+                wp.copy(self.host, self.watch, dest_offset=self.block.shape[0], count=1)
         for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 
@@ -337,6 +351,7 @@ class CounterRead:
             OverflowError: a counter reached :data:`COUNT_LIMIT`.
         """
         self.counts = counts = self._host_view.tolist()
+        self.watched = int(self._host_watch[0])
         grew = False
         short = None
         for k, (b, c) in enumerate(zip(self.buffers, counts)):

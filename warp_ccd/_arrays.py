@@ -1,0 +1,122 @@
+"""Arrays from anywhere: numpy, Warp, and any DLPack or ``__cuda_array_interface__`` object
+(torch, JAX, CuPy, Numba), taken in place when they already live on the device that needs them.
+
+Two doors:
+
+* :func:`host_array` for set-up that validates on the host (meshes, ids, filters): a numpy view when
+  the data is on the host already, one copy down from a device otherwise.
+* :func:`device_view` for what a frame reads (poses, transforms, world vertices): a ``wp.array`` over
+  the caller's own memory when it is on the wanted device (no copy, no host round trip), else one copy
+  to that device. Such input is validated by a kernel on the device (the scenes' setters), never by a
+  read to the host.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from ._typing import ArrayLike, DeviceLike
+
+__all__ = ["ArrayLike", "DeviceLike", "device_view", "host_array", "is_device_array"]
+
+
+
+def _foreign(x) -> wp.array | None:
+    """A ``wp.array`` over the memory of a DLPack or ``__cuda_array_interface__`` object (no copy), or
+    None for anything else (numpy arrays and sequences included)."""
+    if isinstance(x, wp.array):
+        return x
+    if isinstance(x, np.ndarray):
+        return None
+    if hasattr(x, "__dlpack__") and hasattr(x, "__dlpack_device__"):
+        try:
+            return wp.from_dlpack(x)
+        except Exception as exc:  # an unsupported dtype, a device Warp does not know
+            raise ValueError(f"cannot read this {type(x).__name__} through DLPack ({exc})") from None
+    if hasattr(x, "__cuda_array_interface__"):
+        try:
+            return wp.array(data=x, dtype=Any, device="cuda", copy=False)
+        except Exception as exc:
+            raise ValueError(f"cannot read this {type(x).__name__} through __cuda_array_interface__ ({exc})") from None
+    return None
+
+
+def is_device_array(x) -> bool:
+    """Whether ``x`` is a ``wp.array`` or a DLPack / ``__cuda_array_interface__`` object (not numpy)."""
+    return isinstance(x, wp.array) or (not isinstance(x, np.ndarray) and (
+        hasattr(x, "__dlpack__") or hasattr(x, "__cuda_array_interface__")))
+
+
+def host_array(x, name: str) -> np.ndarray:
+    """``x`` as a numpy array (a view where it is on the host, one copy down from a device).
+
+    Args:
+        x: an :data:`ArrayLike` (or a scalar).
+        name: the argument's name, for errors.
+
+    Raises:
+        ValueError: ``x`` is not an array of numbers.
+    """
+    try:
+        w = _foreign(x)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    if w is not None:
+        return w.numpy()  # vectors (wp.vec3, ...) with their components as the last axis
+    try:
+        return np.asarray(x)
+    except Exception as exc:
+        raise ValueError(f"{name}: not an array ({type(exc).__name__}: {exc})") from None
+
+
+_SCALARS = {wp.float32: np.float32, wp.float64: np.float64}
+
+
+def device_view(x, name: str, device, *, scalar_types=(wp.float32, wp.float64)) -> wp.array:
+    """``x`` as a ``wp.array`` of scalars on ``device``: the caller's memory itself when it is there
+    (a view, any strides), else one copy to it.
+
+    Vector-typed Warp arrays (``wp.vec3``, ``wp.transform``) are viewed as their scalars with one more
+    axis (``(N,)`` ``wp.vec3`` as ``(N, 3)``), so kernels read every layout the same way.
+
+    Args:
+        x: an :data:`ArrayLike`.
+        name: the argument's name, for errors.
+        device: the Warp device that will read it.
+        scalar_types: the Warp scalar types accepted in place; other real types are converted (a copy).
+
+    Returns:
+        A ``wp.array`` whose dtype is one of ``scalar_types``, on ``device``.
+
+    Raises:
+        ValueError: ``x`` is not an array of real numbers.
+    """
+    d = wp.get_device(device)
+    try:
+        w = _foreign(x)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    if w is None:
+        arr = host_array(x, name)
+        if arr.dtype.kind not in "fiu" or arr.dtype == np.float16:
+            raise ValueError(f"{name}: expected real numbers, got {arr.dtype}")
+        target = arr.dtype if arr.dtype in (np.float32, np.float64) and \
+            wp.types.np_dtype_to_warp_type[arr.dtype] in scalar_types else np.dtype(_SCALARS[scalar_types[-1]])
+        return wp.array(np.ascontiguousarray(arr, dtype=target), device=d)
+    scalar = getattr(w.dtype, "_wp_scalar_type_", None)
+    if scalar is not None:  # vectors, matrices, transforms: their scalars, one more axis
+        if not w.is_contiguous:
+            w = wp.clone(w)
+        w = w.view(scalar)
+    if w.dtype not in scalar_types:
+        if w.dtype not in (wp.float16, wp.float32, wp.float64, wp.int8, wp.int16, wp.int32, wp.int64, wp.uint8,
+                           wp.uint16, wp.uint32, wp.uint64):
+            raise ValueError(f"{name}: expected real numbers, got {wp.types.type_repr(w.dtype)}")
+        host = w.numpy().astype(_SCALARS[scalar_types[-1]])
+        return wp.array(host, device=d)
+    if w.device != d:
+        return wp.clone(w, device=d)
+    return w
