@@ -11,12 +11,14 @@ Subcommands:
   summary table, optionally a JSON report, a USD overlay and a picture of the worst frame; with
   ``--continuous``, also the prim pairs that touch between consecutive time codes, and which of them
   tunnel (no end frame shows them); with ``--clearance D``, the prim pairs closer than ``D`` (soft
-  clashes); with ``--self``, the prims that pass through themselves. Exit status 0 when nothing
-  penetrates, 1 when something does (or tunnels, or passes through itself, or comes within the
-  clearance, or, with ``--count-touching``, touches), 2 when the input or the arguments are bad,
-  3 on an internal error, so that it can gate a pipeline. No output may be the input or one of its
-  layers; every output is written to a temporary file and all are moved into place at the end, so a
-  failed run writes nothing.
+  clashes); with ``--self``, the prims that pass through themselves; with ``--duplicates``, the prim
+  pairs whose meshes coincide (reported as duplicates, not as collisions). Exit status 0 when nothing
+  penetrates, 1 when something does (or tunnels, or passes through itself, or duplicates another, or
+  comes within the clearance, or, with ``--count-touching``, touches), 2 when the input or the
+  arguments are bad, 3 on an internal error, so that it can gate a pipeline. No output may be the
+  input or one of its layers; every output is written to a temporary file and all are moved into
+  place at the end, so a failed run writes nothing. ``--report -`` prints the JSON report on standard
+  output (last, once every file is in place) and everything else the command prints on stderr.
 * ``bench``: the benchmarks of :mod:`warp_ccd.bench`; every argument after ``bench`` goes there.
 
 Bad arguments end with one line on stderr and a non-zero exit status, never a traceback; so does
@@ -26,6 +28,7 @@ an unexpected exception (exit status 3), unless ``--debug`` asks for its traceba
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import re
@@ -148,8 +151,10 @@ def _build_parser() -> OneLineParser:
         "With --clearance D, also the prim pairs closer than D (soft clashes), with their least distance and "
         "closest points. "
         "With --self, also the prims that pass through themselves, as pairs of their faces with a depth. "
+        "With --duplicates, the prim pairs whose meshes coincide (the same triangles at the same place) are "
+        "reported as duplicates, not as colliding. "
         "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or passes through itself with --self, "
-        "or comes within --clearance, or "
+        "or duplicates another with --duplicates, or comes within --clearance, or "
         "touches with --count-touching), 2 bad arguments or input, 3 an internal error.",
     )
     check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
@@ -181,7 +186,13 @@ def _build_parser() -> OneLineParser:
                        help="also report the prims that pass through themselves (triangles of one mesh meeting beyond "
                        "the vertices they share: a cloth through itself, overlapping bodies in one CAD mesh), as "
                        "pairs of their faces with a depth; a finding like a penetration")
-    check.add_argument("--report", default=None, metavar="REPORT.json", help="write the JSON report here")
+    check.add_argument("--duplicates", action="store_true",
+                       help="report the prim pairs whose meshes coincide (the same triangles at the same place, "
+                       "e.g. a part exported twice) as duplicates instead of as touching or penetrating; a "
+                       "finding like a penetration")
+    check.add_argument("--report", default=None, metavar="REPORT.json",
+                       help="write the JSON report here; '-': to standard output (the summary and every other "
+                       "message then go to stderr)")
     check.add_argument("--usd-out", default=None, metavar="OVERLAY.usd",
                        help="write a layer over IN.usd with the penetrating prims in colour per frame")
     check.add_argument("--segments", action="store_true",
@@ -360,18 +371,38 @@ def _run_demo(args) -> int:
     return EXIT_OK
 
 
+REPORT_STDOUT = "-"
+"""``--report -``: the JSON report on standard output."""
+
+
 def _run_check(args) -> int:
+    """``check``; with ``--report -``, everything but the JSON report printed on stderr, the report on
+    stdout once every file output is in place (nothing on stdout after an error)."""
+    if args.report != REPORT_STDOUT:
+        return _check(args)[0]
+    stdout = sys.stdout
+    with contextlib.redirect_stdout(sys.stderr):  # stdout holds the JSON alone: json.loads(stdout) works
+        status, text = _check(args)
+    stdout.write(text)
+    stdout.flush()
+    return status
+
+
+def _check(args) -> tuple[int, str | None]:
+    """Runs ``check``. Returns the exit status, and with ``--report -`` the report's JSON text (else None)."""
     def fail(message: str) -> CliError:  # bad arguments or input: exit 2 (1 means "penetrates")
         return CliError(f"{PROG} check: error: {message}", EXIT_USAGE)
 
-    outputs = [(flag, path) for flag, path in (("--report", args.report), ("--usd-out", args.usd_out),
-                                               ("--preview", args.preview)) if path is not None]
+    to_stdout = args.report == REPORT_STDOUT
+    outputs = [(flag, path) for flag, path in (("--report", None if to_stdout else args.report),
+                                               ("--usd-out", args.usd_out), ("--preview", args.preview))
+               if path is not None]
     # Every destination is checked before the stage is read; nothing is written on an error.
     try:
         _refuse_overwriting([("the input", args.stage)], outputs)
         for i, output in enumerate(outputs):
             _refuse_overwriting([(f"the {flag} file", path) for flag, path in outputs[:i]], [output])
-        if args.report is not None:
+        if args.report is not None and not to_stdout:
             from ..output import check_output_path
 
             check_output_path(args.report, (".json",), "report")
@@ -432,7 +463,7 @@ def _run_check(args) -> int:
                                include_purposes=tuple(args.include_purpose), progress=True,
                                allow_missing=args.allow_missing, continuous=args.continuous,
                                min_distance=args.min_distance, clearance=args.clearance,
-                               self_intersections=args.self_intersections)
+                               self_intersections=args.self_intersections, duplicates=args.duplicates)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)
@@ -446,8 +477,11 @@ def _run_check(args) -> int:
     # Every output to a temporary file first; all moved into place once all are written.
     pending = []
     lines = []
+    text = None
     try:
-        if args.report is not None:
+        if to_stdout:
+            text = report.json_text()  # printed once the files are in place
+        elif args.report is not None:
             pending.append(report.prepare_json(args.report))
             lines.append("  report : {}")
         if args.usd_out is not None:
@@ -478,7 +512,9 @@ def _run_check(args) -> int:
         raise
     for line, path in zip(lines, written):
         print(line.format(path))
-    return EXIT_FINDINGS if report.findings else EXIT_OK
+    if to_stdout:
+        print("  report : standard output")
+    return (EXIT_FINDINGS if report.findings else EXIT_OK), text
 
 
 def _flat(prims):
