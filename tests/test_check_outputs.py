@@ -459,3 +459,80 @@ def test_no_cuda_driver_notice(resting, tmp_path):
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "Warp CUDA" not in proc.stderr and "Warp " not in proc.stdout
+
+
+# ---------------------------------------------------------------------------------------------
+# 6. --report -: the JSON report on stdout, everything else on stderr
+
+
+def test_report_to_stdout(mixed_file, resting, tmp_path, capsys):
+    import jsonschema
+
+    from warp_ccd.usd import report_schema
+
+    rc, captured = run_cli(capsys, ["check", str(mixed_file), "--frames", "0:6:3", "--device", DEFAULT_DEVICE,
+                                    "--report", "-"])
+    assert rc == 1, captured.err
+    data = json.loads(captured.out)  # stdout holds the report alone
+    jsonschema.validate(data, report_schema())
+    assert data["findings"] == "penetrating" and data["times"] == [0.0, 3.0, 6.0]
+    assert "face pairs / frame" in captured.err and "report : standard output" in captured.err  # the summary
+    # The same report as a file (but for the time each part took).
+    file_report = tmp_path / "r.json"
+    rc, _ = run_cli(capsys, ["check", str(mixed_file), "--frames", "0:6:3", "--device", DEFAULT_DEVICE,
+                             "--report", str(file_report)])
+    on_file = json.loads(file_report.read_text())
+    assert rc == 1 and {**on_file, "seconds": None} == {**data, "seconds": None}
+    rc, captured = run_cli(capsys, ["check", str(resting), "--device", DEFAULT_DEVICE, "--frames", "0",
+                                    "--report", "-"])
+    assert rc == 0, captured.err
+    assert json.loads(captured.out)["findings"] is None and json.loads(captured.out)["touching"] is True
+
+
+def test_report_to_stdout_with_files(mixed_file, tmp_path, capsys, monkeypatch):
+    args = ["check", str(mixed_file), "--frames", "0:6:3", "--device", DEFAULT_DEVICE, "--report", "-",
+            "--usd-out", str(tmp_path / "o.usda"), "--preview", str(tmp_path / "p.png")]
+    rc, captured = run_cli(capsys, args)
+    assert rc == 1, captured.err
+    assert json.loads(captured.out)["findings"] == "penetrating"
+    assert sorted(os.listdir(tmp_path)) == ["anim.usda", "o.usda", "p.png"]
+    assert str(tmp_path / "o.usda") in captured.err and str(tmp_path / "o.usda") not in captured.out
+    # All or none: a failed overlay leaves the files as they were and prints no report.
+    before = listing(tmp_path)
+    monkeypatch.setattr(Sdf.Layer, "Export", lambda self, *a, **k: False)
+    rc, captured = run_cli(capsys, args)
+    assert rc == 2 and captured.out == ""
+    line = message_lines(captured.err)[-1]  # after the summary, on stderr too
+    assert line.startswith("warp-ccd check: error:") and "export failed" in line
+    assert listing(tmp_path) == before
+
+
+def test_report_to_stdout_bad_input_and_internal_error(tmp_path, resting, capsys, monkeypatch):
+    rc, captured = run_cli(capsys, ["check", str(tmp_path / "nope.usda"), "--report", "-"])
+    assert rc == 2 and captured.out == ""
+    assert len(message_lines(captured.err)) == 1
+    rc, captured = run_cli(capsys, ["check", str(resting), "--report", "-", "--usd-out", "-"])
+    assert rc == 2 and captured.out == "" and "--usd-out" not in captured.out  # '-' is for the report only
+    assert "unknown USD extension" in message_lines(captured.err)[0]
+    from warp_ccd.usd import check
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("device lost")
+
+    monkeypatch.setattr(check, "check_usd", broken)
+    rc, captured = run_cli(capsys, ["check", str(resting), "--device", DEFAULT_DEVICE, "--report", "-"])
+    assert rc == 3 and captured.out == ""
+    assert "internal error" in message_lines(captured.err)[0]
+
+
+def test_report_to_stdout_in_a_process(resting, tmp_path):
+    # A fresh interpreter: Warp's start-up, kernel loading and the progress bars stay off stdout.
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-m", "warp_ccd", "check", str(resting), "--frames", "0:1",
+                           "--device", DEFAULT_DEVICE, "--report", "-", "--count-touching"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["findings"] == "touching" and data["times"] == [0.0, 1.0]
+    assert "frames with intersecting (touching included) pairs: 2 of 2" in proc.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["resting.usda"]  # no file named "-"

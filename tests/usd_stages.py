@@ -227,3 +227,60 @@ def world_polygon_meshes(stage, time) -> dict:
             points, tri, face = read(prim, m)
             out[str(prim.GetPath())] = (points @ m[:3, :3] + m[3, :3], tri, face)
     return out
+
+
+DUPLICATE_CASES = ("exact", "reordered", "offset", "half_turn", "quarter_turn")
+"""The copies :func:`duplicate_stage` builds: the same mesh (``exact``); its fanned triangles shuffled, each
+one's vertices rotated and the vertices renumbered (``reordered``); moved by 1e-3 of its bounding-box
+diagonal (``offset``); turned half a turn about its axis, where its triangles land on the original's
+(``half_turn``); turned a quarter turn, which fills the same box with other triangles (``quarter_turn``)."""
+
+
+def duplicate_stage(case: str = "exact", path=None, seed: int = 0):
+    """A box-like prism ``/World/Part`` (at ``(1, 2, 3)``) and ``/World/Copy/Part``, a copy of it under an
+    ``Xform`` that carries the translation instead (another hierarchy, the same world matrix), made as
+    :data:`DUPLICATE_CASES` says; a floor ``/World/Floor`` far below. Time codes 0 to 2: the copy sits
+    on the original at 0 and 1 and is lifted by 0.5 at 2 (then it penetrates the original).
+
+    Returns:
+        ``(stage, diagonal)``: the ``Usd.Stage`` (saved to ``path`` when given) and the prism's
+        bounding-box diagonal.
+    """
+    from pxr import Gf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(2)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    points, counts, indices = prism(4, radius=0.7, height=1.0)
+    diagonal = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    define_mesh(stage, "/World/Floor", *grid(2, 12.0))
+    UsdGeom.Xformable(stage.GetPrimAtPath("/World/Floor")).AddTranslateOp().Set(Gf.Vec3d(0.0, -5.0, 0.0))
+    part = define_mesh(stage, "/World/Part", points, counts, indices)
+    UsdGeom.Xformable(part).AddTranslateOp().Set(Gf.Vec3d(1.0, 2.0, 3.0))
+    holder = UsdGeom.Xform.Define(stage, "/World/Copy")
+    move = holder.AddTranslateOp()
+    for tc, lift in ((0, 0.0), (1, 0.0), (2, 0.5)):
+        move.Set(Gf.Vec3d(1.0, 2.0 + lift, 3.0), tc)
+    if case == "reordered":
+        rng = np.random.default_rng(seed)
+        tri, _ = fan(counts, indices)
+        tri = tri[rng.permutation(len(tri))]
+        tri = np.array([np.roll(t, int(r)) for t, r in zip(tri, rng.integers(0, 3, len(tri)))])  # same winding
+        new_of_old = rng.permutation(len(points))
+        copy = np.empty_like(points)
+        copy[new_of_old] = points
+        define_mesh(stage, "/World/Copy/Part", copy, [3] * len(tri), new_of_old[tri].ravel().tolist())
+    else:
+        copy = define_mesh(stage, "/World/Copy/Part", points, counts, indices)
+        xf = UsdGeom.Xformable(copy)
+        if case == "offset":
+            xf.AddTranslateOp().Set(Gf.Vec3d(*(1e-3 * diagonal * np.array([0.6, 0.0, 0.8]))))
+        elif case in ("half_turn", "quarter_turn"):
+            xf.AddRotateYOp().Set(180.0 if case == "half_turn" else 90.0)
+        elif case != "exact":
+            raise ValueError(f"unknown case {case!r} (one of {', '.join(DUPLICATE_CASES)})")
+    if path is not None:
+        stage.GetRootLayer().Save()
+    return stage, diagonal
