@@ -187,8 +187,13 @@ def tri_tri_distance(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_r
     """Distance of the closed triangles ``(v0, v1, v2)`` and ``(u0, u1, u2)``, and a closest pair of points.
 
     Args:
-        v0, v1, v2, u0, u1, u2: vertices in one frame (any units), all ``wp.vec3`` (float32) or all
-            ``wp.vec3d`` (float64).
+        v0: first vertex of the first triangle, in one frame with the others (any units); all six
+            vertices ``wp.vec3`` (float32) or all ``wp.vec3d`` (float64).
+        v1: second vertex of the first triangle.
+        v2: third vertex of the first triangle.
+        u0: first vertex of the second triangle.
+        u1: second vertex of the second triangle.
+        u2: third vertex of the second triangle.
         tol_rel: tolerance relative to the longest edge, as for
             :func:`~warp_ccd.geometry.triangle.tri_tri_moller` (triangles that touch within it are at
             distance 0; it also says which triangles are degenerate).

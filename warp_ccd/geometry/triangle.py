@@ -243,8 +243,13 @@ def tri_tri_segment(v0: Any, v1: Any, v2: Any, u0: Any, u1: Any, u2: Any, tol_re
     """Möller's test, and where the triangles meet: ``(kind, p, q)``.
 
     Args:
-        v0, v1, v2, u0, u1, u2: vertices in one coordinate frame (any units), all ``wp.vec3`` (the
-            test computes in float32) or all ``wp.vec3d`` (in float64).
+        v0: first vertex of the first triangle, in one coordinate frame with the others (any units);
+            all six vertices ``wp.vec3`` (the test computes in float32) or all ``wp.vec3d`` (in float64).
+        v1: second vertex of the first triangle.
+        v2: third vertex of the first triangle.
+        u0: first vertex of the second triangle.
+        u1: second vertex of the second triangle.
+        u2: third vertex of the second triangle.
         tol_rel: tolerance relative to the longest edge (see the module docstring), a float of
             either precision, rounded to the vertices' precision. With float64 vertices give it
             in float64 (``wp.float64(wc.TOLERANCE)``): a float32 value is already rounded.
