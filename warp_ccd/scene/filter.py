@@ -35,9 +35,9 @@ __all__ = ["ALL_GROUPS", "WORLDS_MAX", "CollisionFilter", "PairFilter", "pair_al
 ALL_GROUPS = 0xFFFFFFFF
 """Default group and mask of an object: every bit set (it collides with every object)."""
 
-WORLDS_MAX = 1 << 22
-"""Most distinct worlds of one scene: a world's slot takes the high bits of the broad phase's 31-bit
-sort keys, beside at least 8 bits of sweep order and one of grid cells."""
+WORLDS_MAX = 1 << 20
+"""Most distinct worlds of one scene (1,048,576): a world's slot takes the high bits (21 at most) of the
+broad phase's 31-bit sort keys, beside at least 2 bits of grid cells and 8 of sweep order."""
 
 
 @wp.struct
