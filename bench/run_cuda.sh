@@ -15,11 +15,13 @@
 # then clearance: the clearance frame against the discrete one up to 1e6 polyhedra (clearance_<tag>.json), and
 # the least distance of two meshes of 1e4 and 1e5 triangles against python-fcl with its builds (distance_<tag>.json);
 # then self-intersection: one 1.3M-triangle mesh against pymeshlab, and 1e2 to 1e3 deforming 10k-triangle
-# sheets per frame, self plus pairwise (self_intersection_<tag>.json).
+# sheets per frame, self plus pairwise (self_intersection_<tag>.json); then worlds: 4,096 worlds of 20 objects
+# against the same objects in one world, a Python loop over worlds and newton's per-world broad phase, the cost
+# of filters, a frame from device arrays with Warp's memcpy activities counted (worlds_<tag>.json).
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
 #   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, stages, profile, narrow, scaling, spheres, boxes, deforming,
-#                                          # broad, build, host, usd, ccd, continuous, clearance, distance, self
+#                                          # broad, build, host, usd, ccd, continuous, clearance, distance, self, worlds
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -36,7 +38,7 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd ccd continuous clearance distance self}
+parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd ccd continuous clearance distance self worlds}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
@@ -45,6 +47,7 @@ if [ -n "${SMOKE:-}" ]; then
     mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
     ccd="--queries 4000 --objects 100 --ipctk-queries 1000 --repeats 2"; continuous="100 300"
     clearance="100 300"; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --crumpled 4 --sheet-n 20"
+    worldargs="--worlds 16 --loop-worlds 4"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests=${TESTS:-tests}
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
@@ -54,6 +57,7 @@ else
     staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
     ccd="--queries 1e7 --objects 1e4 --ipctk-queries 2e4 --repeats 10"; continuous="1e3 1e4 1e5 1e6"
     clearance="1e3 1e4 1e5 1e6"; distance="--triangles 1e4 1e5"; selfargs="--mesh-triangles 1.3e6 --sheets 1e2 1e3 --crumpled 1e2"
+    worldargs="--worlds 4096 --loop-worlds 256"
 fi
 status=0
 step() { "$@" || { rc=$?; echo "step failed (exit $rc): $*" >&2; [ $status -eq 0 ] && status=$rc; }; }
@@ -127,9 +131,12 @@ for part in $parts; do
     self)
         step python3 -m warp_ccd.bench.self_intersection --device "$device" $selfargs --frames $frames --warmup 3 \
             --out "$out/self_intersection_$tag.json" ;;
+    worlds)
+        step python3 -m warp_ccd.bench.worlds --device "$device" $worldargs --frames $frames --warmup 3 \
+            --out "$out/worlds_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
-            "host, usd, ccd, continuous, clearance, distance, self)" >&2
+            "host, usd, ccd, continuous, clearance, distance, self, worlds)" >&2
         status=2 ;;
     esac
 done

@@ -380,18 +380,22 @@ class WarpBvhBroadPhase:
 class NewtonBroadPhaseSAP:
     """newton's ``BroadPhaseSAP`` behind ``launch(lower, upper, pairs)``.
 
-    All boxes are put in world 0 and collision group 1 (so every pair may collide), with no gap
-    and no filter. newton sweeps along one fixed direction and sorts with Warp's radix sort.
-    Rows are written as newton finds them: ``(a, b)`` or ``(b, a)``.
+    All boxes are put in collision group 1 (so every pair may collide), with no gap and no filter,
+    in world 0 or the worlds given (newton's per-world sweep: a segmented sort of each world's boxes,
+    world -1's appended to every world). newton sweeps along one fixed direction and sorts with Warp's
+    radix sort. Rows are written as newton finds them: ``(a, b)`` or ``(b, a)``.
 
     Args:
         device: Warp device.
+        shape_world: ``(N,)`` world of each box (newton's convention: ``-1`` pairs with every world), or
+            None (every box in world 0).
 
     Raises:
         PeerUnavailable: newton is not installed or fails to import.
     """
 
-    def __init__(self, *, device=None):
+    def __init__(self, *, device=None, shape_world: np.ndarray | None = None):
+        self.shape_world_np = None if shape_world is None else np.asarray(shape_world, np.int32)
         try:
             from newton.geometry import BroadPhaseSAP
         except Exception as exc:  # ImportError, or newton failing on this Warp
@@ -411,10 +415,13 @@ class NewtonBroadPhaseSAP:
             return
         d = self.device
         self.num_boxes = n
-        self.sap = self._sap_class(np.zeros(n, np.int32), device=d)
+        world = np.zeros(n, np.int32) if self.shape_world_np is None else self.shape_world_np
+        if len(world) != n:
+            raise ValueError(f"shape_world: {len(world)} worlds for {n} boxes")
+        self.sap = self._sap_class(world, device=d)
         self.count32 = wp.zeros(1, dtype=wp.int32, device=d)  # newton counts in int32
         self.shape_group = wp.array(np.ones(n, np.int32), dtype=wp.int32, device=d)
-        self.shape_world = wp.array(np.zeros(n, np.int32), dtype=wp.int32, device=d)
+        self.shape_world = wp.array(world, dtype=wp.int32, device=d)
 
     def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs`` (newton zeroes its counter)."""
