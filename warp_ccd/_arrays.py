@@ -24,13 +24,15 @@ __all__ = ["ArrayLike", "DeviceLike", "device_view", "host_array", "is_device_ar
 
 
 
-def _foreign(x) -> wp.array | None:
+def _foreign(x: ArrayLike) -> wp.array | None:
     """A ``wp.array`` over the memory of a DLPack or ``__cuda_array_interface__`` object (no copy), or
     None for anything else (numpy arrays and sequences included)."""
     if isinstance(x, wp.array):
         return x
     if isinstance(x, np.ndarray):
         return None
+    if hasattr(x, "__dlpack__") or hasattr(x, "__cuda_array_interface__"):
+        wp.init()  # DLPack's device lookup needs Warp's runtime (a no-op once it is up)
     if hasattr(x, "__dlpack__") and hasattr(x, "__dlpack_device__"):
         try:
             return wp.from_dlpack(x)
@@ -44,13 +46,13 @@ def _foreign(x) -> wp.array | None:
     return None
 
 
-def is_device_array(x) -> bool:
+def is_device_array(x: ArrayLike) -> bool:
     """Whether ``x`` is a ``wp.array`` or a DLPack / ``__cuda_array_interface__`` object (not numpy)."""
     return isinstance(x, wp.array) or (not isinstance(x, np.ndarray) and (
         hasattr(x, "__dlpack__") or hasattr(x, "__cuda_array_interface__")))
 
 
-def host_array(x, name: str) -> np.ndarray:
+def host_array(x: ArrayLike, name: str) -> np.ndarray:
     """``x`` as a numpy array (a view where it is on the host, one copy down from a device).
 
     Args:
@@ -75,7 +77,8 @@ def host_array(x, name: str) -> np.ndarray:
 _SCALARS = {wp.float32: np.float32, wp.float64: np.float64}
 
 
-def device_view(x, name: str, device, *, scalar_types=(wp.float32, wp.float64)) -> wp.array:
+def device_view(x: ArrayLike, name: str, device: DeviceLike, *,
+                scalar_types: tuple[type, ...] = (wp.float32, wp.float64)) -> wp.array:
     """``x`` as a ``wp.array`` of scalars on ``device``: the caller's memory itself when it is there
     (a view, any strides), else one copy to it.
 

@@ -98,8 +98,10 @@ class CollisionPipeline:
         containment: also report objects wholly inside another (winding number of one vertex,
             for object pairs where one object's box holds the other's vertex), in
             :attr:`CollisionResult.containment_pairs`.
-        pair_capacity, candidate_capacity, hit_capacity, near_capacity: initial buffer capacities
-            (they grow; ``near_capacity``: the pairs within the clearance).
+        pair_capacity: initial capacity of the broad phase's object pairs (it grows).
+        candidate_capacity: initial capacity of the mid phase's candidate triangle pairs (it grows).
+        hit_capacity: initial capacity of the narrow phase's intersecting triangle pairs (it grows).
+        near_capacity: initial capacity of the object pairs within the clearance (it grows).
         front_capacity: initial capacity of the traversal's front of node pairs (``bvh`` mid phase;
             it grows; default four per object).
         rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
@@ -178,7 +180,7 @@ class CollisionPipeline:
         near_capacity: int | None = None,
         self_intersections: bool = False,
         self_capacity: int | None = None,
-    ):
+    ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         ccd = _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase,
@@ -504,8 +506,9 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
         world: ``(N,)`` world id of each object: objects of different worlds never pair; ``-1`` pairs
             with every world (:class:`~warp_ccd.scene.scene.Scene`). The result's :attr:`pair_world
             <warp_ccd.result.CollisionResult.pair_world>` gives each pair's world.
-        group, mask: ``(N,)`` 32-bit collision groups and masks: a pair collides when
+        group: ``(N,)`` 32-bit collision group of each object: a pair collides when
             ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero.
+        mask: ``(N,)`` 32-bit collision mask of each object (the groups it collides with; see ``group``).
         exclude_pairs: ``(E, 2)`` object indices of pairs that never collide.
         **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
             ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,

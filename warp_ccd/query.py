@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 import warp as wp
 
+from ._typing import ArrayLike, DeviceLike
 from .geometry.triangle import TOLERANCE
 from .options import integer_option
 from .result import DistanceResult
@@ -63,7 +64,8 @@ class DistanceQuery:
             it are at distance 0 (:func:`~warp_ccd.geometry.tri_tri_distance`).
         leaf_size: triangles per tree leaf (default 1).
         graph: run each query as a captured CUDA graph (default: on CUDA).
-        front_capacity, listed_capacity: initial capacities of the walk's buffers (they grow).
+        front_capacity: initial capacity of the walk's front of node pairs (it grows).
+        listed_capacity: initial capacity of the walk's measured triangle pairs (it grows).
 
     Attributes:
         bvh: the :class:`~warp_ccd.stages.bvh.SceneBVH`; ``stage``: the
@@ -71,8 +73,9 @@ class DistanceQuery:
             :class:`~warp_ccd.stages.buffers.GrowableBuffer` of queried pairs (``pair_ids``: on the host).
     """
 
-    def __init__(self, scene: Scene, pairs=None, *, tolerance: float = TOLERANCE, leaf_size: int = 1,
-                 graph: bool | None = None, front_capacity: int | None = None, listed_capacity: int | None = None):
+    def __init__(self, scene: Scene, pairs: ArrayLike | None = None, *, tolerance: float = TOLERANCE,
+                 leaf_size: int = 1, graph: bool | None = None, front_capacity: int | None = None,
+                 listed_capacity: int | None = None) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         n = scene.num_objects
@@ -132,15 +135,18 @@ def _as_meshes(meshes, name: str) -> list:
     return list(meshes)
 
 
-def distance(meshes_a, meshes_b=None, transforms_a=None, transforms_b=None, *, pairs=None, device=None,
+def distance(meshes_a: Sequence, meshes_b: Sequence | None = None, transforms_a: ArrayLike | None = None,
+             transforms_b: ArrayLike | None = None, *, pairs: ArrayLike | None = None, device: DeviceLike = None,
              precision: str = "float32", tolerance: float = TOLERANCE) -> DistanceResult:
     """One-shot least distances between meshes, however far apart ("how far is the arm from the table").
 
     Args:
         meshes_a: ``(vertices (n, 3), triangles (m, 3))`` meshes (or one such pair).
         meshes_b: a second set; without it, the pairs of ``meshes_a`` among themselves.
-        transforms_a, transforms_b: ``(N, 4, 4)`` rigid transforms of each set, or None (vertices in
-            world space; a set without them while the other has them is placed by identities).
+        transforms_a: ``(N, 4, 4)`` rigid transforms of ``meshes_a``, or None (vertices in world space;
+            without them while ``transforms_b`` is given, the meshes are placed by identities).
+        transforms_b: ``(N, 4, 4)`` rigid transforms of ``meshes_b``, or None (vertices in world space;
+            without them while ``transforms_a`` is given, the meshes are placed by identities).
         pairs: ``(P, 2)`` rows ``(i, j)`` to measure: mesh ``i`` of ``meshes_a`` against ``j`` of
             ``meshes_b`` (or of ``meshes_a``); default every ``(i, j)`` (``i < j`` within one set).
         device: Warp device (default: Warp's default device).
@@ -190,8 +196,8 @@ def distance(meshes_a, meshes_b=None, transforms_a=None, transforms_b=None, *, p
     return result
 
 
-def self_intersections(vertices, triangles, *, device=None, precision: str = "float32", tolerance: float = TOLERANCE,
-                       leaf_size: int = 1) -> np.ndarray:
+def self_intersections(vertices: ArrayLike, triangles: ArrayLike, *, device: DeviceLike = None,
+                       precision: str = "float32", tolerance: float = TOLERANCE, leaf_size: int = 1) -> np.ndarray:
     """The pairs of triangles of one mesh that meet other than through the vertices they share (a cloth
     folded through itself, a scan or a boolean result with self-intersections).
 

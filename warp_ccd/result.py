@@ -60,10 +60,11 @@ class CollisionResult:
     and the counts it reports.
     """
 
-    def __init__(self, num_objects: int, device_triangle_pairs, device_colliding: wp.array,
+    def __init__(self, num_objects: int, device_triangle_pairs: wp.array, device_colliding: wp.array,
                  timings: dict | None = None, num_candidates: int = 0, num_broad_pairs: int = 0,
-                 device_contained=None, device_segments=None, device_toi=None, clearance: float = 0.0,
-                 near: dict | None = None, self_rows: tuple | None = None):
+                 device_contained: wp.array | None = None, device_segments: wp.array | None = None,
+                 device_toi: wp.array | None = None, clearance: float = 0.0, near: dict | None = None,
+                 self_rows: tuple | None = None) -> None:
         self._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,
                    int(device_triangle_pairs.shape[0]), {})
         self.__dict__.update(device_triangle_pairs=device_triangle_pairs, device_contained=device_contained,
@@ -384,7 +385,7 @@ class DistanceResult:
     """
 
     def __init__(self, pairs: np.ndarray, device_distance: wp.array, device_points: wp.array,
-                 device_normal: wp.array, device_triangles: wp.array, runs: int = 1):
+                 device_normal: wp.array, device_triangles: wp.array, runs: int = 1) -> None:
         self.pairs = np.asarray(pairs, np.int32).reshape(-1, 2)
         self.device_distance = device_distance
         self.device_points = device_points

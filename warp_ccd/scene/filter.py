@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .._typing import ArrayLike, DeviceLike
+
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["ALL_GROUPS", "WORLDS_MAX", "CollisionFilter", "PairFilter", "pair_allowed"]
@@ -142,7 +144,9 @@ class CollisionFilter:
         num_objects: ``N``.
         world: ``(N,)`` integer world id of each object (``>= -1``; ``-1``: pairs with every world), or
             None (one world).
-        group, mask: ``(N,)`` 32-bit collision group and mask bits, or None (every bit set).
+        group: ``(N,)`` 32-bit collision group bits of each object, or None (every bit set).
+        mask: ``(N,)`` 32-bit collision mask bits of each object (the groups it collides with), or None
+            (every bit set).
         exclude_pairs: ``(E, 2)`` object indices of pairs that never collide, or None.
         device: Warp device.
 
@@ -160,8 +164,9 @@ class CollisionFilter:
         ValueError: naming the argument and the first bad object or row.
     """
 
-    def __init__(self, num_objects: int, *, world=None, group=None, mask=None, exclude_pairs=None,
-                 device=None) -> None:
+    def __init__(self, num_objects: int, *, world: ArrayLike | None = None, group: ArrayLike | None = None,
+                 mask: ArrayLike | None = None, exclude_pairs: ArrayLike | None = None,
+                 device: DeviceLike = None) -> None:
         n = int(num_objects)
         d = wp.get_device(device)
         self.device = d
@@ -252,7 +257,7 @@ class CollisionFilter:
         return np.maximum(self.object_world[p[:, 0]], self.object_world[p[:, 1]])
 
 
-def inactive_filter(device) -> PairFilter:
+def inactive_filter(device: DeviceLike) -> PairFilter:
     """A :class:`PairFilter` that lets every pair through (for scenes without filters), one per device."""
     d = wp.get_device(device)
     cached = _INACTIVE.get(d.alias)

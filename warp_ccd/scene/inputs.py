@@ -20,6 +20,8 @@ from typing import Any
 
 import warp as wp
 
+from .._typing import DeviceLike
+
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["FAULT_NONE", "InputCheck"]
@@ -136,7 +138,7 @@ class InputCheck:
         source: what wrote the inputs last (``"set_poses"``, ...), for the message.
     """
 
-    def __init__(self, device) -> None:
+    def __init__(self, device: DeviceLike) -> None:
         self.device = wp.get_device(device)
         self.fault = wp.zeros(1, dtype=wp.int64, device=self.device)
         self.source = ""

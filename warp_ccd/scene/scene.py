@@ -172,8 +172,7 @@ QUAT_TOLERANCE = 1e-3
 
 
 def poses_to_rows(poses: ArrayLike, num_objects: int, *, name: str = "poses") -> np.ndarray:
-    """Validates ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` (Warp's order) and normalises
-    their quaternions.
+    """Validates ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` (Warp's order), normalising their quaternions.
 
     Args:
         poses: ``(N, 7)`` array-like.
@@ -212,11 +211,10 @@ def transforms_to_poses(transforms: ArrayLike, num_objects: int, *, tol: float =
     """Validates rigid transforms and converts them to ``wp.transform`` rows.
 
     Args:
-        transforms: ``(N, 4, 4)`` array-like, each a rotation (orthonormal, determinant +1, within
-            ``tol``) and a translation, bottom row ``(0, 0, 0, 1)``; or ``(N, 7)`` poses
-            ``(px, py, pz, qx, qy, qz, qw)`` (position, then quaternion x, y, z, w: Warp's order), each
-            quaternion unit within :data:`QUAT_TOLERANCE` (then normalised). Any array of
-            :data:`~warp_ccd._arrays.ArrayLike` (torch, JAX, CuPy, Warp).
+        transforms: ``(N, 4, 4)`` array-like, each a rotation (orthonormal, determinant +1, within ``tol``)
+            and a translation, bottom row ``(0, 0, 0, 1)``; or ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)``
+            (position, then quaternion x, y, z, w: Warp's order), each quaternion unit within
+            :data:`QUAT_TOLERANCE` (then normalised). Any :data:`~warp_ccd._arrays.ArrayLike` (torch, JAX, Warp).
         num_objects: expected ``N``.
         tol: tolerance of the rigidity checks.
 
@@ -263,9 +261,8 @@ def transforms_to_poses(transforms: ArrayLike, num_objects: int, *, tol: float =
 
 
 def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | None, precision: str) -> None:
-    """Raises ValueError when ``precision`` does not resolve the scene's world vertices at its
-    triangles' size (:func:`~warp_ccd.geometry.precision.needed_precision`), naming the mesh with the
-    largest coordinate.
+    """Raises ValueError when ``precision`` does not resolve the scene's world vertices at its triangles'
+    size (:func:`~warp_ccd.geometry.precision.needed_precision`), naming the mesh with the largest coordinate.
 
     Args:
         packed: the meshes (float64 vertices: world vertices when ``poses`` is None).
@@ -325,8 +322,9 @@ class Scene:
         world: ``(N,)`` integer world id of each object: objects of different worlds never pair, world
             ``-1`` pairs with every world (thousands of environments in one scene, one launch each
             stage). None: one world.
-        group, mask: ``(N,)`` 32-bit collision group and mask of each object: a pair collides when
+        group: ``(N,)`` 32-bit collision group of each object: a pair collides when
             ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero. None: every bit set.
+        mask: ``(N,)`` 32-bit collision mask of each object (the groups it collides with). None: every bit set.
         exclude_pairs: ``(E, 2)`` object indices of pairs that never collide (meant to touch).
             The filters apply in the broad phase (:mod:`warp_ccd.scene.filter`).
 
@@ -462,15 +460,14 @@ class Scene:
         shapes: Sequence = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron"),
         density: float = 0.04,
         size_range: tuple[float, float] = (0.5, 1.5),
-        device=None,
+        device: DeviceLike = None,
         precision: str = "float32",
     ) -> "Scene":
         """Seeded polyhedra moving on inclined ellipses, spread at constant density.
 
-        Object radii are ``U(size_range)``; centres are uniform in a cube whose side is chosen so
-        that the objects' bounding spheres fill ``density`` of its volume. Each object orbits a few
-        of its own sizes, so the fraction of objects in contact stays about the same for any
-        ``num_objects``.
+        Object radii are ``U(size_range)``; centres are uniform in a cube whose side is chosen so that the
+        objects' bounding spheres fill ``density`` of its volume. Each object orbits a few of its own sizes,
+        so the fraction of objects in contact stays about the same for any ``num_objects``.
 
         Args:
             num_objects: ``N >= 0``.
@@ -533,7 +530,10 @@ class Scene:
                 (:meth:`set_world_vertices`), or an ``(N,)`` bool mask of those objects.
             device: Warp device.
             precision: ``"float32"`` or ``"float64"`` (see :class:`Scene`).
-            world, group, mask, exclude_pairs: the collision filters (see :class:`Scene`).
+            world: ``(N,)`` integer world id of each object, or None: one world (see :class:`Scene`).
+            group: ``(N,)`` 32-bit collision group of each object, or None: every bit set (see :class:`Scene`).
+            mask: ``(N,)`` 32-bit collision mask of each object, or None: every bit set (see :class:`Scene`).
+            exclude_pairs: ``(E, 2)`` object indices of pairs that never collide, or None (see :class:`Scene`).
 
         Raises:
             ValueError: a bad mesh or transform (naming it), or world vertices too far from the

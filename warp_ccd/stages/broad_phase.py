@@ -55,6 +55,8 @@ entry buffer and the pair buffer report overflow through their counters.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import warp as wp
 
@@ -89,6 +91,9 @@ from .sap_grid import (  # noqa: F401 (KEY_PAD, GRID_CELLS_MAX, ...: the grid's 
     sap_key_bits,
     sap_world_bits,
 )
+
+if TYPE_CHECKING:
+    from .kinds import BroadPhaseStage
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -138,7 +143,7 @@ def _all_pairs_kernel(
             emit_pair(a, b, pair, pair_count, pair_capacity)
 
 
-def _device_filter(pair_filter, device) -> PairFilter:
+def _device_filter(pair_filter: CollisionFilter | None, device: wp.Device) -> PairFilter:
     """The :class:`~warp_ccd.scene.filter.PairFilter` struct of a filter, or one that lets every
     pair through."""
     if pair_filter is None or not pair_filter.active:
@@ -161,7 +166,7 @@ class BroadPhase:
         graph: replay frames of :meth:`find_pairs` as CUDA graphs (default: on CUDA).
     """
 
-    def __init__(self, *, device=None, graph: bool | None = None):
+    def __init__(self, *, device: DeviceLike = None, graph: bool | None = None) -> None:
         self.device = wp.get_device(device)
         self.mode = frame_mode(self.device, graph)
         self.pairs = None
@@ -172,7 +177,7 @@ class BroadPhase:
         """The buffers of its own with counters that ``launch`` writes, besides ``pairs``."""
         return []
 
-    def find_pairs(self, lower: wp.array, upper: wp.array, pair_filter=None) -> wp.array:
+    def find_pairs(self, lower: wp.array, upper: wp.array, pair_filter: CollisionFilter | None = None) -> wp.array:
         """Overlapping pairs of the ``(N,)`` closed boxes ``lower``/``upper`` (``wp.vec3`` on this
         device), as one frame: launch, one counter read, grow and rerun if a buffer overflowed.
         ``pair_filter``: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the boxes, or None.
@@ -208,13 +213,15 @@ class BroadPhaseAllPairs(BroadPhase):
         graph: as for :class:`BroadPhase`.
     """
 
-    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> None:
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer,
+               pair_filter: CollisionFilter | None = None) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes ``lower``/``upper`` into ``pairs``.
 
         The caller resets ``pairs`` (or not, to append) and checks its counter afterwards.
 
         Args:
-            lower, upper: ``(N,)`` ``wp.vec3`` closed boxes.
+            lower: ``(N,)`` ``wp.vec3`` lower corners of the closed boxes.
+            upper: ``(N,)`` ``wp.vec3`` upper corners of the closed boxes.
             pairs: the output buffer.
             pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the ``N`` boxes' objects
                 (worlds, groups, excluded pairs), or None (every overlapping pair).
@@ -434,8 +441,8 @@ class BroadPhaseSAP(BroadPhase):
             on the CPU (whose threads run one by one).
     """
 
-    def __init__(self, *, device=None, graph: bool | None = None, cell_scale: float = 2.0, max_cells_per_box: int = 64,
-                 stats_blocks: int = 512, all_pairs_max: int | None = None):
+    def __init__(self, *, device: DeviceLike = None, graph: bool | None = None, cell_scale: float = 2.0,
+                 max_cells_per_box: int = 64, stats_blocks: int = 512, all_pairs_max: int | None = None) -> None:
         super().__init__(device=device, graph=graph)
         if all_pairs_max is None:
             all_pairs_max = ALL_PAIRS_MAX if self.device.is_cuda else 0
@@ -468,7 +475,7 @@ class BroadPhaseSAP(BroadPhase):
             self.entry.mark_stale()
         self.entry.ensure(2 * n)  # room for 2 entries a box (they cover 1.5 to 2.5 cells): grows if short
 
-    def _entry_arrays(self):
+    def _entry_arrays(self) -> tuple[wp.array, wp.array]:
         if self._entry_box is None or self._entry_box.shape[0] != 2 * self.entry.capacity:
             self._entry_box = wp.empty(2 * self.entry.capacity, dtype=wp.int32, device=self.device)
         return self.entry.data, self._entry_box
@@ -479,7 +486,8 @@ class BroadPhaseSAP(BroadPhase):
         reads after it (besides ``pairs``): the grid entries (their counter emptied by a kernel)."""
         return [self.entry]
 
-    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> None:
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer,
+               pair_filter: CollisionFilter | None = None) -> None:
         """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing.
 
         Four launches: statistics (with the padding of the keys and the grid layout), emit, sort
@@ -488,7 +496,8 @@ class BroadPhaseSAP(BroadPhase):
         ``ensure`` it and launch again (:func:`find_pairs` does).
 
         Args:
-            lower, upper: ``(N,)`` ``wp.vec3`` closed boxes.
+            lower: ``(N,)`` ``wp.vec3`` lower corners of the closed boxes.
+            upper: ``(N,)`` ``wp.vec3`` upper corners of the closed boxes.
             pairs: the output buffer.
             pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the ``N`` boxes' objects,
                 or None. Its worlds are sorted and swept in the same launches (a world's slot is the
@@ -535,7 +544,7 @@ BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": B
 ``"all_pairs"``, kept as an alias."""
 
 
-def make_broad_phase(method: str, *, device=None, graph: bool | None = None) -> BroadPhase:
+def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None) -> BroadPhase:
     """The broad phase of a method name.
 
     Args:
@@ -552,7 +561,8 @@ def make_broad_phase(method: str, *, device=None, graph: bool | None = None) -> 
     return BROAD_METHODS[method](device=device, graph=graph)
 
 
-def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, pair_filter=None) -> int:
+def find_pairs(broad: BroadPhaseStage, lower: wp.array, upper: wp.array, pairs: GrowableBuffer,
+               pair_filter: CollisionFilter | None = None) -> int:
     """Runs a broad phase until its buffers hold everything; returns the number of pairs.
 
     Resets ``pairs``, launches, reads the counters of ``pairs`` and of the broad phase's own
@@ -562,7 +572,8 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, p
     Args:
         broad: an object with ``launch(lower, upper, pairs)`` (and ``counters``, when it writes
             buffers of its own).
-        lower, upper: ``(N,)`` ``wp.vec3`` boxes on the broad phase's device.
+        lower: ``(N,)`` ``wp.vec3`` lower corners of the boxes, on the broad phase's device.
+        upper: ``(N,)`` ``wp.vec3`` upper corners of the boxes, on the broad phase's device.
         pairs: ``wp.vec2i`` output buffer.
         pair_filter: a :class:`~warp_ccd.scene.filter.CollisionFilter` of the boxes, or None.
     """
@@ -572,7 +583,7 @@ def find_pairs(broad, lower: wp.array, upper: wp.array, pairs: GrowableBuffer, p
     return CountedFrame(launch, reader).run()[0]
 
 
-def _boxes_to_float32(a, name: str, outward: int) -> np.ndarray:
+def _boxes_to_float32(a: ArrayLike, name: str, outward: int) -> np.ndarray:
     try:
         arr = np.asarray(a)
     except Exception as exc:
@@ -607,9 +618,12 @@ def broad_phase_pairs(lower: ArrayLike, upper: ArrayLike, method: str = "sap", d
             rounded outward to float32 (a pair may be added, never lost).
         method: ``"sap"`` (default) or ``"all_pairs"`` (the reference; ``"nxn"`` is an alias).
         device: Warp device (default: Warp's default device).
-        world, group, mask, exclude_pairs: filters of the boxes (see
-            :class:`~warp_ccd.scene.filter.CollisionFilter`): ``(N,)`` world ids (``-1`` pairs with
-            every world), ``(N,)`` 32-bit groups and masks, ``(E, 2)`` pairs that never pair.
+        world: ``(N,)`` world id of each box (``-1`` pairs with every world), or None: one world
+            (see :class:`~warp_ccd.scene.filter.CollisionFilter`).
+        group: ``(N,)`` 32-bit collision group of each box, or None: every bit set.
+        mask: ``(N,)`` 32-bit collision mask of each box, or None: every bit set (a pair collides
+            when ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero).
+        exclude_pairs: ``(E, 2)`` box indices of pairs that never pair, or None.
 
     Returns:
         ``(K, 2)`` int32 pairs ``(a, b)``, ``a < b``, rows sorted.
