@@ -11,8 +11,9 @@ Modules: :mod:`~warp_ccd.usd.importer` (:class:`UsdMeshImport`: a stage read onc
 code), :mod:`~warp_ccd.usd.stage` (opening a stage, its layers and time codes),
 :mod:`~warp_ccd.usd.meshes` (a mesh prim as triangles), :mod:`~warp_ccd.usd.poses` (world matrices as
 poses and scales), :mod:`~warp_ccd.usd.workers` (the
-processes that read transforms in parallel), :mod:`~warp_ccd.usd.check` (:func:`check_usd` and its
-overlay), :mod:`~warp_ccd.usd.export` (:class:`UsdAnimationWriter`). ``pxr`` (usd-core) is imported
+processes that read transforms in parallel), :mod:`~warp_ccd.usd.filters` (worlds, excluded pairs, sets A
+and B from prim paths), :mod:`~warp_ccd.usd.check` (:func:`check_usd` and its overlay),
+:mod:`~warp_ccd.usd.export` (:class:`UsdAnimationWriter`). ``pxr`` (usd-core) is imported
 inside functions only: importing this package works without it. The names of the module
 ``warp_ccd.usd`` of 0.1 (now :mod:`~warp_ccd.usd.export`) still resolve here for one release, with a
 warning.

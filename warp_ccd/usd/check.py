@@ -52,7 +52,11 @@ follows the JSON Schema (draft 2020-12) shipped beside this module, ``report.sch
 fields (``additionalProperties: false``), so a report with a field the schema does not know fails
 validation. The version's policy: the minor number grows when optional fields are added (a reader of
 ``1.x`` reads every later ``1.y``), the major number when a field is removed or changes its meaning or
-type.
+type. ``1.1`` added the ``filters`` section.
+
+**Filters** (:mod:`~warp_ccd.usd.filters`): pairs of two ``worlds``, excluded pairs (``ignore_pairs``, the
+stage's ``UsdPhysics`` filters) and, with ``set_a`` / ``set_b``, pairs not of one prim of each set are dropped
+by the broad phase (so for every kind of check; self-intersection, per prim, is not filtered).
 """
 
 from __future__ import annotations
@@ -60,11 +64,14 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cache
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._typing import DeviceLike, PathLike
 from ..geometry.triangle import TOLERANCE
 from ..options import number_option
 from ..output import PendingFile, check_output_path
@@ -90,6 +97,7 @@ from .duplicates import (
     frame_duplicates_json,
 )
 from .export import COLOR_COLLIDING, COLOR_FREE, COLOR_SEGMENT, segment_points, validate_stage_path
+from .filters import FilterSummary, PairFilters
 from .self_intersection import (
     COLOR_SELF,
     SelfIntersections,
@@ -101,10 +109,13 @@ from .self_intersection import (
 from .self_intersection import self_intersections as find_self_intersections
 from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
 
+if TYPE_CHECKING:
+    from pxr import Usd
+
 __all__ = ["REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts", "check_usd", "prepare_overlay",
            "report_schema", "write_overlay"]
 
-SCHEMA_VERSION = "1.0"
+SCHEMA_VERSION = "1.1"
 """The version of the JSON report's layout (``"schema_version"`` in it): ``MAJOR.MINOR``, the minor number
 raised when optional fields are added, the major one when a field is removed or changes meaning or type."""
 REPORT_SCHEMA_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "report.schema.json")
@@ -198,6 +209,8 @@ class CheckReport:
         clearance: the distance of soft clashes (0: none sought).
         self_checked: whether self-intersections were sought.
         duplicates_checked: whether duplicates (coincident meshes) were sought.
+        filters: the :class:`~warp_ccd.usd.filters.FilterSummary` of the worlds, excluded pairs and sets
+            (the report's ``filters`` section when any was used), or None.
     """
 
     stage: str
@@ -216,6 +229,7 @@ class CheckReport:
     clearance: float = 0.0
     self_checked: bool = False
     duplicates_checked: bool = False
+    filters: FilterSummary | None = None
 
     @property
     def duplicated(self) -> bool:
@@ -360,6 +374,8 @@ class CheckReport:
         if self.duplicates_checked:
             out["duplicated"] = self.duplicated
             out["duplicates"] = duplicates_json(self.frames, self.object_path, REL_TOL)
+        if self.filters is not None and self.filters.used:
+            out["filters"] = self.filters.to_json()
         return out
 
     def json_text(self) -> str:
@@ -409,6 +425,8 @@ class CheckReport:
                     f"{touching.mean() if n else 0.0:.1f}, max {touching.max(initial=0)}")]
         if self.missing:
             lines.append(f"  not checked, cannot be opened: {', '.join(self.missing)}")
+        if self.filters is not None:
+            lines[1:1] = self.filters.summary_lines()
         pairs = self.pair_summary()
         if pairs:
             wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
@@ -472,12 +490,15 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
                          seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup)
 
 
-def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision: str = "float32",
+def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[float] | None = None,
+              prims: str | Sequence[str] | None = None, device: DeviceLike = None, precision: str = "float32",
               min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
-              include_invisible: bool = False, include_purposes=(), tolerance: float = TOLERANCE,
+              include_invisible: bool = False, include_purposes: Sequence[str] = (), tolerance: float = TOLERANCE,
               progress: bool = False, allow_missing: bool = False, continuous: bool = False,
               min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False,
-              duplicates: bool = False) -> CheckReport:
+              duplicates: bool = False, worlds: str | Sequence[str] | None = None,
+              ignore_pairs: PathLike | Sequence[Any] | None = None, usd_filters: bool = True,
+              set_a: str | Sequence[str] | None = None, set_b: str | Sequence[str] | None = None) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -498,7 +519,9 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         progress: show progress bars on stderr (reading the transforms of every time code, then
             the frames).
         allow_missing: check a stage whose sublayers, references or payloads cannot all be
-            opened (without them; :attr:`CheckReport.missing` lists them) instead of raising.
+            opened (without them; :attr:`CheckReport.missing` lists them) instead of raising; likewise
+            an ``ignore_pairs`` pair naming no prim, a ``worlds``, ``set_a`` or ``set_b`` pattern matching no
+            checked mesh: a note in the report (``filters.notes``) instead of a ValueError.
         continuous: also report, per interval between consecutive time codes, the prim pairs that
             touch at some time in it (every vertex moving linearly between its positions at the
             two time codes), and which of them tunnel (:attr:`CheckReport.intervals`).
@@ -511,13 +534,27 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
         duplicates: report, per frame, the pairs whose meshes coincide (the same triangles at the same
             place, :mod:`~warp_ccd.usd.duplicates`) as duplicates (:attr:`FrameContacts.duplicates`) instead
             of as collisions.
+        worlds: prim paths or ``fnmatch`` patterns, every prim they match rooting a world: pairs of two
+            worlds are never checked (meshes under no root pair with every world; see
+            :class:`~warp_ccd.usd.importer.UsdMeshImport`).
+        ignore_pairs: prim pairs never checked: an ignore-pairs file (text: two prim paths or patterns a
+            line, separated by whitespace or a comma, ``#`` comments; ``.json``: a list of ``[a, b]``), or
+            a sequence of such files and ``(a, b)`` pairs. Every mesh at or under ``a`` is excluded against
+            every mesh at or under ``b`` (:mod:`~warp_ccd.usd.filters`).
+        usd_filters: also exclude the pairs the stage's ``UsdPhysics.FilteredPairsAPI`` and
+            ``UsdPhysics.CollisionGroup`` prims filter out.
+        set_a: prim paths or patterns (a string may hold several, comma-separated): with ``set_b``, only
+            pairs of one mesh of set A and one of set B are checked (a mesh may be in both).
+        set_b: the other set, given with ``set_a``.
 
     Returns:
         The :class:`CheckReport`.
 
     Raises:
         ValueError: naming the file or prim: see :class:`~warp_ccd.usd.importer.UsdMeshImport`; or
-            a sublayer, reference or payload cannot be opened (unless ``allow_missing``).
+            a sublayer, reference or payload cannot be opened (unless ``allow_missing``); a bad
+            ``ignore_pairs`` file (naming it and the line), a pair naming no prim, a pattern matching
+            no checked mesh (unless ``allow_missing``), ``set_a`` without ``set_b``.
     """
     import warp as wp
     from tqdm import tqdm
@@ -531,13 +568,16 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
     if min_distance > 0.0 and not continuous:
         raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
+    filters = PairFilters(ignore_pairs=ignore_pairs, usd_filters=usd_filters, set_a=set_a, set_b=set_b,
+                          allow_missing=allow_missing)
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
     missing = require_layers(stage, allow_missing)
     times = stage_time_codes(stage, frames)
     opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
-                        include_purposes=include_purposes, device=device, precision=precision, progress=progress)
+                        include_purposes=include_purposes, device=device, precision=precision, progress=progress,
+                        worlds=worlds, filters=filters)
     seconds = dict(imp.seconds)
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
@@ -555,7 +595,7 @@ def check_usd(stage_or_path, *, frames=None, prims=None, device=None, precision:
     report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
                          count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
                          clearance=clearance, self_checked=bool(self_intersections),
-                         duplicates_checked=bool(duplicates))
+                         duplicates_checked=bool(duplicates), filters=imp.filters)
     if continuous:
         report.intervals = []
         report.min_distance = float(min_distance)

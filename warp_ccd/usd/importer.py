@@ -69,6 +69,7 @@ from ..geometry.precision import PrecisionWarning, coordinate_message, needed_pr
 from ..options import integer_option
 from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
+from .filters import FilterSummary, PairFilters, world_ids
 from .meshes import MeshData, read_mesh
 from .poses import finite_matrix_poses, matrix_poses, similarity_split
 from .stage import MAX_FRAMES, open_stage
@@ -144,6 +145,12 @@ class UsdMeshImport:
             (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` lookups, else none; 0 or 1:
             none. A stage with unsaved edits is always read in this process.
         progress: show a progress bar on stderr while the transforms of every time code are read.
+        worlds: prim paths or ``fnmatch`` patterns (``"/World/envs/*"``): every prim they match roots a
+            world, and meshes at or under it belong to it (to its outermost matching ancestor); worlds are
+            numbered in the order of their roots' paths, meshes under no root are world ``-1`` and pair
+            with every world. Objects of two worlds never pair (the scene's ``world``). Default: one world.
+        filters: the :class:`~warp_ccd.usd.filters.PairFilters` (excluded pairs, the stage's physics
+            filters, sets A and B) turned into the scene's ``exclude_pairs``, ``group`` and ``mask``, or None.
 
     Attributes:
         stage: the ``Usd.Stage``.
@@ -164,10 +171,14 @@ class UsdMeshImport:
             given as a :class:`~warp_ccd.geometry.precision.PrecisionWarning`).
         seconds: wall time of ``read`` (opening, traversal, topology, transforms at every time
             code) and ``build`` (the scene on its device, the first frame).
+        object_world: ``(N,)`` int64 world of each object (``-1``: every world), or None without ``worlds``.
+        filters: the :class:`~warp_ccd.usd.filters.FilterSummary` of ``worlds`` and ``filters`` (what
+            they were and did).
 
     Raises:
         ValueError: naming the file or prim: a missing or unreadable file, a prim path that does
-            not exist, patterns that match nothing, a stage without meshes, a bad mesh or
+            not exist, patterns that match nothing (``worlds`` and sets: no checked mesh; unless
+            ``filters.allow_missing``), a pair of ``filters`` naming no prim, a stage without meshes, a bad mesh or
             PointInstancer, more than :data:`~warp_ccd.usd.stage.MAX_FRAMES` time codes, or coordinates beyond float64
             at the triangles' size.
     """
@@ -175,7 +186,8 @@ class UsdMeshImport:
     def __init__(self, stage_or_path: Usd.Stage | PathLike, *, prims: str | Sequence[str] | None = None,
                  times: Sequence[float] | np.ndarray | None = None, include_invisible: bool = False,
                  include_purposes: Sequence[str] = (), device: DeviceLike = None, precision: str = "float32",
-                 workers: int | None = None, progress: bool = False) -> None:
+                 workers: int | None = None, progress: bool = False, worlds: str | Sequence[str] | None = None,
+                 filters: PairFilters | None = None) -> None:
         from pxr import Usd
 
         self._start = time.perf_counter()
@@ -200,6 +212,8 @@ class UsdMeshImport:
         self._varying_xform: dict[str, bool] = {}
         self._workers = workers
         self._prim_args = None if prims is None else ([prims] if isinstance(prims, str) else list(prims))
+        self._worlds = worlds
+        self._filters = filters
         mesh_prims = self._traverse(prims, include_invisible, purposes)
         self._build(mesh_prims, device, precision)
 
@@ -511,13 +525,30 @@ class UsdMeshImport:
         fdtype = np.float64 if precision == "float64" else np.float32
         packed.vertices = packed.vertices.astype(fdtype)
         self._anim_poses = self._anim_poses.astype(fdtype, copy=False)
+        filter_args = self._filter_arguments()
         self.seconds = {"read": time.perf_counter() - self._start}
         start = time.perf_counter()
         self.scene = Scene(packed, shape_of, object_scale=scale, poses=poses,
-                           deforming=np.arange(n) >= self._num_rigid, device=device, precision=precision)
+                           deforming=np.arange(n) >= self._num_rigid, device=device, precision=precision,
+                           **filter_args)
         self.scene.usd = self
         self.set_frame(0)
         self.seconds["build"] = time.perf_counter() - start
+
+    def _filter_arguments(self) -> dict:
+        """The scene's ``world``, ``exclude_pairs``, ``group`` and ``mask`` from ``worlds`` and ``filters``
+        (:mod:`~warp_ccd.usd.filters`); sets :attr:`object_world` and :attr:`filters`."""
+        summary = FilterSummary()
+        self.object_world = None
+        allow = self._filters is not None and self._filters.allow_missing
+        if self._worlds is not None:
+            self.object_world, summary = world_ids(self.stage, self.object_prim, self._worlds, allow, summary)
+        args = {"world": self.object_world}
+        if self._filters is not None:
+            more, summary = self._filters.resolve(self.stage, self.object_prim, summary)
+            args.update(more)
+        self.filters = summary
+        return args
 
     def _choose_precision(self, packed: MeshSet, shape_of: np.ndarray, poses: np.ndarray, scale: np.ndarray,
                           precision: str) -> str:
@@ -704,8 +735,9 @@ def scene_from_usd(stage_or_path: Usd.Stage | PathLike, *, prims: str | Sequence
             or pass ``times=[...]`` to prepare several and move with ``scene.usd.set_frame``.
         device: Warp device.
         precision: ``"float32"`` or ``"float64"``.
-        **options: ``times``, ``include_invisible``, ``include_purposes``, ``workers``, ``progress``
-            of :class:`UsdMeshImport`.
+        **options: ``times``, ``include_invisible``, ``include_purposes``, ``workers``, ``progress``,
+            ``worlds`` (prim patterns, each match rooting a world whose meshes never pair with another
+            world's) and ``filters`` of :class:`UsdMeshImport`.
 
     Returns:
         The :class:`~warp_ccd.scene.scene.Scene`, with the import as ``scene.usd``.
