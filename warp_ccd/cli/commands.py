@@ -12,7 +12,9 @@ Subcommands:
   ``--continuous``, also the prim pairs that touch between consecutive time codes, and which of them
   tunnel (no end frame shows them); with ``--clearance D``, the prim pairs closer than ``D`` (soft
   clashes); with ``--self``, the prims that pass through themselves; with ``--duplicates``, the prim
-  pairs whose meshes coincide (reported as duplicates, not as collisions). Exit status 0 when nothing
+  pairs whose meshes coincide (reported as duplicates, not as collisions); ``--worlds``,
+  ``--ignore-pairs`` (and the stage's ``UsdPhysics`` filters, unless ``--no-usd-filters``), ``--set-a`` with
+  ``--set-b`` leave pairs out (:mod:`warp_ccd.usd.filters`). Exit status 0 when nothing
   penetrates, 1 when something does (or tunnels, or passes through itself, or duplicates another, or
   comes within the clearance, or, with ``--count-touching``, touches), 2 when the input or the
   arguments are bad, 3 on an internal error, so that it can gate a pipeline. No output may be the
@@ -153,6 +155,7 @@ def _build_parser() -> OneLineParser:
         "With --self, also the prims that pass through themselves, as pairs of their faces with a depth. "
         "With --duplicates, the prim pairs whose meshes coincide (the same triangles at the same place) are "
         "reported as duplicates, not as colliding. "
+        "--ignore-pairs, --set-a with --set-b, --worlds (and the stage's UsdPhysics filters) leave pairs unchecked. "
         "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or passes through itself with --self, "
         "or duplicates another with --duplicates, or comes within --clearance, or "
         "touches with --count-touching), 2 bad arguments or input, 3 an internal error.",
@@ -202,9 +205,26 @@ def _build_parser() -> OneLineParser:
     check.add_argument("--include-purpose", action="append", choices=("guide", "proxy"), default=[],
                        help="also check prims of this purpose (repeatable)")
     check.add_argument("--top", type=_count(1), default=10, help="prim pairs in the summary table (default: 10)")
+    check.add_argument("--worlds", action="append", default=None, metavar="PATTERN",
+                       help="prim path or fnmatch pattern ('/World/envs/*'): every prim it matches roots a world, "
+                       "and meshes of two worlds are never checked against each other; meshes under no root pair "
+                       "with every world (repeatable)")
+    check.add_argument("--ignore-pairs", action="append", default=None, metavar="FILE",
+                       help="prim pairs never checked: two prim paths or patterns a line, separated by whitespace "
+                       "or a comma, '#' comments; a .json file: a list of [a, b]. Every mesh under a is excluded "
+                       "against every mesh under b (repeatable)")
+    check.add_argument("--no-usd-filters", dest="usd_filters", action="store_false",
+                       help="check the pairs the stage's UsdPhysics filtered pairs and collision groups filter "
+                       "out too (default: they are excluded)")
+    check.add_argument("--set-a", type=_prims, action="append", default=None, metavar="PATH[,PATH...]",
+                       help="with --set-b: only pairs of one mesh under these prims (paths or fnmatch patterns) "
+                       "and one under --set-b's are checked, as clash tools do (repeatable)")
+    check.add_argument("--set-b", type=_prims, action="append", default=None, metavar="PATH[,PATH...]",
+                       help="the other set of --set-a (a mesh may be in both)")
     check.add_argument("--allow-missing", action="store_true",
                        help="check a stage whose sublayers, references or payloads cannot all be opened, "
-                       "without them (default: an error)")
+                       "without them; an --ignore-pairs line naming no prim, a --worlds, --set-a or --set-b "
+                       "pattern matching no checked mesh: a note (default: an error)")
 
     for command in (demo, check):
         command.add_argument("--debug", action="store_true",
@@ -418,6 +438,13 @@ def _check(args) -> tuple[int, str | None]:
         frames = _frames(args.frames)
         if args.min_distance > 0.0 and not args.continuous:
             raise ValueError("--min-distance is an option of --continuous")
+        if (args.set_a is None) != (args.set_b is None):
+            given, other = ("--set-a", "--set-b") if args.set_b is None else ("--set-b", "--set-a")
+            raise ValueError(f"{given} needs {other}: only pairs of one prim of each set are checked")
+        from ..usd.filters import read_pair_file
+
+        for path in args.ignore_pairs or ():  # read again by the check: here, its errors come first
+            read_pair_file(path)
     except ValueError as exc:
         raise fail(str(exc)) from None
     try:
@@ -463,7 +490,9 @@ def _check(args) -> tuple[int, str | None]:
                                include_purposes=tuple(args.include_purpose), progress=True,
                                allow_missing=args.allow_missing, continuous=args.continuous,
                                min_distance=args.min_distance, clearance=args.clearance,
-                               self_intersections=args.self_intersections, duplicates=args.duplicates)
+                               self_intersections=args.self_intersections, duplicates=args.duplicates,
+                               worlds=args.worlds, ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters,
+                               set_a=_flat(args.set_a), set_b=_flat(args.set_b))
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)
@@ -518,7 +547,7 @@ def _check(args) -> tuple[int, str | None]:
 
 
 def _flat(prims):
-    """``--prims`` values (lists, one per use of the option) as one list, or None."""
+    """``--prims`` (``--set-a``, ``--set-b``) values (lists, one per use of the option) as one list, or None."""
     return None if prims is None else [p for group in prims for p in group]
 
 
