@@ -284,3 +284,63 @@ def duplicate_stage(case: str = "exact", path=None, seed: int = 0):
     if path is not None:
         stage.GetRootLayer().Save()
     return stage, diagonal
+
+
+def boxes_stage(path=None, boxes: dict | None = None, filtered_pairs: dict | None = None,
+                collision_groups: dict | None = None, filtered_groups: dict | None = None):
+    """Box-like prisms (``prism(4)``, radius 0.7, height 1) for the filter tests, time codes 0 and 1, static.
+
+    Args:
+        path: where to save the stage (None: in memory).
+        boxes: ``{mesh path: (x, y, z) translation}``; the parents of a mesh path are made ``Xform``s. Default:
+            ``/World/A/Geom`` at the origin and ``/World/B/Geom`` 0.5 along x (they penetrate).
+        filtered_pairs: ``{prim path: [target paths]}``: ``UsdPhysics.FilteredPairsAPI`` applied to the prim
+            with those ``physics:filteredPairs`` targets.
+        collision_groups: ``{group path: [member paths]}``: ``UsdPhysics.CollisionGroup`` prims whose
+            ``collectionAPI:colliders`` includes the members.
+        filtered_groups: ``{group path: [group paths]}``: the groups' ``physics:filteredGroups``.
+
+    Returns:
+        The ``Usd.Stage`` (saved to ``path`` when given).
+    """
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+
+    stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(1)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    boxes = {"/World/A/Geom": (0.0, 0.0, 0.0), "/World/B/Geom": (0.5, 0.0, 0.0)} if boxes is None else boxes
+    points, counts, indices = prism(4, radius=0.7, height=1.0)
+    for mesh_path, offset in boxes.items():
+        parent = Sdf.Path(mesh_path).GetParentPath()
+        while parent != Sdf.Path.absoluteRootPath and not stage.GetPrimAtPath(parent).IsValid():
+            UsdGeom.Xform.Define(stage, parent)
+            parent = parent.GetParentPath()
+        mesh = define_mesh(stage, mesh_path, points, counts, indices)
+        UsdGeom.Xformable(mesh).AddTranslateOp().Set(Gf.Vec3d(*offset))
+    for prim_path, targets in (filtered_pairs or {}).items():
+        api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(prim_path))
+        api.CreateFilteredPairsRel().SetTargets([Sdf.Path(t) for t in targets])
+    for group_path, members in (collision_groups or {}).items():
+        group = UsdPhysics.CollisionGroup.Define(stage, group_path)
+        group.GetCollidersCollectionAPI().CreateIncludesRel().SetTargets([Sdf.Path(m) for m in members])
+    for group_path, others in (filtered_groups or {}).items():
+        UsdPhysics.CollisionGroup(stage.GetPrimAtPath(group_path)).CreateFilteredGroupsRel().SetTargets(
+            [Sdf.Path(o) for o in others])
+    if path is not None:
+        stage.GetRootLayer().Save()
+    return stage
+
+
+def env_boxes(num_envs: int = 2, ground: bool = True) -> dict:
+    """:func:`boxes_stage`'s ``boxes`` for worlds: ``/World/envs/env<k>/P`` and ``/Q`` in every environment, at the
+    same places in each (the environments lie on top of each other; ``P`` and ``Q`` penetrate), and with
+    ``ground`` a ``/World/Ground/Geom`` through all of them."""
+    boxes = {}
+    for k in range(num_envs):
+        boxes[f"/World/envs/env{k}/P"] = (0.0, 0.0, 0.0)
+        boxes[f"/World/envs/env{k}/Q"] = (0.5, 0.0, 0.0)
+    if ground:
+        boxes["/World/Ground/Geom"] = (0.25, -0.5, 0.0)
+    return boxes
