@@ -51,7 +51,7 @@ from .._typing import PathLike
 if TYPE_CHECKING:
     from pxr import Usd
 
-__all__ = ["MAX_EXCLUDED", "FilterSummary", "PairFilters", "PrimIndex", "PrimPair", "read_pair_file"]
+__all__ = ["MAX_EXCLUDED", "FilterSummary", "PairFilters", "PrimIndex", "PrimPair", "read_pair_file", "world_ids"]
 
 MAX_EXCLUDED = 50_000_000
 """Most object pairs the excluded pairs may expand to (400 MB of keys); beyond it, a ValueError."""
@@ -181,24 +181,33 @@ class PrimIndex:
         object_prim: ``N`` prim paths, one per object (a point instance: its prototype's mesh).
 
     Attributes:
-        ancestors: the ``A`` distinct prim paths at or above some object, sorted.
+        ancestors: the ``A`` distinct prim paths at or above some object (their ids' order).
     """
 
     def __init__(self, object_prim: Sequence[str]) -> None:
         self.num_objects = len(object_prim)
-        unique, self._object_row = np.unique(np.asarray(list(object_prim), dtype=object), return_inverse=True)
-        self._object_row = self._object_row.reshape(-1)
-        chains = []
-        for p in unique.tolist():  # per prim path (not per object, not per frame)
-            parts = p.split("/")
-            chains.append(["/".join(parts[:k]) for k in range(2, len(parts) + 1)])
-        counts = np.array([len(c) for c in chains], np.int64)
-        flat = np.array([a for c in chains for a in c], dtype=object)
-        self.ancestors, col = np.unique(flat, return_inverse=True)
-        self._col = col.reshape(-1)  # per (row, depth): ancestor id, root first
+        row_id: dict[str, int] = {}
+        self._object_row = np.fromiter((row_id.setdefault(p, len(row_id)) for p in object_prim), np.int64,
+                                       count=self.num_objects)
+        self._id: dict[str, int] = {}
+        col, counts = [], []
+        for p in row_id:  # per prim path (not per object, not per frame): its ancestors, root first
+            cut = [k for k in range(1, len(p)) if p[k] == "/"] + [len(p)]
+            col += [self._id.setdefault(p[:k], len(self._id)) for k in cut]
+            counts.append(len(cut))
+        self.ancestors = np.array(list(self._id), dtype=object)
+        self._col = np.asarray(col, np.int64)  # per (row, depth): ancestor id
+        counts = np.asarray(counts, np.int64)
         self._row_start = np.concatenate([[0], np.cumsum(counts)])
-        self._row_of = np.repeat(np.arange(len(unique)), counts)
-        self._id = {a: k for k, a in enumerate(self.ancestors.tolist())}
+        self._row_of = np.repeat(np.arange(len(row_id)), counts)
+        unique = row_id
+        # Both ways, as CSR: ancestor -> rows under it, row -> its objects.
+        by_col = np.argsort(self._col, kind="stable")
+        self._anc_rows = self._row_of[by_col]
+        self._anc_start = np.searchsorted(self._col[by_col], np.arange(len(self.ancestors) + 1))
+        self._row_objects = np.argsort(self._object_row, kind="stable")
+        self._row_obj_start = np.searchsorted(self._object_row[self._row_objects], np.arange(len(unique) + 1))
+        self._cache: dict[str, np.ndarray] = {}
 
     def match(self, path: str) -> np.ndarray:
         """``(A,)`` bool: the ancestors ``path`` names (itself, or those a pattern matches)."""
@@ -211,6 +220,25 @@ class PrimIndex:
             if k is not None:
                 hit[k] = True
         return hit
+
+    def select(self, path: str) -> np.ndarray:
+        """Sorted object indices at or under the prims ``path`` names (a path: from the index, without a
+        pass over every object; a pattern: :meth:`match`, remembered for the next time)."""
+        out = self._cache.get(path)
+        if out is not None:
+            return out
+        if is_pattern(path):
+            out = np.nonzero(self.objects_under(self.match(path)))[0]
+            self._cache[path] = out
+            return out
+        k = self._id.get(path.rstrip("/") or "/")
+        if k is None:
+            return np.zeros(0, np.int64)
+        rows = self._anc_rows[self._anc_start[k]:self._anc_start[k + 1]]
+        start, stop = self._row_obj_start[rows], self._row_obj_start[rows + 1]
+        counts = stop - start
+        offsets = np.repeat(start - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+        return np.sort(self._row_objects[np.arange(int(counts.sum())) + offsets])
 
     def objects_under(self, hit: np.ndarray) -> np.ndarray:
         """``(N,)`` bool: the objects at or under an ancestor in ``hit`` (``(A,)`` bool)."""
@@ -356,13 +384,13 @@ class PairFilters:
                              f"checked; only {'set_a' if self.set_b is None else 'set_b'} given")
         self.allow_missing = bool(allow_missing)
 
-    def resolve(self, stage: Usd.Stage, object_prim: Sequence[str], summary: FilterSummary | None = None
-                ) -> tuple[dict, FilterSummary]:
+    def resolve(self, stage: Usd.Stage, object_prim: Sequence[str] | PrimIndex,
+                summary: FilterSummary | None = None) -> tuple[dict, FilterSummary]:
         """The scene's filter arguments for objects ``object_prim`` of ``stage``.
 
         Args:
             stage: the stage the prim paths name prims of.
-            object_prim: ``N`` prim paths, one per object (see :class:`PrimIndex`).
+            object_prim: ``N`` prim paths, one per object, or their :class:`PrimIndex`.
             summary: a summary to fill in (one holding the worlds already), or None.
 
         Returns:
@@ -373,7 +401,7 @@ class PairFilters:
             ValueError: a pair naming no prim, a set pattern matching no checked mesh (unless
                 ``allow_missing``), or more than :data:`MAX_EXCLUDED` excluded pairs.
         """
-        index = PrimIndex(object_prim)
+        index = object_prim if isinstance(object_prim, PrimIndex) else PrimIndex(object_prim)
         s = summary if summary is not None else FilterSummary()
         s.ignore_files = list(self.files)
         s.ignore_lines = len(self.pairs)
@@ -383,13 +411,13 @@ class PairFilters:
         for pair in self.pairs:
             sides = []
             for path in (pair.a, pair.b):
-                hit = index.match(path)
-                if not hit.any() and not _stage_has_match(stage, path):
+                objects = index.select(path)
+                if not len(objects) and not _stage_has_match(stage, path):
                     message = f"{pair.source}: {path} names no prim of the stage"
                     if not self.allow_missing:
                         raise ValueError(message + " (--allow-missing: a note instead)")
                     s.notes.append(message + "; pair ignored")
-                sides.append(np.nonzero(index.objects_under(hit))[0])
+                sides.append(objects)
             given.append(self._expand(sides[0], sides[1], pair.source, budget))
         usd = self._usd_keys(stage, index, s, budget) if self.usd_filters else []
         given_pairs, usd_pairs = _pairs_of(given), _pairs_of(usd)
@@ -441,14 +469,14 @@ class PairFilters:
             if not prim.HasAPI(UsdPhysics.FilteredPairsAPI):
                 continue
             path = str(prim.GetPath())
-            mine = np.nonzero(index.objects_under(index.match(path)))[0]
+            mine = index.select(path)
             for target in UsdPhysics.FilteredPairsAPI(prim).GetFilteredPairsRel().GetTargets():
                 s.usd_filtered_pairs += 1
                 source = f"prim {path}: physics:filteredPairs target {target}"
                 if not stage.GetPrimAtPath(target).IsValid():
                     s.notes.append(f"{source} is no prim of the stage; ignored")
                     continue
-                theirs = np.nonzero(index.objects_under(index.match(str(target))))[0]
+                theirs = index.select(str(target))
                 keys.append(self._expand(mine, theirs, source, budget))
         if groups:
             keys += self._group_keys(stage, index, s, budget)
@@ -481,13 +509,13 @@ class PairFilters:
         return keys
 
 
-def world_ids(stage: Usd.Stage, object_prim: Sequence[str], worlds: str | Sequence[str],
+def world_ids(stage: Usd.Stage, object_prim: Sequence[str] | PrimIndex, worlds: str | Sequence[str],
               allow_missing: bool = False, summary: FilterSummary | None = None) -> tuple[np.ndarray, FilterSummary]:
     """The world of each object (see the module docstring).
 
     Args:
         stage: the stage (for messages).
-        object_prim: ``N`` prim paths, one per object.
+        object_prim: ``N`` prim paths, one per object, or their :class:`PrimIndex`.
         worlds: prim paths or patterns, each prim they match rooting one world.
         allow_missing: a pattern that matches no checked mesh is a note instead of an error.
         summary: a summary to fill in, or None.
@@ -500,7 +528,7 @@ def world_ids(stage: Usd.Stage, object_prim: Sequence[str], worlds: str | Sequen
     """
     patterns = _patterns(worlds, "worlds")
     s = summary if summary is not None else FilterSummary()
-    index = PrimIndex(object_prim)
+    index = object_prim if isinstance(object_prim, PrimIndex) else PrimIndex(object_prim)
     hit = np.zeros(len(index.ancestors), bool)
     for p in patterns:
         mine = index.match(p)
@@ -513,8 +541,12 @@ def world_ids(stage: Usd.Stage, object_prim: Sequence[str], worlds: str | Sequen
         hit |= mine
     root = index.outermost(hit)
     roots, world = np.unique(root[root >= 0], return_inverse=True)
+    names = index.ancestors[roots]
+    order = np.argsort(names.astype(str), kind="stable")  # worlds in the order of their roots' paths
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
     ids = np.full(index.num_objects, -1, np.int64)
-    ids[root >= 0] = world.reshape(-1)
+    ids[root >= 0] = rank[world.reshape(-1)]
     s.worlds = patterns
-    s.world_roots = index.ancestors[roots].tolist()
+    s.world_roots = names[order].tolist()
     return ids, s

@@ -69,7 +69,7 @@ from ..geometry.precision import PrecisionWarning, coordinate_message, needed_pr
 from ..options import integer_option
 from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
-from .filters import FilterSummary, PairFilters, world_ids
+from .filters import FilterSummary, PairFilters, PrimIndex, world_ids
 from .meshes import MeshData, read_mesh
 from .poses import finite_matrix_poses, matrix_poses, similarity_split
 from .stage import MAX_FRAMES, open_stage
@@ -541,11 +541,12 @@ class UsdMeshImport:
         summary = FilterSummary()
         self.object_world = None
         allow = self._filters is not None and self._filters.allow_missing
+        index = PrimIndex(self.object_prim) if self._worlds is not None or self._filters is not None else None
         if self._worlds is not None:
-            self.object_world, summary = world_ids(self.stage, self.object_prim, self._worlds, allow, summary)
+            self.object_world, summary = world_ids(self.stage, index, self._worlds, allow, summary)
         args = {"world": self.object_world}
         if self._filters is not None:
-            more, summary = self._filters.resolve(self.stage, self.object_prim, summary)
+            more, summary = self._filters.resolve(self.stage, index, summary)
             args.update(more)
         self.filters = summary
         return args
