@@ -59,6 +59,7 @@ def test_torch_tensors_are_read_in_place():
     vec = wp.array(np.ones((5, 3), np.float32), dtype=wp.vec3, device="cpu")
     assert device_view(vec, "v", "cpu").shape == (5, 3)
     assert device_view(np.zeros((2, 7), np.int32), "p", "cpu").dtype == wp.float64  # converted, a copy
+    assert device_view(np.zeros((2, 7), np.float32), "p", "cpu").dtype == wp.float32  # uploaded as it is
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])

@@ -27,7 +27,6 @@ PUBLIC_MODULES = ("warp_ccd", "warp_ccd.scene", "warp_ccd.stages", "warp_ccd.geo
 PENDING = {
     "warp_ccd.usd.check.CheckReport.prepare_json",
     "warp_ccd.usd.check.CheckReport.write_json",
-    "warp_ccd.usd.check.check_usd",
     "warp_ccd.usd.check.write_overlay",
 }
 

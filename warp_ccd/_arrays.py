@@ -40,10 +40,27 @@ def _foreign(x: ArrayLike) -> wp.array | None:
             raise ValueError(f"cannot read this {type(x).__name__} through DLPack ({exc})") from None
     if hasattr(x, "__cuda_array_interface__"):
         try:
-            return wp.array(data=x, dtype=Any, device="cuda", copy=False)
+            return _from_cuda_interface(x)
         except Exception as exc:
             raise ValueError(f"cannot read this {type(x).__name__} through __cuda_array_interface__ ({exc})") from None
     return None
+
+
+def _from_cuda_interface(x: Any) -> wp.array:
+    """A ``wp.array`` over the CUDA memory an ``__cuda_array_interface__`` (version 2 or 3) describes,
+    holding a reference to ``x`` (no copy)."""
+    desc = x.__cuda_array_interface__
+    if desc.get("mask") is not None:
+        raise ValueError("masked arrays are not supported")
+    dtype = wp.dtype_from_numpy(np.dtype(desc["typestr"]))
+    shape = tuple(int(n) for n in desc["shape"])
+    strides = desc.get("strides")
+    if strides is None:
+        strides = [wp.types.type_size_in_bytes(dtype) * int(np.prod(shape[k + 1:])) for k in range(len(shape))]
+    a = wp.array(ptr=int(desc["data"][0]), dtype=dtype, shape=shape, strides=tuple(int(s) for s in strides),
+                 device="cuda")
+    a._ref = x  # keeps the producer's memory alive as long as the view
+    return a
 
 
 def is_device_array(x: ArrayLike) -> bool:
@@ -107,7 +124,7 @@ def device_view(x: ArrayLike, name: str, device: DeviceLike, *,
         if arr.dtype.kind not in "fiu" or arr.dtype == np.float16:
             raise ValueError(f"{name}: expected real numbers, got {arr.dtype}")
         target = arr.dtype if arr.dtype in (np.float32, np.float64) and \
-            wp.types.np_dtype_to_warp_type[arr.dtype] in scalar_types else np.dtype(_SCALARS[scalar_types[-1]])
+            wp.dtype_from_numpy(arr.dtype) in scalar_types else np.dtype(_SCALARS[scalar_types[-1]])
         return wp.array(np.ascontiguousarray(arr, dtype=target), device=d)
     scalar = getattr(w.dtype, "_wp_scalar_type_", None)
     if scalar is not None:  # vectors, matrices, transforms: their scalars, one more axis

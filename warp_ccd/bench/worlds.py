@@ -38,7 +38,8 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
+from warp_ccd.bench.command import add_row as _add_row
+from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
 from warp_ccd.bench.methods import device_modes
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable
 from warp_ccd.bench.timing import ModeFrames, StageTimes, ms_stats, synced_ms
@@ -137,6 +138,11 @@ def main(argv=None) -> int:
     parser.add_argument("--spacing", type=float, default=8.0, help="grid spacing of one_world (default 8)")
     add_run_options(parser, frames=20, warmup=3, seed=0)
     args, device, doc = start(parser, argv)
+
+    def add_row(doc: dict, row: dict) -> None:  # each row written as it comes (a later failure keeps them)
+        _add_row(doc, row)
+        write_result(args.out, doc)
+
     w = args.worlds
     meshes, poses, world, scale = robot_world(w, args.seed)
     _, spread, _, _ = robot_world(w, args.seed, spacing=args.spacing)
