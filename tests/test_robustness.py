@@ -95,18 +95,25 @@ def test_containment_excludes_surface_contacts(device):
     assert res.containment_pairs.shape == (0, 2) and res.object_pairs.shape == (0, 2)
 
 
-def test_arrays_on_another_device_are_rejected():
-    """Arrays on another device than the scene's: a clear ValueError (host arrays always exist)."""
+def test_arrays_on_another_device_are_copied_there():
+    """Arrays on another device than the scene's are copied to it once (as numpy arrays are), then read
+    and checked there like the scene's own."""
     devices = [str(d) for d in wp.get_devices()]
     cuda = [d for d in devices if d.startswith("cuda")]
-    if not cuda:
+    if not cuda or "cpu" not in devices:
         pytest.skip("needs a CUDA device beside the host")
     scene = wc.Scene.random(5, seed=0, device=cuda[0])
     deforming = wc.Scene.from_meshes(scene.world_meshes(), deforming=True, device=cuda[0])
-    with pytest.raises(ValueError, match="scene on"):
-        deforming.set_world_vertices(wp.zeros(scene.num_world_vertices, dtype=wp.vec3, device="cpu"))
-    with pytest.raises(ValueError, match="scene on"):
-        scene.set_poses(wp.zeros(scene.num_objects, dtype=wp.transform, device="cpu"))
+    vertices = scene.world_vertex.numpy() + 1.0
+    deforming.set_world_vertices(wp.array(vertices, dtype=wp.vec3, device="cpu"))
+    assert np.array_equal(deforming.world_vertex.numpy(), vertices)
+    poses = np.tile(np.array([1, 2, 3, 0, 0, 0, 1], np.float32), (5, 1))
+    scene.set_poses(wp.array(poses, dtype=wp.transform, device="cpu"))
+    scene.check_inputs()
+    assert np.array_equal(scene.object_pose.numpy(), poses)
+    scene.set_poses(wp.zeros(scene.num_objects, dtype=wp.transform, device="cpu"))
+    with pytest.raises(ValueError, match="set_poses: row 0 has a quaternion that is not unit"):
+        scene.check_inputs()
 
 
 def test_set_world_vertices_validation():

@@ -22,7 +22,7 @@ import warp as wp
 
 from .._typing import DeviceLike
 
-wp.set_module_options({"enable_backward": False})  # forward kernels only
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})  # forward only; no FMA: the host's rounding
 
 __all__ = ["FAULT_NONE", "InputCheck"]
 
