@@ -75,7 +75,7 @@ def test_a_duplicate_is_no_soft_clash(stage_paths, device):
 
 
 def test_command_line_report_summary_and_overlay(stage_paths, device, tmp_path, capsys):
-    import jsonschema
+    jsonschema = pytest.importorskip("jsonschema", reason="jsonschema (a test extra) is not installed")
 
     src = stage_paths["reordered"]
     report_path, overlay = tmp_path / "r.json", tmp_path / "over.usda"

@@ -466,7 +466,7 @@ def test_no_cuda_driver_notice(resting, tmp_path):
 
 
 def test_report_to_stdout(mixed_file, resting, tmp_path, capsys):
-    import jsonschema
+    jsonschema = pytest.importorskip("jsonschema", reason="jsonschema (a test extra) is not installed")
 
     from warp_ccd.usd import report_schema
 

@@ -11,7 +11,8 @@ more value), and ``detect()`` raises ValueError naming the setter, the row and t
 
 The checks match the host's (:func:`~warp_ccd.scene.scene.transforms_to_poses`): finite numbers, unit
 quaternions within ``1e-3``, rigid matrices (orthonormal within ``1e-4``, determinant +1, bottom row
-``(0, 0, 0, 1)``); a quaternion within the tolerance is normalised, as ``matrix_to_quat``'s are.
+``(0, 0, 0, 1)``). Poses are copied as given (bit for bit where the precision is the scene's), as the host's
+are; a matrix's quaternion is normalised, as ``matrix_to_quat``'s are.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ def _finite(x: wp.float64) -> bool:
 @wp.kernel
 def _poses_from_rows_kernel(rows: wp.array2d[Any], out: wp.array2d[Any], fault: wp.array[wp.int64]):
     """Row ``i`` of ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` into the scene's poses (viewed as
-    ``(N, 7)`` scalars), its quaternion normalised; a bad row into ``fault``."""
+    ``(N, 7)`` scalars), as given; a bad row into ``fault``."""
     i = wp.tid()
     v = wp.vector(dtype=wp.float64, length=7)
     ok = bool(True)
@@ -68,8 +69,6 @@ def _poses_from_rows_kernel(rows: wp.array2d[Any], out: wp.array2d[Any], fault: 
     if wp.abs(norm - wp.float64(1.0)) > wp.float64(1.0e-3):
         wp.atomic_max(fault, 0, _fault(_NOT_UNIT, i))
         return
-    for k in range(3, 7):
-        v[k] = v[k] / norm
     for k in range(7):
         o = out[i, k]
         out[i, k] = type(o)(v[k])

@@ -168,11 +168,11 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
 
 
 QUAT_TOLERANCE = 1e-3
-"""How far from 1 the norm of a given quaternion may be (it is then normalised)."""
+"""How far from 1 the norm of a given quaternion may be (it is used as given, as Warp's transforms use it)."""
 
 
 def poses_to_rows(poses: ArrayLike, num_objects: int, *, name: str = "poses") -> np.ndarray:
-    """Validates ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` (Warp's order), normalising their quaternions.
+    """Validates ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)`` (Warp's order), kept as given (bit for bit).
 
     Args:
         poses: ``(N, 7)`` array-like.
@@ -199,12 +199,10 @@ def poses_to_rows(poses: ArrayLike, num_objects: int, *, name: str = "poses") ->
     if bad.any():
         i = int(np.argmax(bad))
         raise ValueError(f"{name}: row {i} has a quaternion of norm {norm[i]:.6g}, not unit (x, y, z, w)")
-    out = p.copy()
-    out[:, 3:] /= norm[:, None]
     with np.errstate(over="ignore"):
-        if not np.isfinite(out.astype(np.float32)).all():
+        if not np.isfinite(p.astype(np.float32)).all():
             raise ValueError(f"{name}: translations overflow float32")
-    return out
+    return p
 
 
 def transforms_to_poses(transforms: ArrayLike, num_objects: int, *, tol: float = 1e-4) -> np.ndarray:
@@ -214,7 +212,7 @@ def transforms_to_poses(transforms: ArrayLike, num_objects: int, *, tol: float =
         transforms: ``(N, 4, 4)`` array-like, each a rotation (orthonormal, determinant +1, within ``tol``)
             and a translation, bottom row ``(0, 0, 0, 1)``; or ``(N, 7)`` poses ``(px, py, pz, qx, qy, qz, qw)``
             (position, then quaternion x, y, z, w: Warp's order), each quaternion unit within
-            :data:`QUAT_TOLERANCE` (then normalised). Any :data:`~warp_ccd._arrays.ArrayLike` (torch, JAX, Warp).
+            :data:`QUAT_TOLERANCE` (used as given). Any :data:`~warp_ccd._arrays.ArrayLike` (torch, JAX, Warp).
         num_objects: expected ``N``.
         tol: tolerance of the rigidity checks.
 
