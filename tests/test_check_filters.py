@@ -11,6 +11,8 @@ import pytest
 from warp_ccd.cli import commands as cli
 from warp_ccd.usd import check_usd, report_schema, scene_from_usd
 
+from conftest import DEFAULT_DEVICE
+
 pxr = pytest.importorskip("pxr")
 from usd_stages import boxes_stage, env_boxes  # noqa: E402
 
@@ -65,10 +67,10 @@ def test_ignore_pairs_makes_the_check_clean(stages, tmp_path, capsys, content, n
     pairs = tmp_path / name
     pairs.write_text(content)
     report = tmp_path / "r.json"
-    rc, out, err = run(capsys, stages["two"], "--device", "cpu", "--report", report)
+    rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, "--report", report)
     assert rc == 1, err
     assert "filters" not in valid(json.loads(report.read_text()))  # no filter, no section
-    rc, out, err = run(capsys, stages["two"], "--device", "cpu", "--ignore-pairs", pairs, "--report", report)
+    rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, "--ignore-pairs", pairs, "--report", report)
     assert rc == 0, err
     data = valid(json.loads(report.read_text()))
     assert data["schema_version"] == "1.1" and data["findings"] is None
@@ -79,18 +81,19 @@ def test_ignore_pairs_makes_the_check_clean(stages, tmp_path, capsys, content, n
 
 
 def test_ignore_pairs_from_python(stages):
-    report = check_usd(stages["abc"], device="cpu", ignore_pairs=[("/World/A", "/World/B"), ["/World/B", "/World/C"]])
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE,
+                       ignore_pairs=[("/World/A", "/World/B"), ["/World/B", "/World/C"]])
     assert pairs_of(report) == [("/World/A", "/World/C")]
     assert report.filters.excluded == 2 and report.filters.ignore_files == []
 
 
 def test_usd_filtered_pairs(stages, capsys, tmp_path):
     report = tmp_path / "r.json"
-    rc, out, err = run(capsys, stages["physics"], "--device", "cpu", "--report", report)
+    rc, out, err = run(capsys, stages["physics"], "--device", DEFAULT_DEVICE, "--report", report)
     assert rc == 0, err
     f = valid(json.loads(report.read_text()))["filters"]
     assert (f["excluded_usd"], f["usd_filtered_pairs"], f["excluded_given"]) == (1, 1, 0)
-    rc, out, err = run(capsys, stages["physics"], "--device", "cpu", "--no-usd-filters", "--report", report)
+    rc, out, err = run(capsys, stages["physics"], "--device", DEFAULT_DEVICE, "--no-usd-filters", "--report", report)
     assert rc == 1, err
     data = valid(json.loads(report.read_text()))
     assert data["findings"] == "penetrating" and data["filters"]["usd_filters"] is False
@@ -98,17 +101,17 @@ def test_usd_filtered_pairs(stages, capsys, tmp_path):
 
 
 def test_usd_collision_groups(stages):
-    report = check_usd(stages["groups"], device="cpu")
+    report = check_usd(stages["groups"], device=DEFAULT_DEVICE)
     assert pairs_of(report) == [("/World/A", "/World/C"), ("/World/B", "/World/C")]
     assert report.filters.usd_collision_groups == 2 and report.filters.excluded_usd == 1
-    assert len(pairs_of(check_usd(stages["groups"], device="cpu", usd_filters=False))) == 3
+    assert len(pairs_of(check_usd(stages["groups"], device=DEFAULT_DEVICE, usd_filters=False))) == 3
 
 
 def test_set_a_against_set_b(stages, capsys, tmp_path):
-    everything = check_usd(stages["abc"], device="cpu")
+    everything = check_usd(stages["abc"], device=DEFAULT_DEVICE)
     assert len(pairs_of(everything)) == 3  # A, B and C all penetrate each other
     path = tmp_path / "r.json"
-    rc, out, err = run(capsys, stages["abc"], "--device", "cpu", "--set-a", "/World/A", "--set-b", "/World/B",
+    rc, out, err = run(capsys, stages["abc"], "--device", DEFAULT_DEVICE, "--set-a", "/World/A", "--set-b", "/World/B",
                        "--report", path)
     assert rc == 1, err
     data = valid(json.loads(path.read_text()))
@@ -117,13 +120,13 @@ def test_set_a_against_set_b(stages, capsys, tmp_path):
     assert (f["set_a"], f["set_b"], f["set_a_objects"], f["set_b_objects"]) == (["/World/A"], ["/World/B"], 1, 1)
     assert "only set A x set B: A /World/A (1 objects), B /World/B (1 objects)" in out
     # A prim in both sets pairs with every other prim of either set; repeated options and comma lists add up.
-    report = check_usd(stages["abc"], device="cpu", set_a=["/World/A", "/World/B"], set_b="/World/B")
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, set_a=["/World/A", "/World/B"], set_b="/World/B")
     assert pairs_of(report) == [("/World/A", "/World/B")]  # B-B is no pair; A-A none either
-    report = check_usd(stages["abc"], device="cpu", set_a="/World/A,/World/B", set_b=["/World/B", "/World/C"])
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, set_a="/World/A,/World/B", set_b=["/World/B", "/World/C"])
     assert pairs_of(report) == [("/World/A", "/World/B"), ("/World/A", "/World/C"), ("/World/B", "/World/C")]
-    report = check_usd(stages["abc"], device="cpu", set_a="/World/[AB]", set_b="/World/C")
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, set_a="/World/[AB]", set_b="/World/C")
     assert pairs_of(report) == [("/World/A", "/World/C"), ("/World/B", "/World/C")]
-    rc, out, err = run(capsys, stages["abc"], "--device", "cpu", "--set-a", "/World/A", "--set-a", "/World/C",
+    rc, out, err = run(capsys, stages["abc"], "--device", DEFAULT_DEVICE, "--set-a", "/World/A", "--set-a", "/World/C",
                        "--set-b", "/World/B", "--report", path)
     assert rc == 1, err
     data = valid(json.loads(path.read_text()))
@@ -132,16 +135,17 @@ def test_set_a_against_set_b(stages, capsys, tmp_path):
 
 
 def test_sets_combine_with_excluded_pairs(stages):
-    report = check_usd(stages["abc"], device="cpu", set_a="/World/A", set_b="/World/B,/World/C",
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, set_a="/World/A", set_b="/World/B,/World/C",
                        ignore_pairs=[("/World/A", "/World/C")])
     assert pairs_of(report) == [("/World/A", "/World/B")]
 
 
 def test_worlds(stages, capsys, tmp_path):
-    plain = check_usd(stages["envs"], device="cpu")
+    plain = check_usd(stages["envs"], device=DEFAULT_DEVICE)
     assert len(pairs_of(plain)) == 10  # the two environments on top of each other: every pair crosses
     report = tmp_path / "r.json"
-    rc, out, err = run(capsys, stages["envs"], "--device", "cpu", "--worlds", "/World/envs/*", "--report", report)
+    rc, out, err = run(capsys, stages["envs"], "--device", DEFAULT_DEVICE, "--worlds", "/World/envs/*", "--report",
+                       report)
     assert rc == 1, err
     data = valid(json.loads(report.read_text()))
     got = sorted(tuple(sorted((p["a"], p["b"]))) for p in data["pairs"])
@@ -153,7 +157,7 @@ def test_worlds(stages, capsys, tmp_path):
         ["/World/envs/*"], 2, ["/World/envs/env0", "/World/envs/env1"])
     assert "worlds: 2 (/World/envs/*)" in out
     # The import alone: world ids in the roots' order, -1 outside; two patterns, one world each.
-    scene = scene_from_usd(stages["envs"], device="cpu", worlds=["/World/envs/env1", "/World/envs/env0"])
+    scene = scene_from_usd(stages["envs"], device=DEFAULT_DEVICE, worlds=["/World/envs/env1", "/World/envs/env0"])
     world = dict(zip(scene.usd.object_path, scene.usd.object_world.tolist()))
     assert world == {"/World/envs/env0/P": 0, "/World/envs/env0/Q": 0, "/World/envs/env1/P": 1,
                      "/World/envs/env1/Q": 1, ground: -1}
@@ -173,7 +177,7 @@ def test_worlds(stages, capsys, tmp_path):
 def test_bad_ignore_pairs_files(stages, tmp_path, capsys, content, name, message):
     bad = tmp_path / name
     bad.write_text(content)
-    rc, out, err = run(capsys, stages["two"], "--device", "cpu", "--ignore-pairs", bad)
+    rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, "--ignore-pairs", bad)
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1, err
     assert "Traceback" not in err
 
@@ -182,13 +186,13 @@ def test_missing_prims_with_allow_missing_are_notes(stages, tmp_path, capsys):
     pairs = tmp_path / "pairs.txt"
     pairs.write_text("/World/A /World/B\n/World/A /World/Nowhere\n")
     report = tmp_path / "r.json"
-    rc, out, err = run(capsys, stages["two"], "--device", "cpu", "--ignore-pairs", pairs, "--allow-missing",
+    rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, "--ignore-pairs", pairs, "--allow-missing",
                        "--report", report)
     assert rc == 0, err
     f = valid(json.loads(report.read_text()))["filters"]
     assert f["excluded_given"] == 1 and len(f["notes"]) == 1 and "/World/Nowhere names no prim" in f["notes"][0]
     assert "note: " in out and "pair ignored" in out
-    report = check_usd(stages["abc"], device="cpu", set_a="/World/A,/World/Nowhere", set_b="/World/B",
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, set_a="/World/A,/World/Nowhere", set_b="/World/B",
                        allow_missing=True)
     assert pairs_of(report) == [("/World/A", "/World/B")] and "set_a: /World/Nowhere" in report.filters.notes[0]
 
@@ -204,7 +208,7 @@ def test_missing_prims_with_allow_missing_are_notes(stages, tmp_path, capsys):
 def test_bad_arguments_exit_2(stages, tmp_path, capsys, argv, message):
     names = {"missing": str(tmp_path / "missing.txt"), "folder": str(tmp_path)}
     argv = [a.format(**names) for a in argv]
-    rc, out, err = run(capsys, stages["two"], "--device", "cpu", *argv)
+    rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, *argv)
     assert rc == 2 and message.format(**names) in err and len(err.strip().splitlines()) == 1, err
     assert out == ""
 
