@@ -220,3 +220,32 @@ def test_cuda_frame_from_device_arrays_copies_nothing(rng, producer):
         copies = wp.timing_end()
         assert copies == [], [(c.name, c.elapsed) for c in copies]
         assert np.array_equal(res.triangle_pairs, expect)
+
+
+def test_device_faults_name_their_setter_and_follow_the_latest_call(device):
+    """A pose beyond float32 is a fault (not an inf pose); each kind of input's fault is that of its latest
+    call (good poses after bad ones clear it) and names the setter that made it; the one-object frame and
+    the distance query raise it too."""
+    scene = wc.Scene.from_meshes([shape("cube")] * 2, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    scene.set_poses(torch.tensor([[0, 0, 0, 0, 0, 0, 1.0], [1e39, 0, 0, 0, 0, 0, 1]], dtype=torch.float64))
+    with pytest.raises(ValueError, match="set_poses: row 1 is not finite"):
+        pipe.detect()
+    assert np.isfinite(scene.object_pose.numpy()).all()
+    bent = torch.eye(4).repeat(2, 1, 1)
+    bent[1, 0, 0] = 2.0
+    scene.set_transforms(bent)
+    scene.set_poses(torch.tensor([[0, 0, 0, 0, 0, 0, 1.0], [3, 0, 0, 0, 0, 0, 1]]))
+    assert pipe.detect().object_pairs.shape == (0, 2)  # the good poses replaced the bad transforms
+    scene.set_transforms(bent)
+    with pytest.raises(ValueError, match="set_transforms: row 1 is not a rigid transform"):
+        pipe.detect()
+    query = wc.DistanceQuery(scene, [(0, 1)])
+    scene.set_poses(torch.tensor([[0, 0, 0, 0, 0, 0, 1.0], [5, 0, 0, 0, 0, 0, 3]]))
+    with pytest.raises(ValueError, match="set_poses: row 1 has a quaternion that is not unit"):
+        query.query()
+    one = wc.Scene.from_meshes([shape("cube")], device=device)
+    single = wc.CollisionPipeline(one)
+    one.set_poses(torch.tensor([[0, 0, 0, 0, 0, 0, 3.0]]))
+    with pytest.raises(ValueError, match="set_poses: row 0 has a quaternion that is not unit"):
+        single.detect()

@@ -218,3 +218,12 @@ def test_filters_pass_before_the_stage_is_read(tmp_path, capsys):
     arguments first."""
     rc, _, err = run(capsys, tmp_path / "none.usda", "--set-a", "/World/A")
     assert rc == 2 and "--set-a needs --set-b" in err
+
+
+def test_the_root_names_every_mesh(stages):
+    """``/`` is the stage's root: a pair with it excludes every pair of the other side's meshes; a pattern
+    never matches the root itself (``/*`` is every top prim)."""
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, ignore_pairs=[("/", "/World/A")])
+    assert pairs_of(report) == [("/World/B", "/World/C")]
+    report = check_usd(stages["abc"], device=DEFAULT_DEVICE, worlds="/*")
+    assert len(pairs_of(report)) == 3  # one top prim, /World: one world

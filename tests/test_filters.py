@@ -239,3 +239,24 @@ def test_filter_defaults_and_views():
     assert f.pair_world([[0, 1], [0, 2], [2, 3]]).tolist() == [5, 5, 9]
     assert not CollisionFilter(3).active
     assert CollisionFilter(3).object_group.tolist() == [0xFFFFFFFF] * 3
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"world": [2**63, 0]}, "world: object 0 has .*, out of range"),
+    ({"group": np.full(2, 2**63, np.uint64)}, "group: object 0 has 9223372036854775808, out of range"),
+    ({"world": np.full(2, 1e30)}, "world: object 0 has 1e[+]30, out of range"),
+    ({"world": np.array([True, False])}, "world: expected integers, got bool"),
+    ({"exclude_pairs": np.zeros((0, 3), int)}, r"exclude_pairs: expected \(E, 2\)"),
+])
+def test_out_of_range_filters_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        wc.Scene.from_meshes([shape("cube")] * 2, **kwargs)
+    assert wc.Scene.from_meshes([shape("cube")] * 2, exclude_pairs=[]).collision_filter.exclude_pairs.shape == (0, 2)
+
+
+def test_a_filter_of_another_size_is_refused(device, rng):
+    lo = rng.uniform(0, 3, (50, 3)).astype(np.float32)
+    with pytest.raises(ValueError, match="pair_filter: made for 10 objects, given 50 boxes"):
+        BroadPhaseSAP(device=device).find_pairs(wp.array(lo, dtype=wp.vec3, device=device),
+                                                wp.array(lo + 1, dtype=wp.vec3, device=device),
+                                                CollisionFilter(10, world=np.arange(10), device=device))

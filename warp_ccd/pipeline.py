@@ -364,6 +364,7 @@ class CollisionPipeline:
         scene = self.scene
         step = None if advance is None else scene.advance_host(advance)
         if scene.num_objects < 2 and (self.self_phase is None or scene.num_objects == 0):
+            scene.input_check.check()  # no frame to read the inputs' fault with: read it now
             return self._no_pairs(step)
         if self.rebuild_every:
             self._detects += 1

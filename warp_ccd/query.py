@@ -104,7 +104,7 @@ class DistanceQuery:
             self.pairs.data[:count].assign(wp.array(self.pair_ids, dtype=wp.vec2i, device=d))
         self.pairs.count.fill_(count)
         self.pairs.last_count = count
-        self.counter_read = CounterRead(self.stage.counters, d, stages=[0, 1])
+        self.counter_read = CounterRead(self.stage.counters, d, stages=[0, 1], watch=scene.input_check.fault)
         self._frames = FrameCache(self.counter_read, mode)
 
     def _launch(self) -> None:
@@ -119,7 +119,11 @@ class DistanceQuery:
             valid until the next ``query()`` (its numpy arrays, once read, are its own).
         """
         runs = 1
-        while self._frames.get(None, self._launch).run_once():  # a buffer grew: measure again
+        grew = self._frames.get(None, self._launch).run_once()
+        if self.counter_read.watched:  # the scene's device-side inputs (set_poses, ...) were bad
+            self.scene.input_check.raise_for(self.counter_read.watched)
+        while grew:  # a buffer grew: measure again
+            grew = self._frames.get(None, self._launch).run_once()
             runs += 1
         stage, count = self.stage, len(self.pair_ids)
         return DistanceResult(self.pair_ids, stage.distance[:count], stage.point[:count], stage.normal[:count],

@@ -96,11 +96,14 @@ def _integer_ids(values, name: str, n: int) -> np.ndarray:
         arr = np.broadcast_to(arr, (n,))
     if arr.shape != (n,):
         raise ValueError(f"{name}: expected ({n},) values, one per object, got shape {arr.shape}")
-    if arr.size and arr.dtype.kind not in "iub":
+    if arr.size and arr.dtype.kind not in "iu":
         if arr.dtype.kind == "f" and np.isfinite(arr).all() and (arr == np.round(arr)).all():
-            arr = arr.astype(np.int64)
+            pass
         else:
             raise ValueError(f"{name}: expected integers, got {arr.dtype}")
+    if arr.size and arr.dtype.kind in "uf" and np.abs(arr).max() > 2**62:
+        bad = int(np.argmax(np.abs(arr) > 2**62))
+        raise ValueError(f"{name}: object {bad} has {arr[bad]}, out of range")
     return arr.astype(np.int64)
 
 
@@ -118,7 +121,7 @@ def _pairs(values, n: int) -> np.ndarray:
     from .._arrays import host_array
 
     arr = host_array(values, "exclude_pairs")
-    if arr.size == 0:
+    if arr.shape == (0,) or arr.shape == (0, 2):
         return np.zeros(0, np.int64)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"exclude_pairs: expected (E, 2) object indices, got shape {arr.shape}")
@@ -168,6 +171,8 @@ class CollisionFilter:
                  mask: ArrayLike | None = None, exclude_pairs: ArrayLike | None = None,
                  device: DeviceLike = None) -> None:
         n = int(num_objects)
+        if n < 0:
+            raise ValueError(f"num_objects must be >= 0, got {num_objects!r}")
         d = wp.get_device(device)
         self.device = d
         self.num_objects = n

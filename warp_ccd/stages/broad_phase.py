@@ -143,13 +143,15 @@ def _all_pairs_kernel(
             emit_pair(a, b, pair, pair_count, pair_capacity)
 
 
-def _device_filter(pair_filter: CollisionFilter | None, device: wp.Device) -> PairFilter:
+def _device_filter(pair_filter: CollisionFilter | None, device: wp.Device, num_boxes: int) -> PairFilter:
     """The :class:`~warp_ccd.scene.filter.PairFilter` struct of a filter, or one that lets every
     pair through."""
     if pair_filter is None or not pair_filter.active:
         return inactive_filter(device)
     if pair_filter.device != device:
         raise ValueError(f"pair_filter: on {pair_filter.device}, the broad phase on {device}")
+    if pair_filter.num_objects != num_boxes:
+        raise ValueError(f"pair_filter: made for {pair_filter.num_objects} objects, given {num_boxes} boxes")
     return pair_filter.device_filter
 
 
@@ -235,7 +237,7 @@ class BroadPhaseAllPairs(BroadPhase):
         wp.launch(
             _all_pairs_kernel,
             dim=num_pairs,
-            inputs=[lower, upper, _device_filter(pair_filter, self.device), pairs.capacity],
+            inputs=[lower, upper, _device_filter(pair_filter, self.device, n), pairs.capacity],
             outputs=[pairs.data, pairs.count],
             device=self.device,
         )
@@ -506,7 +508,7 @@ class BroadPhaseSAP(BroadPhase):
         """
         n = lower.shape[0]
         self._resize(n)
-        pf = _device_filter(pair_filter, self.device)
+        pf = _device_filter(pair_filter, self.device, n)
         if n <= self.all_pairs_max:  # no grid entries: their counter stays as the frame's reset left it
             if n >= 2:
                 wp.launch(_all_pairs_kernel, dim=n * (n - 1) // 2, inputs=[lower, upper, pf, pairs.capacity],

@@ -239,12 +239,15 @@ class GrowableBuffer:
 @wp.kernel
 def _publish_counters_kernel(block: wp.array[wp.int64], watch: wp.array[wp.int64], host: wp.array[wp.int64]):
     """Counter ``k`` into host memory (pinned, mapped into the device's address space); the last
-    thread publishes the watched value."""
+    thread publishes the largest watched value."""
     k = wp.tid()
     if k < block.shape[0]:
         host[k] = block[k]
     else:
-        host[k] = watch[0]
+        m = wp.int64(0)
+        for j in range(watch.shape[0]):
+            m = wp.max(m, watch[j])
+        host[k] = m
 
 
 class CounterRead:
@@ -268,14 +271,14 @@ class CounterRead:
             so they grow to ``r`` times their count too: the next run usually fits everything,
             where growing one stage per run would take a run per stage. None for a buffer of
             work that does not flow from the others (it neither grows with them nor they with it).
-        watch: optional ``(1,)`` int64 device array published with the counters (by the same kernel)
-            and never reset by the reader: a scene's input fault (:class:`~warp_ccd.scene.inputs.InputCheck`),
-            read in :attr:`watched` after each frame.
+        watch: optional int64 device array whose largest value is published with the counters (by
+            the same kernel) and never reset by the reader: a scene's input faults
+            (:class:`~warp_ccd.scene.inputs.InputCheck`), read in :attr:`watched` after each frame.
 
     Attributes:
         block: ``(len(buffers),)`` int64 counters on the device.
         counts: the counts of the last :meth:`finish`.
-        watched: the value of ``watch`` at the end of the last frame (0 without one).
+        watched: the largest value of ``watch`` at the end of the last frame (0 without one).
         generation: counts the new storages of its buffers (and counters adopted away by a later
             reader): a graph captured at one generation is stale at the next.
     """
@@ -297,12 +300,12 @@ class CounterRead:
             b.count = self.block[slot : slot + 1]
             b.mark_stale()  # its counter moved out of the former readers' block
             b.readers.add(self)
-        self.host = wp.zeros(k + 1, dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
+        self.host = wp.zeros(k + self.watch.shape[0], dtype=wp.int64, device="cpu", pinned=self.device.is_cuda)
         # The pinned block as the device sees it: with unified addressing, pinned host memory is
         # mapped at the same address (else None: a copy node instead).
         self._host_mapped = self.host
         if self.device.is_cuda:
-            self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=(k + 1,), device=self.device)
+            self._host_mapped = (wp.array(ptr=self.host.ptr, dtype=wp.int64, shape=self.host.shape, device=self.device)
                                  if self.device.is_uva else None)
         self._host_view = self.host.numpy()[: len(self.buffers)]  # made once: a frame's read is a tolist()
         self._host_watch = self.host.numpy()[k:]
@@ -330,7 +333,7 @@ class CounterRead:
                           outputs=[self._host_mapped], device=self.device)
             else:
                 wp.copy(self.host, self.block, count=len(self.buffers))
-                wp.copy(self.host, self.watch, dest_offset=self.block.shape[0], count=1)
+                wp.copy(self.host, self.watch, dest_offset=self.block.shape[0], count=self.watch.shape[0])
         for k, b in self._strays():
             wp.copy(self.host, b.count, dest_offset=k, src_offset=0, count=1)
 
@@ -351,7 +354,7 @@ class CounterRead:
             OverflowError: a counter reached :data:`COUNT_LIMIT`.
         """
         self.counts = counts = self._host_view.tolist()
-        self.watched = int(self._host_watch[0])
+        self.watched = int(self._host_watch.max())
         grew = False
         short = None
         for k, (b, c) in enumerate(zip(self.buffers, counts)):

@@ -192,8 +192,8 @@ class PrimIndex:
         self._id: dict[str, int] = {}
         col, counts = [], []
         for p in row_id:  # per prim path (not per object, not per frame): its ancestors, root first
-            cut = [k for k in range(1, len(p)) if p[k] == "/"] + [len(p)]
-            col += [self._id.setdefault(p[:k], len(self._id)) for k in cut]
+            cut = [0] + [k for k in range(1, len(p)) if p[k] == "/"] + [len(p)]  # 0: the root, "/"
+            col += [self._id.setdefault(p[:k] or "/", len(self._id)) for k in cut]
             counts.append(len(cut))
         self.ancestors = np.array(list(self._id), dtype=object)
         self._col = np.asarray(col, np.int64)  # per (row, depth): ancestor id
@@ -215,6 +215,9 @@ class PrimIndex:
         if is_pattern(path):
             regex = re.compile(fnmatch.translate(path))
             hit[:] = [regex.match(a) is not None for a in self.ancestors.tolist()]
+            root = self._id.get("/")
+            if root is not None:  # a pattern names prims, never the pseudo-root ("/*" is every top prim)
+                hit[root] = False
         else:
             k = self._id.get(path.rstrip("/") or "/")
             if k is not None:
