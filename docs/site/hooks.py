@@ -31,7 +31,6 @@ PENDING_DOCSTRINGS = (
     # Modules being reworked, whose docstrings still list several parameters on one line of their Args
     # (griffe: "Parameter 'a, b' does not appear in the function signature"). Remove each once mended;
     # the tuple is meant to end empty.
-    "warp_ccd/usd/check.py",
 )
 
 

@@ -382,7 +382,7 @@ class CheckReport:
         """:meth:`to_json` as the text the report file holds (what ``--report -`` prints), newline-terminated."""
         return json.dumps(self.to_json(), indent=1) + "\n"
 
-    def write_json(self, path) -> str:
+    def write_json(self, path: PathLike) -> str:
         """Writes :meth:`to_json` to ``path`` (``.json``) through a temporary file moved into place.
 
         Returns:
@@ -390,7 +390,7 @@ class CheckReport:
         """
         return self.prepare_json(path).commit()
 
-    def prepare_json(self, path) -> PendingFile:
+    def prepare_json(self, path: PathLike) -> PendingFile:
         """Writes :meth:`to_json` to a temporary file beside ``path`` (``.json``), not yet in place.
 
         Returns:
@@ -514,7 +514,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
         min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
         count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
         segments: keep the intersection segments (for the report and the overlay).
-        include_invisible, include_purposes: also check invisible prims, guides or proxies.
+        include_invisible: also check invisible prims.
+        include_purposes: also check prims of these purposes (``"guide"``, ``"proxy"``).
         tolerance: relative tolerance of the triangle test.
         progress: show progress bars on stderr (reading the transforms of every time code, then
             the frames).
@@ -642,7 +643,7 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     return report
 
 
-def write_overlay(report: CheckReport, out_path) -> str:
+def write_overlay(report: CheckReport, out_path: PathLike) -> str:
     """Writes a USD layer over the checked stage: penetrating prims in colour per frame (with a
     continuous check, tunnelling prims in orange at the start of the interval, and their
     ``warpCcd:tunnelling`` attribute; with a clearance, prims in a soft clash in yellow; with
@@ -667,7 +668,7 @@ def write_overlay(report: CheckReport, out_path) -> str:
     return prepare_overlay(report, out_path).commit()
 
 
-def prepare_overlay(report: CheckReport, out_path) -> PendingFile:
+def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
     """Writes the overlay of :func:`write_overlay` to a temporary file beside ``out_path``, not yet in place.
 
     Returns:
