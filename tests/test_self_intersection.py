@@ -341,8 +341,9 @@ def test_weld_vertices():
 
 
 def test_reference_agrees_with_itself():
-    """The float64 sweep of the reference and its exact pairwise decision agree on a crumpled sheet."""
-    v, t = crumpled_sheet(9, 7)
+    """The float64 sweep of the reference and its exact pairwise decision agree on a crumpled sheet (50
+    triangles, 28 crossing pairs among 1,225: the exact decision costs some 14 ms a pair)."""
+    v, t = crumpled_sheet(6, 7)
     w = weld_vertices(v, [0, len(v)])
     exact = [[i, j] for i in range(len(t)) for j in range(i + 1, len(t))
              if pair_meets(v[t[i]], v[t[j]], w[t[i]], w[t[j]], TOL)]
