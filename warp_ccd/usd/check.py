@@ -108,6 +108,7 @@ from .self_intersection import (
 )
 from .self_intersection import self_intersections as find_self_intersections
 from .sweep import COLOR_TUNNELLING, sweep_interval, sweep_json, sweep_summary, tunnelling_flags
+from .tables import pair_table, span
 
 if TYPE_CHECKING:
     from pxr import Usd
@@ -428,18 +429,10 @@ class CheckReport:
         if self.filters is not None:
             lines[1:1] = self.filters.summary_lines()
         pairs = self.pair_summary()
-        if pairs:
-            wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
-            wb = min(max(len(p["b"]) for p in pairs[:top]), 60)
-            spans = [f"{p['first']:g}..{p['last']:g}" for p in pairs[:top]]
-            ws = max(11, max(len(x) for x in spans))
-            lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  {'first..last':<{ws}}  "
-                         "max face pairs  max depth")
-            for p, span in zip(pairs[:top], spans):
-                lines.append(f"  {p['a']:<{wa}}  {p['b']:<{wb}}  {p['frames']:6d}  {span:<{ws}}  "
-                             f"{p['max_triangle_pairs']:14d}  {p['max_depth']:.3g}")
-            if len(pairs) > top:
-                lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
+        ws = max([11] + [len(span(p)) for p in pairs[:top]])
+        lines += pair_table(pairs, top, f"frames  {'first..last':<{ws}}  max face pairs  max depth",
+                            lambda p: f"{p['frames']:6d}  {span(p):<{ws}}  {p['max_triangle_pairs']:14d}  "
+                                      f"{p['max_depth']:.3g}")
         if self.intervals is not None:
             lines += sweep_summary(self.intervals, self.object_path, self.min_distance, top)
         if self.clearance > 0.0:

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .tables import pair_table, span
+
 __all__ = ["COLOR_CLEARANCE", "COLOR_SOFT_CLASH", "SoftClashes", "clearance_json", "clearance_summary",
            "soft_clash_flags", "soft_clashes"]
 
@@ -107,17 +109,8 @@ def clearance_summary(frames: list, object_path: list, clearance: float, top: in
     pairs = clearance_pair_summary(frames, object_path)
     lines = [f"  soft clashes (within {clearance:g}, not reported as collisions): {len(pairs)} prim pairs in "
              f"{len(hit)} of {len(frames)} frames"]
-    if pairs:
-        wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
-        wb = min(max(len(p["b"]) for p in pairs[:top]), 60)
-        lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  first..last  least distance (at)")
-        for p in pairs[:top]:
-            span = f"{p['first']:g}..{p['last']:g}"
-            lines.append(f"  {p['a']:<{wa}}  {p['b']:<{wb}}  {p['frames']:6d}  {span:<11}  "
-                         f"{p['min_distance']:.4g} ({p['at']:g})")
-        if len(pairs) > top:
-            lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
-    return lines
+    return lines + pair_table(pairs, top, "frames  first..last  least distance (at)",
+                              lambda p: f"{p['frames']:6d}  {span(p):<11}  {p['min_distance']:.4g} ({p['at']:g})")
 
 
 def soft_clash_flags(frames: list, num_objects: int) -> np.ndarray:

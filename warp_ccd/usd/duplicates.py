@@ -43,6 +43,8 @@ import itertools
 
 import numpy as np
 
+from .tables import pair_table, span
+
 __all__ = ["CHUNK", "COLOR_DUPLICATE", "REL_TOL", "WINDOW", "coincident", "duplicate_flags", "duplicate_pair_summary",
            "duplicate_pairs", "duplicates_json", "duplicates_summary", "frame_duplicates_json"]
 
@@ -192,15 +194,7 @@ def duplicates_summary(frames: list, object_path: list, top: int) -> list[str]:
     pairs = duplicate_pair_summary(frames, object_path)
     lines = [f"  duplicates (coincident meshes, not reported as collisions): {len(pairs)} prim pairs in "
              f"{len(hit)} of {len(frames)} frames"]
-    if pairs:
-        wa = min(max(len(p["a"]) for p in pairs[:top]), 60)
-        wb = min(max(len(p["b"]) for p in pairs[:top]), 60)
-        lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  frames  first..last")
-        for p in pairs[:top]:
-            lines.append(f"  {p['a']:<{wa}}  {p['b']:<{wb}}  {p['frames']:6d}  {p['first']:g}..{p['last']:g}")
-        if len(pairs) > top:
-            lines.append(f"  ... {len(pairs) - top} more pairs (see the report)")
-    return lines
+    return lines + pair_table(pairs, top, "frames  first..last", lambda p: f"{p['frames']:6d}  {span(p)}")
 
 
 def duplicate_flags(frames: list, num_objects: int) -> np.ndarray:

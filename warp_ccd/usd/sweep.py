@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .tables import pair_table
+
 __all__ = ["COLOR_TUNNELLING", "SweepInterval", "sweep_interval", "sweep_json", "sweep_summary",
            "tunnelling_flags"]
 
@@ -139,18 +141,15 @@ def sweep_summary(intervals, object_path, min_distance: float, top: int = 10) ->
     rows = _tunnelling_rows(intervals, object_path)
     lines = [f"  continuous (min distance {min_distance:g}): intervals with contacts {with_contacts} of {n}; "
              f"tunnelling pairs (neither end frame intersects): {len(rows)}"]
-    if rows:
-        shown = sorted(rows, key=lambda r: (r["time"], r["a"], r["b"]))[:top]
-        wa = min(max(len(r["a"]) for r in shown), 60)
-        wb = min(max(len(r["b"]) for r in shown), 60)
-        spans = [f"{r['start']:g}..{r['end']:g}" for r in shown]
-        ws = max(8, max(len(s) for s in spans))
-        lines.append(f"  {'prim a':<{wa}}  {'prim b':<{wb}}  {'interval':<{ws}}  toi       time")
-        for r, span in zip(shown, spans):
-            lines.append(f"  {r['a']:<{wa}}  {r['b']:<{wb}}  {span:<{ws}}  {r['toi']:<8.4f}  {r['time']:g}")
-        if len(rows) > top:
-            lines.append(f"  ... {len(rows) - top} more tunnelling pairs (see the report)")
-    return lines
+    rows = sorted(rows, key=lambda r: (r["time"], r["a"], r["b"]))
+    ws = max([8] + [len(_interval(r)) for r in rows[:top]])
+    return lines + pair_table(rows, top, f"{'interval':<{ws}}  toi       time",
+                              lambda r: f"{_interval(r):<{ws}}  {r['toi']:<8.4f}  {r['time']:g}", "tunnelling pairs")
+
+
+def _interval(row: dict) -> str:
+    """A tunnelling row's interval ``start..end``."""
+    return f"{row['start']:g}..{row['end']:g}"
 
 
 def tunnelling_flags(intervals, times, num_objects: int) -> np.ndarray:
