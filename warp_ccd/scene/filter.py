@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .._arrays import host_array
 from .._typing import ArrayLike, DeviceLike
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
@@ -89,8 +90,6 @@ def pair_allowed(f: PairFilter, a: int, b: int) -> bool:
 
 def _integer_ids(values, name: str, n: int) -> np.ndarray:
     """``values`` as an ``(n,)`` int64 array of integers, or ValueError naming ``name``."""
-    from .._arrays import host_array
-
     arr = host_array(values, name)
     if arr.ndim == 0:
         arr = np.broadcast_to(arr, (n,))
@@ -118,8 +117,6 @@ def _bits(values, name: str, n: int) -> np.ndarray:
 
 def _pairs(values, n: int) -> np.ndarray:
     """Excluded pairs as sorted unique int64 keys ``min << 32 | max``, or ValueError."""
-    from .._arrays import host_array
-
     arr = host_array(values, "exclude_pairs")
     if arr.shape == (0,) or arr.shape == (0, 2):
         return np.zeros(0, np.int64)
