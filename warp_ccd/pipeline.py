@@ -534,15 +534,13 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
     if continuous:
         options["continuous"] = True
         options["min_distance"] = min_distance
-    if transforms_end is not None:
-        _check_transforms(transforms_end, len(meshes), "transforms_end")
+    end_poses = None if transforms_end is None else _checked_poses(transforms_end, len(meshes), "transforms_end")
     if vertices_end is not None:  # deforming: world vertices at both ends, computed here
         ends = _vertices_end(meshes, vertices_end)
-        if transforms is not None:
-            _check_transforms(transforms, len(meshes), "transforms")
+        start_poses = None if transforms is None else _checked_poses(transforms, len(meshes), "transforms")
         start = _placed([np.asarray(host_array(v, f"mesh {i}"), np.float64) for i, (v, _) in enumerate(meshes)],
-                        transforms)
-        end = _placed(ends, transforms if transforms_end is None else transforms_end)
+                        start_poses)
+        end = _placed(ends, start_poses if end_poses is None else end_poses)
         scene = Scene.from_meshes([(v, t) for v, (_, t) in zip(start, meshes)], deforming=True, device=device,
                                   precision=precision, **filters)
     else:
@@ -589,19 +587,19 @@ def _vertices_end(meshes: Sequence, vertices_end) -> list[np.ndarray]:
     return out
 
 
-def _check_transforms(transforms, n: int, name: str) -> None:
-    """Validates rigid transforms (:func:`~warp_ccd.scene.scene.transforms_to_poses`), the message naming ``name``."""
+def _checked_poses(transforms: ArrayLike, n: int, name: str) -> np.ndarray:
+    """Rigid transforms validated and converted (:func:`~warp_ccd.scene.scene.transforms_to_poses`), the
+    message naming ``name``: ``(n, 7)`` float64 poses."""
     try:
-        transforms_to_poses(transforms, n)
+        return transforms_to_poses(transforms, n)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}" if name != "transforms" else str(exc)) from None
 
 
-def _placed(vertices: list[np.ndarray], transforms) -> list[np.ndarray]:
-    """Each mesh's ``vertices`` under its transform (checked by the caller, :func:`_check_transforms`),
-    in float64; as they are without one."""
-    if transforms is None:
+def _placed(vertices: list[np.ndarray], poses: np.ndarray | None) -> list[np.ndarray]:
+    """Each mesh's ``vertices`` under its ``(N, 7)`` pose (:func:`_checked_poses`), in float64; as they
+    are without poses."""
+    if poses is None:
         return vertices
-    poses = transforms_to_poses(transforms, len(vertices))
     rot = quat_to_matrix(poses[:, 3:])
     return [v @ rot[i].T + poses[i, :3] for i, v in enumerate(vertices)]
