@@ -70,7 +70,7 @@ import numpy as np
 
 from .._typing import DeviceLike, PathLike
 from ..geometry.triangle import TOLERANCE
-from ..options import number_option
+from ..options import integer_option, number_option
 from ..stages.clearance import CLEARANCE_MAX
 from ..stages.crossing import CrossingClassifier
 from .clearance import soft_clashes
@@ -128,7 +128,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
               min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False,
               duplicates: bool = False, worlds: str | Sequence[str] | None = None,
               ignore_pairs: PathLike | Sequence[Any] | None = None, usd_filters: bool = True,
-              set_a: str | Sequence[str] | None = None, set_b: str | Sequence[str] | None = None) -> CheckReport:
+              set_a: str | Sequence[str] | None = None, set_b: str | Sequence[str] | None = None,
+              read_workers: int | None = None) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
 
     Args:
@@ -177,6 +178,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
         set_a: prim paths or patterns (a string may hold several, comma-separated): with ``set_b``, only
             pairs of one mesh of set A and one of set B are checked (a mesh may be in both).
         set_b: the other set, given with ``set_a``.
+        read_workers: processes that read the transforms (:class:`~warp_ccd.usd.importer.UsdMeshImport`'s
+            ``workers``; default: chosen by the stage's size; 0: read in this process).
 
     Returns:
         The :class:`CheckReport`.
@@ -195,6 +198,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     from .stage import open_stage, require_layers, stage_time_codes
 
     number_option("min_depth", min_depth, low=0.0)
+    if read_workers is not None:
+        integer_option("read_workers", read_workers, low=0)
     number_option("min_distance", min_distance, low=0.0)
     clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
     if min_distance > 0.0 and not continuous:
@@ -208,7 +213,7 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     opened = time.perf_counter() - t
     imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
                         include_purposes=include_purposes, device=device, precision=precision, progress=progress,
-                        worlds=worlds, filters=filters)
+                        worlds=worlds, filters=filters, workers=read_workers)
     seconds = dict(imp.seconds)
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
@@ -270,4 +275,11 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     report.seconds = {k: round(v, 4) for k, v in seconds.items()}
     report.source = imp
     report.missing = missing
+    report.object_instancer = list(imp.object_instancer)
+    report.object_instance = np.asarray(imp.object_instance, np.int64)
+    world = scene.world_vertex.numpy()
+    report.extent = float(np.max(world.max(axis=0) - world.min(axis=0))) if len(world) else 0.0
+    report.precision = str(scene.precision)
+    report.precision_note = imp.precision_note
+    report.max_coordinate = float(imp.max_coordinate)
     return report

@@ -66,21 +66,26 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
     """
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
-    from .stage import layer_files
+    from .stage import layer_files, open_stage
 
     full, ext = validate_stage_path(out_path)
     imp = report.source
-    source = imp.stage.GetRootLayer().realPath
+    if imp is not None:
+        src = imp.stage
+    else:  # a report from elsewhere (another process, merged from parts): its stage from its file
+        if not os.path.isfile(report.stage):
+            raise ValueError(f"overlay: the checked stage {report.stage} is not a file (save it first)")
+        src = open_stage(report.stage)
+    source = src.GetRootLayer().realPath
     if not source:
         raise ValueError("overlay: the checked stage is not a file (save it first)")
-    if os.path.realpath(full) in layer_files(imp.stage):
+    if os.path.realpath(full) in layer_files(src):
         raise ValueError(f"cannot write {out_path}: it is a layer of the checked stage ({os.path.realpath(full)})")
     pending = PendingFile(full)
     try:
         layer = Sdf.Layer.CreateAnonymous(ext)
         layer.subLayerPaths.append(source)
         stage = Usd.Stage.Open(layer)
-        src = imp.stage
         stage.SetStartTimeCode(src.GetStartTimeCode())
         stage.SetEndTimeCode(src.GetEndTimeCode())
         stage.SetTimeCodesPerSecond(src.GetTimeCodesPerSecond())
@@ -102,9 +107,9 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
             targets: dict[str, tuple[np.ndarray, ...]] = {}
             for i in np.nonzero((hit | tunnel | soft | mine | twin).any(axis=0))[0].tolist():
-                if imp.object_instancer[i] is not None:
+                if report.object_instancer[i] is not None:
                     continue
-                prim = src.GetPrimAtPath(imp.object_path[i])
+                prim = src.GetPrimAtPath(report.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
@@ -129,8 +134,8 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
                     for tc, g in zip(times, tunnels.tolist()):
                         flag.Set(bool(g), tc)
             # PointInstancer instances: the instancer's per-instance colour.
-            instancer = np.array(imp.object_instancer, dtype=object)
-            for path in sorted({p for p in imp.object_instancer if p is not None}):
+            instancer = np.array(report.object_instancer, dtype=object)
+            for path in sorted({p for p in report.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
                 if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows] | twin[:, rows]).any():
                     continue
@@ -141,17 +146,16 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
                                                                   UsdGeom.Tokens.vertex)
                 for k, tc in enumerate(times):
                     colors = np.tile(np.asarray(COLOR_CLEAR, np.float32), (size, 1))
-                    colors[imp.object_instance[rows][soft[k, rows]]] = COLOR_SOFT_CLASH
-                    colors[imp.object_instance[rows][twin[k, rows]]] = COLOR_DUPLICATE
-                    colors[imp.object_instance[rows][mine[k, rows]]] = COLOR_SELF
-                    colors[imp.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
-                    colors[imp.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
+                    colors[report.object_instance[rows][soft[k, rows]]] = COLOR_SOFT_CLASH
+                    colors[report.object_instance[rows][twin[k, rows]]] = COLOR_DUPLICATE
+                    colors[report.object_instance[rows][mine[k, rows]]] = COLOR_SELF
+                    colors[report.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
+                    colors[report.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
                     primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
         # Defined outside the change block: a new prim needs the stage recomposed. The intersection
         # segments, and the soft clashes' closest points joined, as time-sampled curves.
         curves = []
-        world = imp.scene.world_vertex.numpy()
-        width = float(np.max(world.max(axis=0) - world.min(axis=0))) * 2e-3 if len(world) else 0.0
+        width = report.extent * 2e-3
         for name, color, parts in (("Segments", COLOR_SEGMENT, [f.segments for f in report.frames]),
                                    ("Clearance", COLOR_CLEARANCE, [None if f.soft_clashes is None
                                                                    else f.soft_clashes.points for f in report.frames])):

@@ -108,7 +108,8 @@ class CheckReport:
         skipped: ``(path, reason)`` of the meshes left out.
         missing: the sublayers, references and payloads that could not be opened (checked
             without them; see :func:`~warp_ccd.usd.stage.missing_layers`).
-        source: the :class:`~warp_ccd.usd.importer.UsdMeshImport` (its scene is at the last frame).
+        source: the :class:`~warp_ccd.usd.importer.UsdMeshImport` (its scene is at the last frame), where the
+            check ran in this process; None in a report that was pickled (sent from another process) or merged.
         intervals: with ``continuous``, one :class:`~warp_ccd.usd.sweep.SweepInterval` per pair of
             consecutive time codes; None otherwise.
         min_distance: with ``continuous``, the distance within which surfaces count as touching.
@@ -118,6 +119,15 @@ class CheckReport:
         duplicates_checked: whether duplicates (coincident meshes) were sought.
         filters: the :class:`~warp_ccd.usd.filters.FilterSummary` of the worlds, excluded pairs and sets
             (the report's ``filters`` section when any was used), or None.
+        object_instancer: ``N`` PointInstancer paths of the objects (None for a mesh prim), for the overlay.
+        object_instance: ``(N,)`` int64 instance index of each object in its PointInstancer (-1 for a mesh prim).
+        extent: the largest side of the world vertices' bounding box at the last time code checked, scene units
+            (the width of the overlay's curves).
+        precision: the precision the check ran in (``"float32"``, or ``"float64"`` where asked for or where the
+            coordinates needed it).
+        precision_note: why the check ran in float64 though float32 was asked for, or None.
+        max_coordinate: the largest ``|coordinate|`` of a world vertex over the time codes read, scene units
+            (:attr:`~warp_ccd.usd.importer.UsdMeshImport.max_coordinate`).
     """
 
     stage: str
@@ -137,6 +147,18 @@ class CheckReport:
     self_checked: bool = False
     duplicates_checked: bool = False
     filters: FilterSummary | None = None
+    object_instancer: list = field(default_factory=list)
+    object_instance: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    extent: float = 0.0
+    precision: str = "float32"
+    precision_note: str | None = None
+    max_coordinate: float = 0.0
+
+    def __getstate__(self) -> dict:
+        """Pickled without :attr:`source` (a USD stage and device arrays do not travel): plain data only."""
+        state = dict(self.__dict__)
+        state["source"] = None
+        return state
 
     @property
     def duplicated(self) -> bool:

@@ -1,0 +1,423 @@
+"""Checking many USD files, or long animations in parts: units of work, their results merged as one run.
+
+:func:`check_many` checks every file of a list (globs expanded) with :func:`~warp_ccd.usd.check.check_usd` and
+returns a :class:`BatchReport`: one :class:`FileResult` per file, its merged :class:`~warp_ccd.usd.report.CheckReport`
+or the error that stopped it. The work is cut into :class:`CheckTask` s (:func:`plan_tasks`): a whole file, or a
+(file, range of time codes) where there are fewer files than workers or ``frames_per_task`` asks for it; a
+continuous check's range starts one time code early, so that the interval across the cut is checked, and that
+time code's frame is dropped when the parts are merged (:func:`merge_reports`).
+
+The tasks run in this process one after the other, or on a Ray cluster (:mod:`~warp_ccd.usd.cluster`: one actor
+per GPU, kernels and stages kept warm across tasks). Either way the result is the serial one: each part is a
+plain-data report; merged, a file's frames, intervals, pair summaries, JSON and overlay are those of
+:func:`~warp_ccd.usd.check.check_usd` over the whole file (timings apart). One precision for a whole file: a part
+whose coordinates need float64 makes every part of its file run in float64, as the serial check would.
+
+Known difference: a scene whose float32 or float64 choice depends on the time code a part starts at through
+deforming points or an animated scale (the choice is made from the first time code read) can choose differently
+in parts than in one run.
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+import os
+import sys
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .._typing import PathLike
+from ..output import PendingFile, check_output_path
+from .report import SCHEMA_VERSION, CheckReport
+
+__all__ = ["BatchReport", "CheckTask", "FileResult", "check_many", "expand_paths", "merge_reports", "plan_tasks",
+           "run_task"]
+
+EXIT_CLEAN, EXIT_FINDINGS, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+"""A file's status, as ``warp-ccd check`` exits: nothing found, findings, bad input, an internal error."""
+MIN_FRAMES_PER_TASK = 32
+"""The fewest time codes a part of a file gets when files are split to keep every worker busy."""
+
+
+@dataclass
+class CheckTask:
+    """One unit of work: a file, or a range of its time codes.
+
+    Attributes:
+        file: index of the file in the batch.
+        path: the file.
+        times: ``(F,)`` float64 time codes to check, or None: the file's ``frames`` (the whole file).
+        part: the part's number among its file's parts, in time order.
+        skip: frames of the part's report that belong to the part before (1 where a continuous check's part
+            starts one time code early), dropped when merged.
+    """
+
+    file: int
+    path: str
+    times: np.ndarray | None = None
+    part: int = 0
+    skip: int = 0
+
+    @property
+    def frames(self) -> int:
+        """Its number of time codes (0: the whole file, not counted up front)."""
+        return 0 if self.times is None else len(self.times)
+
+
+@dataclass
+class TaskOutcome:
+    """What a task gave: its report, or the error that stopped it (``status``: 2 bad input, 3 internal)."""
+
+    task: CheckTask
+    report: CheckReport | None = None
+    error: str | None = None
+    status: int = EXIT_CLEAN
+    seconds: float = 0.0
+
+
+@dataclass
+class FileResult:
+    """One file of a batch.
+
+    Attributes:
+        path: the file.
+        report: its :class:`~warp_ccd.usd.report.CheckReport` (merged from its parts), or None when it failed.
+        error: why it failed (one line naming the file or prim), or None.
+        exit_status: 0 nothing found, 1 findings (:attr:`~warp_ccd.usd.report.CheckReport.findings`), 2 bad input,
+            3 an internal error.
+        tasks: how many tasks checked it.
+    """
+
+    path: str
+    report: CheckReport | None = None
+    error: str | None = None
+    exit_status: int = EXIT_CLEAN
+    tasks: int = 1
+
+    def to_json(self) -> dict:
+        """``{"path", "exit_status", "report"}`` or ``{"path", "exit_status", "error"}``."""
+        out: dict[str, Any] = {"path": self.path, "exit_status": self.exit_status}
+        if self.report is not None:
+            out["report"] = self.report.to_json()
+        else:
+            out["error"] = self.error
+        return out
+
+
+@dataclass
+class BatchReport:
+    """The result of :func:`check_many`.
+
+    Attributes:
+        files: one :class:`FileResult` per file, in the order given.
+        engine: ``"serial"`` (this process) or ``"ray"``.
+        workers: how many workers ran the tasks (1 in this process).
+        seconds: wall time of the whole batch, ``{"total": s}``.
+    """
+
+    files: list[FileResult] = field(default_factory=list)
+    engine: str = "serial"
+    workers: int = 1
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def exit_status(self) -> int:
+        """The worst status over the files (0 when there are none)."""
+        return max((f.exit_status for f in self.files), default=EXIT_CLEAN)
+
+    @property
+    def reports(self) -> list[CheckReport | None]:
+        """The files' reports (None where a file failed), in order."""
+        return [f.report for f in self.files]
+
+    def to_json(self) -> dict:
+        """The batch as JSON-ready data: ``schema_version``, ``exit_status``, ``engine``, ``workers``, ``seconds``
+        and ``files`` (each with its :meth:`~warp_ccd.usd.report.CheckReport.to_json` report or its error)."""
+        return {"schema_version": SCHEMA_VERSION, "exit_status": self.exit_status, "engine": self.engine,
+                "workers": self.workers, "seconds": self.seconds, "files": [f.to_json() for f in self.files]}
+
+    def prepare_json(self, path: PathLike) -> PendingFile:
+        """Writes :meth:`to_json` to a temporary file beside ``path`` (``.json``), not yet in place."""
+        import json
+
+        full, _ = check_output_path(path, (".json",), "report")
+        pending = PendingFile(full)
+        try:
+            with open(pending.temp_path, "w", encoding="utf-8") as fh:
+                fh.write(json.dumps(self.to_json(), indent=1) + "\n")
+        except BaseException:
+            pending.discard()
+            raise
+        return pending
+
+    def summary(self, top: int = 10) -> str:
+        """Each file's summary (or its error), then one line for the batch."""
+        lines = []
+        for f in self.files:
+            lines.append(f.report.summary(top=top) if f.report is not None else f"{f.path}: error: {f.error}")
+        found = sum(f.exit_status == EXIT_FINDINGS for f in self.files)
+        failed = sum(f.exit_status >= EXIT_BAD_INPUT for f in self.files)
+        total = self.seconds.get("total")
+        lines.append(f"{len(self.files)} files: {found} with findings, {failed} failed"
+                     + (f"; {self.engine}, {self.workers} workers" if self.engine != "serial" else "")
+                     + (f"; {total:.2f} s" if total is not None else ""))
+        return "\n".join(lines)
+
+
+def expand_paths(paths: PathLike | Sequence[PathLike]) -> list[str]:
+    """Files and glob patterns (``*``, ``?``, ``[...]``, ``**`` for any folders) as a list of files.
+
+    A name that exists is taken as it is; a pattern is replaced by its matches, sorted. The same file twice is
+    kept once (the first time).
+
+    Raises:
+        ValueError: no paths, or a pattern matching no file.
+    """
+    if isinstance(paths, (str, bytes, os.PathLike)):
+        paths = [paths]
+    out: list[str] = []
+    for given in paths:
+        text = os.fsdecode(os.fspath(given))
+        if os.path.exists(text) or not glob.has_magic(text):
+            found = [text]
+        else:
+            found = sorted(p for p in glob.glob(text, recursive=True) if os.path.isfile(p))
+            if not found:
+                raise ValueError(f"{text}: no file matches this pattern")
+        out.extend(found)
+    if not out:
+        raise ValueError("no USD files given")
+    seen: set[str] = set()
+    return [p for p in out if not (os.path.realpath(p) in seen or seen.add(os.path.realpath(p)))]
+
+
+def plan_tasks(paths: Sequence[str], *, frames: Any = None, workers: int = 1, frames_per_task: int | None = None,
+               continuous: bool = False) -> tuple[list[CheckTask], dict[int, str]]:
+    """Cuts the work into tasks.
+
+    A file is one task, unless ``frames_per_task`` is given or there are fewer files than ``workers``: then its
+    time codes (:func:`~warp_ccd.usd.stage.stage_time_codes` of ``frames``) are cut into ranges of
+    ``frames_per_task`` (default: an even share of every worker, at least :data:`MIN_FRAMES_PER_TASK`). With
+    ``continuous``, every range but the first starts one time code early (its :attr:`CheckTask.skip` is 1).
+
+    Returns:
+        ``(tasks, errors)``: the tasks, largest first; ``errors`` maps the index of a file that could not be
+        opened to count its time codes to the message.
+    """
+    from .stage import open_stage, stage_time_codes
+
+    tasks: list[CheckTask] = []
+    errors: dict[int, str] = {}
+    split = frames_per_task is not None or len(paths) < workers
+    if not split:
+        return [CheckTask(i, p) for i, p in enumerate(paths)], errors
+    counted: dict[int, np.ndarray] = {}
+    for i, p in enumerate(paths):
+        try:
+            counted[i] = stage_time_codes(open_stage(p), frames)
+        except ValueError as exc:
+            errors[i] = str(exc)
+    total = sum(len(t) for t in counted.values())
+    size = frames_per_task or max(MIN_FRAMES_PER_TASK, math.ceil(total / max(workers, 1)))
+    for i, times in counted.items():
+        parts = max(1, math.ceil(len(times) / size))
+        cuts = np.linspace(0, len(times), parts + 1).round().astype(int)
+        for k in range(parts):
+            lo = cuts[k] - (1 if continuous and k > 0 else 0)
+            tasks.append(CheckTask(i, paths[i], times[lo:cuts[k + 1]], k, cuts[k] - lo))
+    tasks.sort(key=lambda t: -t.frames)
+    return tasks, errors
+
+
+def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
+    """Runs one task with :func:`~warp_ccd.usd.check.check_usd` (``options`` are its keyword arguments; the
+    task's ``times``, where it has them, replace ``frames``); a bad input or an internal error becomes the
+    outcome's error, not an exception.
+
+    Args:
+        task: the task.
+        options: :func:`~warp_ccd.usd.check.check_usd`'s keyword arguments.
+        stage: the file's ``Usd.Stage`` when it is already open (a worker keeps them), else None.
+    """
+    from ..geometry.precision import PrecisionWarning
+    from .check import check_usd
+
+    t = time.perf_counter()
+    opts = dict(options)
+    if task.times is not None:
+        opts["frames"] = task.times
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PrecisionWarning)  # the report carries it (precision_note)
+            report = check_usd(task.path if stage is None else stage, **opts)
+    except ValueError as exc:
+        return TaskOutcome(task, error=str(exc), status=EXIT_BAD_INPUT, seconds=time.perf_counter() - t)
+    except Exception as exc:  # noqa: BLE001 (a file's failure is reported; the others go on)
+        return TaskOutcome(task, error=f"internal error: {type(exc).__name__}: {exc}", status=EXIT_INTERNAL,
+                           seconds=time.perf_counter() - t)
+    report.source = None  # plain data, as it would come back from another process
+    return TaskOutcome(task, report, seconds=time.perf_counter() - t)
+
+
+def merge_reports(parts: Sequence[CheckReport], skip: Sequence[int] = ()) -> CheckReport:
+    """One report from the reports of consecutive ranges of one file's time codes, in time order.
+
+    Args:
+        parts: the parts' reports (all of one precision).
+        skip: per part, how many of its first frames belong to the part before (a continuous check's overlap).
+
+    Returns:
+        The report a check of the whole range gives: frames and intervals in time order, timings summed,
+        the precision note and largest coordinate over the parts, the extent of the last part.
+
+    Raises:
+        ValueError: the parts are not of one file, objects and precision.
+    """
+    if not parts:
+        raise ValueError("merge_reports: no parts")
+    skip = list(skip) or [0] * len(parts)
+    first = parts[0]
+    for p in parts[1:]:
+        if p.stage != first.stage or p.object_path != first.object_path or p.precision != first.precision:
+            raise ValueError(f"merge_reports: parts of {first.stage} disagree on their stage, objects or precision")
+    merged = CheckReport(**{k: v for k, v in first.__dict__.items() if k != "source"})
+    merged.frames = [f for p, s in zip(parts, skip) for f in p.frames[s:]]
+    if first.intervals is not None:
+        merged.intervals = [iv for p in parts for iv in p.intervals]
+    keys = dict.fromkeys(k for p in parts for k in p.seconds)
+    merged.seconds = {k: round(sum(p.seconds.get(k, 0.0) for p in parts), 4) for k in keys}
+    far = max(parts, key=lambda p: p.max_coordinate)
+    merged.max_coordinate = far.max_coordinate
+    merged.precision_note = far.precision_note or next((p.precision_note for p in parts if p.precision_note), None)
+    merged.extent = parts[-1].extent
+    return merged
+
+
+def _file_results(paths: Sequence[str], outcomes: Sequence[TaskOutcome], errors: dict[int, str]) -> list[FileResult]:
+    """Per file: its parts merged, or the error of its earliest failing part (the one a serial run meets first)."""
+    by_file: dict[int, list[TaskOutcome]] = {}
+    for o in outcomes:
+        by_file.setdefault(o.task.file, []).append(o)
+    results = []
+    for i, path in enumerate(paths):
+        if i in errors:
+            results.append(FileResult(path, error=errors[i], exit_status=EXIT_BAD_INPUT, tasks=0))
+            continue
+        parts = sorted(by_file.get(i, []), key=lambda o: o.task.part)
+        failed = [o for o in parts if o.report is None]
+        if failed:
+            results.append(FileResult(path, error=failed[0].error, exit_status=failed[0].status, tasks=len(parts)))
+            continue
+        report = merge_reports([o.report for o in parts], [o.task.skip for o in parts])
+        results.append(FileResult(path, report, exit_status=EXIT_FINDINGS if report.findings else EXIT_CLEAN,
+                                  tasks=len(parts)))
+    return results
+
+
+def _one_precision(outcomes: list[TaskOutcome], options: dict,
+                   run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
+    """Runs again in float64 the float32 parts of a file whose other parts needed float64 (as one run would)."""
+    by_file: dict[int, list[TaskOutcome]] = {}
+    for o in outcomes:
+        if o.report is not None:
+            by_file.setdefault(o.task.file, []).append(o)
+    again = [o for parts in by_file.values() if len({o.report.precision for o in parts}) > 1
+             for o in parts if o.report.precision == "float32"]
+    if not again:
+        return outcomes
+    redone = {id(o.task): r for o, r in zip(again, run([o.task for o in again], dict(options, precision="float64")))}
+    return [redone.get(id(o.task), o) for o in outcomes]
+
+
+def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray: bool = False,
+               ray_address: str | None = None, workers: int | None = None, frames_per_task: int | None = None,
+               read_workers: int | None = None, progress: bool = False, **options: Any) -> BatchReport:
+    """Checks many USD files (or long animations in parts), in this process or on a Ray cluster.
+
+    Example::
+
+        batch = check_many(["shots/*.usd"], ray=True, clearance=0.01)
+        for f in batch.files:
+            print(f.path, f.exit_status, f.report.findings if f.report else f.error)
+
+    Args:
+        paths: USD files or glob patterns (:func:`expand_paths`).
+        frames: the time codes of every file (as :func:`~warp_ccd.usd.check.check_usd` takes them).
+        ray: run the tasks on a Ray cluster (:mod:`~warp_ccd.usd.cluster`): a local one unless ``ray_address``
+            names one (``"auto"``, ``"host:port"``, ``"ray://host:port"``), or the one this process is connected
+            to already. Needs ``pip install 'warp-ccd[distributed]'``.
+        ray_address: the cluster to connect to (implies ``ray``).
+        workers: Ray actors (default: one per GPU of the cluster, else one per CPU); in this process: the parts
+            a lone file is cut into (default 1: whole files).
+        frames_per_task: cut every file into ranges of this many time codes (default: see :func:`plan_tasks`).
+        read_workers: processes that read transforms, in this process's check only (see
+            :class:`~warp_ccd.usd.importer.UsdMeshImport`'s ``workers``; Ray tasks read in their own process).
+        progress: a progress bar on stderr over the time codes of all tasks.
+        **options: :func:`~warp_ccd.usd.check.check_usd`'s other keyword arguments (``device`` for this process;
+            Ray actors use their GPU, or the CPU).
+
+    Returns:
+        The :class:`BatchReport`; a file that fails is reported there (``error``, ``exit_status`` 2 or 3) and the
+        others go on.
+
+    Raises:
+        ValueError: no files, a pattern matching nothing, a bad option, Ray asked for but not installed or not
+            reachable.
+    """
+    from tqdm import tqdm
+
+    from ..options import integer_option
+
+    start = time.perf_counter()
+    files = expand_paths(paths)
+    if "stage_or_path" in options or "progress" in options:
+        raise ValueError("check_many: give the files as paths and progress as progress=")
+    if frames_per_task is not None:
+        integer_option("frames_per_task", frames_per_task, low=1)
+    if workers is not None:
+        integer_option("workers", workers, low=1)
+    use_ray = bool(ray) or ray_address is not None
+    options = dict(options, frames=frames)
+    continuous = bool(options.get("continuous", False))
+    if use_ray:
+        from .cluster import RayEngine
+
+        engine = RayEngine(ray_address, workers)
+        count = engine.workers
+    else:
+        engine, count = None, workers or 1
+        options["read_workers"] = read_workers
+    tasks, errors = plan_tasks(files, frames=frames, workers=count, frames_per_task=frames_per_task,
+                               continuous=continuous)
+    bar = tqdm(total=sum(t.frames or 1 for t in tasks), desc="checking", unit="frame", leave=False,
+               disable=not progress or None, file=sys.stderr)
+
+    def done(outcome: TaskOutcome) -> None:
+        bar.update(outcome.task.frames or 1)
+
+    try:
+        if engine is not None:
+            outcomes = engine.run(tasks, options, done)
+            outcomes = _one_precision(outcomes, options, lambda ts, opts: engine.run(ts, opts))
+        else:
+            def run(ts: list[CheckTask], opts: dict, report: Callable | None = None) -> list[TaskOutcome]:
+                out = []
+                for t in ts:
+                    out.append(run_task(t, opts))
+                    if report is not None:
+                        report(out[-1])
+                return out
+
+            outcomes = _one_precision(run(tasks, options, done), options, run)
+    finally:
+        bar.close()
+        if engine is not None:
+            engine.close()
+    return BatchReport(_file_results(files, outcomes, errors), "ray" if use_ray else "serial", count,
+                       {"total": round(time.perf_counter() - start, 4)})

@@ -1,0 +1,159 @@
+"""The check on a Ray cluster: one actor per GPU (or per CPU without GPUs), tasks handed out as actors free up.
+
+:class:`RayEngine` connects to a cluster (or starts a local one), starts its actors and runs
+:class:`~warp_ccd.usd.batch.CheckTask` s on them (:func:`~warp_ccd.usd.batch.run_task`), largest first, each actor
+holding one task at a time. An actor (:class:`CheckWorker`) keeps its process warm across tasks: Warp initialised
+and its kernels loaded once, its CUDA context, and the stages it opened (the parts of one file read one stage). It
+reads transforms in its own process (no reader processes of its own: the cluster schedules the work). An actor
+that dies (a killed process, a lost node) is restarted by Ray and its task run again, up to
+:data:`MAX_RETRIES` times; results come back as plain data (:class:`~warp_ccd.usd.report.CheckReport` pickles
+without the stage).
+
+``ray`` is imported inside the functions: this module imports without it (``pip install 'warp-ccd[distributed]'``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from .batch import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
+
+__all__ = ["FAULT_ENV", "MAX_RETRIES", "CheckWorker", "RayEngine"]
+
+MAX_RETRIES = 3
+"""How many times Ray restarts a dead actor and runs its task again."""
+FAULT_ENV = "WARP_CCD_FAULT_EXIT_ONCE"
+"""Fault injection for tests: where this environment variable names a file that does not exist yet, an actor
+creates it and ends its process at the start of its next task (as a killed worker would)."""
+OPEN_STAGES = 4
+"""Stages an actor keeps open (the most recently used)."""
+
+
+class CheckWorker:
+    """A Ray actor's state: its device, and its open stages.
+
+    Args:
+        quiet: silence Warp's messages (the driver shows progress and results).
+    """
+
+    def __init__(self, quiet: bool = True) -> None:
+        import warp as wp
+
+        wp.config.quiet = quiet
+        wp.init()
+        self.device = "cuda:0" if wp.is_cuda_available() else "cpu"
+        self._stages: OrderedDict[str, Any] = OrderedDict()
+
+    def run(self, task: CheckTask, options: dict) -> TaskOutcome:
+        """Runs ``task`` on this actor's device, reading in this process (``read_workers=0``)."""
+        marker = os.environ.get(FAULT_ENV)
+        if marker and not os.path.exists(marker):
+            with open(marker, "w") as fh:
+                fh.write(str(os.getpid()))
+            os._exit(1)
+        opts = dict(options, device=self.device, read_workers=0, progress=False)
+        return run_task(task, opts, self._stage(task.path))
+
+    def _stage(self, path: str) -> Any:
+        """The file's stage, opened once per actor (None where it cannot be opened: the task names the error)."""
+        from .stage import open_stage
+
+        key = os.path.realpath(path)
+        stage = self._stages.get(key)
+        if stage is None:
+            try:
+                stage = open_stage(path)
+            except ValueError:
+                return None
+            self._stages[key] = stage
+            while len(self._stages) > OPEN_STAGES:
+                self._stages.popitem(last=False)
+        self._stages.move_to_end(key)
+        return stage
+
+    def pid(self) -> int:
+        """This actor's process id."""
+        return os.getpid()
+
+
+class RayEngine:
+    """Actors on a Ray cluster that run check tasks.
+
+    Args:
+        address: the cluster (``"auto"``, ``"host:port"``, ``"ray://host:port"``); None or ``"local"``: the one
+            this process is connected to, else a new local cluster.
+        workers: actors to start (default: one per GPU of the cluster, else one per CPU).
+
+    Attributes:
+        workers: how many actors run.
+        gpus: whether each actor holds a GPU.
+
+    Raises:
+        ValueError: Ray is not installed, or the cluster cannot be reached.
+    """
+
+    def __init__(self, address: str | None = None, workers: int | None = None) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise ValueError("Ray is not installed: pip install 'warp-ccd[distributed]'") from None
+        self._ray = ray
+        self._started = False
+        if not ray.is_initialized():
+            try:
+                ray.init(address=None if address in (None, "local") else address, include_dashboard=False,
+                         log_to_driver=False, logging_level="ERROR", configure_logging=False)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                raise ValueError(f"cannot reach the Ray cluster {address or '(local)'}: {exc}") from None
+            self._started = True
+        resources = ray.cluster_resources()
+        num_gpus = int(resources.get("GPU", 0))
+        self.gpus = num_gpus > 0
+        self.workers = workers or (num_gpus if self.gpus else max(1, int(resources.get("CPU", 1))))
+        actor = ray.remote(CheckWorker).options(
+            num_gpus=1 if self.gpus else 0, num_cpus=0 if self.gpus else 1, max_restarts=MAX_RETRIES,
+            max_task_retries=MAX_RETRIES)
+        self._actors = [actor.remote() for _ in range(self.workers)]
+
+    def run(self, tasks: Sequence[CheckTask], options: dict,
+            done: Callable[[TaskOutcome], None] | None = None) -> list[TaskOutcome]:
+        """Runs ``tasks`` (in the order given, each on the next free actor); ``done`` is called as each ends.
+
+        Returns:
+            The outcomes, in the order of ``tasks``. A task whose actor died more than :data:`MAX_RETRIES` times
+            is an internal error of its file.
+        """
+        ray = self._ray
+        pending = list(enumerate(tasks))[::-1]
+        running: dict[Any, tuple[int, Any]] = {}
+        out: list[TaskOutcome | None] = [None] * len(tasks)
+        free = list(self._actors)
+        while pending or running:
+            while pending and free:
+                i, task = pending.pop()
+                actor = free.pop()
+                running[actor.run.remote(task, options)] = (i, actor)
+            ready, _ = ray.wait(list(running), num_returns=1)
+            for ref in ready:
+                i, actor = running.pop(ref)
+                try:
+                    out[i] = ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                    out[i] = TaskOutcome(tasks[i], error=f"internal error: the worker was lost ({first})",
+                                         status=EXIT_INTERNAL)
+                free.append(actor)
+                if done is not None:
+                    done(out[i])
+        return out
+
+    def close(self) -> None:
+        """Ends the actors, and the local cluster where this engine started it."""
+        for a in self._actors:
+            self._ray.kill(a)
+        self._actors = []
+        if self._started:
+            self._ray.shutdown()
