@@ -49,6 +49,7 @@ from .common import (
     EXIT_USAGE,
     CliError,
     OneLineParser,
+    flat_values,
     init_warp,
     quiet_warp,
     resolve_device,
@@ -160,7 +161,22 @@ def _build_parser() -> OneLineParser:
         "or duplicates another with --duplicates, or comes within --clearance, or "
         "touches with --count-touching), 2 bad arguments or input, 3 an internal error.",
     )
-    check.add_argument("stage", metavar="IN.usd", help="the USD file to check (.usd, .usda, .usdc, .usdz)")
+    check.add_argument("stages", nargs="+", metavar="IN.usd",
+                       help="the USD files to check (.usd, .usda, .usdc, .usdz), or glob patterns ('shots/*.usd', "
+                       "'assets/**/*.usdc'; quoted). With several files: one summary each, --report holds every "
+                       "file's report, --usd-out is a folder; the exit status is the worst over the files")
+    check.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                       help="run on a Ray cluster: one worker per GPU (else per CPU), long animations cut into ranges "
+                       "of time codes; the results are those of one process. ADDRESS: 'auto', HOST:PORT or "
+                       "ray://HOST:PORT (default: a local cluster). Needs pip install 'warp-ccd[distributed]'")
+    check.add_argument("--workers", type=_count(1), default=None, metavar="N",
+                       help="with --ray: workers to start (default: one per GPU of the cluster, else one per CPU)")
+    check.add_argument("--frames-per-task", type=_count(1), default=None, metavar="N",
+                       help="cut every file into ranges of N time codes, one task each (default: whole files, cut "
+                       "only where there are fewer files than workers)")
+    check.add_argument("--read-workers", type=_count(0), default=None, metavar="N",
+                       help="processes that read the transforms of a big animation, in this process's check "
+                       "(default: chosen by its size; 0: none; Ray workers read in their own process)")
     check.add_argument("--frames", default=None, metavar="START:END[:STEP]",
                        help="time codes to check, END included (default: the stage's time range)")
     check.add_argument("--prims", type=_prims, action="append", default=None, metavar="PATH[,PATH...]",
@@ -413,6 +429,24 @@ def _check(args) -> tuple[int, str | None]:
     def fail(message: str) -> CliError:  # bad arguments or input: exit 2 (1 means "penetrates")
         return CliError(f"{PROG} check: error: {message}", EXIT_USAGE)
 
+    from ..usd.batch import expand_paths
+
+    if args.ray is not None and _looks_like_file(args.ray):  # "--ray IN.usd": a file, not an address
+        args.stages.insert(0, args.ray)
+        args.ray = "local"
+    try:
+        files = expand_paths(args.stages)
+    except ValueError as exc:
+        raise fail(str(exc)) from None
+    if len(files) > 1 or args.ray is not None:
+        from .batch import check_batch
+
+        try:
+            frames = _frames(args.frames)
+        except ValueError as exc:
+            raise fail(str(exc)) from None
+        return check_batch(args, files, frames, fail)
+    args.stage = files[0]
     to_stdout = args.report == REPORT_STDOUT
     outputs = [(flag, path) for flag, path in (("--report", None if to_stdout else args.report),
                                                ("--usd-out", args.usd_out), ("--preview", args.preview))
@@ -483,7 +517,7 @@ def _check(args) -> tuple[int, str | None]:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", PrecisionWarning)
-            report = check_usd(stage, frames=frames, prims=_flat(args.prims), device=device,
+            report = check_usd(stage, frames=frames, prims=flat_values(args.prims), device=device,
                                precision=args.precision, min_depth=args.min_depth,
                                count_touching=args.count_touching, segments=args.segments,
                                include_invisible=args.include_invisible,
@@ -492,7 +526,8 @@ def _check(args) -> tuple[int, str | None]:
                                min_distance=args.min_distance, clearance=args.clearance,
                                self_intersections=args.self_intersections, duplicates=args.duplicates,
                                worlds=args.worlds, ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters,
-                               set_a=_flat(args.set_a), set_b=_flat(args.set_b))
+                               set_a=flat_values(args.set_a), set_b=flat_values(args.set_b),
+                               read_workers=args.read_workers)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)
@@ -546,9 +581,11 @@ def _check(args) -> tuple[int, str | None]:
     return (EXIT_FINDINGS if report.findings else EXIT_OK), text
 
 
-def _flat(prims):
-    """``--prims`` (``--set-a``, ``--set-b``) values (lists, one per use of the option) as one list, or None."""
-    return None if prims is None else [p for group in prims for p in group]
+def _looks_like_file(text: str) -> bool:
+    """Whether a ``--ray`` value is a USD file or pattern (``--ray IN.usd``) rather than a cluster's address."""
+    from ..usd.export import STAGE_EXTENSIONS
+
+    return os.path.exists(text) or text.lower().endswith(tuple(STAGE_EXTENSIONS + (".usdz",))) or "*" in text
 
 
 def _refuse_overwriting(inputs, outputs) -> None:

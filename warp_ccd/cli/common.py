@@ -12,7 +12,7 @@ import sys
 import tempfile
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError",
-           "OneLineParser", "init_warp", "quiet_warp", "resolve_device", "uncached_modules"]
+           "OneLineParser", "flat_values", "init_warp", "quiet_warp", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -145,3 +145,8 @@ def resolve_device(name: str | None):
     if name not in available:
         raise ValueError(f"unknown device {name!r} (available: {', '.join(available)})")
     return wp.get_device(name)
+
+
+def flat_values(prims: list[list[str]] | None) -> list[str] | None:
+    """``--prims`` (``--set-a``, ``--set-b``) values (lists, one per use of the option) as one list, or None."""
+    return None if prims is None else [p for group in prims for p in group]
