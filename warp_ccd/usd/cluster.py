@@ -85,11 +85,13 @@ class RayEngine:
     Args:
         address: the cluster (``"auto"``, ``"host:port"``, ``"ray://host:port"``); None or ``"local"``: the one
             this process is connected to, else a new local cluster.
-        workers: actors to start (default: one per GPU of the cluster, else one per CPU).
+        workers: actors to start (default: one per GPU of the cluster, else one per CPU); more than the GPUs share
+            them.
 
     Attributes:
         workers: how many actors run.
-        gpus: whether each actor holds a GPU.
+        gpus: whether the actors run on GPUs.
+        gpu_share: the GPU each actor holds (1; a fraction where there are more workers than GPUs; 0 on CPUs).
 
     Raises:
         ValueError: Ray is not installed, or the cluster cannot be reached.
@@ -113,8 +115,10 @@ class RayEngine:
         num_gpus = int(resources.get("GPU", 0))
         self.gpus = num_gpus > 0
         self.workers = workers or (num_gpus if self.gpus else max(1, int(resources.get("CPU", 1))))
+        # More workers than GPUs share them (a fraction of a GPU each).
+        self.gpu_share = min(1.0, num_gpus / self.workers) if self.gpus else 0.0
         actor = ray.remote(CheckWorker).options(
-            num_gpus=1 if self.gpus else 0, num_cpus=0 if self.gpus else 1, max_restarts=MAX_RETRIES,
+            num_gpus=self.gpu_share, num_cpus=0 if self.gpus else 1, max_restarts=MAX_RETRIES,
             max_task_retries=MAX_RETRIES)
         self._actors = [actor.remote() for _ in range(self.workers)]
 
