@@ -21,7 +21,8 @@
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
 #   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, stages, profile, narrow, scaling, spheres, boxes, deforming,
-#                                          # broad, build, host, usd, ccd, continuous, clearance, distance, self, worlds
+#                                          # broad, build, host, usd, distributed, ccd, continuous, clearance, distance, self,
+#                                          # worlds
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -38,12 +39,13 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd ccd continuous clearance distance self worlds}
+parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd distributed ccd continuous clearance distance self worlds}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
     profiled="100"; hosted="300"; waits="0.05 5"; builds="100x20 10x80 1x1280"; small="32"; rebuild="2x320"
     usd="--frames 4 --rigid 200 --deforming 3 --fcl-every 2"
+    distributed="--objects 200 --frames 8 --long-frames 40 --layers 2 --batch 4 --batch-objects 50 --batch-frames 6"
     mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
     ccd="--queries 4000 --objects 100 --ipctk-queries 1000 --repeats 2"; continuous="100 300"
     clearance="100 300"; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --crumpled 4 --sheet-n 20"
@@ -53,6 +55,7 @@ else
     narrow=100000; profiled="1e3 1e4 1e5"; hosted="1e3 1e5 1e6"; waits="0.05 1 5 20 50"
     builds="1000x20 100000x80 10000x1280 1x1310720 60x5120"; small="16"; rebuild="27x5120"
     usd="--frames 240 --rigid 10000 --deforming 100 --fcl-every 10"
+    distributed="${DISTRIBUTED:---objects 10000 --frames 240 --long-frames 2400 --layers 16 --batch 100}"
     mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
     staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
     ccd="--queries 1e7 --objects 1e4 --ipctk-queries 2e4 --repeats 10"; continuous="1e3 1e4 1e5 1e6"
@@ -117,6 +120,8 @@ for part in $parts; do
             --out "$out/host_after_wait_$tag.json" ;;
     usd)
         step python3 -m warp_ccd.bench.usd_check --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
+    distributed)
+        step python3 -m warp_ccd.bench.distributed --device "$device" $distributed --out "$out/distributed_$tag.json" ;;
     ccd)
         step python3 -m warp_ccd.bench.ccd_queries --device "$device" $ccd --out "$out/ccd_queries_$tag.json" ;;
     continuous)
@@ -136,7 +141,7 @@ for part in $parts; do
             --out "$out/worlds_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \
-            "host, usd, ccd, continuous, clearance, distance, self, worlds)" >&2
+            "host, usd, distributed, ccd, continuous, clearance, distance, self, worlds)" >&2
         status=2 ;;
     esac
 done
