@@ -39,12 +39,12 @@ from warp_ccd.bench.usd_check import _commit_label, write_rigid_stage
 
 def write_part(task) -> None:
     """One sublayer of the long stage: prims ``lo..hi`` of ``num_objects`` (the motion of all, these kept)."""
-    path, num_objects, num_frames, lo, hi, seed = task
+    path, num_objects, num_frames, lo, hi, seed, device = task
     from pxr import Gf, Sdf, Vt
 
     from warp_ccd.scene.scene import Scene
 
-    scene = Scene.random(num_objects, seed=seed, device="cpu")
+    scene = Scene.random(num_objects, seed=seed, device=device)
     poses = np.empty((num_frames, hi - lo, 7))
     for f in range(num_frames):
         poses[f] = scene.object_pose.numpy()[lo:hi]
@@ -79,13 +79,13 @@ def write_part(task) -> None:
 
 
 def write_layered_stage(path: str, num_objects: int, num_frames: int, layers: int, pool: ProcessPoolExecutor,
-                        seed: int = 0) -> None:
+                        seed: int = 0, device: str = "cpu") -> None:
     """A root layer over ``layers`` sublayers written in parallel, each holding a share of the prims."""
     from pxr import Sdf
 
     cuts = np.linspace(0, num_objects, layers + 1).round().astype(int)
     stem = os.path.splitext(path)[0]
-    parts = [(f"{stem}_part{k}.usdc", num_objects, num_frames, int(cuts[k]), int(cuts[k + 1]), seed)
+    parts = [(f"{stem}_part{k}.usdc", num_objects, num_frames, int(cuts[k]), int(cuts[k + 1]), seed, device)
              for k in range(layers) if cuts[k + 1] > cuts[k]]
     list(pool.map(write_part, parts))
     root = Sdf.Layer.CreateNew(path)
@@ -96,8 +96,8 @@ def write_layered_stage(path: str, num_objects: int, num_frames: int, layers: in
 
 
 def _write_small(task) -> None:
-    path, n, frames, seed = task
-    write_rigid_stage(path, n, frames, seed=seed, device="cpu")
+    path, n, frames, seed, device = task
+    write_rigid_stage(path, n, frames, seed=seed, device=device)
 
 
 def same_results(a, b) -> bool:
@@ -148,11 +148,11 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as folder, ProcessPoolExecutor(
             max(1, min(32, os.cpu_count() or 1)), mp_context=multiprocessing.get_context("spawn")) as pool:
         warm = os.path.join(folder, "warm.usdc")
-        write_rigid_stage(warm, 20, 2, device="cpu")
+        write_rigid_stage(warm, 20, 2, device=device)
         check_usd(warm, device=device)  # compile and load every kernel once
         if "rigid" in parts:
             path = os.path.join(folder, "rigid.usdc")
-            _, write_s = _timed(write_rigid_stage, path, args.objects, args.frames, device="cpu")
+            _, write_s = _timed(write_rigid_stage, path, args.objects, args.frames, device=device)
             for workers in (None, 0):
                 runs = [_timed(check_usd, path, device=device, read_workers=workers) for _ in range(2)]
                 report, wall = min(runs, key=lambda r: r[1])
@@ -172,7 +172,8 @@ def main(argv=None) -> int:
         shared = gpus < 2
         if args.long_frames > 0 and "long" in parts:
             path = os.path.join(folder, "long.usda")
-            _, write_s = _timed(write_layered_stage, path, args.objects, args.long_frames, args.layers, pool)
+            _, write_s = _timed(write_layered_stage, path, args.objects, args.long_frames, args.layers, pool,
+                                     device=str(device))
             serial, wall = _timed(check_usd, path, device=device)
             row = {"case": "long", "objects": args.objects, "frames": args.long_frames, "layers": args.layers,
                    "write_s": write_s, "one_process_s": wall, "one_process_seconds": serial.seconds}
@@ -190,8 +191,8 @@ def main(argv=None) -> int:
             del serial
         if args.batch > 0 and "batch" in parts:
             paths = [os.path.join(folder, f"batch_{k}.usdc") for k in range(args.batch)]
-            _, write_s = _timed(lambda: list(pool.map(
-                _write_small, [(p, args.batch_objects, args.batch_frames, k) for k, p in enumerate(paths)])))
+            jobs = [(p, args.batch_objects, args.batch_frames, k, str(device)) for k, p in enumerate(paths)]
+            _, write_s = _timed(lambda: list(pool.map(_write_small, jobs)))
             serial, wall = _timed(check_many, paths, device=device)
             row = {"case": "batch", "stages": args.batch, "objects": args.batch_objects, "frames": args.batch_frames,
                    "write_s": write_s, "one_process_s": wall}
