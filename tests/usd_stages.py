@@ -344,3 +344,55 @@ def env_boxes(num_envs: int = 2, ground: bool = True) -> dict:
     if ground:
         boxes["/World/Ground/Geom"] = (0.25, -0.5, 0.0)
     return boxes
+
+
+def far_flight_stage(path=None, num_frames: int = 12, flight: int = 3, far: float = 1e6):
+    """Three box-like prisms (``prism(4)``, radius 0.7, height 1, triangles of size about 1.4), time codes
+    ``0 .. num_frames - 1``, whose coordinates need float64 in the last ``flight`` time codes only: ``/World/A``
+    stays at the origin; ``/World/B`` and ``/World/C`` start through it from either side and slide apart by 0.1 a
+    time code, then fly ``far`` away together (B at ``(far, far, -far)``, C 0.5 from it along x: they penetrate
+    each other there). ``far = 1e6`` is beyond float32 at that triangle size, well within float64
+    (:func:`~warp_ccd.geometry.precision.needed_precision`: float32 up to about ``8.4e3`` times the size).
+
+    Returns:
+        The ``Usd.Stage`` (saved to ``path`` when given).
+    """
+    from pxr import Gf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(num_frames - 1)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    points, counts, indices = prism(4, radius=0.7, height=1.0)
+    define_mesh(stage, "/World/A", points, counts, indices)
+    for name, side, dx in (("B", 1.0, 0.0), ("C", -1.0, 0.5)):
+        move = UsdGeom.Xformable(define_mesh(stage, f"/World/{name}", points, counts, indices)).AddTranslateOp()
+        for f in range(num_frames):
+            if f < num_frames - flight:
+                move.Set(Gf.Vec3d(side * (0.3 + 0.1 * f), 0.0, 0.1 * side), f)
+            else:
+                move.Set(Gf.Vec3d(far + dx + 0.01 * f, far + 0.1 * dx, -far), f)
+    if path is not None:
+        stage.GetRootLayer().Save()
+    return stage
+
+
+def blinking_stage(path=None):
+    """:func:`boxes_stage`'s two penetrating boxes ``/World/A/Geom`` and ``/World/B/Geom``, time codes 0 to 3,
+    ``/World/B`` invisible at 0 and 1 and visible (``inherited``) from 2 on. The import reads visibility at the
+    first time code it reads: a check of 0..3 leaves B out at every time code, one of 2..3 checks it.
+
+    Returns:
+        The ``Usd.Stage`` (saved to ``path`` when given).
+    """
+    from pxr import UsdGeom
+
+    stage = boxes_stage(path)
+    stage.SetEndTimeCode(3)
+    visibility = UsdGeom.Imageable(stage.GetPrimAtPath("/World/B")).CreateVisibilityAttr()
+    visibility.Set(UsdGeom.Tokens.invisible, 0)
+    visibility.Set(UsdGeom.Tokens.inherited, 2)
+    if path is not None:
+        stage.GetRootLayer().Save()
+    return stage
