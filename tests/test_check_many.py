@@ -309,11 +309,7 @@ def test_expand_paths(tmp_path, files):
 
 @pytest.mark.parametrize("bad", [
     {"frames_per_task": 0}, {"frames_per_task": 2.5}, {"workers": 0}, {"stage_or_path": "x"},
-    *[pytest.param(bad, marks=pytest.mark.xfail(strict=True, reason=(
-        "check_many documents 'Raises: ValueError: ... a bad option', but check_usd's options are only checked in "
-        "each task: a bad value becomes every file's error (exit status 2), a misspelt name an 'internal error: "
-        "TypeError' (exit status 3) of every file"))) for bad in ({"min_depth": -1.0}, {"precision": "float16"},
-                                                                 {"clearence": 0.1})],
+    {"min_depth": -1.0}, {"precision": "float16"}, {"clearence": 0.1},
 ], ids=lambda bad: "{}={!r}".format(*next(iter(bad.items()))))
 def test_bad_options_raise(files, bad):
     with pytest.raises(ValueError):
@@ -416,18 +412,12 @@ def test_run_task_reports_bad_input_as_an_outcome(tmp_path):
 # time codes where a prim is invisible: the import reads visibility at a part's first time code
 
 
-@pytest.mark.xfail(strict=True, reason="batch.merge_reports raises ValueError ('parts ... disagree on their stage, "
-                   "objects or precision') out of check_many: a prim invisible at the file's first time code and "
-                   "visible at a later part's first one is an object of that part only; the batch's other files "
-                   "are lost")
 def test_parts_that_disagree_on_objects_do_not_stop_the_batch(tmp_path, files, device):
     blinking_stage(tmp_path / "blink.usda")
     batch = check_many([files["abc"], tmp_path / "blink.usda"], frames_per_task=2, device=device)
     assert batch.files[0].exit_status == EXIT_FINDINGS
 
 
-@pytest.mark.xfail(strict=True, reason="the parts of a file disagree on its objects where visibility is animated "
-                   "(the import reads it at each part's first time code); the merged report is not the serial one")
 def test_animated_visibility_parts_merge_to_the_serial_report(tmp_path, device):
     path = str(tmp_path / "blink.usda")
     blinking_stage(path)

@@ -13,9 +13,13 @@ plain-data report; merged, a file's frames, intervals, pair summaries, JSON and 
 :func:`~warp_ccd.usd.check.check_usd` over the whole file (timings apart). One precision for a whole file: a part
 whose coordinates need float64 makes every part of its file run in float64, as the serial check would.
 
+A file whose parts find different objects (a prim invisible at the first time code and visible later: the import
+reads visibility, PointInstancer masks and prototypes at its first time code) is checked again whole, in one task.
+
 Known difference: a scene whose float32 or float64 choice depends on the time code a part starts at through
 deforming points or an animated scale (the choice is made from the first time code read) can choose differently
-in parts than in one run.
+in parts than in one run; where deforming points move beyond float32's reach only late, one run stops there with an
+error ("check it in float64") while the parts run in float64 and report.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import numpy as np
 
 from .._typing import PathLike
 from ..output import PendingFile, check_output_path
+from .check import check_usd as _CHECK_USD  # its signature: the options check_many passes on
 from .report import SCHEMA_VERSION, CheckReport
 
 __all__ = ["BatchReport", "CheckTask", "FileResult", "check_many", "expand_paths", "merge_reports", "plan_tasks",
@@ -42,7 +47,8 @@ __all__ = ["BatchReport", "CheckTask", "FileResult", "check_many", "expand_paths
 EXIT_CLEAN, EXIT_FINDINGS, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
 """A file's status, as ``warp-ccd check`` exits: nothing found, findings, bad input, an internal error."""
 MIN_FRAMES_PER_TASK = 32
-"""The fewest time codes a part of a file gets when files are split to keep every worker busy."""
+"""About the fewest time codes a part of a file gets when files are split to keep every worker busy (parts are
+cut evenly: a few may get one less)."""
 
 
 @dataclass
@@ -335,6 +341,41 @@ def _one_precision(outcomes: list[TaskOutcome], options: dict,
     return [redone.get(id(o.task), o) for o in outcomes]
 
 
+def _whole_files(outcomes: list[TaskOutcome], options: dict,
+                 run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
+    """Checks whole, as one task, the files whose parts found different objects (a prim visible, or an instance
+    present, from a later time code on: the import reads them at its first time code, as one run does)."""
+    by_file: dict[int, list[TaskOutcome]] = {}
+    for o in outcomes:
+        by_file.setdefault(o.task.file, []).append(o)
+    again = [parts[0].task for parts in by_file.values()
+             if len(parts) > 1 and all(o.report is not None for o in parts)
+             and len({tuple(o.report.object_path) for o in parts}) > 1]
+    if not again:
+        return outcomes
+    whole = [CheckTask(t.file, t.path) for t in again]
+    files = {t.file for t in whole}
+    return [o for o in outcomes if o.task.file not in files] + run(whole, options)
+
+
+def _check_options(options: dict) -> None:
+    """Raises ValueError for an option :func:`~warp_ccd.usd.check.check_usd` does not take, or a bad value of
+    the numbers and precision (before any file is read, rather than as every file's error)."""
+    import inspect
+
+    from ..options import number_option
+
+    known = set(inspect.signature(_CHECK_USD).parameters) - {"stage_or_path"}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"check_many: unknown option {unknown[0]!r} (check_usd's keyword arguments)")
+    for name in ("min_depth", "min_distance", "clearance"):
+        if name in options:
+            number_option(name, options[name], low=0.0)
+    if options.get("precision", "float32") not in ("float32", "float64"):
+        raise ValueError(f"precision: expected 'float32' or 'float64', got {options['precision']!r}")
+
+
 def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray: bool = False,
                ray_address: str | None = None, workers: int | None = None, frames_per_task: int | None = None,
                read_workers: int | None = None, progress: bool = False, **options: Any) -> BatchReport:
@@ -382,6 +423,7 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
         integer_option("frames_per_task", frames_per_task, low=1)
     if workers is not None:
         integer_option("workers", workers, low=1)
+    _check_options(options)
     use_ray = bool(ray) or ray_address is not None
     options = dict(options, frames=frames)
     continuous = bool(options.get("continuous", False))
@@ -404,6 +446,7 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
     try:
         if engine is not None:
             outcomes = engine.run(tasks, options, done)
+            outcomes = _whole_files(outcomes, options, lambda ts, opts: engine.run(ts, opts))
             outcomes = _one_precision(outcomes, options, lambda ts, opts: engine.run(ts, opts))
         else:
             def run(ts: list[CheckTask], opts: dict, report: Callable | None = None) -> list[TaskOutcome]:
@@ -414,7 +457,7 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
                         report(out[-1])
                 return out
 
-            outcomes = _one_precision(run(tasks, options, done), options, run)
+            outcomes = _one_precision(_whole_files(run(tasks, options, done), options, run), options, run)
     finally:
         bar.close()
         if engine is not None:

@@ -115,11 +115,12 @@ class RayEngine:
         num_gpus = int(resources.get("GPU", 0))
         self.gpus = num_gpus > 0
         self.workers = workers or (num_gpus if self.gpus else max(1, int(resources.get("CPU", 1))))
-        # More workers than GPUs share them (a fraction of a GPU each).
+        # More workers than GPUs (or CPUs, without GPUs) share them: a fraction each, so that all can be placed.
+        num_cpus = max(1.0, float(resources.get("CPU", 1)))
         self.gpu_share = min(1.0, num_gpus / self.workers) if self.gpus else 0.0
+        cpu_share = 0 if self.gpus else min(1.0, num_cpus / self.workers)
         actor = ray.remote(CheckWorker).options(
-            num_gpus=self.gpu_share, num_cpus=0 if self.gpus else 1, max_restarts=MAX_RETRIES,
-            max_task_retries=MAX_RETRIES)
+            num_gpus=self.gpu_share, num_cpus=cpu_share, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)
         self._actors = [actor.remote() for _ in range(self.workers)]
 
     def run(self, tasks: Sequence[CheckTask], options: dict,
