@@ -899,3 +899,24 @@ def test_worker_processes_name_a_transform_that_is_not_finite(tmp_path):
     stage.GetRootLayer().Save()
     with pytest.raises(ValueError, match="/World/Box: its world transform is not finite at time 2"):
         UsdMeshImport(path, times=[0, 1, 2, 3], workers=2)
+
+
+def test_deepest_face_pair_rows_match_the_full_sort():
+    """The frame's rows without segments (one sort of a packed key, or of two keys where it does not fit in 63
+    bits) equal the full sort by (a, b, face_a, face_b, deepest first, triangles) and its first row per face pair."""
+    from warp_ccd.usd.check import _deepest_per_face_pair
+
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        m, n, num_faces = int(rng.integers(1, 300)), int(rng.integers(1, 20)), int(rng.integers(1, 10))
+        faces = np.stack([rng.integers(0, n, m), rng.integers(0, num_faces, m), rng.integers(0, n, m),
+                          rng.integers(0, num_faces, m)], axis=1).astype(np.int32)
+        depth = np.round(rng.random(m), 1) * (rng.random(m) < 0.7)  # ties and zeros (touching rows)
+        tri = rng.integers(0, 50, (m, 2))
+        order = np.lexsort((tri[:, 1], tri[:, 0], -depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))
+        first = np.ones(m, bool)
+        first[1:] = (faces[order][1:] != faces[order][:-1]).any(axis=1)
+        for objects, count in ((n, num_faces), (2**20, 2**20)):
+            got, deepest = _deepest_per_face_pair(faces, depth, objects, count)
+            assert got.dtype == np.int32 and np.array_equal(got, faces[order][first])
+            assert np.array_equal(deepest, depth[order][first])

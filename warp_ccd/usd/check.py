@@ -89,10 +89,11 @@ __all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "REPORT_SCHEMA_PATH", "SCHEMA_VER
 
 
 def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
-                    time_code: float, duplicates: bool = False) -> FrameContacts:
+                    time_code: float, duplicates: bool = False, num_faces: int = 0) -> FrameContacts:
     """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
     penetrating ones kept, the others counted. With ``duplicates``, the object pairs whose meshes
-    coincide are found among the rows' pairs and their rows left out."""
+    coincide are found among the rows' pairs and their rows left out. ``num_faces``: more than the largest
+    USD face index (0: found here)."""
     rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
     seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
     dup = None
@@ -106,7 +107,12 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
             seg = seg[~gone] if seg is not None else None
     faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
                       imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
-    if len(faces):
+    if len(faces) and seg is None:
+        # By (a, b, fa, fb), each face pair once with its deepest crossing (which of its triangle
+        # pairs is deepest does not show without segments): one sort of one key where it fits in 63 bits.
+        num_faces = num_faces or int(imp.triangle_face.max(initial=-1)) + 1
+        faces, depth = _deepest_per_face_pair(faces, depth, imp.scene.num_objects, num_faces)
+    elif len(faces):
         # By (a, b, fa, fb), deepest first, then by triangles: the same row (and segment) on every
         # device, whatever order the device's hits came in.
         order = np.lexsort((rows[:, 3], rows[:, 1], -depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))
@@ -114,10 +120,28 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
         first = np.ones(len(faces), bool)
         first[1:] = (faces[1:] != faces[:-1]).any(axis=1)
         faces, depth = faces[first], depth[first]
-        seg = seg[order][first] if seg is not None else None
+        seg = seg[order][first]
     keep = np.ones(len(faces), bool) if count_touching else depth > min_depth
     return FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
                          seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup)
+
+
+def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: int,
+                           num_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, 4)`` rows ``(a, face_a, b, face_b)`` and their depths as unique rows sorted by ``(a, b, face_a,
+    face_b)``, each with its largest depth: one sort of a packed key (a sort of two where it does not fit)."""
+    a, fa, b, fb = (faces[:, k].astype(np.int64) for k in range(4))
+    pair, face = a * num_objects + b, fa * max(num_faces, 1) + fb
+    if (max(num_objects, 1) ** 2) * (max(num_faces, 1) ** 2) < 2**63:
+        key = pair * max(num_faces, 1) ** 2 + face
+        order = np.argsort(key)
+        key = key[order]
+        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    else:
+        order = np.lexsort((face, pair))
+        p, f = pair[order], face[order]
+        starts = np.flatnonzero(np.r_[True, (p[1:] != p[:-1]) | (f[1:] != f[:-1])])
+    return faces[order][starts], np.maximum.reduceat(depth[order], starts)
 
 
 def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[float] | None = None,
@@ -237,6 +261,7 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
         report.min_distance = float(min_distance)
         report.ccd_tolerance = float(sweep.narrow.tolerance)
     intersecting = None  # the object pairs of the previous time code (touching included)
+    num_faces = int(imp.triangle_face.max(initial=-1)) + 1
     bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not progress or None, leave=False)
     for k in bar:
         t = time.perf_counter()
@@ -247,7 +272,7 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
         pairs = res.device_triangle_pairs
         _, depth = classify(pairs)  # 0 where the surfaces only touch
         contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k],
-                                   bool(duplicates))
+                                   bool(duplicates), num_faces)
         if clearance > 0.0:
             reported = contacts.object_pairs
             if contacts.duplicates is not None and len(contacts.duplicates):  # a duplicate is no soft clash
