@@ -2,10 +2,10 @@
 
 :func:`check_many` checks every file of a list (globs expanded) with :func:`~warp_ccd.usd.check.check_usd` and
 returns a :class:`BatchReport`: one :class:`FileResult` per file, its merged :class:`~warp_ccd.usd.report.CheckReport`
-or the error that stopped it. The work is cut into :class:`CheckTask` s (:func:`plan_tasks`): a whole file, or a
-(file, range of time codes) where there are fewer files than workers or ``frames_per_task`` asks for it; a
-continuous check's range starts one time code early, so that the interval across the cut is checked, and that
-time code's frame is dropped when the parts are merged (:func:`merge_reports`).
+or the error that stopped it. The work is cut into :class:`~warp_ccd.usd.tasks.CheckTask` s (:func:`plan_tasks`):
+a whole file, or a (file, range of time codes) where there are fewer files than workers or ``frames_per_task``
+asks for it; a continuous check's range starts one time code early, so that the interval across the cut is
+checked, and that time code's frame is dropped when the parts are merged (:func:`merge_reports`).
 
 The tasks run in this process one after the other, or on a Ray cluster (:mod:`~warp_ccd.usd.cluster`: one actor
 per GPU, kernels and stages kept warm across tasks). Either way the result is the serial one: each part is a
@@ -29,7 +29,6 @@ import math
 import os
 import sys
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,51 +39,14 @@ from .._typing import PathLike
 from ..output import PendingFile, check_output_path
 from .check import check_usd as _CHECK_USD  # its signature: the options check_many passes on
 from .report import SCHEMA_VERSION, CheckReport
+from .tasks import EXIT_BAD_INPUT, EXIT_CLEAN, EXIT_FINDINGS, EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
-__all__ = ["BatchReport", "CheckTask", "FileResult", "check_many", "expand_paths", "merge_reports", "plan_tasks",
-           "run_task"]
+__all__ = ["EXIT_BAD_INPUT", "EXIT_CLEAN", "EXIT_FINDINGS", "EXIT_INTERNAL", "BatchReport", "CheckTask", "FileResult",
+           "check_many", "expand_paths", "merge_reports", "plan_tasks", "run_task"]
 
-EXIT_CLEAN, EXIT_FINDINGS, EXIT_BAD_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
-"""A file's status, as ``warp-ccd check`` exits: nothing found, findings, bad input, an internal error."""
 MIN_FRAMES_PER_TASK = 32
 """About the fewest time codes a part of a file gets when files are split to keep every worker busy (parts are
 cut evenly: a few may get one less)."""
-
-
-@dataclass
-class CheckTask:
-    """One unit of work: a file, or a range of its time codes.
-
-    Attributes:
-        file: index of the file in the batch.
-        path: the file.
-        times: ``(F,)`` float64 time codes to check, or None: the file's ``frames`` (the whole file).
-        part: the part's number among its file's parts, in time order.
-        skip: frames of the part's report that belong to the part before (1 where a continuous check's part
-            starts one time code early), dropped when merged.
-    """
-
-    file: int
-    path: str
-    times: np.ndarray | None = None
-    part: int = 0
-    skip: int = 0
-
-    @property
-    def frames(self) -> int:
-        """Its number of time codes (0: the whole file, not counted up front)."""
-        return 0 if self.times is None else len(self.times)
-
-
-@dataclass
-class TaskOutcome:
-    """What a task gave: its report, or the error that stopped it (``status``: 2 bad input, 3 internal)."""
-
-    task: CheckTask
-    report: CheckReport | None = None
-    error: str | None = None
-    status: int = EXIT_CLEAN
-    seconds: float = 0.0
 
 
 @dataclass
@@ -239,36 +201,6 @@ def plan_tasks(paths: Sequence[str], *, frames: Any = None, workers: int = 1, fr
             tasks.append(CheckTask(i, paths[i], times[lo:cuts[k + 1]], k, cuts[k] - lo))
     tasks.sort(key=lambda t: -t.frames)
     return tasks, errors
-
-
-def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
-    """Runs one task with :func:`~warp_ccd.usd.check.check_usd` (``options`` are its keyword arguments; the
-    task's ``times``, where it has them, replace ``frames``); a bad input or an internal error becomes the
-    outcome's error, not an exception.
-
-    Args:
-        task: the task.
-        options: :func:`~warp_ccd.usd.check.check_usd`'s keyword arguments.
-        stage: the file's ``Usd.Stage`` when it is already open (a worker keeps them), else None.
-    """
-    from ..geometry.precision import PrecisionWarning
-    from .check import check_usd
-
-    t = time.perf_counter()
-    opts = dict(options)
-    if task.times is not None:
-        opts["frames"] = task.times
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", PrecisionWarning)  # the report carries it (precision_note)
-            report = check_usd(task.path if stage is None else stage, **opts)
-    except ValueError as exc:
-        return TaskOutcome(task, error=str(exc), status=EXIT_BAD_INPUT, seconds=time.perf_counter() - t)
-    except Exception as exc:  # noqa: BLE001 (a file's failure is reported; the others go on)
-        return TaskOutcome(task, error=f"internal error: {type(exc).__name__}: {exc}", status=EXIT_INTERNAL,
-                           seconds=time.perf_counter() - t)
-    report.source = None  # plain data, as it would come back from another process
-    return TaskOutcome(task, report, seconds=time.perf_counter() - t)
 
 
 def merge_reports(parts: Sequence[CheckReport], skip: Sequence[int] = ()) -> CheckReport:

@@ -1,7 +1,7 @@
 """The check on a Ray cluster: one actor per GPU (or per CPU without GPUs), tasks handed out as actors free up.
 
 :class:`RayEngine` connects to a cluster (or starts a local one), starts its actors and runs
-:class:`~warp_ccd.usd.batch.CheckTask` s on them (:func:`~warp_ccd.usd.batch.run_task`), largest first, each actor
+:class:`~warp_ccd.usd.tasks.CheckTask` s on them (:func:`~warp_ccd.usd.tasks.run_task`), largest first, each actor
 holding one task at a time. An actor (:class:`CheckWorker`) keeps its process warm across tasks: Warp initialised
 and its kernels loaded once, its CUDA context, and the stages it opened (the parts of one file read one stage). It
 reads transforms in its own process (no reader processes of its own: the cluster schedules the work). An actor
@@ -19,7 +19,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .batch import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
+from .tasks import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
 __all__ = ["FAULT_ENV", "MAX_RETRIES", "CheckWorker", "RayEngine"]
 
