@@ -1,9 +1,12 @@
 """USD meshes as triangles: a mesh prim's topology and points read once, its polygons fanned.
 
-:func:`read_mesh` reads a ``UsdGeom.Mesh`` at the first time code into a :class:`MeshData` (points,
-triangles, the USD face of every triangle, whether the points are time-sampled, a content hash for
-sharing shapes); :func:`fan_triangles` turns polygons into triangles in numpy. Used by
-:class:`~warp_ccd.usd.importer.UsdMeshImport`; ``pxr`` is imported inside the functions.
+:func:`read_meshes` reads many ``UsdGeom.Mesh`` prims at the first time code into :class:`MeshData`
+(points, triangles, the USD face of every triangle, whether the points are time-sampled, a content
+hash for sharing shapes): per prim only the raw arrays are read (the attributes it does not author
+are not asked for), then every mesh is validated and fanned at once, in numpy over the concatenated
+arrays; the first mesh at fault (in the order given) raises the error :func:`read_mesh` raises for
+it alone. :func:`read_mesh` reads one; :func:`fan_triangles` turns one mesh's polygons into
+triangles. Used by :class:`~warp_ccd.usd.importer.UsdMeshImport`; ``pxr`` is imported inside the functions.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MeshData", "fan_triangles", "read_mesh"]
+__all__ = ["MeshData", "fan_triangles", "read_mesh", "read_meshes"]
 
 
 @dataclass
@@ -93,6 +96,104 @@ def fan_triangles(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, pa
     return tri.astype(np.int32), face.astype(np.int32)
 
 
+def _raw(source, t0, names=None) -> tuple:
+    """The raw arrays of one mesh prim: ``(points attribute, points, counts, indices, holes, left-handed,
+    deforming, animated topology attribute name or None)``. ``names``: its authored property names, if
+    known (attributes it does not author are not read)."""
+    if names is None:
+        names = source.GetAuthoredPropertyNames()
+    points_attr = source.GetAttribute("points")
+    counts_attr, indices_attr = source.GetAttribute("faceVertexCounts"), source.GetAttribute("faceVertexIndices")
+    animated = next((a.GetName() for a in (counts_attr, indices_attr) if a.ValueMightBeTimeVarying()), None)
+    raw = points_attr.Get(t0)
+    counts, indices = counts_attr.Get(t0), indices_attr.Get(t0)
+    holes = source.GetAttribute("holeIndices").Get(t0) if "holeIndices" in names else None
+    left = "orientation" in names and source.GetAttribute("orientation").Get(t0) == "leftHanded"
+    return (points_attr, np.zeros((0, 3)) if raw is None else np.asarray(raw).reshape(-1, 3),
+            np.zeros(0, np.int32) if counts is None else np.asarray(counts),
+            np.zeros(0, np.int32) if indices is None else np.asarray(indices),
+            np.zeros(0, np.int64) if holes is None else np.asarray(holes, np.int64),
+            left, points_attr.ValueMightBeTimeVarying(), animated)
+
+
+def _check(name: str, raw: tuple) -> None:
+    """Raises the ValueError naming the prim that :func:`read_mesh` raises for this mesh, if any."""
+    _, points, counts, indices, holes, _, _, animated = raw
+    if animated is not None:
+        raise ValueError(f"prim {name}: animated topology ({animated} is time-sampled) is not supported")
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"prim {name}: point {int(np.argmin(finite))} is not finite")
+    fan_triangles(counts, indices, holes, name, len(points))
+
+
+def read_meshes(sources: list, names: list[str], t0, authored: list | None = None) -> list[MeshData]:
+    """:func:`read_mesh` of many mesh prims: the raw arrays per prim, then validated, fanned and wound
+    over all of them at once.
+
+    Args:
+        sources: ``M`` ``UsdGeom.Mesh`` prims to read (a prototype's mesh for an instance proxy).
+        names: the ``M`` paths that messages name.
+        t0: the first ``Usd.TimeCode`` read.
+        authored: each prim's authored property names (``Usd.Prim.GetAuthoredPropertyNames``), or
+            None to ask for them.
+
+    Returns:
+        ``M`` :class:`MeshData`, in order.
+
+    Raises:
+        ValueError: naming the first prim at fault, as :func:`read_mesh` does.
+    """
+    raws = [_raw(s, t0, None if authored is None else authored[k]) for k, s in enumerate(sources)]
+    m = len(raws)
+    if not m:
+        return []
+    npts = np.array([len(r[1]) for r in raws], np.int64)
+    nface = np.array([r[2].size for r in raws], np.int64)
+    nidx = np.array([r[3].size for r in raws], np.int64)
+    points = np.concatenate([r[1] for r in raws]).astype(np.float64, copy=False)
+    counts = np.concatenate([r[2] for r in raws]).astype(np.int64, copy=False)
+    indices = np.concatenate([r[3] for r in raws]).astype(np.int64, copy=False)
+    vstart, fstart, istart = (np.concatenate([[0], np.cumsum(x)]) for x in (npts, nface, nidx))
+    # Every check of read_mesh, per mesh at once; the first mesh at fault raises as read_mesh would.
+    fault = np.array([r[7] is not None for r in raws])
+    fault |= np.bincount(np.repeat(np.arange(m), npts), ~np.isfinite(points).all(axis=1), m) > 0
+    fault |= np.bincount(np.repeat(np.arange(m), nface), counts < 3, m) > 0
+    sums = np.bincount(np.repeat(np.arange(m), nface), counts, m).astype(np.int64)
+    fault |= sums != nidx
+    owner = np.repeat(np.arange(m), nidx)
+    fault |= np.bincount(owner, (indices < 0) | (indices >= npts[owner]), m) > 0
+    fault |= np.array([r[4].size > 0 and bool(((r[4] < 0) | (r[4] >= r[2].size)).any()) for r in raws])
+    if fault.any():
+        k = int(np.argmax(fault))
+        _check(names[k], raws[k])
+    keep = np.ones(counts.size, bool)
+    for k, r in enumerate(raws):
+        if r[4].size:
+            keep[fstart[k] + r[4]] = False
+    face_owner = np.repeat(np.arange(m), nface)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    per_face = np.where(keep, counts - 2, 0)
+    face = np.repeat(np.arange(counts.size), per_face)
+    first = start[face]
+    k = np.arange(face.size) - np.repeat(np.cumsum(per_face) - per_face, per_face)
+    tri = np.stack([indices[first], indices[first + k + 1], indices[first + k + 2]], axis=1).astype(np.int32)
+    tri_owner = face_owner[face]
+    left = np.array([r[5] for r in raws])
+    if left.any():  # wound right-handed: normals out of the object
+        flip = left[tri_owner]
+        tri[flip] = tri[flip, ::-1]
+    local_face = (face - fstart[tri_owner]).astype(np.int32)
+    tstart = np.concatenate([[0], np.cumsum(np.bincount(tri_owner, minlength=m))])
+    out = []
+    for k, r in enumerate(raws):
+        pts, t = points[vstart[k]:vstart[k + 1]], tri[tstart[k]:tstart[k + 1]]
+        digest = hashlib.blake2b(pts.tobytes(), digest_size=16)
+        digest.update(t.tobytes())
+        out.append(MeshData(names[k], r[0], pts, t, local_face[tstart[k]:tstart[k + 1]], r[6], digest.digest()))
+    return out
+
+
 def read_mesh(source, name: str, t0) -> MeshData:
     """The topology and points of a mesh prim, polygons fanned into triangles wound right-handed.
 
@@ -108,28 +209,4 @@ def read_mesh(source, name: str, t0) -> MeshData:
         ValueError: naming the prim: animated topology, a non-finite point, a bad polygon
             (:func:`fan_triangles`).
     """
-    from pxr import UsdGeom
-
-    mesh = UsdGeom.Mesh(source)
-    for attr in (mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()):
-        if attr.ValueMightBeTimeVarying():
-            raise ValueError(f"prim {name}: animated topology ({attr.GetName()} is time-sampled) is not supported")
-    points_attr = mesh.GetPointsAttr()
-    raw = points_attr.Get(t0)
-    points = np.zeros((0, 3)) if raw is None else np.asarray(raw, dtype=np.float64).reshape(-1, 3)
-    counts = mesh.GetFaceVertexCountsAttr().Get(t0)
-    indices = mesh.GetFaceVertexIndicesAttr().Get(t0)
-    holes = mesh.GetHoleIndicesAttr().Get(t0)
-    counts = np.zeros(0, np.int64) if counts is None else np.asarray(counts)
-    indices = np.zeros(0, np.int64) if indices is None else np.asarray(indices)
-    holes = np.zeros(0, np.int64) if holes is None else np.asarray(holes, np.int64)
-    if not np.isfinite(points).all():
-        v = int(np.argmin(np.isfinite(points).all(axis=1)))
-        raise ValueError(f"prim {name}: point {v} is not finite")
-    tri, face = fan_triangles(counts, indices, holes, name, len(points))
-    if mesh.GetOrientationAttr().Get(t0) == UsdGeom.Tokens.leftHanded:
-        tri = np.ascontiguousarray(tri[:, ::-1])  # wound right-handed: normals out of the object
-    deforming = points_attr.ValueMightBeTimeVarying()
-    digest = hashlib.blake2b(points.astype(np.float64).tobytes(), digest_size=16)
-    digest.update(tri.tobytes())
-    return MeshData(name, points_attr, points, tri, face, deforming, digest.digest())
+    return read_meshes([source], [name], t0)[0]
