@@ -37,25 +37,32 @@ per object its world transform at every time code asked for:
   computed on the host each frame (``points(t) M(t)``) and copied to the device. Every other
   object is rigid: only its pose (and scale) changes, and the scene's kernel places its vertices.
 
-Cost: the stage is traversed once. Per time code, one ``UsdGeom.XformCache`` lookup per object
-whose world transform is time-varying (10-20 us each; spread over worker processes, each
-opening the file, from :data:`PARALLEL_LOOKUPS` lookups on), one ``ComputeInstanceTransformsAtTime`` per animated
-PointInstancer, and one ``points`` read per time-sampled mesh; static transforms and points are
-read once. Poses of every time code are read and decomposed up front (numpy over the objects, no
-per-object Python beyond the lookups), which is where an animated transform that does not stay a
-similarity is found. Objects are ordered static rigid, animated rigid, then deforming, so that a
-frame copies two contiguous pose slices and one contiguous tail of world vertices.
+Cost: the stage is traversed once, a few ``pxr`` calls a prim (its type's schemas asked once per type
+name, purpose and visibility only where authored); meshes are read as raw arrays, a few calls each, and
+validated, fanned and hashed together (:func:`~warp_ccd.usd.meshes.read_meshes`). The world transforms
+of animated prims are read in bulk (:func:`~warp_ccd.usd.xforms.read_world_poses`): their xform ops'
+time samples, about 0.5 us a sample read whole, composed and split into poses in numpy (well under
+1 us per prim and time code); only what the bulk read cannot reproduce takes one
+``UsdGeom.XformCache`` lookup per prim and time code (10-20 us each). From :data:`PARALLEL_LOOKUPS`
+prim-time codes on, worker processes (each opening the file) read shares of the prims while this
+process reads one. Per time code, one ``ComputeInstanceTransformsAtTime`` per animated PointInstancer
+and one ``points`` read per time-sampled mesh; static transforms and points are read once. Measured on
+10,000 rigid prims over 240 time codes (2 slow cores, one process): 80 s before the bulk read, 9 s
+with it, two thirds of which is reading the samples. Poses of every time code are read and decomposed
+up front, which is where an animated transform that does not stay a similarity is found. Objects are
+ordered static rigid, animated rigid, then deforming, so that a frame copies two contiguous pose slices
+and one contiguous tail of world vertices.
 
 :func:`scene_from_usd` is the short way to the scene of one time code. The stage is opened by
 :mod:`~warp_ccd.usd.stage`, meshes are read and fanned by :mod:`~warp_ccd.usd.meshes`, world matrices
-become poses in :mod:`~warp_ccd.usd.poses`, and the worker processes are :mod:`~warp_ccd.usd.workers`.
+are read in bulk by :mod:`~warp_ccd.usd.xforms` and become poses in :mod:`~warp_ccd.usd.poses`, and the worker
+processes are :mod:`~warp_ccd.usd.workers`.
 """
 
 from __future__ import annotations
 
 import fnmatch
 import os
-import sys
 import time
 import warnings
 from collections.abc import Sequence
@@ -70,18 +77,21 @@ from ..options import integer_option
 from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
 from .filters import FilterSummary, PairFilters, PrimIndex, world_ids
-from .meshes import MeshData, read_mesh
-from .poses import finite_matrix_poses, matrix_poses, similarity_split
+from .meshes import MeshData, read_meshes
+from .poses import baked_linear, finite_matrix_poses, matrix_poses
 from .stage import MAX_FRAMES, open_stage
+from .workers import read_shared
+from .xforms import WorldPoses, XformInfo, paused_gc
 
 if TYPE_CHECKING:
     from pxr import Usd
 
 __all__ = ["PARALLEL_LOOKUPS", "UsdMeshImport", "scene_from_usd"]
 
-PARALLEL_LOOKUPS = 200_000
-"""Transform lookups (animated prims times time codes) from which a file's transforms are read by
-worker processes, each opening the file and reading a share of the time codes."""
+PARALLEL_LOOKUPS = 1_000_000
+"""Prim-time codes (animated prims times time codes) from which a file's transforms are read by worker
+processes too, each opening the file and reading a share of the prims (about 1 s to start one and open
+the file, against about 1-3 us a prim-time code read in bulk)."""
 
 
 @dataclass
@@ -140,10 +150,11 @@ class UsdMeshImport:
         device: Warp device of the scene.
         precision: ``"float32"`` or ``"float64"`` (see :class:`~warp_ccd.scene.scene.Scene`); float32
             becomes float64 where the coordinates need it (see the module docstring).
-        workers: processes that read the transforms of animated prims of a stage saved in a file
-            (each opens the file and takes a share of the time codes). Default: the CPU count
-            (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` lookups, else none; 0 or 1:
-            none. A stage with unsaved edits is always read in this process.
+        workers: processes that read the transforms of animated prims of a stage saved in a file, this
+            one included (each other opens the file; every one reads a share of the prims). Default: the
+            CPU count (at most 16) when there are at least :data:`PARALLEL_LOOKUPS` prim-time codes, else
+            none; 0 or 1: none, everything is read in this process. A stage with unsaved edits is always
+            read in this process.
         progress: show a progress bar on stderr while the transforms of every time code are read.
         worlds: prim paths or ``fnmatch`` patterns (``"/World/envs/*"``): every prim they match roots a
             world, and meshes at or under it belong to it (to its outermost matching ancestor); worlds are
@@ -208,14 +219,16 @@ class UsdMeshImport:
         self.skipped: list[tuple[str, str]] = []
         self._meshes: list[MeshData] = []
         self._mesh_by_source: dict[str, int] = {}
+        self._pending: list = []
         self._instancers: list[_Instancer] = []
-        self._varying_xform: dict[str, bool] = {}
+        self._xinfo = XformInfo(self.stage)
         self._workers = workers
         self._prim_args = None if prims is None else ([prims] if isinstance(prims, str) else list(prims))
         self._worlds = worlds
         self._filters = filters
-        mesh_prims = self._traverse(prims, include_invisible, purposes)
-        self._build(mesh_prims, device, precision)
+        with paused_gc():  # millions of pxr values alive while reading: collections would scan them over and over
+            mesh_prims = self._traverse(prims, include_invisible, purposes)
+            self._build(mesh_prims, device, precision)
 
     # ------------------------------------------------------------------ traversal
     def _roots(self, prims):
@@ -241,7 +254,9 @@ class UsdMeshImport:
         return roots, patterns or None
 
     def _traverse(self, prims, include_invisible: bool, purposes: set) -> list:
-        """Walks the chosen subtrees once; returns the mesh prims, records the PointInstancers."""
+        """Walks the chosen subtrees once; returns ``(mesh prim, path, authored property names)``,
+        records the PointInstancers. A few ``pxr`` calls a prim: its type's schemas are asked once per
+        type name, purpose and visibility only where authored."""
         from pxr import Usd, UsdGeom
 
         roots, patterns = self._roots(prims)
@@ -250,6 +265,7 @@ class UsdMeshImport:
         predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
         found, seen = [], set()
         by_pattern = 0  # meshes and instancers that a pattern selects
+        kinds: dict[str, tuple] = {}  # type name -> (Imageable, PointInstancer, Mesh)
         for r, root in enumerate(roots):
             filtering = patterns is not None and r >= named
             if root.IsA(UsdGeom.Imageable) and not root.IsPseudoRoot():
@@ -261,49 +277,73 @@ class UsdMeshImport:
             chosen = None  # with patterns: the depth of the matched ancestor, while inside its subtree
             for prim in it:
                 path = prim.GetPath()
-                depth = path.pathElementCount
+                key = str(path)
                 if filtering:
+                    depth = path.pathElementCount
                     if chosen is not None and depth <= chosen:
                         chosen = None
-                    if chosen is None and any(fnmatch.fnmatchcase(str(path), pat) for pat in patterns):
+                    if chosen is None and any(fnmatch.fnmatchcase(key, pat) for pat in patterns):
                         chosen = depth
-                if prim.IsA(UsdGeom.Imageable):
-                    img = UsdGeom.Imageable(prim)
-                    purpose = img.GetPurposeAttr().Get() if img.GetPurposeAttr().HasAuthoredValue() else "default"
+                type_name = prim.GetTypeName()
+                kind = kinds.get(type_name)
+                if kind is None:
+                    kind = kinds[type_name] = (prim.IsA(UsdGeom.Imageable), prim.IsA(UsdGeom.PointInstancer),
+                                               prim.IsA(UsdGeom.Mesh))
+                names = None
+                if kind[0]:
+                    names = prim.GetAuthoredPropertyNames()  # attributes it does not author are not asked for
+                    self._xinfo.seed(key, names)
+                    attr = prim.GetAttribute("purpose") if "purpose" in names else None
+                    purpose = attr.Get() if attr is not None and attr.HasAuthoredValue() else "default"
                     if purpose not in purposes:
-                        self.skipped.append((str(path), f"purpose {purpose}"))
+                        self.skipped.append((key, f"purpose {purpose}"))
                         it.PruneChildren()
                         continue
-                    if not include_invisible and img.GetVisibilityAttr().Get(t0) == UsdGeom.Tokens.invisible:
-                        self.skipped.append((str(path), "invisible"))
+                    if not include_invisible and "visibility" in names and \
+                            prim.GetAttribute("visibility").Get(t0) == UsdGeom.Tokens.invisible:
+                        self.skipped.append((key, "invisible"))
                         it.PruneChildren()
                         continue
                 selected = not filtering or chosen is not None
-                if filtering and selected and (prim.IsA(UsdGeom.PointInstancer) or prim.IsA(UsdGeom.Mesh)):
+                if filtering and selected and (kind[1] or kind[2]):
                     by_pattern += 1
-                if prim.IsA(UsdGeom.PointInstancer):
+                if kind[1]:
                     it.PruneChildren()  # prototypes are drawn through the instancer only
-                    if selected and str(path) not in seen:
-                        seen.add(str(path))
+                    if selected and key not in seen:
+                        seen.add(key)
                         self._add_instancer(prim)
                     continue
-                if selected and prim.IsA(UsdGeom.Mesh) and str(path) not in seen:
-                    seen.add(str(path))
-                    found.append(prim)
+                if selected and kind[2] and key not in seen:
+                    seen.add(key)
+                    found.append((prim, key, names))
         if patterns and not by_pattern:
             raise ValueError(f"prims: no mesh matches {', '.join(patterns)}")
         return found
 
     def _mesh_data(self, prim) -> int:
         """Index of the mesh data of ``prim`` (read once per prim, or per prototype for instance proxies)."""
-        source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
-        key = str(source.GetPath())
-        k = self._mesh_by_source.get(key)
-        if k is not None:
-            return k
-        self._meshes.append(read_mesh(source, str(prim.GetPath()), self._codes[0]))
-        self._mesh_by_source[key] = len(self._meshes) - 1
-        return len(self._meshes) - 1
+        return self._mesh_datas([(prim, str(prim.GetPath()), None)])[0]
+
+    def _mesh_datas(self, prims: list) -> list[int]:
+        """:meth:`_mesh_data` of ``(prim, path, authored property names or None)``, the new ones read together
+        (:func:`~warp_ccd.usd.meshes.read_meshes`: the first at fault raises, in this order)."""
+        out, new = [], {}
+        for prim, path, names in prims:
+            source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
+            key = path if source is prim else str(source.GetPath())
+            k = self._mesh_by_source.get(key)
+            if k is None:
+                k = new.get(key)
+                if k is None:
+                    k = new[key] = len(self._meshes) + len(new)
+                    self._pending.append((source, path, names))
+            out.append(k)
+        if self._pending:
+            pending, self._pending = self._pending, []
+            self._meshes += read_meshes([p[0] for p in pending], [p[1] for p in pending], self._codes[0],
+                                        [p[2] for p in pending] if all(p[2] is not None for p in pending) else None)
+            self._mesh_by_source.update(new)
+        return out
 
     def _add_instancer(self, prim) -> None:
         from pxr import Usd, UsdGeom
@@ -352,39 +392,26 @@ class UsdMeshImport:
 
     def _world_varies(self, prim, stop=None) -> bool:
         """Whether ``prim``'s transform (relative to ``stop``, or the world) may change over time."""
-        from pxr import UsdGeom
-
-        p = prim
-        while p.IsValid() and not p.IsPseudoRoot() and (stop is None or p != stop):
-            key = str(p.GetPath())
-            v = self._varying_xform.get(key)
-            if v is None:
-                v = p.IsA(UsdGeom.Xformable) and UsdGeom.Xformable(p).TransformMightBeTimeVarying()
-                self._varying_xform[key] = v
-            if v:
-                return True
-            p = p.GetParent()
-        return False
+        return self._xinfo.varies(prim, stop)
 
     # ------------------------------------------------------------------ objects and transforms
     def _build(self, mesh_prims: list, device, precision: str) -> None:
         # Objects in traversal order: mesh prims, then each instancer's instances, prototype mesh by mesh.
         obj_mesh, obj_path, obj_prim, obj_varying, obj_instancer, obj_instance, obj_handle = [], [], [], [], [], [], []
-        self._prims = []
-        for prim in mesh_prims:
-            k = self._mesh_data(prim)
+        self._prims, self._prim_paths = [], []
+        for (prim, path, _), k in zip(mesh_prims, self._mesh_datas(mesh_prims)):
             if len(self._meshes[k].triangles) == 0:
-                self.skipped.append((str(prim.GetPath()), "no faces"))
+                self.skipped.append((path, "no faces"))
                 continue
-            path = str(prim.GetPath())
             obj_mesh.append([k])
             obj_path.append([path])
             obj_prim.append([path])
-            obj_varying.append([self._world_varies(prim)])
+            obj_varying.append([self._xinfo.varies(prim, key=path)])
             obj_instancer.append([-1])
             obj_instance.append([-1])
             obj_handle.append([len(self._prims)])
             self._prims.append(prim)
+            self._prim_paths.append(path)
         for j, rec in enumerate(self._instancers):
             for slot, (proto, k, p, root) in enumerate(rec.slots):
                 if len(self._meshes[k].triangles) == 0:
@@ -416,42 +443,41 @@ class UsdMeshImport:
         self._obj_instance = flat(obj_instance, np.int64)
         self._obj_handle = flat(obj_handle, np.int64)
 
-        # World matrices at every time code: static objects once, the others at each time code.
-        first = self._matrices(self._codes[0], np.arange(n))
+        # World matrices at every time code: static objects once; animated prims in bulk (read_world_poses,
+        # here or in worker processes); a PointInstancer's instances at each time code.
+        varying = np.nonzero(obj_varying)[0]
+        by_prim = self._obj_instancer[varying] < 0
+        read_v, rest = varying[by_prim], varying[~by_prim]
+        others = np.setdiff1d(np.arange(n), read_v)
+        first = np.empty((n, 4, 4))
+        first[others] = self._matrices(self._codes[0], others)
+        read = self._world_poses(read_v)
+        first[read_v] = read.first
         finite = np.isfinite(first).all(axis=(1, 2))
         if not finite.all():
             raise ValueError(f"prim {obj_path[int(np.argmin(finite))]}: its world transform is not finite")
-        varying = np.nonzero(obj_varying)[0]
-        lin0 = first[:, :3, :3]
-        _, _, similar0 = similarity_split(lin0)
-        singular = np.abs(np.linalg.det(lin0)) <= 1e-30
-        bake = np.where((similar0 | singular)[:, None, None], np.eye(3), lin0)  # baked at the first time code
+        if not read.finite.all():
+            f, k = np.unravel_index(int(np.argmin(read.finite)), read.finite.shape)
+            raise ValueError(f"prim {obj_path[int(read_v[k])]}: its world transform is not finite at time "
+                             f"{self.times[f]:g}")
+        bake, similar0 = baked_linear(first)  # baked at the first time code
         deforming = np.array([self._meshes[k].deforming for k in obj_mesh.tolist()], bool)
         poses0, scale0, ok0 = matrix_poses(first, bake)
         deforming |= ~ok0
-        var_poses = np.empty((len(self._codes), varying.size, 7))  # float64 until the precision is known
-        var_scale = np.empty((len(self._codes), varying.size), np.float32)
-        var_ok = np.ones(varying.size, bool)
-        by_prim = self._obj_instancer[varying] < 0
-        pooled = self._pooled_poses(varying[by_prim], bake[varying[by_prim]], obj_path)
-        rest = varying[~by_prim] if pooled is not None else varying
-        cols = ~by_prim if pooled is not None else slice(None)
-        from tqdm import tqdm  # here: importing warp_ccd needs no progress bars
-
-        bar = tqdm(total=len(self._codes), desc="reading transforms", unit="time code", leave=False,
-                   disable=not (self._progress and rest.size) or None, file=sys.stderr)
+        if rest.size:  # float64 poses until the precision is known
+            var_poses = np.empty((len(self._codes), varying.size, 7))
+            var_scale = np.empty((len(self._codes), varying.size), np.float32)
+            var_ok = np.ones(varying.size, bool)
+            var_poses[:, by_prim], var_scale[:, by_prim], var_ok[by_prim] = read.poses, read.scale, read.ok
+        else:  # every animated object read in bulk: its arrays as they are
+            var_poses, var_scale, var_ok = read.poses, read.scale.astype(np.float32), read.ok.copy()
         for f, code in enumerate(self._codes if rest.size else ()):
-            finite, var_poses[f, cols], var_scale[f, cols], ok = finite_matrix_poses(
+            finite, var_poses[f, ~by_prim], var_scale[f, ~by_prim], ok = finite_matrix_poses(
                 first[rest] if f == 0 else self._matrices(code, rest), bake[rest])
             if not finite.all():
                 raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
                                  f"finite at time {code.GetValue():g}")
-            var_ok[cols] &= ok
-            bar.update()
-        bar.close()
-        if pooled is not None:
-            var_poses[:, by_prim], var_scale[:, by_prim], ok = pooled
-            var_ok[by_prim] &= ok
+            var_ok[~by_prim] &= ok
         deforming[varying[~var_ok]] = True
 
         # Order: static rigid, animated rigid, deforming.
@@ -464,8 +490,9 @@ class UsdMeshImport:
         var_pos = np.full(n, -1, np.int64)
         var_pos[varying] = np.arange(varying.size)
         anim = var_pos[order[self._num_static:self._num_rigid]]
-        self._anim_poses = var_poses[:, anim]
-        self._anim_scale = var_scale[:, anim]
+        same = anim.size == varying.size and np.array_equal(anim, np.arange(anim.size))  # no copy needed
+        self._anim_poses = var_poses if same else var_poses[:, anim]
+        self._anim_scale = var_scale if same else var_scale[:, anim]
         self._scale_varies = bool(anim.size and np.ptp(self._anim_scale, axis=0).max() > 0)
         del var_poses, var_scale
         defo = order[self._num_rigid:]
@@ -597,33 +624,17 @@ class UsdMeshImport:
             return "float64"
         return precision
 
-    def _pooled_poses(self, objects: np.ndarray, bake: np.ndarray, obj_path: list):
-        """Poses, scales and similarity flags of prim ``objects`` at every time code, read by worker
-        processes; None when this stage is read in this process (see ``workers``)."""
-        layer = self.stage.GetRootLayer()
-        lookups = objects.size * len(self._codes)
+    def _world_poses(self, objects: np.ndarray) -> WorldPoses:
+        """The :class:`~warp_ccd.usd.xforms.WorldPoses` of prim ``objects`` (indices in traversal order)
+        at every time code: read in this process, or by worker processes that each open the file and
+        read a share of the prims (see ``workers``)."""
+        handles = self._obj_handle[objects].tolist()
+        prims = [self._prims[h] for h in handles]
+        paths = [self._prim_paths[h] for h in handles]
         workers = self._workers
         if workers is None:
-            workers = min(os.cpu_count() or 1, 16) if lookups >= PARALLEL_LOOKUPS else 0
-        workers = min(workers, len(self._codes))
-        clean = layer.realPath and not any(x.dirty for x in self.stage.GetUsedLayers()) \
-            and self.stage.GetSessionLayer().empty
-        if workers <= 1 or not objects.size or not clean:
-            return None
-        paths = [str(self._prims[h].GetPath()) for h in self._obj_handle[objects].tolist()]
-        chunks = [c for c in np.array_split(np.arange(len(self._codes)), workers) if c.size]
-        tasks = [(layer.realPath, paths, self.times[c], bake) for c in chunks]
-        # Imported here, not with the package: ``python -m warp_ccd.usd.workers`` runs a module not imported yet.
-        from .workers import run_pose_workers
-
-        parts = run_pose_workers(tasks, self._progress)
-        finite = np.concatenate([p[3] for p in parts])
-        if not finite.all():
-            f, k = np.unravel_index(int(np.argmin(finite)), finite.shape)
-            raise ValueError(f"prim {obj_path[int(objects[k])]}: its world transform is not finite at time "
-                             f"{self.times[f]:g}")
-        ok = np.logical_and.reduce([p[2] for p in parts])
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), ok
+            workers = min(os.cpu_count() or 1, 16) if objects.size * len(self._codes) >= PARALLEL_LOOKUPS else 0
+        return read_shared(self.stage, prims, paths, self.times, workers, info=self._xinfo, progress=self._progress)
 
     def _matrices(self, code, objects: np.ndarray) -> np.ndarray:
         """``(K, 4, 4)`` world matrices (row vectors) of ``objects`` (indices in traversal order) at ``code``."""

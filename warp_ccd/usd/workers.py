@@ -1,11 +1,18 @@
-"""Worker processes that read the world transforms of a stage saved in a file, a share of the time codes each.
+"""Worker processes that read the world transforms of a stage saved in a file, a share of the prims each.
 
-:func:`run_pose_workers` starts one process per task (``python -m warp_ccd.usd.workers TASK OUT``:
-a fresh interpreter, so nothing of the caller's ``__main__`` is imported again), passing the task and
-the result through pickle files in a temporary folder; each runs :func:`read_poses`, which opens the
-file, looks up the world transforms of the given prims at its time codes and splits them into poses
-(:func:`~warp_ccd.usd.poses.finite_matrix_poses`). :class:`~warp_ccd.usd.importer.UsdMeshImport`
-uses them from :data:`~warp_ccd.usd.importer.PARALLEL_LOOKUPS` lookups on.
+:func:`run_pose_workers` starts one process per task, passing the task and the result through pickle
+files in a temporary folder; each runs :func:`read_poses`, which opens the file and reads the world
+transforms of its prims at every time code (:func:`~warp_ccd.usd.xforms.read_world_poses`: in bulk where
+the op stacks allow it). The bulk reader's cost grows with the samples read, so the prims are split
+(each worker reads its prims' samples once), not the time codes (each worker would read every
+prim's ops and, with whole-dictionary reads, every sample).
+
+A worker is a fresh interpreter (nothing of the caller's ``__main__`` is imported again) that imports
+this module without running the package's ``__init__`` (the ``warp_ccd`` and ``warp_ccd.usd`` packages
+are registered bare, :data:`BOOTSTRAP`): it needs numpy, pxr and tqdm, not Warp, and starts in a
+fraction of a second. :class:`~warp_ccd.usd.importer.UsdMeshImport` uses them from
+:data:`~warp_ccd.usd.importer.PARALLEL_LOOKUPS` prim-time codes on, reading one share of the prims itself
+while the workers read the others.
 """
 
 from __future__ import annotations
@@ -15,29 +22,48 @@ import pickle
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
 
-from .poses import finite_matrix_poses
+from . import xforms
 
-__all__ = ["read_poses", "run_pose_workers"]
+if TYPE_CHECKING:
+    from pxr import Usd
+
+__all__ = ["BOOTSTRAP", "read_poses", "read_shared", "run_pose_workers"]
+
+BOOTSTRAP = """import sys, types
+for _name, _path in {packages!r}:
+    _module = types.ModuleType(_name)
+    _module.__path__ = [_path]
+    sys.modules[_name] = _module
+from warp_ccd.usd.workers import main
+main(sys.argv[1], sys.argv[2])
+"""
+"""The worker's command (``python -c``): ``warp_ccd`` and ``warp_ccd.usd`` registered as bare packages of
+their folders, then :func:`main` on the task and result files."""
 
 
-def run_pose_workers(tasks: list, progress: bool = False) -> list:
-    """Runs :func:`read_poses` on each task in a process of its own (``python -m
-    warp_ccd.usd.workers TASK OUT``: nothing of the caller's ``__main__`` is imported again).
+def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], Any] | None = None) -> tuple[list, Any]:
+    """Runs :func:`read_poses` on each task in a process of its own, and ``local`` in this process meanwhile.
 
     Args:
         tasks: :func:`read_poses` tasks, one per process.
-        progress: a bar on stderr counts the time codes of the workers done.
+        progress: a bar on stderr counts the prims of the workers done.
+        local: work for this process while the workers run (its share of the prims), or None.
 
     Returns:
-        The results of :func:`read_poses`, in the order of ``tasks``.
+        ``(results, local result)``: the results of :func:`read_poses` in the order of ``tasks``, and what
+        ``local`` returned (None without it).
 
     Raises:
         ValueError: a worker failed (the message ends with the last line it wrote to stderr).
     """
+    usd = os.path.dirname(os.path.abspath(__file__))
+    boot = BOOTSTRAP.format(packages=(("warp_ccd", os.path.dirname(usd)), ("warp_ccd.usd", usd)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
         procs = []
@@ -45,53 +71,80 @@ def run_pose_workers(tasks: list, progress: bool = False) -> list:
             src, dst = os.path.join(folder, f"task{i}.pkl"), os.path.join(folder, f"out{i}.pkl")
             with open(src, "wb") as fh:
                 pickle.dump(task, fh)
-            procs.append((subprocess.Popen([sys.executable, "-m", "warp_ccd.usd.workers", src, dst], env=env,
-                                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True), dst))
+            procs.append((subprocess.Popen([sys.executable, "-c", boot, src, dst], env=env, stdout=subprocess.DEVNULL,
+                                           stderr=subprocess.PIPE, text=True), dst))
+        mine = local() if local is not None else None
         results = []
-        bar = tqdm(total=sum(len(task[2]) for task in tasks), desc="reading transforms", unit="time code",
+        bar = tqdm(total=sum(len(task[1]) for task in tasks), desc="reading transforms", unit="prim",
                    leave=False, disable=not progress or None, file=sys.stderr)
         for (proc, dst), task in zip(procs, tasks):
             _, err = proc.communicate()
-            bar.update(len(task[2]))
+            bar.update(len(task[1]))
             if proc.returncode != 0:
                 last = err.strip().splitlines()[-1] if err.strip() else f"exit status {proc.returncode}"
                 raise ValueError(f"reading transforms in a worker process failed: {last}")
             with open(dst, "rb") as fh:
                 results.append(pickle.load(fh))
         bar.close()
-    return results
+    return results, mine
 
 
-def read_poses(task):
-    """Opens a stage file and splits the world transforms of some prims at some time codes into poses.
+def read_shared(stage: Usd.Stage, prims: list, paths: list[str], times: np.ndarray, workers: int, *,
+                info: xforms.XformInfo | None = None, progress: bool = False) -> xforms.WorldPoses:
+    """:func:`~warp_ccd.usd.xforms.read_world_poses` of prims split over ``workers`` processes, this one
+    included: each other opens the file and reads a share of the prims while this one reads the first
+    share. In this process alone for ``workers`` of 0 or 1, and for a stage not saved as it is (unsaved
+    edits, a session layer with content, no file).
 
     Args:
-        task: ``(path, prim_paths, times, bake)``: the USD file, ``P`` prim paths, ``(F,)`` time codes
-            and ``(P, 3, 3)`` linear parts baked into the shapes (:func:`~warp_ccd.usd.poses.matrix_poses`).
+        stage: the ``Usd.Stage``.
+        prims: ``P`` prims (not PointInstancer instances).
+        paths: their paths.
+        times: ``(F,)`` float64 time codes.
+        workers: processes to read with, this one included.
+        info: the :class:`~warp_ccd.usd.xforms.XformInfo` of ``stage`` for this process's share.
+        progress: show a progress bar on stderr.
 
     Returns:
-        ``(poses (F, P, 7), scale (F, P), ok (P,), finite (F, P))``: ``ok`` where the transform is a
-        similarity relative to ``bake`` at every time code, ``finite`` where it is finite.
+        The :class:`~warp_ccd.usd.xforms.WorldPoses` of the prims, in their order (the same, bit for bit,
+        however they are split).
     """
-    path, prim_paths, times, bake = task
-    from pxr import Usd, UsdGeom
+    layer = stage.GetRootLayer()
+    workers = min(workers, len(prims))
+    clean = layer.realPath and not any(x.dirty for x in stage.GetUsedLayers()) and stage.GetSessionLayer().empty
+    if workers <= 1 or not clean:
+        return xforms.read_world_poses(stage, prims, times, paths=paths, info=info, progress=progress)
+    chunks = [c.tolist() for c in np.array_split(np.arange(len(paths)), workers) if c.size]
+    tasks = [(layer.realPath, [paths[i] for i in c], times, xforms.FAST_XFORMS) for c in chunks[1:]]
+    own = chunks[0]  # this process's share, read while the workers read theirs
+    parts, mine = run_pose_workers(tasks, progress, local=lambda: xforms.read_world_poses(
+        stage, [prims[i] for i in own], times, paths=[paths[i] for i in own], info=info))
+    parts = [mine, *parts]
+    return xforms.WorldPoses(*(np.concatenate([getattr(p, name) for p in parts], axis=axis) for name, axis in
+                               (("first", 0), ("poses", 1), ("scale", 1), ("ok", 0), ("finite", 1), ("fast", 0))))
 
+
+def read_poses(task: tuple) -> xforms.WorldPoses:
+    """Opens a stage file and reads the world transforms of some prims at every time code.
+
+    Args:
+        task: ``(path, prim_paths, times, fast)``: the USD file, ``P`` prim paths, ``(F,)`` time codes, and
+            whether to read in bulk where the op stacks allow it (:data:`~warp_ccd.usd.xforms.FAST_XFORMS`).
+
+    Returns:
+        The :class:`~warp_ccd.usd.xforms.WorldPoses` of the prims.
+    """
+    from pxr import Usd
+
+    path, prim_paths, times, fast = task
+    xforms.FAST_XFORMS = fast
     stage = Usd.Stage.Open(path)
-    prims = [stage.GetPrimAtPath(p) for p in prim_paths]
-    poses = np.empty((len(times), len(prims), 7))
-    scale = np.empty((len(times), len(prims)))
-    finite = np.empty((len(times), len(prims)), bool)
-    ok = np.ones(len(prims), bool)
-    for f, t in enumerate(times):
-        cache = UsdGeom.XformCache(Usd.TimeCode(float(t)))
-        m = np.array([cache.GetLocalToWorldTransform(p) for p in prims], np.float64).reshape(-1, 4, 4)
-        finite[f], poses[f], scale[f], good = finite_matrix_poses(m, bake)
-        ok &= good
-    return poses, scale, ok, finite
+    return xforms.read_world_poses(stage, [stage.GetPrimAtPath(p) for p in prim_paths], times)
 
 
-if __name__ == "__main__":  # a worker of run_pose_workers: python -m warp_ccd.usd.workers TASK OUT
-    with open(sys.argv[1], "rb") as _task:
-        _result = read_poses(pickle.load(_task))
-    with open(sys.argv[2], "wb") as _out:
-        pickle.dump(_result, _out)
+def main(src: str, dst: str) -> None:
+    """A worker of :func:`run_pose_workers`: the task pickled in ``src``, the result pickled to ``dst``."""
+    with open(src, "rb") as fh:
+        result = read_poses(pickle.load(fh))
+    with open(dst, "wb") as fh:
+        pickle.dump(result, fh, protocol=pickle.HIGHEST_PROTOCOL)
