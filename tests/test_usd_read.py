@@ -307,8 +307,8 @@ def test_whole_and_one_by_one_sample_reads_agree(monkeypatch):
     read = []
     real = xforms._Reader.samples
 
-    def counted(self, spec, mapping):
-        keys, values = real(self, spec, mapping)
+    def counted(self, spec, mapping, type_name):
+        keys, values = real(self, spec, mapping, type_name)
         read.append(len(keys))
         return keys, values
 

@@ -288,11 +288,11 @@ class UsdMeshImport:
                 kind = kinds.get(type_name)
                 if kind is None:
                     kind = kinds[type_name] = (prim.IsA(UsdGeom.Imageable), prim.IsA(UsdGeom.PointInstancer),
-                                               prim.IsA(UsdGeom.Mesh))
+                                               prim.IsA(UsdGeom.Mesh), self._xinfo.xformable(type_name, prim))
                 names = None
                 if kind[0]:
                     names = prim.GetAuthoredPropertyNames()  # attributes it does not author are not asked for
-                    self._xinfo.seed(key, names)
+                    self._xinfo.seed(key, names, kind[3])
                     attr = prim.GetAttribute("purpose") if "purpose" in names else None
                     purpose = attr.Get() if attr is not None and attr.HasAuthoredValue() else "default"
                     if purpose not in purposes:

@@ -193,7 +193,10 @@ def _axis_angle(ax, ay, az, degrees):
     s, c = np.sin(half), np.cos(half)
     x, y, z = ax * s, ay * s, az * s
     length = np.sqrt(x * x + y * y + z * z + c * c)
-    length = np.where(length < 1e-10, 1.0, length)
+    tiny = length < 1e-10
+    if tiny.any():  # GetNormalized: identity below GF_MIN_VECTOR_LENGTH
+        c, length = np.where(tiny, 1.0, c), np.where(tiny, 1.0, length)
+        x, y, z = (np.where(tiny, 0.0, u) for u in (x, y, z))
     return _quat_matrix(c / length, x / length, y / length, z / length)
 
 
@@ -201,13 +204,14 @@ def _orient(v, inverse: bool):
     """``GfRotation(GfQuatd(q))`` as a matrix (``SetQuat``: the axis the normalised imaginary part, the
     angle ``2 acos(real)``; identity for an imaginary part shorter than 1e-10), inverted by negating
     the angle. ``v``: ``(..., 4)`` float64 ``(i, j, k, real)``."""
-    x, y, z, r = v[..., 0], v[..., 1], v[..., 2], v[..., 3]
+    x, y, z, r = np.moveaxis(v, -1, 0).copy()  # one contiguous array per component
     length = np.sqrt(x * x + y * y + z * z)
     valid = length > 1e-10
-    inv_len = 1.0 / np.where(valid, length, 1.0)
+    everywhere = valid.all()
+    inv_len = 1.0 / (length if everywhere else np.where(valid, length, 1.0))
     degrees = 2.0 * (np.arccos(np.clip(r, -1.0, 1.0)) * _RAD)
     m = _axis_angle(x * inv_len, y * inv_len, z * inv_len, -degrees if inverse else degrees)
-    return [[np.where(valid, m[i][j], float(i == j)) for j in range(3)] for i in range(3)]
+    return m if everywhere else [[np.where(valid, m[i][j], float(i == j)) for j in range(3)] for i in range(3)]
 
 
 def op_transform(kind: str, inverse: bool, v):

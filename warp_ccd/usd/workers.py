@@ -26,7 +26,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from tqdm import tqdm
 
 from . import xforms
 
@@ -62,6 +61,8 @@ def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], An
     Raises:
         ValueError: a worker failed (the message ends with the last line it wrote to stderr).
     """
+    from tqdm import tqdm  # here: importing warp_ccd needs no progress bars
+
     usd = os.path.dirname(os.path.abspath(__file__))
     boot = BOOTSTRAP.format(packages=(("warp_ccd", os.path.dirname(usd)), ("warp_ccd.usd", usd)))
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
