@@ -38,20 +38,21 @@ per object its world transform at every time code asked for:
   object is rigid: only its pose (and scale) changes, and the scene's kernel places its vertices.
 
 Cost: the stage is traversed once, a few ``pxr`` calls a prim (its type's schemas asked once per type
-name, purpose and visibility only where authored); meshes are read as raw arrays, a few calls each, and
-validated, fanned and hashed together (:func:`~warp_ccd.usd.meshes.read_meshes`). The world transforms
-of animated prims are read in bulk (:func:`~warp_ccd.usd.xforms.read_world_poses`): their xform ops'
-time samples, about 0.5 us a sample read whole, composed and split into poses in numpy (well under
-1 us per prim and time code); only what the bulk read cannot reproduce takes one
-``UsdGeom.XformCache`` lookup per prim and time code (10-20 us each). From :data:`PARALLEL_LOOKUPS`
-prim-time codes on, worker processes (each opening the file) read shares of the prims while this
-process reads one. Per time code, one ``ComputeInstanceTransformsAtTime`` per animated PointInstancer
-and one ``points`` read per time-sampled mesh; static transforms and points are read once. Measured on
-10,000 rigid prims over 240 time codes (2 slow cores, one process): 80 s before the bulk read, 9 s
-with it, two thirds of which is reading the samples. Poses of every time code are read and decomposed
-up front, which is where an animated transform that does not stay a similarity is found. Objects are
-ordered static rigid, animated rigid, then deforming, so that a frame copies two contiguous pose slices
-and one contiguous tail of world vertices.
+name, purpose and visibility only where authored); meshes are read as raw arrays, a few calls each,
+and validated, fanned and hashed together (:func:`~warp_ccd.usd.meshes.read_meshes`). The world
+transforms of animated prims are read in bulk (:func:`~warp_ccd.usd.xforms.read_world_poses`): their
+xform ops' time samples, about 0.5-0.7 us a sample read with its attribute's dictionary, composed and
+split into poses in numpy (about 0.3 us per prim and time code); only what the bulk read cannot
+reproduce takes one ``UsdGeom.XformCache`` lookup per prim and time code (10-20 us each). From
+:data:`PARALLEL_LOOKUPS` prim-time codes on, worker processes (each opening the file) read shares of
+the prims while this process reads one. Per time code, one ``ComputeInstanceTransformsAtTime`` per
+animated PointInstancer and one ``points`` read per time-sampled mesh; static transforms and points
+are read once. Measured on 10,000 rigid prims over 240 time codes (2 slow cores, one process): 77-80 s
+before the bulk read, 8-9 s with it, 6 s of which the transforms (4.8 million samples); the rest about
+130 us a prim. Poses of every time code are read and decomposed up front, which is where an animated
+transform that does not stay a similarity is found. Objects are ordered static rigid, animated rigid,
+then deforming, so that a frame copies two contiguous pose slices and one contiguous tail of world
+vertices.
 
 :func:`scene_from_usd` is the short way to the scene of one time code. The stage is opened by
 :mod:`~warp_ccd.usd.stage`, meshes are read and fanned by :mod:`~warp_ccd.usd.meshes`, world matrices

@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from pxr import Usd
 
 __all__ = ["MeshData", "fan_triangles", "read_mesh", "read_meshes"]
 
@@ -127,7 +131,7 @@ def _check(name: str, raw: tuple) -> None:
     fan_triangles(counts, indices, holes, name, len(points))
 
 
-def read_meshes(sources: list, names: list[str], t0, authored: list | None = None) -> list[MeshData]:
+def read_meshes(sources: list, names: list[str], t0: Usd.TimeCode, authored: list | None = None) -> list[MeshData]:
     """:func:`read_mesh` of many mesh prims: the raw arrays per prim, then validated, fanned and wound
     over all of them at once.
 

@@ -112,7 +112,8 @@ def _quaternions(r, shape) -> np.ndarray:
     return np.moveaxis(q, 0, -1).reshape(*shape, 4)
 
 
-def affine_poses(linear, translation, bake_inverse=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def affine_poses(linear: list, translation: list, bake_inverse: list | None = None) -> tuple[np.ndarray, np.ndarray,
+                                                                                         np.ndarray]:
     """Poses and scales of affine transforms given entry by entry, relative to baked linear parts.
 
     Args:
@@ -174,8 +175,9 @@ def finite_matrix_poses(matrix: np.ndarray, bake: np.ndarray) -> tuple:
 
 
 # ---------------------------------------------------------------------- USD's op matrices, entry by entry
-def mul3(a, b):
-    """Product of two 3x3 matrices given entry by entry (row-major nested lists of arrays)."""
+def mul3(a: list, b: list) -> list:
+    """Product ``a @ b`` of two 3x3 matrices given entry by entry: ``a[i][j]`` arrays (or numbers) that
+    broadcast together; the sums in order ``k = 0, 1, 2``, as ``GfMatrix`` multiplies."""
     return [[a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j] for j in range(3)] for i in range(3)]
 
 
@@ -214,41 +216,58 @@ def _orient(v, inverse: bool):
     return m if everywhere else [[np.where(valid, m[i][j], float(i == j)) for j in range(3)] for i in range(3)]
 
 
-def op_transform(kind: str, inverse: bool, v):
-    """An op's transform as ``("t", translation)``, ``("d", diagonal)``, ``("m", 3x3)`` or ``("a", 3x3,
-    translation)``, entry by entry, from its values ``v`` (float64, ``(..., k)``) as
-    ``UsdGeomXformOp::GetOpTransform`` builds it."""
-    if kind in ("translate", "translateX", "translateY", "translateZ"):
-        if kind == "translate":
+def op_transform(op_type: str, inverse: bool, v: np.ndarray) -> tuple:
+    """An xform op's transform as ``UsdGeomXformOp::GetOpTransform`` builds it, entry by entry.
+
+    Args:
+        op_type: ``translate``, ``translateX``, ``scale``, ``rotateY``, ``rotateXYZ``, ``orient``, ``transform``, ...
+        inverse: an inverse op (``!invert!``).
+        v: ``(..., k)`` float64 values: ``k`` 1 (single axis), 3 (vectors, three-axis angles in degrees), 4
+            (quaternions ``(i, j, k, real)``) or 16 (a row-major matrix, affine).
+
+    Returns:
+        ``("t", translation)``, ``("d", diagonal)``, ``("m", 3x3)`` or ``("a", 3x3, translation)``: lists of
+        arrays of shape ``v.shape[:-1]`` (row vectors: ``p' = p M``).
+    """
+    if op_type in ("translate", "translateX", "translateY", "translateZ"):
+        if op_type == "translate":
             t = [v[..., 0], v[..., 1], v[..., 2]]
         else:
-            t = [v[..., 0] * 0.0 if a != kind[-1] else v[..., 0] for a in "XYZ"]
+            t = [v[..., 0] * 0.0 if a != op_type[-1] else v[..., 0] for a in "XYZ"]
         return ("t", [-x for x in t] if inverse else t)
-    if kind in ("scale", "scaleX", "scaleY", "scaleZ"):
-        d = [v[..., 0], v[..., 1], v[..., 2]] if kind == "scale" else \
-            [v[..., 0] if a == kind[-1] else v[..., 0] * 0.0 + 1.0 for a in "XYZ"]
+    if op_type in ("scale", "scaleX", "scaleY", "scaleZ"):
+        d = [v[..., 0], v[..., 1], v[..., 2]] if op_type == "scale" else \
+            [v[..., 0] if a == op_type[-1] else v[..., 0] * 0.0 + 1.0 for a in "XYZ"]
         return ("d", [1.0 / x for x in d] if inverse else d)
-    if kind in ("rotateX", "rotateY", "rotateZ"):
-        return ("m", _axis_angle(*_AXES[kind[-1]], -v[..., 0] if inverse else v[..., 0]))
-    if kind == "orient":
+    if op_type in ("rotateX", "rotateY", "rotateZ"):
+        return ("m", _axis_angle(*_AXES[op_type[-1]], -v[..., 0] if inverse else v[..., 0]))
+    if op_type == "orient":
         return ("m", _orient(v, inverse))
-    if kind == "transform":
+    if op_type == "transform":
         m = v.reshape(*v.shape[:-1], 4, 4)
         lin, t = m[..., :3, :3], m[..., 3, :3]
         if inverse:
             lin = np.linalg.inv(lin)
             t = -np.einsum("...j,...jk->...k", t, lin)
         return ("a", [[lin[..., i, j] for j in range(3)] for i in range(3)], [t[..., j] for j in range(3)])
-    order = kind[len("rotate"):]  # three-axis rotations: one GfRotation per axis, multiplied in order
+    order = op_type[len("rotate"):]  # three-axis rotations: one GfRotation per axis, multiplied in order
     mats = {a: _axis_angle(*_AXES[a], -v[..., i] if inverse else v[..., i]) for i, a in enumerate("XYZ")}
     seq = order[::-1] if inverse else order
     return ("m", mul3(mul3(mats[seq[0]], mats[seq[1]]), mats[seq[2]]))
 
 
-def compose_ops(ops):
-    """``M = I; M = M @ op`` for each op in order (the ops of an op order, last first), the affine part
-    only: ``(linear 3x3 or None for identity, translation or None for zero)``. Products that only
-    multiply by one or add zero are skipped (their results are the same)."""
+def compose_ops(ops: list) -> tuple:
+    """A local transform from its ops' transforms, as ``UsdGeomXformable`` composes them: ``M = I; M = M @ op``
+    for each op in order (the ops of an op order, last first), the affine part only. Products that only
+    multiply by one or add zero are skipped (their results are the same).
+
+    Args:
+        ops: :func:`op_transform` results, in composition order.
+
+    Returns:
+        ``(linear, translation)``: the 3x3 entry by entry (None for identity) and the translation row (None
+        for zero), arrays broadcasting to the ops' shapes.
+    """
     lin, diag, t = None, None, None  # lin: full 3x3; diag: a diagonal; neither: identity
     for op in ops:
         if op[0] == "t":

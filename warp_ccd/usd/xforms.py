@@ -17,24 +17,28 @@ time code where USD's own computation can be reproduced:
   matrix is built as ``UsdGeomXformOp::GetOpTransform`` builds it (a rotation through ``GfRotation``:
   axis and angle, then its quaternion), and the ops are composed in USD's order.
 * **Values.** A static op (``ValueMightBeTimeVarying`` False) is read once. A time-sampled op must
-  resolve to time samples (``GetResolveInfo``; value clips, splines, defaults fall back): the samples
-  are those of the strongest spec holding them, its layer offset (sublayers, references) mapping
-  stage time to layer time. Values between samples are interpolated as USD does: held, or linear
-  (component-wise in the value's own precision, quaternions by ``GfSlerp`` with its float
-  arithmetic for ``quatf``); before the first and after the last sample the end value is held. Half
-  values that would need interpolating, value blocks and values of an unexpected type fall back.
+  resolve to time samples alone (``GetResolveInfo``: value clips, splines and values composed with
+  weaker opinions fall back): the samples are those of the strongest spec holding them, its layer
+  offset (sublayers, references) mapping stage time to layer time. Values are those USD 26 resolves:
+  the samples bracketing each time code in layer time, mixed with a weight from their stage times
+  (``Usd_Interpolate``), held or linear (component-wise in the value's own precision, rounded as
+  ``GfLerp`` rounds; quaternions by ``GfSlerp``, for ``quatf`` with its float arithmetic and the C
+  library's ``sinf``); before the first and after the last sample the end value is held. Half values
+  that would need interpolating, value blocks, values of an unexpected type and inverse single-axis
+  scales (which USD 26.11 negates) fall back.
 * **Reads.** Per attribute, the whole dictionary of time samples (``Sdf`` spec ``GetInfo``) when the
-  time codes asked for are at least :data:`WHOLE_READ_SHARE` of its samples, else the samples
-  bracketing each time code one by one (``GetBracketingTimeSamplesForPath``, ``QueryTimeSample``): a
-  range of frames costs in proportion to the range.
+  time codes asked for are at least :data:`WHOLE_READ_SHARE` of its samples, else the samples the
+  time codes need one by one (``QueryTimeSample``; ``GetBracketingTimeSamplesForPath`` for a time code
+  between samples): a range of frames costs in proportion to the range.
 
 Everything else (PointInstancers aside, which the import reads on its own) falls back to
 ``XformCache`` per prim and time code. Prims with the same op stack are composed together, a batch
 of about :data:`BATCH` prim-time codes at a time, one numpy pass per matrix entry.
 
-Cost: per animated prim a few dozen ``pxr`` calls (its ops, their resolve info and spec); per
-sample read about 0.5 us (whole dictionary) or 1-2 us (one by one); the numpy composition and
-poses about 0.3 us per prim and time code. An ``XformCache`` lookup (fallback) is 10-20 us.
+Cost: per animated prim a few dozen ``pxr`` calls (its ops, their resolve info and spec); per sample
+about 0.5-0.7 us read with its dictionary (most of the time: the ``Gf`` values made for Python) or 2 us
+read alone; the numpy composition and poses about 0.3 us per prim and time code. An ``XformCache``
+lookup (the fallback) is 10-20 us. The garbage collector is paused while reading (:func:`paused_gc`).
 :data:`FAST_XFORMS` turns the bulk path off (every lookup through ``XformCache``), for comparison.
 """
 
