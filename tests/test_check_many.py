@@ -247,8 +247,9 @@ def test_failing_files_among_good_ones(tmp_path, files, device, frames_per_task)
     assert str(garbage) in by_name["garbage.usda"].error and "not a USD file" in by_name["garbage.usda"].error
     assert "/World/Bad" in by_name["broken.usda"].error and "faceVertexIndices" in by_name["broken.usda"].error
     assert all("\n" not in f.error for f in batch.files if f.error)
-    if frames_per_task is not None:  # files that could not be opened to count their time codes: no task
-        assert [f.tasks for f in batch.files] == [2, 0, 0, 2, 3, 3]
+    if frames_per_task is not None:  # files that could not be opened to count their time codes: no task; a file
+        # with a part at fault checked again whole (one task: the error one run meets)
+        assert [f.tasks for f in batch.files] == [2, 0, 0, 2, 1, 3]
     for f in batch.files:
         if f.report is not None:
             assert f.error is None
@@ -497,3 +498,28 @@ def test_ray_worker_killed_mid_task_is_retried(ray_cluster, files):
     assert marker.exists() and int(marker.read_text()) > 0  # the fault happened (the dead process's id)
     assert batch.files[0].tasks == 4 and batch.files[0].error is None
     assert_same(batch.files[0].report, serial(files["mixed"], DEFAULT_DEVICE, **options))
+
+
+def test_a_part_at_fault_checks_its_file_whole(tmp_path, device):
+    """A set naming a prim invisible at the file's first time code is an error of one run; a part starting where
+    the prim is visible would accept it: the file is checked again whole and fails as one run does."""
+    path = str(tmp_path / "blink.usda")
+    blinking_stage(path)
+    with pytest.raises(ValueError) as one_run:
+        check_usd(path, device=device, set_a="/World/A", set_b="/World/B")
+    batch = check_many(path, frames_per_task=2, device=device, set_a="/World/A", set_b="/World/B")
+    f = batch.files[0]
+    assert f.exit_status == EXIT_BAD_INPUT and f.error == str(one_run.value) and f.tasks == 1
+
+
+def test_cli_ray_before_the_file(ray_cluster, files, tmp_path):
+    """``warp-ccd check --ray IN.usd``: the file is a file, not the cluster's address; the report is one run's."""
+    from warp_ccd.cli import main
+
+    out = tmp_path / "ray.json"
+    assert main(["check", "--ray", files["abc"], "--workers", "2", "--frames-per-task", "5",
+                 "--report", str(out)]) == EXIT_FINDINGS
+    got = json.loads(out.read_text())
+    want = serial(files["abc"], DEFAULT_DEVICE).to_json()
+    got.pop("seconds"), want.pop("seconds")
+    assert json.dumps(got) == json.dumps(want)

@@ -71,6 +71,15 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
                 if os.path.exists(args.usd_out) and not os.path.isdir(args.usd_out):
                     raise ValueError(f"--usd-out {args.usd_out}: with several files, a folder for their overlays")
                 overlays = _overlay_paths(files, args.usd_out)
+                for path in overlays:
+                    for f in files:
+                        if same_file(path, f):
+                            raise ValueError(f"--usd-out: {path} is one of the files to check: it would be written "
+                                             "over (write the overlays to another folder)")
+                try:
+                    os.makedirs(args.usd_out, exist_ok=True)
+                except OSError as exc:
+                    raise ValueError(f"--usd-out {args.usd_out}: cannot make the folder ({exc.strerror})") from None
             else:
                 from ..usd.export import validate_stage_path
 
@@ -127,8 +136,6 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
                 pending.append(report.prepare_json(args.report))
                 lines.append("  report : {}")
         if overlays is not None:
-            if several:
-                os.makedirs(args.usd_out, exist_ok=True)
             for f, path in zip(batch.files, overlays):
                 if f.report is not None and (f.report.findings or not several):
                     pending.append(prepare_overlay(f.report, path))

@@ -431,9 +431,6 @@ def _check(args) -> tuple[int, str | None]:
 
     from ..usd.batch import expand_paths
 
-    if args.ray is not None and _looks_like_file(args.ray):  # "--ray IN.usd": a file, not an address
-        args.stages.insert(0, args.ray)
-        args.ray = "local"
     try:
         files = expand_paths(args.stages)
     except ValueError as exc:
@@ -581,6 +578,15 @@ def _check(args) -> tuple[int, str | None]:
     return (EXIT_FINDINGS if report.findings else EXIT_OK), text
 
 
+def _ray_before_files(argv: list[str]) -> list[str]:
+    """``check --ray IN.usd ...``: the file is a file, not ``--ray``'s address (``--ray=local IN.usd ...``)."""
+    out = list(argv)
+    for k, arg in enumerate(out[:-1]):
+        if arg == "--ray" and _looks_like_file(out[k + 1]):
+            out[k] = "--ray=local"
+    return out
+
+
 def _looks_like_file(text: str) -> bool:
     """Whether a ``--ray`` value is a USD file or pattern (``--ray IN.usd``) rather than a cluster's address."""
     from ..usd.export import STAGE_EXTENSIONS
@@ -644,7 +650,7 @@ def main(argv: list[str] | None = None) -> int:
     args = None
     try:
         try:
-            args = _build_parser().parse_args(_join_dash_values(argv))
+            args = _build_parser().parse_args(_ray_before_files(_join_dash_values(argv)))
         except SystemExit as exc:  # --help
             return exc.code if isinstance(exc.code, int) else EXIT_OK
         if args.command == "demo":

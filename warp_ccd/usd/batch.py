@@ -183,6 +183,7 @@ def plan_tasks(paths: Sequence[str], *, frames: Any = None, workers: int = 1, fr
     tasks: list[CheckTask] = []
     errors: dict[int, str] = {}
     split = frames_per_task is not None or len(paths) < workers
+    paths = [os.path.abspath(p) for p in paths]  # workers elsewhere open them from another folder
     if not split:
         return [CheckTask(i, p) for i, p in enumerate(paths)], errors
     counted: dict[int, np.ndarray] = {}
@@ -220,6 +221,8 @@ def merge_reports(parts: Sequence[CheckReport], skip: Sequence[int] = ()) -> Che
     if not parts:
         raise ValueError("merge_reports: no parts")
     skip = list(skip) or [0] * len(parts)
+    if len(skip) != len(parts):
+        raise ValueError(f"merge_reports: {len(skip)} skips for {len(parts)} parts")
     first = parts[0]
     for p in parts[1:]:
         if p.stage != first.stage or p.object_path != first.object_path or p.precision != first.precision:
@@ -275,14 +278,15 @@ def _one_precision(outcomes: list[TaskOutcome], options: dict,
 
 def _whole_files(outcomes: list[TaskOutcome], options: dict,
                  run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
-    """Checks whole, as one task, the files whose parts found different objects (a prim visible, or an instance
-    present, from a later time code on: the import reads them at its first time code, as one run does)."""
+    """Checks whole, as one task, the files whose parts found different objects, or where a part found bad input (a
+    prim visible, or an instance present, from a later time code on: the import reads them at its first time code,
+    as one run does, so a pattern or set may match nothing in a part): the one-run result or error."""
     by_file: dict[int, list[TaskOutcome]] = {}
     for o in outcomes:
         by_file.setdefault(o.task.file, []).append(o)
     again = [parts[0].task for parts in by_file.values()
-             if len(parts) > 1 and all(o.report is not None for o in parts)
-             and len({tuple(o.report.object_path) for o in parts}) > 1]
+             if len(parts) > 1 and (any(o.status == EXIT_BAD_INPUT for o in parts)
+                                    or len({tuple(o.report.object_path) for o in parts if o.report}) > 1)]
     if not again:
         return outcomes
     whole = [CheckTask(t.file, t.path) for t in again]
@@ -356,6 +360,12 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
     if workers is not None:
         integer_option("workers", workers, low=1)
     _check_options(options)
+    pairs = options.get("ignore_pairs")
+    if isinstance(pairs, (str, bytes, os.PathLike)):  # files read by workers elsewhere: absolute paths
+        options["ignore_pairs"] = os.path.abspath(os.fsdecode(pairs))
+    elif isinstance(pairs, (list, tuple)):
+        options["ignore_pairs"] = [os.path.abspath(os.fsdecode(p)) if isinstance(p, (str, bytes, os.PathLike)) else p
+                                   for p in pairs]
     use_ray = bool(ray) or ray_address is not None
     options = dict(options, frames=frames)
     continuous = bool(options.get("continuous", False))
@@ -367,15 +377,16 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
     else:
         engine, count = None, workers or 1
         options["read_workers"] = read_workers
-    tasks, errors = plan_tasks(files, frames=frames, workers=count, frames_per_task=frames_per_task,
-                               continuous=continuous)
-    bar = tqdm(total=sum(t.frames or 1 for t in tasks), desc="checking", unit="frame", leave=False,
-               disable=not progress or None, file=sys.stderr)
-
-    def done(outcome: TaskOutcome) -> None:
-        bar.update(outcome.task.frames or 1)
-
+    bar = None
     try:
+        tasks, errors = plan_tasks(files, frames=frames, workers=count, frames_per_task=frames_per_task,
+                                   continuous=continuous)
+        bar = tqdm(total=sum(t.frames or 1 for t in tasks), desc="checking", unit="frame", leave=False,
+                   disable=not progress or None, file=sys.stderr)
+
+        def done(outcome: TaskOutcome) -> None:
+            bar.update(outcome.task.frames or 1)
+
         if engine is not None:
             outcomes = engine.run(tasks, options, done)
             outcomes = _whole_files(outcomes, options, lambda ts, opts: engine.run(ts, opts))
@@ -391,7 +402,8 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
 
             outcomes = _one_precision(_whole_files(run(tasks, options, done), options, run), options, run)
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if engine is not None:
             engine.close()
     return BatchReport(_file_results(files, outcomes, errors), "ray" if use_ray else "serial", count,

@@ -6,8 +6,9 @@ holding one task at a time. An actor (:class:`CheckWorker`) keeps its process wa
 and its kernels loaded once, its CUDA context, and the stages it opened (the parts of one file read one stage). It
 reads transforms in its own process (no reader processes of its own: the cluster schedules the work). An actor
 that dies (a killed process, a lost node) is restarted by Ray and its task run again, up to
-:data:`MAX_RETRIES` times; results come back as plain data (:class:`~warp_ccd.usd.report.CheckReport` pickles
-without the stage).
+:data:`MAX_RETRIES` times (then the task's file fails; the other tasks go on); workers the cluster cannot place
+are ended after :data:`START_TIMEOUT`; results come back as plain data
+(:class:`~warp_ccd.usd.report.CheckReport` pickles without the stage).
 
 ``ray`` is imported inside the functions: this module imports without it (``pip install 'warp-ccd[distributed]'``).
 """
@@ -21,13 +22,16 @@ from typing import Any
 
 from .tasks import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
-__all__ = ["FAULT_ENV", "MAX_RETRIES", "CheckWorker", "RayEngine"]
+__all__ = ["FAULT_ENV", "MAX_RETRIES", "START_TIMEOUT", "CheckWorker", "RayEngine"]
 
 MAX_RETRIES = 3
-"""How many times Ray restarts a dead actor and runs its task again."""
+"""How many times a task runs again after its worker died under it (Ray restarts the worker)."""
 FAULT_ENV = "WARP_CCD_FAULT_EXIT_ONCE"
 """Fault injection for tests: where this environment variable names a file that does not exist yet, an actor
 creates it and ends its process at the start of its next task (as a killed worker would)."""
+START_TIMEOUT = 300.0
+"""Seconds the workers have to start (Warp initialised, the CUDA context made); those the cluster cannot place
+in that time are ended."""
 OPEN_STAGES = 4
 """Stages an actor keeps open (the most recently used)."""
 
@@ -119,38 +123,72 @@ class RayEngine:
         num_cpus = max(1.0, float(resources.get("CPU", 1)))
         self.gpu_share = min(1.0, num_gpus / self.workers) if self.gpus else 0.0
         cpu_share = 0 if self.gpus else min(1.0, num_cpus / self.workers)
-        actor = ray.remote(CheckWorker).options(
-            num_gpus=self.gpu_share, num_cpus=cpu_share, max_restarts=MAX_RETRIES, max_task_retries=MAX_RETRIES)
-        self._actors = [actor.remote() for _ in range(self.workers)]
+        # Ray restarts a dead actor (always); the driver runs its task again, up to MAX_RETRIES times per task.
+        actor = ray.remote(CheckWorker).options(num_gpus=self.gpu_share, num_cpus=cpu_share, max_restarts=-1,
+                                                max_task_retries=0)
+        self._actors = []
+        self._actors = self._placed([actor.remote() for _ in range(self.workers)])
+        self.workers = len(self._actors)
+
+    def _placed(self, actors: list) -> list:
+        """The actors that started within :data:`START_TIMEOUT` seconds (the others, which the cluster cannot
+        place, are ended).
+
+        Raises:
+            ValueError: none started.
+        """
+        ray = self._ray
+        probes = {a.pid.remote(): a for a in actors}
+        ready, waiting = ray.wait(list(probes), num_returns=len(probes), timeout=START_TIMEOUT)
+        alive = []
+        for ref in ready:
+            try:
+                ray.get(ref)
+                alive.append(probes[ref])
+            except ray.exceptions.RayError:
+                ray.kill(probes[ref])
+        for ref in waiting:
+            ray.kill(probes[ref])
+        if not alive:
+            self.close()
+            raise ValueError(f"no Ray worker started within {START_TIMEOUT:g} s (are the cluster's "
+                             f"{'GPUs' if self.gpus else 'CPUs'} taken?)")
+        return alive
 
     def run(self, tasks: Sequence[CheckTask], options: dict,
             done: Callable[[TaskOutcome], None] | None = None) -> list[TaskOutcome]:
         """Runs ``tasks`` (in the order given, each on the next free actor); ``done`` is called as each ends.
 
         Returns:
-            The outcomes, in the order of ``tasks``. A task whose actor died more than :data:`MAX_RETRIES` times
-            is an internal error of its file.
+            The outcomes, in the order of ``tasks``. A task whose worker died more than :data:`MAX_RETRIES` times
+            under it is an internal error of its file.
         """
         ray = self._ray
+        options = {k: v for k, v in options.items() if k not in ("device", "read_workers")}  # the actor's own
         pending = list(enumerate(tasks))[::-1]
         running: dict[Any, tuple[int, Any]] = {}
         out: list[TaskOutcome | None] = [None] * len(tasks)
+        tries = [0] * len(tasks)
         free = list(self._actors)
         while pending or running:
             while pending and free:
                 i, task = pending.pop()
                 actor = free.pop()
+                tries[i] += 1
                 running[actor.run.remote(task, options)] = (i, actor)
             ready, _ = ray.wait(list(running), num_returns=1)
             for ref in ready:
                 i, actor = running.pop(ref)
+                free.append(actor)  # restarted by Ray where it died
                 try:
                     out[i] = ray.get(ref)
                 except ray.exceptions.RayError as exc:
+                    if tries[i] <= MAX_RETRIES:
+                        pending.append((i, tasks[i]))
+                        continue
                     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                    out[i] = TaskOutcome(tasks[i], error=f"internal error: the worker was lost ({first})",
-                                         status=EXIT_INTERNAL)
-                free.append(actor)
+                    out[i] = TaskOutcome(tasks[i], error=f"internal error: the worker was lost {tries[i]} times "
+                                         f"({first})", status=EXIT_INTERNAL)
                 if done is not None:
                     done(out[i])
         return out
