@@ -523,3 +523,27 @@ def test_cli_ray_before_the_file(ray_cluster, files, tmp_path):
     want = serial(files["abc"], DEFAULT_DEVICE).to_json()
     got.pop("seconds"), want.pop("seconds")
     assert json.dumps(got) == json.dumps(want)
+
+
+def test_ray_read_tasks_equal_one_process(ray_cluster, files, monkeypatch):
+    """A GPU worker's reads as cluster tasks (``workers.POOL``): shares of the prims read by Ray tasks give the
+    poses one process reads, bit for bit."""
+    import numpy as np
+    from pxr import Usd
+
+    from warp_ccd.usd import workers
+    from warp_ccd.usd.cluster import _ray_pool
+
+    stage = Usd.Stage.Open(files["mixed"])
+    prims = [p for p in stage.Traverse() if p.GetTypeName() == "Mesh"]
+    paths = [str(p.GetPath()) for p in prims]
+    times = np.arange(0.0, NUM_FRAMES)
+    alone = workers.read_shared(stage, prims, paths, times, 0)
+    calls = []
+    monkeypatch.setattr(workers, "POOL", lambda fn, tasks: calls.append(len(tasks)) or _ray_pool(fn, tasks))
+    monkeypatch.setattr(workers, "POOL_WORKERS", 2)
+    assert workers.auto_workers() == 2
+    shared = workers.read_shared(stage, prims, paths, times, 3)
+    assert calls == [2]  # two shares as cluster tasks, the third read here
+    for name in ("first", "poses", "scale", "ok", "finite", "fast"):
+        assert np.array_equal(getattr(alone, name), getattr(shared, name)), name

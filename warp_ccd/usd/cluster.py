@@ -3,8 +3,10 @@
 :class:`RayEngine` connects to a cluster (or starts a local one), starts its actors and runs
 :class:`~warp_ccd.usd.tasks.CheckTask` s on them (:func:`~warp_ccd.usd.tasks.run_task`), largest first, each actor
 holding one task at a time. An actor (:class:`CheckWorker`) keeps its process warm across tasks: Warp initialised
-and its kernels loaded once, its CUDA context, and the stages it opened (the parts of one file read one stage). It
-reads transforms in its own process (no reader processes of its own: the cluster schedules the work). An actor
+and its kernels loaded once, its CUDA context, and the stages it opened (the parts of one file read one stage). A
+GPU actor holds no CPU: it reads the transforms of a big animation as cluster tasks on its share of the CPUs
+(shares of the prims, :data:`~warp_ccd.usd.workers.POOL`); a CPU actor reads in its own process. No reader
+processes of its own: the cluster schedules all the work. An actor
 that dies (a killed process, a lost node) is restarted by Ray and its task run again, up to
 :data:`MAX_RETRIES` times (then the task's file fails; the other tasks go on); workers the cluster cannot place
 are ended after :data:`START_TIMEOUT`; results come back as plain data
@@ -41,24 +43,31 @@ class CheckWorker:
 
     Args:
         quiet: silence Warp's messages (the driver shows progress and results).
+        read_tasks: cluster tasks that read the transforms of a big animation (0 or 1: this process reads them).
     """
 
-    def __init__(self, quiet: bool = True) -> None:
+    def __init__(self, quiet: bool = True, read_tasks: int = 0) -> None:
         import warp as wp
 
         wp.config.quiet = quiet
         wp.init()
         self.device = "cuda:0" if wp.is_cuda_available() else "cpu"
         self._stages: OrderedDict[str, Any] = OrderedDict()
+        self.read_tasks = read_tasks
+        if read_tasks > 1:  # reads of big animations as cluster tasks (the actor holds no CPU of its own)
+            from . import workers
+
+            workers.POOL, workers.POOL_WORKERS = _ray_pool, read_tasks
 
     def run(self, task: CheckTask, options: dict) -> TaskOutcome:
-        """Runs ``task`` on this actor's device, reading in this process (``read_workers=0``)."""
+        """Runs ``task`` on this actor's device; a big animation's transforms read as cluster tasks (GPU actors),
+        or in this process (CPU actors: ``read_workers=0``)."""
         marker = os.environ.get(FAULT_ENV)
         if marker and not os.path.exists(marker):
             with open(marker, "w") as fh:
                 fh.write(str(os.getpid()))
             os._exit(1)
-        opts = dict(options, device=self.device, read_workers=0, progress=False)
+        opts = dict(options, device=self.device, read_workers=None if self.read_tasks > 1 else 0, progress=False)
         return run_task(task, opts, self._stage(task.path))
 
     def _stage(self, path: str) -> Any:
@@ -81,6 +90,16 @@ class CheckWorker:
     def pid(self) -> int:
         """This actor's process id."""
         return os.getpid()
+
+
+def _ray_pool(fn: Callable, tasks: list) -> Callable[[], list]:
+    """:data:`~warp_ccd.usd.workers.POOL` on Ray: ``fn`` on every task as a task of one CPU, retried where its
+    worker dies; returns the wait for their results."""
+    import ray
+
+    remote = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(fn)
+    refs = [remote.remote(t) for t in tasks]
+    return lambda: ray.get(refs)
 
 
 class RayEngine:
@@ -126,8 +145,11 @@ class RayEngine:
         # Ray restarts a dead actor (always); the driver runs its task again, up to MAX_RETRIES times per task.
         actor = ray.remote(CheckWorker).options(num_gpus=self.gpu_share, num_cpus=cpu_share, max_restarts=-1,
                                                 max_task_retries=0)
+        # GPU workers hold no CPU: each reads the transforms of a big animation as tasks on its share of the
+        # cluster's CPUs (CPU workers hold them all and read in their own process).
+        self.read_tasks = int(num_cpus // self.workers) if self.gpus else 0
         self._actors = []
-        self._actors = self._placed([actor.remote() for _ in range(self.workers)])
+        self._actors = self._placed([actor.remote(True, self.read_tasks) for _ in range(self.workers)])
         self.workers = len(self._actors)
 
     def _placed(self, actors: list) -> list:

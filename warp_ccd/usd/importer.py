@@ -63,7 +63,6 @@ processes are :mod:`~warp_ccd.usd.workers`.
 from __future__ import annotations
 
 import fnmatch
-import os
 import time
 import warnings
 from collections.abc import Sequence
@@ -81,7 +80,7 @@ from .filters import FilterSummary, PairFilters, PrimIndex, world_ids
 from .meshes import MeshData, read_meshes
 from .poses import baked_linear, finite_matrix_poses, matrix_poses
 from .stage import MAX_FRAMES, open_stage
-from .workers import read_shared
+from .workers import auto_workers, read_shared
 from .xforms import WorldPoses, XformInfo, paused_gc
 
 if TYPE_CHECKING:
@@ -634,7 +633,7 @@ class UsdMeshImport:
         paths = [self._prim_paths[h] for h in handles]
         workers = self._workers
         if workers is None:
-            workers = min(os.cpu_count() or 1, 16) if objects.size * len(self._codes) >= PARALLEL_LOOKUPS else 0
+            workers = auto_workers() if objects.size * len(self._codes) >= PARALLEL_LOOKUPS else 0
         return read_shared(self.stage, prims, paths, self.times, workers, info=self._xinfo, progress=self._progress)
 
     def _matrices(self, code, objects: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ from . import xforms
 if TYPE_CHECKING:
     from pxr import Usd
 
-__all__ = ["BOOTSTRAP", "read_poses", "read_shared", "run_pose_workers"]
+__all__ = ["BOOTSTRAP", "POOL", "POOL_WORKERS", "auto_workers", "read_poses", "read_shared", "run_pose_workers"]
 
 BOOTSTRAP = """import sys, types
 for _name, _path in {packages!r}:
@@ -44,6 +44,22 @@ main(sys.argv[1], sys.argv[2])
 """
 """The worker's command (``python -c``): ``warp_ccd`` and ``warp_ccd.usd`` registered as bare packages of
 their folders, then :func:`main` on the task and result files."""
+
+
+POOL: Callable[[Callable, list], Callable[[], list]] | None = None
+"""Where worker processes come from: None, processes started here; or ``POOL(fn, tasks)``, which starts ``fn`` on
+every task elsewhere and returns a function that waits for their results in order (a Ray worker sets it, so that
+reads run as tasks the cluster schedules on its CPUs)."""
+
+
+POOL_WORKERS = 0
+"""With :data:`POOL`: how many tasks a big read is split into (its owner's share of the cluster's CPUs)."""
+
+
+def auto_workers() -> int:
+    """The readers of a big animation when none were asked for: :data:`POOL_WORKERS` with a :data:`POOL`, else one
+    process per CPU (at most 16)."""
+    return POOL_WORKERS if POOL is not None else min(os.cpu_count() or 1, 16)
 
 
 def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], Any] | None = None) -> tuple[list, Any]:
@@ -61,6 +77,10 @@ def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], An
     Raises:
         ValueError: a worker failed (the message ends with the last line it wrote to stderr).
     """
+    if POOL is not None:
+        collect = POOL(read_poses, tasks)
+        mine = local() if local is not None else None
+        return collect(), mine
     from tqdm import tqdm  # here: importing warp_ccd needs no progress bars
 
     usd = os.path.dirname(os.path.abspath(__file__))
