@@ -34,13 +34,13 @@ import numpy as np
 import warp as wp
 
 from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
-from warp_ccd.bench.usd_check import _commit_label, write_rigid_stage
+from warp_ccd.bench.usd_check import _commit_label, write_rigid_prims, write_rigid_stage
 
 
 def write_part(task) -> None:
     """One sublayer of the long stage: prims ``lo..hi`` of ``num_objects`` (the motion of all, these kept)."""
     path, num_objects, num_frames, lo, hi, seed, device = task
-    from pxr import Gf, Sdf, Vt
+    from pxr import Sdf
 
     from warp_ccd.scene.scene import Scene
 
@@ -50,31 +50,7 @@ def write_part(task) -> None:
         poses[f] = scene.object_pose.numpy()[lo:hi]
         scene.advance(1 / 24)
     layer = Sdf.Layer.CreateNew(path)
-    names = Vt.TokenArray(["xformOp:translate", "xformOp:orient", "xformOp:scale"])
-    with Sdf.ChangeBlock():
-        world = Sdf.CreatePrimInLayer(layer, "/World")
-        world.specifier, world.typeName = Sdf.SpecifierDef, "Xform"
-        for j, i in enumerate(range(lo, hi)):
-            prim = Sdf.CreatePrimInLayer(layer, f"/World/obj_{i}")
-            prim.specifier, prim.typeName = Sdf.SpecifierDef, "Xform"
-            translate = Sdf.AttributeSpec(prim, "xformOp:translate", Sdf.ValueTypeNames.Double3)
-            orient = Sdf.AttributeSpec(prim, "xformOp:orient", Sdf.ValueTypeNames.Quatf)
-            s = float(scene.object_scale_np[i])
-            Sdf.AttributeSpec(prim, "xformOp:scale", Sdf.ValueTypeNames.Float3).default = Gf.Vec3f(s, s, s)
-            Sdf.AttributeSpec(prim, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
-                              variability=Sdf.VariabilityUniform).default = names
-            for f, (p, q) in enumerate(zip(poses[:, j, :3].tolist(), poses[:, j, 3:].tolist())):
-                layer.SetTimeSample(translate.path, float(f), Gf.Vec3d(*p))
-                layer.SetTimeSample(orient.path, float(f), Gf.Quatf(q[3], q[0], q[1], q[2]))
-            v, t = scene.shape_meshes[scene.object_shape_np[i]]
-            mesh = Sdf.CreatePrimInLayer(layer, f"/World/obj_{i}/Geom")
-            mesh.specifier, mesh.typeName = Sdf.SpecifierDef, "Mesh"
-            Sdf.AttributeSpec(mesh, "points", Sdf.ValueTypeNames.Point3fArray).default = \
-                Vt.Vec3fArray.FromNumpy(np.asarray(v, np.float32))
-            Sdf.AttributeSpec(mesh, "faceVertexCounts", Sdf.ValueTypeNames.IntArray).default = \
-                Vt.IntArray.FromNumpy(np.full(len(t), 3, np.int32))
-            Sdf.AttributeSpec(mesh, "faceVertexIndices", Sdf.ValueTypeNames.IntArray).default = \
-                Vt.IntArray.FromNumpy(np.ascontiguousarray(t, np.int32).ravel())
+    write_rigid_prims(layer, scene, poses, range(lo, hi))
     layer.Save()
 
 

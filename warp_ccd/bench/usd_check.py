@@ -45,23 +45,24 @@ def _commit_label() -> str:
     return "unknown" if commit is None else commit + ("-dirty" if dirty else "")
 
 
-def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 0, device=None) -> None:
-    """The rigid stage (see the module docstring), written with ``Sdf`` in one change block; the
-    motion computed on ``device``."""
+def write_rigid_prims(layer, scene: Scene, poses: np.ndarray, objects) -> None:
+    """Writes objects of ``scene`` into an ``Sdf.Layer`` as the rigid stage's prims (``/World/obj_<i>``, an
+    ``Xform`` with time-sampled ``translate`` and ``orient`` over its ``Mesh``), in one change block.
+
+    Args:
+        layer: the ``Sdf.Layer``.
+        scene: the scene (shapes, scales).
+        poses: ``(F, K, 7)`` poses of the objects at time codes ``0 .. F - 1``.
+        objects: the ``K`` object indices written.
+    """
     from pxr import Gf, Sdf, Vt
 
-    scene = Scene.random(num_objects, seed=seed, device=device)
-    poses = np.empty((num_frames, num_objects, 7))
-    for f in range(num_frames):
-        poses[f] = scene.object_pose.numpy()
-        scene.advance(1 / 24)
-    layer = Sdf.Layer.CreateNew(path)
-    frames = [float(f) for f in range(num_frames)]
+    frames = [float(f) for f in range(len(poses))]
     names = Vt.TokenArray(["xformOp:translate", "xformOp:orient", "xformOp:scale"])
     with Sdf.ChangeBlock():
         world = Sdf.CreatePrimInLayer(layer, "/World")
         world.specifier, world.typeName = Sdf.SpecifierDef, "Xform"
-        for i in range(num_objects):
+        for j, i in enumerate(objects):
             prim = Sdf.CreatePrimInLayer(layer, f"/World/obj_{i}")
             prim.specifier, prim.typeName = Sdf.SpecifierDef, "Xform"
             translate = Sdf.AttributeSpec(prim, "xformOp:translate", Sdf.ValueTypeNames.Double3)
@@ -70,7 +71,7 @@ def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 
             Sdf.AttributeSpec(prim, "xformOp:scale", Sdf.ValueTypeNames.Float3).default = Gf.Vec3f(s, s, s)
             Sdf.AttributeSpec(prim, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
                               variability=Sdf.VariabilityUniform).default = names
-            for f, (p, q) in enumerate(zip(poses[:, i, :3].tolist(), poses[:, i, 3:].tolist())):
+            for f, (p, q) in enumerate(zip(poses[:, j, :3].tolist(), poses[:, j, 3:].tolist())):
                 layer.SetTimeSample(translate.path, frames[f], Gf.Vec3d(*p))
                 layer.SetTimeSample(orient.path, frames[f], Gf.Quatf(q[3], q[0], q[1], q[2]))
             v, t = scene.shape_meshes[scene.object_shape_np[i]]
@@ -82,6 +83,20 @@ def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 
                 Vt.IntArray.FromNumpy(np.full(len(t), 3, np.int32))
             Sdf.AttributeSpec(mesh, "faceVertexIndices", Sdf.ValueTypeNames.IntArray).default = \
                 Vt.IntArray.FromNumpy(np.ascontiguousarray(t, np.int32).ravel())
+
+
+def write_rigid_stage(path: str, num_objects: int, num_frames: int, seed: int = 0, device=None) -> None:
+    """The rigid stage (see the module docstring), written with ``Sdf`` in one change block; the
+    motion computed on ``device``."""
+    from pxr import Sdf
+
+    scene = Scene.random(num_objects, seed=seed, device=device)
+    poses = np.empty((num_frames, num_objects, 7))
+    for f in range(num_frames):
+        poses[f] = scene.object_pose.numpy()
+        scene.advance(1 / 24)
+    layer = Sdf.Layer.CreateNew(path)
+    write_rigid_prims(layer, scene, poses, range(num_objects))
     layer.startTimeCode, layer.endTimeCode = 0, num_frames - 1
     layer.defaultPrim = "World"
     layer.Save()

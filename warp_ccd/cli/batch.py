@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Callable
 
-from .common import CliError, flat_values, init_warp, quiet_warp, resolve_device
+from .common import CliError, flat_values, init_warp, pending_outputs, quiet_warp, resolve_device
 
 __all__ = ["check_batch"]
 
@@ -41,7 +41,7 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
     Returns:
         The worst exit status over the files, and with ``--report -`` the JSON text (else None).
     """
-    from ..output import commit_all, same_file
+    from ..output import same_file
     from ..usd.batch import check_many
     from ..usd.overlay import prepare_overlay
 
@@ -118,8 +118,8 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
         if f.report is not None and f.report.precision_note:
             print(f"warp-ccd check: note: {f.report.precision_note}", file=sys.stderr)
     print(batch.summary(top=args.top) if several else _one(batch, args.top))
-    pending, lines, text = [], [], None
-    try:
+    text = None
+    with pending_outputs(fail) as (pending, lines):
         if several:
             if to_stdout:
                 import json
@@ -140,16 +140,6 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
                 if f.report is not None and (f.report.findings or not several):
                     pending.append(prepare_overlay(f.report, path))
                     lines.append("  overlay: {}")
-        written = commit_all(pending)
-    except BaseException as exc:
-        for p in pending:
-            if not p.done:
-                p.discard()
-        if isinstance(exc, ValueError):
-            raise fail(str(exc)) from None
-        raise
-    for line, path in zip(lines, written):
-        print(line.format(path))
     if to_stdout:
         print("  report : standard output")
     return batch.exit_status, text

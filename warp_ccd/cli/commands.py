@@ -51,6 +51,7 @@ from .common import (
     OneLineParser,
     flat_values,
     init_warp,
+    pending_outputs,
     quiet_warp,
     resolve_device,
     uncached_modules,
@@ -536,10 +537,8 @@ def _check(args) -> tuple[int, str | None]:
     print(report.summary(top=args.top))
 
     # Every output to a temporary file first; all moved into place once all are written.
-    pending = []
-    lines = []
     text = None
-    try:
+    with pending_outputs(fail) as (pending, lines):
         if to_stdout:
             text = report.json_text()  # printed once the files are in place
         elif args.report is not None:
@@ -561,18 +560,6 @@ def _check(args) -> tuple[int, str | None]:
             picture = PreviewRenderer(imp.scene, 640, 480).render(colliding)
             pending.append(prepare_preview([picture], args.preview))
             lines.append(f"  preview: {{}} (time {report.frames[worst].time:g})")
-        from ..output import commit_all
-
-        written = commit_all(pending)
-    except BaseException as exc:
-        for p in pending:
-            if not p.done:
-                p.discard()
-        if isinstance(exc, ValueError):
-            raise fail(str(exc)) from None
-        raise
-    for line, path in zip(lines, written):
-        print(line.format(path))
     if to_stdout:
         print("  report : standard output")
     return (EXIT_FINDINGS if report.findings else EXIT_OK), text

@@ -7,12 +7,15 @@ neither imports the other at module level.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import tempfile
+from collections.abc import Callable, Iterator
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError",
-           "OneLineParser", "flat_values", "init_warp", "quiet_warp", "resolve_device", "uncached_modules"]
+           "OneLineParser", "flat_values", "init_warp", "pending_outputs", "quiet_warp", "resolve_device",
+           "uncached_modules"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -150,3 +153,26 @@ def resolve_device(name: str | None):
 def flat_values(prims: list[list[str]] | None) -> list[str] | None:
     """``--prims`` (``--set-a``, ``--set-b``) values (lists, one per use of the option) as one list, or None."""
     return None if prims is None else [p for group in prims for p in group]
+
+
+@contextlib.contextmanager
+def pending_outputs(fail: Callable[[str], CliError]) -> Iterator[tuple[list, list]]:
+    """Outputs written whole or not at all: the block appends :class:`~warp_ccd.output.PendingFile` s and, for each,
+    a line naming it (``"  report : {}"``); when it ends they are all moved into place and the lines printed. On an
+    error every one is discarded (a ValueError becomes ``fail``'s error: exit status 2)."""
+    from ..output import commit_all
+
+    pending: list = []
+    lines: list = []
+    try:
+        yield pending, lines
+        written = commit_all(pending)
+    except BaseException as exc:
+        for p in pending:
+            if not p.done:
+                p.discard()
+        if isinstance(exc, ValueError):
+            raise fail(str(exc)) from None
+        raise
+    for line, path in zip(lines, written):
+        print(line.format(path))
