@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Callable
 
-from .common import CliError, flat_values, init_warp, pending_outputs, quiet_warp, resolve_device
+from .common import CliError, check_options, init_warp, pending_outputs, quiet_warp, require_usd, resolve_device
 
 __all__ = ["check_batch"]
 
@@ -87,18 +87,9 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
                 overlays = [args.usd_out]
     except ValueError as exc:
         raise fail(str(exc)) from None
-    try:
-        import pxr  # noqa: F401
-    except ImportError:
-        raise fail("usd-core is not installed (pip install usd-core)") from None
+    require_usd(fail)
     quiet_warp()
-    options = dict(prims=flat_values(args.prims), precision=args.precision, min_depth=args.min_depth,
-                   count_touching=args.count_touching, segments=args.segments,
-                   include_invisible=args.include_invisible, include_purposes=tuple(args.include_purpose),
-                   allow_missing=args.allow_missing, continuous=args.continuous, min_distance=args.min_distance,
-                   clearance=args.clearance, self_intersections=args.self_intersections, duplicates=args.duplicates,
-                   worlds=args.worlds, ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters,
-                   set_a=flat_values(args.set_a), set_b=flat_values(args.set_b))
+    options = check_options(args)
     if args.ray is None:
         init_warp()
         try:

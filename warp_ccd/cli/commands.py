@@ -49,10 +49,11 @@ from .common import (
     EXIT_USAGE,
     CliError,
     OneLineParser,
-    flat_values,
+    check_options,
     init_warp,
     pending_outputs,
     quiet_warp,
+    require_usd,
     resolve_device,
     uncached_modules,
 )
@@ -479,10 +480,7 @@ def _check(args) -> tuple[int, str | None]:
             read_pair_file(path)
     except ValueError as exc:
         raise fail(str(exc)) from None
-    try:
-        import pxr  # noqa: F401
-    except ImportError:
-        raise fail("usd-core is not installed (pip install usd-core)") from None
+    require_usd(fail)
     quiet_warp()
     init_warp()
     from ..usd.check import check_usd, prepare_overlay
@@ -515,17 +513,8 @@ def _check(args) -> tuple[int, str | None]:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", PrecisionWarning)
-            report = check_usd(stage, frames=frames, prims=flat_values(args.prims), device=device,
-                               precision=args.precision, min_depth=args.min_depth,
-                               count_touching=args.count_touching, segments=args.segments,
-                               include_invisible=args.include_invisible,
-                               include_purposes=tuple(args.include_purpose), progress=True,
-                               allow_missing=args.allow_missing, continuous=args.continuous,
-                               min_distance=args.min_distance, clearance=args.clearance,
-                               self_intersections=args.self_intersections, duplicates=args.duplicates,
-                               worlds=args.worlds, ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters,
-                               set_a=flat_values(args.set_a), set_b=flat_values(args.set_b),
-                               read_workers=args.read_workers)
+            report = check_usd(stage, frames=frames, device=device, progress=True, read_workers=args.read_workers,
+                               **check_options(args))
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)

@@ -14,8 +14,8 @@ import tempfile
 from collections.abc import Callable, Iterator
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError",
-           "OneLineParser", "flat_values", "init_warp", "pending_outputs", "quiet_warp", "resolve_device",
-           "uncached_modules"]
+           "OneLineParser", "check_options", "flat_values", "init_warp", "pending_outputs", "quiet_warp", "require_usd",
+           "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -176,3 +176,23 @@ def pending_outputs(fail: Callable[[str], CliError]) -> Iterator[tuple[list, lis
         raise
     for line, path in zip(lines, written):
         print(line.format(path))
+
+
+def check_options(args: argparse.Namespace) -> dict:
+    """``check``'s arguments as :func:`~warp_ccd.usd.check.check_usd`'s keyword arguments (all but the stage, the
+    frames, the device, progress and the readers)."""
+    return dict(prims=flat_values(args.prims), precision=args.precision, min_depth=args.min_depth,
+                count_touching=args.count_touching, segments=args.segments, include_invisible=args.include_invisible,
+                include_purposes=tuple(args.include_purpose), allow_missing=args.allow_missing,
+                continuous=args.continuous, min_distance=args.min_distance, clearance=args.clearance,
+                self_intersections=args.self_intersections, duplicates=args.duplicates, worlds=args.worlds,
+                ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters, set_a=flat_values(args.set_a),
+                set_b=flat_values(args.set_b))
+
+
+def require_usd(fail: Callable[[str], CliError]) -> None:
+    """Raises ``fail``'s error where usd-core is not installed."""
+    try:
+        import pxr  # noqa: F401
+    except ImportError:
+        raise fail("usd-core is not installed (pip install usd-core)") from None
