@@ -24,6 +24,8 @@ pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom  # noqa: E402
 from usd_stages import define_mesh, mixed_stage, prism  # noqa: E402
 
+from conftest import DEFAULT_DEVICE  # noqa: E402
+
 SAMPLES = [0.0, 1.0, 2.6, 4.0]
 TIMES = np.array([-2.0, 0.0, 0.25, 1.0, 1.5, 2.6, 3.1, 4.0, 5.5])  # before, on, between and after the samples
 OP_TYPES = ["translate", "translateX", "translateY", "translateZ", "scale", "scaleX", "scaleY", "scaleZ", "rotateX",
@@ -345,10 +347,10 @@ def test_import_with_and_without_the_bulk_read(tmp_path, monkeypatch, build):
     else:
         random_op_stage(path, seed=9, num_prims=30)
     times = np.arange(-0.5, 11.0, 0.75)
-    fast = UsdMeshImport(path, times=times, device="cpu", precision="float64", workers=0)
-    pooled = UsdMeshImport(path, times=times, device="cpu", precision="float64", workers=2)
+    fast = UsdMeshImport(path, times=times, device=DEFAULT_DEVICE, precision="float64", workers=0)
+    pooled = UsdMeshImport(path, times=times, device=DEFAULT_DEVICE, precision="float64", workers=2)
     monkeypatch.setattr(xforms, "FAST_XFORMS", False)
-    slow = UsdMeshImport(path, times=times, device="cpu", precision="float64", workers=0)
+    slow = UsdMeshImport(path, times=times, device=DEFAULT_DEVICE, precision="float64", workers=0)
     assert_same_import(fast, slow)
     assert pooled.object_path == fast.object_path  # the prims split over two processes: bit for bit
     np.testing.assert_array_equal(pooled._anim_poses, fast._anim_poses)
@@ -365,7 +367,7 @@ def test_transform_not_finite_at_some_time_names_the_prim():
     for f in range(4):
         op.Set(Gf.Vec3d(float("nan") if f == 2 else 0.0, 0.0, 0.0), f)
     with pytest.raises(ValueError, match="/World/Box: its world transform is not finite at time 2"):
-        UsdMeshImport(stage, times=[0, 1, 2, 3], workers=0, device="cpu")
+        UsdMeshImport(stage, times=[0, 1, 2, 3], workers=0, device=DEFAULT_DEVICE)
 
 
 def test_batched_mesh_read_matches_one_by_one():
@@ -390,3 +392,57 @@ def test_batched_mesh_read_matches_one_by_one():
         read_meshes(prims, ["/A", "/B", "/C"], code)
     with pytest.raises(ValueError, match=r"prim /C: faceVertexIndices\[23\] = 99 is outside its 8 points"):
         read_meshes(prims[::-2], ["/C", "/A"], code)
+
+
+def test_samples_of_two_value_types_fall_back(tmp_path):
+    """An attribute whose samples were written as two types (through Sdf: a quatd then a quatf): USD holds the
+    lower sample between them rather than interpolating; the bulk read falls back to XformCache."""
+    stage = Usd.Stage.CreateInMemory()
+    layer = stage.GetRootLayer()
+    UsdGeom.Xform.Define(stage, "/X").AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
+    path = "/X.xformOp:orient"
+    layer.SetTimeSample(path, 0, Gf.Quatd(1, 0, 0, 0))
+    layer.GetAttributeAtPath(path).SetInfo("typeName", "quatf")
+    layer.SetTimeSample(path, 10, Gf.Quatf(0, 0, 0, 1))
+    layer.GetAttributeAtPath(path).SetInfo("typeName", "quatd")
+    define_mesh(stage, "/X/M", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [3], [0, 1, 2])
+    layer.Export(str(tmp_path / "mixed.usdc"))
+    assert_bulk_matches(Usd.Stage.Open(str(tmp_path / "mixed.usdc")), ["/X"], [0.0, 5.0, 10.0], fast=[False])
+
+
+def test_ill_conditioned_inverse_matrix_op_falls_back():
+    """``!invert!xformOp:transform`` of a matrix whose inverse USD computes differently from numpy (condition
+    number 1e8): read by XformCache."""
+    stage = Usd.Stage.CreateInMemory()
+    xf = UsdGeom.Xform.Define(stage, "/X")
+    op = xf.AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 0)
+    op.Set(Gf.Vec3d(1, 0, 0), 1)
+    q1, q2 = Gf.Quatd(0.3, 0.5, -0.7, 0.2).GetNormalized(), Gf.Quatd(0.6, -0.2, 0.4, 0.66).GetNormalized()
+    m = Gf.Matrix4d().SetRotate(q1) * Gf.Matrix4d().SetScale(Gf.Vec3d(1e4, 1, 1e-4)) * Gf.Matrix4d().SetRotate(q2)
+    m.SetTranslateOnly(Gf.Vec3d(1.5, -2, 3))
+    xf.AddTransformOp(opSuffix="m", isInverseOp=True).GetAttr().Set(m)
+    assert_bulk_matches(stage, ["/X"], [0.0, 0.5, 1.0], fast=[False])
+
+
+@pytest.mark.parametrize("setting", ["held", "unloaded"])
+def test_workers_read_here_a_stage_not_opened_as_by_default(tmp_path, setting):
+    """Worker processes open the file as ``Usd.Stage.Open`` does: a stage read with held interpolation, or with
+    payloads unloaded, is read in this process alone (every prim the same way)."""
+    path = str(tmp_path / "stage.usda")
+    stage = Usd.Stage.CreateNew(path)
+    for i in range(4):
+        xf = UsdGeom.Xform.Define(stage, f"/X{i}")
+        op = xf.AddTranslateOp()
+        op.Set(Gf.Vec3d(0, 0, 0), 0)
+        op.Set(Gf.Vec3d(10, 0, 0), 10)
+        define_mesh(stage, f"/X{i}/M", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [3], [0, 1, 2])
+    stage.GetRootLayer().Save()
+    opened = Usd.Stage.Open(path, Usd.Stage.LoadNone if setting == "unloaded" else Usd.Stage.LoadAll)
+    if setting == "held":
+        opened.SetInterpolationType(Usd.InterpolationTypeHeld)
+    alone = UsdMeshImport(opened, times=[0, 5, 10], device=DEFAULT_DEVICE, precision="float64", workers=0)
+    shared = UsdMeshImport(opened, times=[0, 5, 10], device=DEFAULT_DEVICE, precision="float64", workers=2)
+    assert np.array_equal(alone._anim_poses, shared._anim_poses)
+    if setting == "held":
+        assert (alone._anim_poses[1, :, 0] == 0.0).all()  # held at the sample of time 0

@@ -133,6 +133,8 @@ def read_shared(stage: Usd.Stage, prims: list, paths: list[str], times: np.ndarr
     layer = stage.GetRootLayer()
     workers = min(workers, len(prims))
     clean = layer.realPath and not any(x.dirty for x in stage.GetUsedLayers()) and stage.GetSessionLayer().empty
+    # A worker opens the file with the defaults: linear interpolation, every payload loaded, no population mask.
+    clean = clean and _opened_as_by_default(stage)
     if workers <= 1 or not clean:
         return xforms.read_world_poses(stage, prims, times, paths=paths, info=info, progress=progress)
     chunks = [c.tolist() for c in np.array_split(np.arange(len(paths)), workers) if c.size]
@@ -143,6 +145,18 @@ def read_shared(stage: Usd.Stage, prims: list, paths: list[str], times: np.ndarr
     parts = [mine, *parts]
     return xforms.WorldPoses(*(np.concatenate([getattr(p, name) for p in parts], axis=axis) for name, axis in
                                (("first", 0), ("poses", 1), ("scale", 1), ("ok", 0), ("finite", 1), ("fast", 0))))
+
+
+def _opened_as_by_default(stage: Usd.Stage) -> bool:
+    """Whether ``stage`` reads as ``Usd.Stage.Open(its file)`` does: linear interpolation, every payload loaded,
+    no population mask (a worker process opens the file so)."""
+    from pxr import Usd
+
+    if stage.GetInterpolationType() != Usd.InterpolationTypeLinear:
+        return False
+    if not stage.GetPopulationMask().IncludesSubtree("/"):
+        return False
+    return stage.GetLoadRules().IsLoadedWithAllDescendants("/")
 
 
 def read_poses(task: tuple) -> xforms.WorldPoses:

@@ -24,8 +24,14 @@ time code where USD's own computation can be reproduced:
   (``Usd_Interpolate``), held or linear (component-wise in the value's own precision, rounded as
   ``GfLerp`` rounds; quaternions by ``GfSlerp``, for ``quatf`` with its float arithmetic and the C
   library's ``sinf``); before the first and after the last sample the end value is held. Half values
-  that would need interpolating, value blocks, values of an unexpected type and inverse single-axis
-  scales (which USD 26.11 negates) fall back.
+  that would need interpolating, value blocks, values of an unexpected type (every sample is checked:
+  USD holds rather than interpolates between samples of two types), inverse single-axis scales (which
+  USD 26.11 negates) and inverse matrix ops whose linear part is ill-conditioned (condition number above
+  1e3, where ``GfMatrix4d::GetInverse`` and numpy's inverse part) fall back. Two limits: scalar samples
+  written as two precisions through ``Sdf`` (a double and a float) look alike from Python and are
+  interpolated; and the static matrices between an object and its animated ancestor are multiplied
+  together before the animated one, so where their translations cancel (1e7 and -1e7) the rounding
+  differs from USD's by about 1e-9 of the matrix.
 * **Reads.** Per attribute, the whole dictionary of time samples (``Sdf`` spec ``GetInfo``) when the
   time codes asked for are at least :data:`WHOLE_READ_SHARE` of its samples, else the samples the
   time codes need one by one (``QueryTimeSample``; ``GetBracketingTimeSamplesForPath`` for a time code
@@ -410,7 +416,10 @@ class _Reader:
                         got[k] = query(path, k)
             keys = tuple(sorted(got))
             values = [got[k] for k in keys]
-        return keys, values if values and type(values[0]) is self.values[type_name] else None
+        # Every sample of the expected type: USD interpolates only between samples of one type (it holds the
+        # lower one otherwise), which a crate file written through Sdf can mix.
+        want = self.values[type_name]
+        return keys, values if values and all(type(v) is want for v in values) else None
 
     def evaluate(self, slot: tuple, sources: list, bad: np.ndarray) -> np.ndarray:
         """``(A, F, k)`` float64 values of one time-varying op of ``A`` prims at every time code, from
@@ -475,8 +484,10 @@ class _Reader:
             if kind == "matrix":
                 m = vals.reshape(*vals.shape[:2], 4, 4)
                 proj = ~(m[..., :, 3] == (0.0, 0.0, 0.0, 1.0)).all(axis=(1, 2))
-                if inverse:
-                    proj |= (np.abs(np.linalg.det(m[..., :3, :3])) < 1e-9).any(axis=1)
+                if inverse:  # USD's GfMatrix4d::GetInverse differs from numpy's where the inverse is ill-conditioned
+                    lin = m[..., :3, :3]
+                    proj |= (np.abs(np.linalg.det(lin)) < 1e-9).any(axis=1)
+                    proj |= ~(np.linalg.cond(np.where(proj[:, None, None, None], np.eye(3), lin)) <= 1e3).all(axis=1)
                 bad |= proj
                 vals = np.where(proj[:, None, None], np.eye(4).ravel(), vals)
             ops.append(op_transform(op_type, inverse, vals))
