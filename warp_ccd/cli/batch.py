@@ -14,12 +14,20 @@ import os
 import sys
 from collections.abc import Callable
 
-from .common import CliError, check_options, init_warp, pending_outputs, quiet_warp, require_usd, resolve_device
+from .common import (
+    REPORT_STDOUT,
+    CliError,
+    check_arguments,
+    check_options,
+    init_warp,
+    pending_outputs,
+    quiet_warp,
+    refuse_overwriting,
+    require_usd,
+    resolve_device,
+)
 
 __all__ = ["check_batch"]
-
-REPORT_STDOUT = "-"
-
 
 def _overlay_paths(files: list[str], folder: str) -> list[str]:
     """``folder/<name>_overlay.usd`` per file; names made unique with the parent folder's name where they repeat."""
@@ -41,7 +49,6 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
     Returns:
         The worst exit status over the files, and with ``--report -`` the JSON text (else None).
     """
-    from ..output import same_file
     from ..usd.batch import check_many
     from ..usd.overlay import prepare_overlay
 
@@ -50,17 +57,11 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
     try:
         if args.preview is not None:
             raise ValueError("--preview is for one file checked in one process (without --ray)")
-        if args.min_distance > 0.0 and not args.continuous:
-            raise ValueError("--min-distance is an option of --continuous")
-        if (args.set_a is None) != (args.set_b is None):
-            raise ValueError("--set-a and --set-b go together: only pairs of one prim of each set are checked")
         if args.workers is not None and args.ray is None:
             raise ValueError("--workers is an option of --ray")
-        outputs = [p for p in (None if to_stdout else args.report, args.usd_out) if p is not None]
-        for out in outputs:
-            for f in files:
-                if same_file(out, f):
-                    raise ValueError(f"{out} is one of the files to check: it would be written over")
+        inputs = [("one of the files to check", f) for f in files]
+        refuse_overwriting(inputs, [(flag, path) for flag, path in (("--report", None if to_stdout else args.report),
+                                                                    ("--usd-out", args.usd_out)) if path is not None])
         if args.report is not None and not to_stdout:
             from ..output import check_output_path
 
@@ -71,11 +72,7 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
                 if os.path.exists(args.usd_out) and not os.path.isdir(args.usd_out):
                     raise ValueError(f"--usd-out {args.usd_out}: with several files, a folder for their overlays")
                 overlays = _overlay_paths(files, args.usd_out)
-                for path in overlays:
-                    for f in files:
-                        if same_file(path, f):
-                            raise ValueError(f"--usd-out: {path} is one of the files to check: it would be written "
-                                             "over (write the overlays to another folder)")
+                refuse_overwriting(inputs, [("--usd-out's overlay", path) for path in overlays])
                 try:
                     os.makedirs(args.usd_out, exist_ok=True)
                 except OSError as exc:
@@ -85,6 +82,7 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
 
                 validate_stage_path(args.usd_out)
                 overlays = [args.usd_out]
+        check_arguments(args)
     except ValueError as exc:
         raise fail(str(exc)) from None
     require_usd(fail)
@@ -113,13 +111,11 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
     with pending_outputs(fail) as (pending, lines):
         if several:
             if to_stdout:
-                import json
-
-                text = json.dumps(batch.to_json(), indent=1) + "\n"
+                text = batch.json_text()
             elif args.report is not None:
                 pending.append(batch.prepare_json(args.report))
                 lines.append("  report : {}")
-        elif batch.files[0].report is not None:
+        else:  # one file: it has its report (its failure ended the command above)
             report = batch.files[0].report
             if to_stdout:
                 text = report.json_text()

@@ -47,12 +47,15 @@ from .common import (
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_USAGE,
+    REPORT_STDOUT,
     CliError,
     OneLineParser,
+    check_arguments,
     check_options,
     init_warp,
     pending_outputs,
     quiet_warp,
+    refuse_overwriting,
     require_usd,
     resolve_device,
     uncached_modules,
@@ -409,10 +412,6 @@ def _run_demo(args) -> int:
     return EXIT_OK
 
 
-REPORT_STDOUT = "-"
-"""``--report -``: the JSON report on standard output."""
-
-
 def _run_check(args) -> int:
     """``check``; with ``--report -``, everything but the JSON report printed on stderr, the report on
     stdout once every file output is in place (nothing on stdout after an error)."""
@@ -452,9 +451,9 @@ def _check(args) -> tuple[int, str | None]:
                if path is not None]
     # Every destination is checked before the stage is read; nothing is written on an error.
     try:
-        _refuse_overwriting([("the input", args.stage)], outputs)
+        refuse_overwriting([("the input", args.stage)], outputs)
         for i, output in enumerate(outputs):
-            _refuse_overwriting([(f"the {flag} file", path) for flag, path in outputs[:i]], [output])
+            refuse_overwriting([(f"the {flag} file", path) for flag, path in outputs[:i]], [output])
         if args.report is not None and not to_stdout:
             from ..output import check_output_path
 
@@ -469,15 +468,7 @@ def _check(args) -> tuple[int, str | None]:
             if validate_preview_path(args.preview)[1] != ".png":
                 raise ValueError(f"cannot write {args.preview}: the preview of a check is one picture (use .png)")
         frames = _frames(args.frames)
-        if args.min_distance > 0.0 and not args.continuous:
-            raise ValueError("--min-distance is an option of --continuous")
-        if (args.set_a is None) != (args.set_b is None):
-            given, other = ("--set-a", "--set-b") if args.set_b is None else ("--set-b", "--set-a")
-            raise ValueError(f"{given} needs {other}: only pairs of one prim of each set are checked")
-        from ..usd.filters import read_pair_file
-
-        for path in args.ignore_pairs or ():  # read again by the check: here, its errors come first
-            read_pair_file(path)
+        check_arguments(args)
     except ValueError as exc:
         raise fail(str(exc)) from None
     require_usd(fail)
@@ -491,7 +482,7 @@ def _check(args) -> tuple[int, str | None]:
         stage = open_stage(args.stage)
         missing = missing_layers(stage)
         # A layer the stage uses (or one it names but cannot open) is an input too.
-        _refuse_overwriting([(f"a layer of {args.stage}", p) for p in layer_files(stage)]
+        refuse_overwriting([(f"a layer of {args.stage}", p) for p in layer_files(stage)]
                             + [(f"an asset {args.stage} uses", p) for p in missing], outputs)
         require_layers(stage, args.allow_missing, missing)
         device = resolve_device(args.device)
@@ -568,22 +559,6 @@ def _looks_like_file(text: str) -> bool:
     from ..usd.export import STAGE_EXTENSIONS
 
     return os.path.exists(text) or text.lower().endswith(tuple(STAGE_EXTENSIONS + (".usdz",))) or "*" in text
-
-
-def _refuse_overwriting(inputs, outputs) -> None:
-    """Raises ValueError when an output names the same file as an input (or an earlier output).
-
-    Args:
-        inputs: ``(what, path)`` of the files that must not be written.
-        outputs: ``(option, path)`` of the destinations.
-    """
-    from ..output import same_file
-
-    for flag, out in outputs:
-        for what, path in inputs:
-            if same_file(out, path):
-                where = "" if os.path.realpath(path) == os.path.abspath(out) else f" ({os.path.realpath(path)})"
-                raise ValueError(f"{flag} {out} is {what}{where}: it would be written over")
 
 
 def _run_bench(argv: list[str]) -> int:

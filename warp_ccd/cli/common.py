@@ -13,9 +13,9 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterator
 
-__all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "CliError",
-           "OneLineParser", "check_options", "flat_values", "init_warp", "pending_outputs", "quiet_warp", "require_usd",
-           "resolve_device", "uncached_modules"]
+__all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "REPORT_STDOUT",
+           "CliError", "OneLineParser", "check_arguments", "check_options", "flat_values", "init_warp",
+           "pending_outputs", "quiet_warp", "refuse_overwriting", "require_usd", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -196,3 +196,37 @@ def require_usd(fail: Callable[[str], CliError]) -> None:
         import pxr  # noqa: F401
     except ImportError:
         raise fail("usd-core is not installed (pip install usd-core)") from None
+
+
+REPORT_STDOUT = "-"
+"""``--report -``: the JSON report on standard output."""
+
+
+def refuse_overwriting(inputs: list[tuple[str, str]], outputs: list[tuple[str, str]]) -> None:
+    """Raises ValueError when an output names the same file as an input (or an earlier output).
+
+    Args:
+        inputs: ``(what, path)`` of the files that must not be written.
+        outputs: ``(option, path)`` of the destinations.
+    """
+    from ..output import same_file
+
+    for flag, out in outputs:
+        for what, path in inputs:
+            if same_file(out, path):
+                where = "" if os.path.realpath(path) == os.path.abspath(out) else f" ({os.path.realpath(path)})"
+                raise ValueError(f"{flag} {out} is {what}{where}: it would be written over")
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Raises ValueError for ``check`` options that do not go together, or an ``--ignore-pairs`` file that cannot
+    be read (read again by the check: here, its errors come before any stage is read)."""
+    if args.min_distance > 0.0 and not args.continuous:
+        raise ValueError("--min-distance is an option of --continuous")
+    if (args.set_a is None) != (args.set_b is None):
+        given, other = ("--set-a", "--set-b") if args.set_b is None else ("--set-b", "--set-a")
+        raise ValueError(f"{given} needs {other}: only pairs of one prim of each set are checked")
+    from ..usd.filters import read_pair_file
+
+    for path in args.ignore_pairs or ():
+        read_pair_file(path)
