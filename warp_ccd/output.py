@@ -19,7 +19,7 @@ import os
 import tempfile
 import weakref
 
-__all__ = ["PendingFile", "check_output_path", "commit_all", "same_file"]
+__all__ = ["PendingFile", "check_output_path", "commit_all", "prepare_text", "same_file"]
 
 
 def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str, str]:
@@ -129,6 +129,28 @@ class PendingFile:
         """Removes the temporary file; the destination is left as it was."""
         self._cleanup()
         self.done = True
+
+
+def prepare_text(path, text: str, extensions: tuple[str, ...], kind: str) -> PendingFile:
+    """``text`` written to a temporary file beside ``path`` (checked with :func:`check_output_path`), not yet
+    in place.
+
+    Returns:
+        The :class:`PendingFile`: :meth:`PendingFile.commit` moves it to ``path``, :meth:`PendingFile.discard`
+        removes it.
+
+    Raises:
+        ValueError: ``path`` is not a writable destination of one of ``extensions``.
+    """
+    full, _ = check_output_path(path, extensions, kind)
+    pending = PendingFile(full)
+    try:
+        with open(pending.temp_path, "w", encoding="utf-8") as fh:
+            fh.write(text)
+    except BaseException:
+        pending.discard()
+        raise
+    return pending
 
 
 def _new_file_mode(path: str) -> int:

@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from .. import __version__
-from ..output import PendingFile, check_output_path
+from ..output import PendingFile, check_output_path, prepare_text
 from .methods import REFERENCE, CaseResult
 
 __all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "RESULTS", "BenchReport", "environment", "git_commit", "write_json"]
@@ -98,12 +98,7 @@ def write_json(path: str, document: dict) -> None:
     Raises:
         ValueError: ``path`` is not a writable ``.json`` destination.
     """
-    full, _ = check_output_path(path, JSON_EXTENSIONS, "JSON")
-    pending = PendingFile(full)
-    with open(pending.temp_path, "w") as f:
-        json.dump(document, f, indent=1)
-        f.write("\n")
-    pending.commit()
+    prepare_text(path, json.dumps(document, indent=1) + "\n", JSON_EXTENSIONS, "JSON").commit()
 
 
 class BenchReport:

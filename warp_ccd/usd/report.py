@@ -17,7 +17,7 @@ from functools import cache
 import numpy as np
 
 from .._typing import PathLike
-from ..output import PendingFile, check_output_path
+from ..output import PendingFile, prepare_text
 from .clearance import SoftClashes, clearance_json, clearance_summary, frame_clearance_json
 from .duplicates import REL_TOL, duplicates_json, duplicates_summary, frame_duplicates_json
 from .filters import FilterSummary
@@ -326,16 +326,7 @@ class CheckReport:
             The :class:`~warp_ccd.output.PendingFile`: :meth:`~warp_ccd.output.PendingFile.commit`
             moves it to ``path``, :meth:`~warp_ccd.output.PendingFile.discard` removes it.
         """
-        full, _ = check_output_path(path, (".json",), "report")
-        text = self.json_text()
-        pending = PendingFile(full)
-        try:
-            with open(pending.temp_path, "w", encoding="utf-8") as fh:
-                fh.write(text)
-        except BaseException:
-            pending.discard()
-            raise
-        return pending
+        return prepare_text(path, self.json_text(), (".json",), "report")
 
     def summary(self, top: int = 10) -> str:
         """A few lines for a terminal: frames with contacts, USD face pairs per frame, the prim
