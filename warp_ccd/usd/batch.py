@@ -36,8 +36,9 @@ from typing import Any
 import numpy as np
 
 from .._typing import PathLike
-from ..output import PendingFile, check_output_path
+from ..output import PendingFile, prepare_text
 from .check import check_usd as _CHECK_USD  # its signature: the options check_many passes on
+from .check import checked_options
 from .report import SCHEMA_VERSION, CheckReport
 from .tasks import EXIT_BAD_INPUT, EXIT_CLEAN, EXIT_FINDINGS, EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
@@ -110,19 +111,15 @@ class BatchReport:
         return {"schema_version": SCHEMA_VERSION, "exit_status": self.exit_status, "engine": self.engine,
                 "workers": self.workers, "seconds": self.seconds, "files": [f.to_json() for f in self.files]}
 
-    def prepare_json(self, path: PathLike) -> PendingFile:
-        """Writes :meth:`to_json` to a temporary file beside ``path`` (``.json``), not yet in place."""
+    def json_text(self) -> str:
+        """:meth:`to_json` as the text the report file holds (what ``--report -`` prints), newline-terminated."""
         import json
 
-        full, _ = check_output_path(path, (".json",), "report")
-        pending = PendingFile(full)
-        try:
-            with open(pending.temp_path, "w", encoding="utf-8") as fh:
-                fh.write(json.dumps(self.to_json(), indent=1) + "\n")
-        except BaseException:
-            pending.discard()
-            raise
-        return pending
+        return json.dumps(self.to_json(), indent=1) + "\n"
+
+    def prepare_json(self, path: PathLike) -> PendingFile:
+        """Writes :meth:`to_json` to a temporary file beside ``path`` (``.json``), not yet in place."""
+        return prepare_text(path, self.json_text(), (".json",), "report")
 
     def summary(self, top: int = 10) -> str:
         """Each file's summary (or its error), then one line for the batch."""
@@ -240,11 +237,17 @@ def merge_reports(parts: Sequence[CheckReport], skip: Sequence[int] = ()) -> Che
     return merged
 
 
-def _file_results(paths: Sequence[str], outcomes: Sequence[TaskOutcome], errors: dict[int, str]) -> list[FileResult]:
-    """Per file: its parts merged, or the error of its earliest failing part (the one a serial run meets first)."""
+def _by_file(outcomes: Sequence[TaskOutcome]) -> dict[int, list[TaskOutcome]]:
+    """The outcomes of each file, by its index in the batch."""
     by_file: dict[int, list[TaskOutcome]] = {}
     for o in outcomes:
         by_file.setdefault(o.task.file, []).append(o)
+    return by_file
+
+
+def _file_results(paths: Sequence[str], outcomes: Sequence[TaskOutcome], errors: dict[int, str]) -> list[FileResult]:
+    """Per file: its parts merged, or the error of its earliest failing part (the one a serial run meets first)."""
+    by_file = _by_file(outcomes)
     results = []
     for i, path in enumerate(paths):
         if i in errors:
@@ -264,11 +267,8 @@ def _file_results(paths: Sequence[str], outcomes: Sequence[TaskOutcome], errors:
 def _one_precision(outcomes: list[TaskOutcome], options: dict,
                    run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
     """Runs again in float64 the float32 parts of a file whose other parts needed float64 (as one run would)."""
-    by_file: dict[int, list[TaskOutcome]] = {}
-    for o in outcomes:
-        if o.report is not None:
-            by_file.setdefault(o.task.file, []).append(o)
-    again = [o for parts in by_file.values() if len({o.report.precision for o in parts}) > 1
+    reported = [[o for o in parts if o.report is not None] for parts in _by_file(outcomes).values()]
+    again = [o for parts in reported if len({o.report.precision for o in parts}) > 1
              for o in parts if o.report.precision == "float32"]
     if not again:
         return outcomes
@@ -281,10 +281,7 @@ def _whole_files(outcomes: list[TaskOutcome], options: dict,
     """Checks whole, as one task, the files whose parts found different objects, or where a part found bad input (a
     prim visible, or an instance present, from a later time code on: the import reads them at its first time code,
     as one run does, so a pattern or set may match nothing in a part): the one-run result or error."""
-    by_file: dict[int, list[TaskOutcome]] = {}
-    for o in outcomes:
-        by_file.setdefault(o.task.file, []).append(o)
-    again = [parts[0].task for parts in by_file.values()
+    again = [parts[0].task for parts in _by_file(outcomes).values()
              if len(parts) > 1 and (any(o.status == EXIT_BAD_INPUT for o in parts)
                                     or len({tuple(o.report.object_path) for o in parts if o.report}) > 1)]
     if not again:
@@ -294,22 +291,35 @@ def _whole_files(outcomes: list[TaskOutcome], options: dict,
     return [o for o in outcomes if o.task.file not in files] + run(whole, options)
 
 
+class _InProcess:
+    """The engine of a check without Ray: the tasks run here, one after the other."""
+
+    def run(self, tasks: Sequence[CheckTask], options: dict,
+            done: Callable[[TaskOutcome], None] | None = None) -> list[TaskOutcome]:
+        """Runs ``tasks`` in order; ``done`` is called as each ends."""
+        out = []
+        for t in tasks:
+            out.append(run_task(t, options))
+            if done is not None:
+                done(out[-1])
+        return out
+
+    def close(self) -> None:
+        """Nothing to end."""
+
+
 def _check_options(options: dict) -> None:
     """Raises ValueError for an option :func:`~warp_ccd.usd.check.check_usd` does not take, or a bad value of
-    the numbers and precision (before any file is read, rather than as every file's error)."""
+    its numbers and precision (:func:`~warp_ccd.usd.check.checked_options`: before any file is read, rather than
+    as every file's error)."""
     import inspect
-
-    from ..options import number_option
 
     known = set(inspect.signature(_CHECK_USD).parameters) - {"stage_or_path"}
     unknown = sorted(set(options) - known)
     if unknown:
         raise ValueError(f"check_many: unknown option {unknown[0]!r} (check_usd's keyword arguments)")
-    for name in ("min_depth", "min_distance", "clearance"):
-        if name in options:
-            number_option(name, options[name], low=0.0)
-    if options.get("precision", "float32") not in ("float32", "float64"):
-        raise ValueError(f"precision: expected 'float32' or 'float64', got {options['precision']!r}")
+    names = set(inspect.signature(checked_options).parameters) - {"read_workers"}
+    checked_options(**{k: v for k, v in options.items() if k in names})
 
 
 def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray: bool = False,
@@ -375,7 +385,7 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
         engine = RayEngine(ray_address, workers)
         count = engine.workers
     else:
-        engine, count = None, workers or 1
+        engine, count = _InProcess(), workers or 1
         options["read_workers"] = read_workers
     bar = None
     try:
@@ -387,24 +397,11 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
         def done(outcome: TaskOutcome) -> None:
             bar.update(outcome.task.frames or 1)
 
-        if engine is not None:
-            outcomes = engine.run(tasks, options, done)
-            outcomes = _whole_files(outcomes, options, lambda ts, opts: engine.run(ts, opts))
-            outcomes = _one_precision(outcomes, options, lambda ts, opts: engine.run(ts, opts))
-        else:
-            def run(ts: list[CheckTask], opts: dict, report: Callable | None = None) -> list[TaskOutcome]:
-                out = []
-                for t in ts:
-                    out.append(run_task(t, opts))
-                    if report is not None:
-                        report(out[-1])
-                return out
-
-            outcomes = _one_precision(_whole_files(run(tasks, options, done), options, run), options, run)
+        outcomes = engine.run(tasks, options, done)
+        outcomes = _one_precision(_whole_files(outcomes, options, engine.run), options, engine.run)
     finally:
         if bar is not None:
             bar.close()
-        if engine is not None:
-            engine.close()
+        engine.close()
     return BatchReport(_file_results(files, outcomes, errors), "ray" if use_ray else "serial", count,
                        {"total": round(time.perf_counter() - start, 4)})

@@ -69,6 +69,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._typing import DeviceLike, PathLike
+from ..geometry.precision import precision_types
 from ..geometry.triangle import TOLERANCE
 from ..options import integer_option, number_option
 from ..stages.clearance import CLEARANCE_MAX
@@ -85,15 +86,15 @@ if TYPE_CHECKING:
     from pxr import Usd
 
 __all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts",
-           "check_usd", "prepare_overlay", "report_schema", "write_overlay"]
+           "check_usd", "checked_options", "prepare_overlay", "report_schema", "write_overlay"]
 
 
 def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
-                    time_code: float, duplicates: bool = False, num_faces: int = 0) -> FrameContacts:
+                    time_code: float, duplicates: bool, num_faces: int) -> FrameContacts:
     """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
     penetrating ones kept, the others counted. With ``duplicates``, the object pairs whose meshes
     coincide are found among the rows' pairs and their rows left out. ``num_faces``: more than the largest
-    USD face index (0: found here)."""
+    USD face index."""
     rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
     seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
     dup = None
@@ -110,7 +111,6 @@ def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touchin
     if len(faces) and seg is None:
         # By (a, b, fa, fb), each face pair once with its deepest crossing (which of its triangle
         # pairs is deepest does not show without segments): one sort of one key where it fits in 63 bits.
-        num_faces = num_faces or int(imp.triangle_face.max(initial=-1)) + 1
         faces, depth = _deepest_per_face_pair(faces, depth, imp.scene.num_objects, num_faces)
     elif len(faces):
         # By (a, b, fa, fb), deepest first, then by triangles: the same row (and segment) on every
@@ -142,6 +142,29 @@ def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: in
         p, f = pair[order], face[order]
         starts = np.flatnonzero(np.r_[True, (p[1:] != p[:-1]) | (f[1:] != f[:-1])])
     return faces[order][starts], np.maximum.reduceat(depth[order], starts)
+
+
+def checked_options(*, min_depth: float = 0.0, min_distance: float = 0.0, clearance: float = 0.0,
+                    continuous: bool = False, precision: str = "float32", read_workers: int | None = None) -> float:
+    """Checks :func:`check_usd`'s numbers and precision before anything is read.
+
+    Returns:
+        ``clearance`` as a float.
+
+    Raises:
+        ValueError: a negative depth or distance, a clearance beyond
+            :data:`~warp_ccd.stages.clearance.CLEARANCE_MAX`, ``min_distance`` without ``continuous``, an
+            unknown precision, a negative number of readers.
+    """
+    number_option("min_depth", min_depth, low=0.0)
+    if read_workers is not None:
+        integer_option("read_workers", read_workers, low=0)
+    number_option("min_distance", min_distance, low=0.0)
+    clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
+    if min_distance > 0.0 and not continuous:
+        raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
+    precision_types(precision)
+    return clearance
 
 
 def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[float] | None = None,
@@ -221,13 +244,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     from .importer import UsdMeshImport
     from .stage import open_stage, require_layers, stage_time_codes
 
-    number_option("min_depth", min_depth, low=0.0)
-    if read_workers is not None:
-        integer_option("read_workers", read_workers, low=0)
-    number_option("min_distance", min_distance, low=0.0)
-    clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
-    if min_distance > 0.0 and not continuous:
-        raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
+    clearance = checked_options(min_depth=min_depth, min_distance=min_distance, clearance=clearance,
+                                continuous=continuous, precision=precision, read_workers=read_workers)
     filters = PairFilters(ignore_pairs=ignore_pairs, usd_filters=usd_filters, set_a=set_a, set_b=set_b,
                           allow_missing=allow_missing)
     t = time.perf_counter()

@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import time
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -53,8 +52,6 @@ class TaskOutcome:
     report: CheckReport | None = None
     error: str | None = None
     status: int = EXIT_CLEAN
-    seconds: float = 0.0
-
 
 
 def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
@@ -70,7 +67,6 @@ def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
     from ..geometry.precision import PrecisionWarning
     from .check import check_usd
 
-    t = time.perf_counter()
     opts = dict(options)
     if task.times is not None:
         opts["frames"] = task.times
@@ -79,10 +75,9 @@ def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
             warnings.simplefilter("ignore", PrecisionWarning)  # the report carries it (precision_note)
             report = check_usd(task.path if stage is None else stage, **opts)
     except ValueError as exc:
-        return TaskOutcome(task, error=str(exc), status=EXIT_BAD_INPUT, seconds=time.perf_counter() - t)
+        return TaskOutcome(task, error=str(exc), status=EXIT_BAD_INPUT)
     except Exception as exc:  # noqa: BLE001 (a file's failure is reported; the others go on)
-        return TaskOutcome(task, error=f"internal error: {type(exc).__name__}: {exc}", status=EXIT_INTERNAL,
-                           seconds=time.perf_counter() - t)
+        return TaskOutcome(task, error=f"internal error: {type(exc).__name__}: {exc}", status=EXIT_INTERNAL)
     report.source = None  # plain data, as it would come back from another process
-    return TaskOutcome(task, report, seconds=time.perf_counter() - t)
+    return TaskOutcome(task, report)
 
