@@ -219,7 +219,6 @@ class UsdMeshImport:
         self.skipped: list[tuple[str, str]] = []
         self._meshes: list[MeshData] = []
         self._mesh_by_source: dict[str, int] = {}
-        self._pending: list = []
         self._instancers: list[_Instancer] = []
         self._xinfo = XformInfo(self.stage)
         self._workers = workers
@@ -327,7 +326,7 @@ class UsdMeshImport:
     def _mesh_datas(self, prims: list) -> list[int]:
         """:meth:`_mesh_data` of ``(prim, path, authored property names or None)``, the new ones read together
         (:func:`~warp_ccd.usd.meshes.read_meshes`: the first at fault raises, in this order)."""
-        out, new = [], {}
+        out, new, pending = [], {}, []
         for prim, path, names in prims:
             source = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
             key = path if source is prim else str(source.GetPath())
@@ -336,10 +335,9 @@ class UsdMeshImport:
                 k = new.get(key)
                 if k is None:
                     k = new[key] = len(self._meshes) + len(new)
-                    self._pending.append((source, path, names))
+                    pending.append((source, path, names))
             out.append(k)
-        if self._pending:
-            pending, self._pending = self._pending, []
+        if pending:
             self._meshes += read_meshes([p[0] for p in pending], [p[1] for p in pending], self._codes[0],
                                         [p[2] for p in pending] if all(p[2] is not None for p in pending) else None)
             self._mesh_by_source.update(new)
