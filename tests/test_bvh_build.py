@@ -51,20 +51,48 @@ def assert_same_trees(b: TreeBuild, meshes, leaf_size: int, cut_depth: int) -> N
             assert np.array_equal(cut, want.cut(depth + deep)), (s, deep)
 
 
+@pytest.fixture(params=["thread", "block"])
+def finish(request):
+    """How the build finishes its small subtrees: one thread each, or one thread block each (on the
+    CPU with Warp's CPU blocks on, so that a block has its lanes)."""
+    saved = wp.config.enable_cpu_blocks
+    wp.config.enable_cpu_blocks = request.param == "block" or saved
+    yield request.param
+    wp.config.enable_cpu_blocks = saved
+
+
 @pytest.mark.parametrize("leaf_size", [1, 2, 3, 7])
 @pytest.mark.parametrize("small, presort", [(None, None), (4, None), (16, None), (None, False), (None, True)])
-def test_kernels_build_the_reference_trees(device, leaf_size, small, presort):
+def test_kernels_build_the_reference_trees(device, leaf_size, small, presort, finish):
     """Sizes from 1 to 400 triangles (all the layouts of small counts, ties among centroids), split
-    level by level or by one thread a subtree, presorted or sorted by insertion: bit for bit the
-    trees of the numpy reference."""
+    level by level, then by one thread or one block a subtree, presorted or sorted by insertion: bit
+    for bit the trees of the numpy reference."""
     rng = np.random.default_rng(leaf_size)
-    counts = [1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 16, 17, 31, 33, 63, 64, 65, 100, 255, 400]
+    counts = [1, 2, 3, 4, 5, 6, 7, 8, 9, 15, 16, 17, 31, 33, 63, 64, 65, 100, 255, 256, 257, 400]
     if presort is False:
         counts = [c for c in counts if c <= 100]  # insertion sorts of unsorted lists: keep them short
     meshes = [soup(rng, m, ties=k % 3 == 1) for k, m in enumerate(counts + counts[::3])]  # some counts twice
     for cut_depth in (0, 3):
-        b = built(meshes, device, leaf_size=leaf_size, cut_depth=cut_depth, small=small, presort=presort)
+        b = built(meshes, device, leaf_size=leaf_size, cut_depth=cut_depth, small=small, presort=presort,
+                  finish=finish)
+        assert b.finish == finish
         assert_same_trees(b, meshes, leaf_size, cut_depth)
+
+
+def test_block_dims_follow_the_subtrees(device, finish):
+    """A block has as many threads as the largest subtree needs (a warp at least); a scene of small
+    shapes finished by blocks needs no lists, no sorts, no level kernels."""
+    rng = np.random.default_rng(9)
+    if finish != "block":
+        pytest.skip("blocks only")
+    for counts, dim, levels in (([5, 20], 32, 0), ([33, 2], 64, 0), ([200, 80], 256, 0), ([300, 20], 256, 1),
+                                ([5000], 256, 5)):
+        meshes = [soup(rng, m) for m in counts]
+        b = built(meshes, device, finish=finish)
+        assert (b.block_dim, b.num_global_levels, b.presort) == (dim, levels, levels > 0)
+        assert_same_trees(b, meshes, 1, 3)
+    with pytest.raises(ValueError, match="at most 256"):
+        built([soup(rng, 10)], device, finish=finish, small=512)
 
 
 def test_shapes_of_one_count_share_a_layout(device):
@@ -75,23 +103,38 @@ def test_shapes_of_one_count_share_a_layout(device):
     assert_same_trees(b, meshes, 1, 3)
 
 
-def test_single_big_shape_levels(device):
+def test_single_big_shape_levels(device, finish):
     """One shape of 5,000 triangles split over many levels by the level-by-level kernels."""
     rng = np.random.default_rng(3)
     meshes = [soup(rng, 5000)]
-    b = built(meshes, device, small=8)
+    b = built(meshes, device, small=8, finish=finish)
     assert b.num_global_levels == 10
     assert_same_trees(b, meshes, 1, 3)
 
 
-def test_identical_and_degenerate_triangles(device):
-    """All centroids equal (17 copies of one triangle), points and slivers: the order falls back on
-    triangle ids, as numpy's stable sort does."""
+def test_identical_and_degenerate_triangles(device, finish):
+    """All centroids equal (17 copies of one triangle, 300 copies), points and slivers: the order
+    falls back on triangle ids, as numpy's stable sort does."""
     v = np.float32([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 2], [-0.0, -0.0, -0.0]])
     same = (v, np.zeros((17, 3), np.int32) + [0, 1, 2])
+    many = (v, np.zeros((300, 3), np.int32) + [0, 1, 2])
     points = (v, np.array([[3, 3, 3], [4, 4, 4], [0, 0, 0], [4, 4, 4]] * 5, np.int32))
-    b = built([same, points], device, small=4)
-    assert_same_trees(b, [same, points], 1, 3)
+    for small in (4, None):
+        b = built([same, points, many], device, small=small, finish=finish)
+        assert_same_trees(b, [same, points, many], 1, 3)
+
+
+def test_block_finish_needs_cpu_blocks():
+    """On the CPU a block is one lane unless Warp's CPU blocks are on: the build says so."""
+    saved = wp.config.enable_cpu_blocks
+    wp.config.enable_cpu_blocks = False
+    try:
+        with pytest.raises(ValueError, match="enable_cpu_blocks"):
+            built([soup(np.random.default_rng(0), 10)], "cpu", finish="block")
+        with pytest.raises(ValueError, match="finish must be"):
+            built([soup(np.random.default_rng(0), 10)], "cpu", finish="warp")
+    finally:
+        wp.config.enable_cpu_blocks = saved
 
 
 def test_tree_sizes_match_the_reference():

@@ -4,7 +4,9 @@ Three parts, in one process on one device:
 
 * **builds**: every tree of ``S`` distinct shapes of ``m`` triangles (noisy icospheres: 80, 1,280,
   ... 1.3M triangles; perturbed icosahedra for 20) built by the kernels
-  (:class:`~warp_ccd.stages.bvh_build.TreeBuild`, layout then triangle order, as ``SceneBVH`` does),
+  (:class:`~warp_ccd.stages.bvh_build.TreeBuild`, layout then triangle order, as ``SceneBVH`` does;
+  ``kernels`` the default, subtrees finished by a thread block on CUDA, ``kernels_thread`` by one
+  thread each, as before the blocks),
   against Warp's own device builds of the same triangles: one ``wp.Mesh`` (LBVH) for a single
   shape, a ``wp.Bvh`` (LBVH) over all triangle boxes grouped by shape for many; and the numpy
   reference (:func:`~warp_ccd.stages.bvh_reference.build_tree`, shape by shape) where it takes under a few
@@ -45,6 +47,7 @@ from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, 
 from warp_ccd.bench.peers import fcl_bvh
 from warp_ccd.bench.report import environment
 from warp_ccd.bench.timing import synced_ms
+from warp_ccd.stages.bvh_block import BLOCK_SUBTREE
 from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild
 from warp_ccd.stages.bvh_reference import build_tree
 
@@ -98,23 +101,24 @@ def bench_builds(device, cases, repeats: int, smalls: list[int], insertion_max: 
                          "ms_min": lo, "ms_median": med, **extra})
             print(f"{label:>18} {method:<22} min {lo:9.3f} ms  median {med:9.3f} ms", flush=True)
 
-        variants = [(None, None), *[(s, None) for s in smalls]]
-        if triangles <= insertion_max:
-            variants.append((triangles, False))  # each shape one thread, lists sorted by insertion
-        for small, presort in variants:
-            def build(small=small, presort=presort):
+        # (method, finish, small, presort): the default (blocks on CUDA), subtrees of 8 finished by
+        # one thread each (the build before blocks), other subtree sizes, shapes sorted by insertion.
+        variants = [("kernels", None, None, None), ("kernels_thread", "thread", None, None),
+                    *[(f"kernels_small{s}", None, s, None) for s in smalls]]
+        if triangles <= insertion_max:  # each shape one thread, lists sorted by insertion
+            variants.append(("kernels_insertion_sort", "thread", triangles, False))
+        for method, finish, small, presort in variants:
+            def build(finish=finish, small=small, presort=presort):
                 b = TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np, small=small, presort=presort,
-                              device=device)
+                              finish=finish, device=device)
                 b.layout()
                 b.order(scene.shape_vertex, scene.shape_vertex_start)
                 return b
 
-            method = "kernels" if small is None else (f"kernels_small{small}" if presort is None else
-                                                      "kernels_insertion_sort")
             b = build()
             add(method, timed(build, device, repeats), global_levels=b.num_global_levels, presort=b.presort,
-                small=b.small)
-            if small is None:
+                small=b.small, finish=b.finish, block_dim=b.block_dim)
+            if method == "kernels":
                 default_build = build
                 add("kernels_init", timed(lambda: TreeBuild(scene.shape_triangle, scene.shape_triangle_start_np,
                                                             device=device), device, repeats))
@@ -304,7 +308,8 @@ def main(argv=None) -> None:
     p = bench_parser(__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cases", nargs="+", default=["1000x20", "100000x80", "10000x1280", "1x1310720", "60x5120"],
                    help="SHAPESxTRIANGLES (triangles 20 or 20 * 4**k)")
-    p.add_argument("--small", nargs="*", type=int, default=[], help="other subtree sizes finished per thread")
+    p.add_argument("--small", nargs="*", type=int, default=[], help="other sizes of the subtrees finished by a block "
+                   "(by a thread on the CPU)")
     p.add_argument("--insertion-max", type=int, default=80,
                    help="also time shapes of at most this many triangles sorted by insertion, one thread each")
     p.add_argument("--repeats", type=int, default=10)
@@ -318,7 +323,8 @@ def main(argv=None) -> None:
     rng = np.random.default_rng(0)
     cases = [tuple(int(float(x)) for x in c.split("x")) for c in args.cases]
     doc = {"benchmark": "build", **environment(device),
-           "config": {"repeats": args.repeats, "small_subtree": SMALL_SUBTREE, "small": args.small}}
+           "config": {"repeats": args.repeats, "small_subtree": SMALL_SUBTREE, "block_subtree": BLOCK_SUBTREE,
+                      "small": args.small}}
     doc["build_activities"] = []
     doc["builds"] = bench_builds(device, cases, args.repeats, args.small, args.insertion_max, args.reference_limit,
                                  rng, doc["build_activities"])

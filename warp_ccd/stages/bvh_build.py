@@ -18,10 +18,13 @@ batched build cheap:
    shape), partitioned stably level by level (the classic O(m log m) k-d build): a node's side of
    the split is its triangles' rank in the list of its axis. Nodes of more than ``small``
    triangles are split level by level over all shapes at once (a flag kernel, a scan, a scatter:
-   three launches a level); every subtree of at most ``small`` triangles is then finished by one
-   thread (:func:`_finish_kernel`: insertion sort of its three lists, then its splits). On the
-   CPU, where Warp runs a kernel on one thread, whole shapes are finished so, and a scene of shapes
-   of at most 64 triangles builds in three launches and no sort; on CUDA subtrees of 8.
+   three launches a level); every subtree of at most ``small`` triangles is then finished on CUDA
+   by one thread block in shared memory (:mod:`~warp_ccd.stages.bvh_block`, subtrees of up to 256:
+   no lists needed, so a scene of shapes of at most 256 triangles builds from its keys in three
+   launches, no sort), or by one thread (:func:`_finish_kernel`: insertion sort of its three
+   lists, then its splits). On the CPU, where Warp runs a kernel on one thread, whole shapes are
+   finished by a thread, and a scene of shapes of at most 64 triangles builds in three launches
+   and no sort. The radix sorts take one 64-bit key per axis: the shape above the float's bits.
 
 The trees are those of :func:`~warp_ccd.stages.bvh_reference.build_tree`, the numpy reference kept beside
 the kernels: same centroid keys (``(v0 / 4 + v1 / 4) + v2 / 4`` in float32, ties broken by triangle id), same
@@ -47,6 +50,7 @@ import warp as wp
 
 from ..geometry.precision import precision_overloads
 from .buffers import packed_upload, upper_bound
+from .bvh_block import BLOCK_SUBTREE, block_dim_for, finish_blocks
 from .bvh_reference import ShapeTree
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
@@ -294,14 +298,15 @@ def _key_kernel(
     shape_triangle: wp.array[wp.vec3i],
     shape_triangle_start: wp.array[wp.int32],
     num_triangles: int,
+    lists: int,
     # Outputs
     tri_shape: wp.array[wp.int32],
     tri_key: wp.array[wp.vec3],
     tri_list: wp.array[wp.int32],
 ):
-    """One thread per shape triangle: its shape, its centroid key (from ``world_vertex`` at
-    ``shape_world_start[s]`` when that is not -1, else from the shape's own vertices) and its place
-    in the three lists, in triangle order."""
+    """One thread per shape triangle: its centroid key (from ``world_vertex`` at
+    ``shape_world_start[s]`` when that is not -1, else from the shape's own vertices) and, when
+    ``lists`` is 1, its shape and its place in the three lists, in triangle order."""
     g = wp.tid()
     s = upper_bound(shape_triangle_start, 0, shape_triangle_start.shape[0], g) - 1
     idx = shape_triangle[g]
@@ -319,32 +324,31 @@ def _key_kernel(
         b = wp.vec3(shape_vertex[base + idx[1]])
         c = wp.vec3(shape_vertex[base + idx[2]])
     quarter = wp.float32(0.25)
-    tri_shape[g] = s
     tri_key[g] = ((a * quarter + b * quarter) + c * quarter) + wp.vec3(0.0)
-    for axis in range(3):
-        tri_list[axis * num_triangles + g] = g
+    if lists == 1:
+        tri_shape[g] = s
+        for axis in range(3):
+            tri_list[axis * num_triangles + g] = g
 
 
 _KEY = precision_overloads(_key_kernel, lambda s, v, q, t: {"shape_vertex": wp.array[v], "world_vertex": wp.array[v]})
 
 
 @wp.kernel
-def _axis_key_kernel(tri_key: wp.array[wp.vec3], axis: int,
+def _axis_key_kernel(key_bits: wp.array[wp.uint32], tri_shape: wp.array[wp.int32], axis: int,
                      # Outputs
-                     sort_key: wp.array[wp.float32], sort_value: wp.array[wp.int32]):
-    """One thread per triangle: the float key along ``axis`` of the radix sort, triangles as values."""
+                     sort_key: wp.array[wp.uint64], sort_value: wp.array[wp.int32]):
+    """One thread per triangle: the key of the radix sort of the ``axis`` list, its shape in the
+    high 32 bits and its centroid key's float bits made to sort as the floats do in the low 32
+    (``key_bits``: the keys' bits; no -0, no NaN), the triangle as its value."""
     g = wp.tid()
-    sort_key[g] = tri_key[g][axis]
+    bits = key_bits[3 * g + axis]
+    if (bits & wp.uint32(0x80000000)) != wp.uint32(0):
+        bits = ~bits
+    else:
+        bits = bits | wp.uint32(0x80000000)
+    sort_key[g] = (wp.uint64(tri_shape[g]) << wp.uint64(32)) | wp.uint64(bits)
     sort_value[g] = g
-
-
-@wp.kernel
-def _shape_key_kernel(tri_shape: wp.array[wp.int32], sort_value: wp.array[wp.int32],
-                      # Outputs
-                      sort_shape: wp.array[wp.int32]):
-    """One thread per sorted triangle: its shape, the key of the second (stable) sort."""
-    i = wp.tid()
-    sort_shape[i] = tri_shape[sort_value[i]]
 
 
 @wp.kernel
@@ -563,10 +567,15 @@ class TreeBuild:
         cut_depth: least level of the first of the two cuts each layout keeps (see
             :class:`ShapeTree`); big trees cut deeper (:meth:`TreeSizes.cut_depth`).
         cut_triangles: most triangles, about, of a cut's subtree in a big tree (:data:`CUT_TRIANGLES`).
-        small: largest subtree one thread finishes (default :data:`SMALL_SUBTREE` on CUDA, whole
-            shapes on the CPU; at least ``2 * leaf_size``).
-        presort: radix-sort the lists before the splits (default: when some shape has more than
-            :data:`INSERTION_SORT_MAX` triangles; always when some are split level by level).
+        small: largest subtree finished by one block (``finish="block"``, default and at most
+            :data:`~warp_ccd.stages.bvh_block.BLOCK_SUBTREE`) or one thread (default
+            :data:`SMALL_SUBTREE` on CUDA, whole shapes on the CPU); at least ``2 * leaf_size``.
+        presort: radix-sort the lists before the splits (default: when some shape is split level by
+            level, and with ``finish="thread"`` when some shape has more than
+            :data:`INSERTION_SORT_MAX` triangles).
+        finish: ``"block"`` (default on CUDA): each subtree of at most ``small`` triangles finished
+            by a thread block in shared memory (:mod:`~warp_ccd.stages.bvh_block`; on the CPU only
+            with ``wp.config.enable_cpu_blocks``); ``"thread"`` (default on the CPU): by one thread.
         device: Warp device.
 
     Attributes:
@@ -580,7 +589,7 @@ class TreeBuild:
 
     def __init__(self, shape_triangle, shape_triangle_start, *, leaf_size: int = 1, cut_depth: int = 3,
                  cut_triangles: int = CUT_TRIANGLES, small: int | None = None, presort: bool | None = None,
-                 device=None):
+                 finish: str | None = None, device=None):
         self.device = wp.get_device(device)
         d = self.device
         tstart = np.asarray(shape_triangle_start, np.int64)
@@ -593,9 +602,19 @@ class TreeBuild:
                              f"(limit {(2**31 - 1) // 6})")
         self.leaf_size = int(leaf_size)
         self.cut_depth = int(cut_depth)
+        if finish is None:
+            finish = "block" if d.is_cuda else "thread"
+        if finish not in ("block", "thread"):
+            raise ValueError(f"finish must be 'block' or 'thread', got {finish!r}")
+        if finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
+            raise ValueError("finish='block' on the CPU needs wp.config.enable_cpu_blocks (else a block is one lane)")
+        self.finish = finish
         if small is None:
-            small = SMALL_SUBTREE if d.is_cuda else 2**31 - 1
+            small = BLOCK_SUBTREE if finish == "block" else SMALL_SUBTREE if d.is_cuda else 2**31 - 1
         self.small = max(int(small), 2 * self.leaf_size)
+        if finish == "block" and self.small > BLOCK_SUBTREE:
+            raise ValueError(f"small: a block finishes subtrees of at most {BLOCK_SUBTREE} triangles, "
+                             f"got {self.small} (leaf_size {self.leaf_size})")
         self.shape_layout, layout_m = _distinct(m)
         self.layout_sizes = sizes = TreeSizes(layout_m, self.leaf_size)
         self.sizes = sizes.take(self.shape_layout)  # per shape: numpy work per layout, not per shape
@@ -613,8 +632,12 @@ class TreeBuild:
                         axis=1).reshape(-1)
         self.layout_cut_start = offsets(cuts)
         # Levels split over all shapes at once: until the nodes hold at most `small` triangles.
-        self.global_levels = _bit_length((layout_m + self.small - 1) // self.small - 1)[self.shape_layout]
-        self.num_global_levels = int(self.global_levels.max()) if len(m) else 0
+        layout_levels = _bit_length((layout_m + self.small - 1) // self.small - 1)
+        self.global_levels = layout_levels[self.shape_layout]
+        self.num_global_levels = int(layout_levels.max()) if len(m) else 0
+        # Threads a block: the largest subtree left (ceil(m / 2**levels) triangles).
+        largest = int((-(-layout_m // (np.int64(1) << layout_levels))).max()) if len(m) else 1
+        self.block_dim = block_dim_for(largest) if finish == "block" else 0
         subtree_end = np.cumsum(np.int64(1) << self.global_levels)
         self.num_subtrees = int(subtree_end[-1]) if len(m) else 0
 
@@ -637,23 +660,26 @@ class TreeBuild:
         self.inner_node = wp.empty(int(self.layout_inner_start[-1]), dtype=wp.int32, device=d)
         self.cut_node = wp.empty(int(self.layout_cut_start[-1]), dtype=wp.int32, device=d)
         self.tri_order = wp.empty(n, dtype=wp.int32, device=d)
-        # Scratch of the order: keys, two halves of three lists, positions; the sorts' keys and values
-        # share one block with the split sides and their scan (used after the sorts).
-        self._tri_shape = wp.empty(n, dtype=wp.int32, device=d)
-        self._tri_key = wp.empty(n, dtype=wp.vec3, device=d)
-        self._tri_list = wp.empty(6 * n, dtype=wp.int32, device=d)
-        self._tri_pos = wp.empty(3 * n, dtype=wp.int32, device=d)
+        # Scratch of the order: keys; with lists (levels split over all shapes, or subtrees finished
+        # by a thread), each triangle's shape, two halves of three lists, positions, and one block
+        # shared by the sorts' keys and values and, after the sorts, the split sides and their scan.
         if presort is None:
-            presort = len(m) > 0 and int(m.max()) > INSERTION_SORT_MAX
+            presort = finish == "thread" and len(m) > 0 and int(m.max()) > INSERTION_SORT_MAX
         self.presort = bool(presort) or bool(self.num_global_levels)
-        self._side = self._side_before = self._sort_key = self._sort_shape = self._sort_value = None
+        self._lists = self.presort or finish == "thread"
+        ln = n if self._lists else 0
+        self._tri_key = wp.empty(n, dtype=wp.vec3, device=d)
+        self._tri_shape = wp.empty(ln, dtype=wp.int32, device=d)
+        self._tri_list = wp.empty(6 * ln, dtype=wp.int32, device=d)
+        self._tri_pos = wp.empty(3 * ln, dtype=wp.int32, device=d)
+        self._side = self._side_before = self._sort_key = self._sort_value = None
         if self.presort:
             self._scratch = wp.empty(6 * n, dtype=wp.int32, device=d)
             self._side, self._side_before = self._scratch[: 3 * n], self._scratch[3 * n:]
-            self._sort_key = wp.array(ptr=self._scratch.ptr, dtype=wp.float32, shape=(2 * n,), device=d)
-            self._sort_value = self._scratch[2 * n: 4 * n]
-            self._sort_shape = self._scratch[4 * n:] if len(m) > 1 else None
-        self._shape_bits = int(_bit_length(np.array([max(len(m) - 1, 0)]))[0])
+            self._sort_key = wp.array(ptr=self._scratch.ptr, dtype=wp.uint64, shape=(2 * n,), device=d)
+            self._sort_value = self._scratch[4 * n:]
+            self._key_bits = wp.array(ptr=self._tri_key.ptr, dtype=wp.uint32, shape=(3 * n,), device=d)
+        self._sort_bits = 32 + int(_bit_length(np.array([max(len(m) - 1, 0)]))[0])
 
     def layout(self) -> None:
         """Launches the layouts (one thread per node of each distinct triangle count)."""
@@ -687,17 +713,13 @@ class TreeBuild:
         precision = "float64" if shape_vertex.dtype == wp.vec3d else "float32"
         wp.launch(_KEY[precision], dim=n,
                   inputs=[shape_vertex, shape_vertex_start, world_vertex, shape_world_start, self.shape_triangle,
-                          self._tstart, n],
+                          self._tstart, n, int(self._lists)],
                   outputs=[self._tri_shape, self._tri_key, self._tri_list], device=d)
         if self.presort:
             for axis in range(3):  # each list sorted by shape, then key (stable: then by triangle)
-                wp.launch(_axis_key_kernel, dim=n, inputs=[self._tri_key, axis],
+                wp.launch(_axis_key_kernel, dim=n, inputs=[self._key_bits, self._tri_shape, axis],
                           outputs=[self._sort_key, self._sort_value], device=d)
-                wp.utils.radix_sort_pairs(self._sort_key, self._sort_value, n)
-                if self._sort_shape is not None:
-                    wp.launch(_shape_key_kernel, dim=n, inputs=[self._tri_shape, self._sort_value],
-                              outputs=[self._sort_shape], device=d)
-                    wp.utils.radix_sort_pairs(self._sort_shape, self._sort_value, n, end_bit=self._shape_bits)
+                wp.utils.radix_sort_pairs(self._sort_key, self._sort_value, n, end_bit=self._sort_bits)
                 wp.launch(_store_list_kernel, dim=n, inputs=[self._sort_value, axis, n],
                           outputs=[self._tri_list, self._tri_pos], device=d)
         if self.num_global_levels:
@@ -708,9 +730,13 @@ class TreeBuild:
                 wp.utils.array_scan(self._side, self._side_before, inclusive=False)
                 wp.launch(_split_scatter_kernel, dim=3 * n, inputs=[*common, self._side, self._side_before],
                           outputs=[self._tri_list, self._tri_pos], device=d)
-        wp.launch(_finish_kernel, dim=self.num_subtrees,
-                  inputs=[n, self.leaf_size, self._tstart, self._global_levels, self._subtree_end, self._tri_key],
-                  outputs=[self._tri_list, self._tri_pos, self.tri_order], device=d)
+        if self.finish == "block":
+            finish_blocks(self.num_subtrees, self.block_dim, n, self.leaf_size, self._tstart, self._global_levels,
+                          self._subtree_end, self._tri_key, self._tri_list, self.tri_order, d)
+        else:
+            wp.launch(_finish_kernel, dim=self.num_subtrees,
+                      inputs=[n, self.leaf_size, self._tstart, self._global_levels, self._subtree_end, self._tri_key],
+                      outputs=[self._tri_list, self._tri_pos, self.tri_order], device=d)
 
     def shape_tree(self, s: int) -> ShapeTree:
         """Shape ``s``'s tree as host arrays (reads the device; for tests and inspection)."""
