@@ -99,6 +99,8 @@ class CollisionPipeline:
             for object pairs where one object's box holds the other's vertex), in
             :attr:`CollisionResult.containment_pairs`.
         pair_capacity: initial capacity of the broad phase's object pairs (it grows).
+        entry_capacity: initial capacity of the ``sap`` broad phase's grid entries (it grows;
+            default: see :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP`).
         candidate_capacity: initial capacity of the mid phase's candidate triangle pairs (it grows).
         hit_capacity: initial capacity of the narrow phase's intersecting triangle pairs (it grows).
         near_capacity: initial capacity of the object pairs within the clearance (it grows).
@@ -168,6 +170,7 @@ class CollisionPipeline:
         segments: bool = False,
         containment: bool = False,
         pair_capacity: int | None = None,
+        entry_capacity: int | None = None,
         candidate_capacity: int | None = None,
         hit_capacity: int | None = None,
         front_capacity: int | None = None,
@@ -204,7 +207,7 @@ class CollisionPipeline:
         n = scene.num_objects
         self.timings = bool(timings)
         self.graph = mode == "graph"
-        self.broad = make_broad_phase(broad_phase, device=d)
+        self.broad = make_broad_phase(broad_phase, device=d, entry_capacity=entry_capacity)
         self.continuous = ccd is not None
         if self.continuous:
             hit_capacity = integer_option("hit_capacity", hit_capacity, low=1, allow_none=True)
@@ -545,15 +548,20 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
                                   precision=precision, **filters)
     else:
         scene = Scene.from_meshes(meshes, transforms, device=device, precision=precision, **filters)
-    # One frame, run once: capacities few scenes exceed (per object, and per triangle for big meshes:
-    # every object pair of a small scene or 32 pairs an object, 8 bytes each; one candidate a
-    # triangle per triangle of a leaf, 16 bytes each, a node pair of the front a triangle, 24 bytes,
-    # and 8 bytes of hits a triangle, for this call only), where a persistent pipeline starts lean
-    # and grows.
+    # One frame, run once: capacities few scenes exceed, where a persistent pipeline starts lean and
+    # grows (a second run costs the whole frame again). Per object: every object pair of a small
+    # scene or 32 pairs an object (8 bytes each), 4 grid entries a box for the sweep (16 bytes each
+    # with the sort's scratch; boxes cover 2.25 cells on average, more with varied sizes: 2 a box
+    # overflowed for a third of the seeds of 1,000 polyhedra). Per triangle: two candidates a
+    # triangle per triangle of a leaf (32 bytes; 60 noisy spheres of 208k triangles need 0.6 to
+    # 1.25 a triangle, so one a triangle overflowed for a fifth of the seeds), a node pair of the
+    # front (24 bytes) and a quarter of a hit and of a touching candidate (8 bytes): about 64 bytes a
+    # triangle, for this call only.
     n, tris = scene.num_objects, scene.num_triangles
     leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
     options.setdefault("pair_capacity", max(64, min(n * (n - 1) // 2, 32 * n)))
-    options.setdefault("candidate_capacity", max(1024, 16 * n, leaf * tris))
+    options.setdefault("entry_capacity", max(1024, 4 * n))
+    options.setdefault("candidate_capacity", max(1024, 16 * n, 2 * leaf * tris))
     options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
     options.setdefault("front_capacity", max(1024, 4 * n, tris))
     pipeline = CollisionPipeline(scene, **options)

@@ -441,10 +441,16 @@ class BroadPhaseSAP(BroadPhase):
             (:class:`BroadPhaseAllPairs`' kernel): a few microseconds for a small scene, where the four
             launches and the sort's fixed cost take tens. Default :data:`ALL_PAIRS_MAX` on CUDA, 0
             on the CPU (whose threads run one by one).
+        entry_capacity: initial capacity of the grid entries (it grows; default 1,024, and at
+            least two a box once boxes come: a persistent frame sorts every slot, so it starts
+            lean and grows once where boxes cover more cells). A one-shot frame passes more
+            (:func:`~warp_ccd.pipeline.collide`: boxes of cells twice their mean extent cover
+            2.25 cells on average, more with varied sizes).
     """
 
     def __init__(self, *, device: DeviceLike = None, graph: bool | None = None, cell_scale: float = 2.0,
-                 max_cells_per_box: int = 64, stats_blocks: int = 512, all_pairs_max: int | None = None) -> None:
+                 max_cells_per_box: int = 64, stats_blocks: int = 512, all_pairs_max: int | None = None,
+                 entry_capacity: int | None = None) -> None:
         super().__init__(device=device, graph=graph)
         if all_pairs_max is None:
             all_pairs_max = ALL_PAIRS_MAX if self.device.is_cuda else 0
@@ -463,7 +469,8 @@ class BroadPhaseSAP(BroadPhase):
         self._scratch_boxes = -1  # boxes the per-box scratch holds
         self._entry_box = None
         # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
-        self.entry = GrowableBuffer(wp.int32, 1024, d, "sap grid entries", factor=2, doubling=False)
+        entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, allow_none=True)
+        self.entry = GrowableBuffer(wp.int32, entry_capacity or 1024, d, "sap grid entries", factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
         """Scratch for ``n`` boxes. It only grows: a captured frame holds its pointers, so a frame of
@@ -546,7 +553,8 @@ BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": B
 ``"all_pairs"``, kept as an alias."""
 
 
-def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None) -> BroadPhase:
+def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None,
+                     entry_capacity: int | None = None) -> BroadPhase:
     """The broad phase of a method name.
 
     Args:
@@ -554,12 +562,16 @@ def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | No
             the reference; ``"nxn"`` is an alias).
         device: Warp device.
         graph: as for :class:`BroadPhase`.
+        entry_capacity: initial capacity of the grid entries (``"sap"``; see :class:`BroadPhaseSAP`),
+            None for its default; the all-pairs reference has none and ignores it.
 
     Raises:
         ValueError: an unknown method (the message lists the known ones).
     """
     if not isinstance(method, str) or method not in BROAD_METHODS:
         raise ValueError(f"broad phase method must be 'sap' or 'all_pairs' (or 'nxn', an alias), got {method!r}")
+    if entry_capacity is not None and BROAD_METHODS[method] is BroadPhaseSAP:
+        return BroadPhaseSAP(device=device, graph=graph, entry_capacity=entry_capacity)
     return BROAD_METHODS[method](device=device, graph=graph)
 
 
