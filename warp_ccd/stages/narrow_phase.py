@@ -6,17 +6,22 @@ This module runs them over the rows ``(obj_a, tri_a, obj_b, tri_b)`` of the mid 
 on the scene's world vertices, and adds what needs the scene: each hit's segment, and the objects
 wholly inside another (:func:`winding_number`).
 
-Over candidate pairs (:class:`NarrowPhase`), Möller's test runs as three kernels. One thread per
+Over candidate pairs (:class:`NarrowPhase`), Möller's test runs as two launches. One thread per
 candidate takes steps 1 to 3, and the pairs that do not cross go to a touch list whose step 4 (six
 edge-against-face tests) runs in a second kernel, two threads a pair (the edges of one triangle
 against the other's face each; six threads, one test each, recomputed the pair's set-up six
 times). A warp of the first kernel then no longer waits for its slowest lane's six tests, the
 longest of the test's paths (at 1,000 polyhedra, 874 of 4,917 candidates reach step 4, in nearly
 every warp; steps 1 to 3 alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The
-rare pairs, with a degenerate triangle or coplanar, go from the first kernel to a third that runs
-the whole test (:func:`tri_tri_moller`), so that the first holds only the common path in its
-registers (capped at :data:`MAX_REGISTERS` on CUDA, as the second's). The verdicts are those of
-:func:`tri_tri_moller`, bit for bit.
+rare pairs, with a degenerate triangle or coplanar, go from the first kernel to a rare list that
+the second kernel's threads past the touch rows take, one a row, with the whole test
+(:func:`tri_tri_moller`), so that the first holds only the common path in its registers (capped
+at :data:`MAX_REGISTERS` on CUDA, as the second's). The rare list was a third launch of its own
+(one graph node more); in the second kernel its branch is one no touch thread takes. Compiled
+for sm_90 by ptxas 13.0 (float32), the touch kernel alone spilled 764 bytes and the rare kernel,
+capped alike, 1,504; the two in one kernel spill 2,372, about their sum: the rare branch brings
+its own spills, and the touch path's are to be read on a GPU (``warp_ccd/bench/kernel_resources.py``,
+``warp_ccd/bench/box_tests.py``). The verdicts are those of :func:`tri_tri_moller`, bit for bit.
 
 Every device gives the same verdict: the module is compiled without floating-point contraction
 (``fuse_fp=False``, as the tests ask of the modules that call them). The winding number of the
@@ -153,8 +158,8 @@ def _narrow_moller_kernel(
     """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: steps 1 to 3 of Möller's test
     (:func:`_moller_steps`); a crossing is a hit, a pair that does not cross goes to the touch
     list (its flag cleared) for step 4 (:func:`_narrow_touch_kernel`), and a pair with a
-    degenerate triangle, or coplanar, to the rare list (:func:`_narrow_rare_kernel`): their code
-    stays out of this kernel, whose registers then hold the common path."""
+    degenerate triangle, or coplanar, to the rare list (taken by the touch kernel's threads past the
+    touch rows): their code stays out of this kernel, whose registers then hold the common path."""
     k = wp.tid()
     if k >= used_count(candidate_count, candidate_capacity):
         return
@@ -182,25 +187,20 @@ def _narrow_moller_kernel(
         _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
 
 
-@wp.kernel
-def _narrow_rare_kernel(
+@wp.func
+def _rare_row(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
     rare: wp.array[wp.vec4i],
-    rare_count: wp.array[wp.int64],
-    rare_capacity: int,
+    k: int,
     tol_rel: wp.float64,
     hit_capacity: int,
-    # Outputs
     hit: wp.array[wp.vec4i],
     hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
-    """One thread per row of the rare list (a degenerate triangle, or coplanar triangles): the
-    whole of Möller's test (:func:`tri_tri_moller`)."""
-    k = wp.tid()
-    if k >= used_count(rare_count, rare_capacity):
-        return
+    """Row ``k`` of the rare list (a degenerate triangle, or coplanar triangles): the whole of
+    Möller's test (:func:`tri_tri_moller`); appends a hit."""
     c = rare[k]
     v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
     if tri_tri_moller(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)):
@@ -214,6 +214,9 @@ def _narrow_touch_kernel(
     touch: wp.array[wp.vec4i],
     touch_count: wp.array[wp.int64],
     touch_capacity: int,
+    rare: wp.array[wp.vec4i],
+    rare_count: wp.array[wp.int64],
+    rare_capacity: int,
     tol_rel: wp.float64,
     hit_capacity: int,
     # Outputs
@@ -227,8 +230,18 @@ def _narrow_touch_kernel(
     (:func:`~warp_ccd.geometry.primitives._edges_near_face`; each thread computes the one normal and
     the edge normals of its face once). The pair touches when one of the six edge tests says so
     (:func:`~warp_ccd.geometry.primitives._edges_meet`); the first thread to find it (its flag)
-    appends the row."""
+    appends the row.
+
+    The threads past the touch rows' ``2 touch_capacity`` take the rare list, one row each
+    (:func:`_rare_row`), in the same launch: the rare list is complete when this kernel starts, as
+    the touch list is. Their branch holds the whole test, beside the touch step's and not in its
+    way: it is taken by no thread of the touch rows (see the module docstring on registers)."""
     t = wp.tid()
+    if t >= 2 * touch_capacity:
+        k = t - 2 * touch_capacity
+        if k < used_count(rare_count, rare_capacity):
+            _rare_row(mesh, world_vertex, rare, k, tol_rel, hit_capacity, hit, hit_count, object_colliding)
+        return
     u = t / 2
     side = t - 2 * u
     if u >= used_count(touch_count, touch_capacity):
@@ -333,10 +346,9 @@ def _containment_kernel(
 
 # Both precisions, declared up front: the module compiles once, for float32 and float64 together.
 # The kernels take the tolerance in float64 and round it to the vertices' precision.
-_NARROW_MOLLER, _NARROW_TOUCH, _NARROW_RARE, _NARROW_EDGE_FACE, _CONTAINMENT = (
+_NARROW_MOLLER, _NARROW_TOUCH, _NARROW_EDGE_FACE, _CONTAINMENT = (
     precision_overloads(k, lambda s, v, q, t: {"world_vertex": wp.array[v]})
-    for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_rare_kernel, _narrow_edge_face_kernel,
-              _containment_kernel))
+    for k in (_narrow_moller_kernel, _narrow_touch_kernel, _narrow_edge_face_kernel, _containment_kernel))
 _SEGMENT = precision_overloads(_segment_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
                                                                   "segment": wp.array2d[v]})
 
@@ -362,8 +374,8 @@ class NarrowPhase:
             candidates that do not cross and may touch (step 4, tested two threads a row by a
             second kernel; else None), with ``touch_flag``, ``(touch.capacity,)`` int32.
         rare: with ``method="moller"``, the :class:`~warp_ccd.stages.buffers.GrowableBuffer` of the
-            candidates with a degenerate triangle or coplanar triangles (tested whole by a third
-            kernel; else None).
+            candidates with a degenerate triangle or coplanar triangles (tested whole by the touch
+            kernel's threads past the touch rows; else None).
         object_colliding: ``(N,)`` int32, 1 for an object with a hit.
         segment: ``(hits.capacity, 2)`` end points (the scene's vector type) of each hit's
             segment (NaN for coplanar contacts), or None without ``segments``.
@@ -437,13 +449,10 @@ class NarrowPhase:
                               candidates.capacity, tol, hits.capacity, touch.capacity, rare.capacity],
                       outputs=[hits.data, hits.count, self.object_colliding, touch.data, touch.count,
                                self.touch_flag, rare.data, rare.count], device=d)
-            wp.launch(_NARROW_RARE[scene.precision], dim=rare.capacity,
-                      inputs=[scene.topology, scene.world_vertex, rare.data, rare.count, rare.capacity, tol,
-                              hits.capacity],
-                      outputs=[hits.data, hits.count, self.object_colliding], device=d)
-            wp.launch(_NARROW_TOUCH[scene.precision], dim=2 * touch.capacity,
-                      inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity, tol,
-                              hits.capacity],
+            # The touch step's rows, two threads each, then the rare rows, one thread each: one launch.
+            wp.launch(_NARROW_TOUCH[scene.precision], dim=2 * touch.capacity + rare.capacity,
+                      inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity,
+                              rare.data, rare.count, rare.capacity, tol, hits.capacity],
                       outputs=[self.touch_flag, hits.data, hits.count, self.object_colliding], device=d)
         if self.segments:
             if self.segment is None or self.segment.shape[0] != hits.capacity or self.segment.dtype != scene.vec3_type:
