@@ -553,14 +553,15 @@ class Scene:
             source = np.arange(n)
             inst = source
         else:  # the very same arrays share one shape, numbered in order of first use
-            key = np.array([(id(v), id(t)) for v, t in meshes], np.int64)
+            key = np.fromiter((id(a) for m in meshes for a in m), np.int64, 2 * n).reshape(n, 2)
             _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
             by_use = np.argsort(first)
             rank = np.empty_like(by_use)
             rank[by_use] = np.arange(len(by_use))
             source = first[by_use]
             inst = rank[inverse.reshape(-1)]
-        packed = validate_meshes([tuple(host_array(a, f"mesh {i}") for a in meshes[i]) for i in source],
+        packed = validate_meshes([tuple(a if type(a) is np.ndarray else host_array(a, f"mesh {i}")  # numpy as is
+                                        for a in meshes[i]) for i in source.tolist()],
                                  labels=source, kind="mesh", dtype=np.float64)
         poses = None
         if transforms is not None:

@@ -357,12 +357,15 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
         raise
     # Ranks, widths and kinds of number, from one attribute of each array (bool, strings, objects,
     # wrong shapes: the per-mesh checks name the mesh).
+    t_types = {x.dtype for x in ts}
     if {x.shape[1:] for x in vs} != {(3,)} or {x.shape[1:] for x in ts} != {(3,)} \
-            or not {x.dtype.kind for x in vs} <= set("iuf") or not {x.dtype.kind for x in ts} <= set("iu"):
+            or not {x.dtype.kind for x in vs} <= set("iuf") or not {d.kind for d in t_types} <= set("iu"):
         each()
         raise ValueError("meshes: arrays of inconsistent shapes or types")  # not reached: some mesh is bad
-    v = np.concatenate(vs)
-    t = np.concatenate(ts, dtype=np.int64, casting="unsafe")
+    v = np.concatenate(vs)  # new arrays: converted below without another copy
+    # int32 indices (the usual) checked as they are; wider ones in int64, where every value fits
+    narrow = all(d == np.int32 or d.itemsize < 4 for d in t_types)
+    t = np.concatenate(ts, dtype=np.int32 if narrow else np.int64, casting="unsafe")
     num_v = np.fromiter(map(len, vs), np.int64, len(vs))
     num_t = np.fromiter(map(len, ts), np.int64, len(ts))
     vstart = np.concatenate([[0], np.cumsum(num_v)])
@@ -396,14 +399,19 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
     if len(empty):
         k = int(empty[0])
         found.append((k, 3, f"{name(k)}: the mesh has no triangles"))
-    limit = np.repeat(num_v, num_t)[:, None]
-    if len(t) and (t.min() < 0 or (t >= limit).any()):
+    # Largest index of each mesh against its vertex count (rows only to name the culprit).
+    with_t = num_t > 0
+    t_max = np.full(len(num_t), -1, np.int64)
+    if len(t):
+        t_max[with_t] = np.maximum.reduceat(t.max(axis=1), tstart[:-1][with_t])
+    if len(t) and (t.min() < 0 or (t_max >= num_v).any()):
+        limit = np.repeat(num_v, num_t)[:, None]
         row = int(np.argmax(((t < 0) | (t >= limit)).any(axis=1)))
         k = int(np.searchsorted(tstart, row, side="right") - 1)
         found.append((k, 4, f"{name(k)}: triangle {row - tstart[k]} has vertex index out of range "
                             f"[0, {num_v[k]}): {t[row].tolist()}"))
     if found:
         raise ValueError(min(found)[2])
-    out = v32 if dtype == np.float32 else v.astype(dtype)
-    return MeshSet(np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32)), vstart.astype(np.int64),
-                   tstart.astype(np.int64))
+    out = v32 if dtype == np.float32 else v.astype(dtype, copy=False)
+    return MeshSet(np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32, copy=False)),
+                   vstart.astype(np.int64), tstart.astype(np.int64))
