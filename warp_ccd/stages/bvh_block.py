@@ -4,24 +4,27 @@
 by level over all shapes at once (three launches a level); what is left is a subtree of at most
 ``small`` triangles per node. Here one thread block finishes each such subtree, one thread per
 triangle (:func:`_block_finish_kernel`): the block loads its triangles' centroid keys and ids into
-shared memory, then splits level by level inside the block:
+shared memory, then splits level by level inside the block, a barrier a level:
 
-* each node's first member takes the bounds of its members' keys and writes the node's longest
-  axis (the first on ties) into a shared table; after the barrier every member counts the members
-  before it along that axis (by key, ties by triangle id: the order of the reference's stable
-  sorts), goes left when that rank is below the median (``count // 2``), and writes itself into its
-  new place, its node's first position plus its rank (the other half of a double-buffered table);
+* each thread loops over the members of its node (a few hundred shared-memory reads at the top,
+  half as many a level down: about ``2 c`` for a subtree of ``c``), taking the bounds of their
+  keys and its own rank along each axis (by key, ties by triangle id: the order of the reference's
+  stable sorts);
+* the node's longest axis (the first on ties) picks the rank; the thread goes left when its rank
+  is below the median (``count // 2``), and writes itself into its new place, its node's first
+  position plus its rank (the other half of a double-buffered slot table);
 * at the leaves, its rank along x among the leaf's triangles gives its place in ``tri_order``
   (the reference's leaves keep the x list's order).
 
-So a subtree needs no lists in global memory: a scene whose shapes are all of at most ``small``
+So a subtree needs no sorted lists at all: a scene whose shapes are all of at most ``small``
 triangles builds from its centroid keys in one launch (no radix sort, no level kernels), and a
 bigger shape needs ``log2(m / small)`` levels fewer than with subtrees finished by one thread.
-Work per thread is about ``2 c`` shared reads (broadcasts within a node: no bank conflicts) and two
-barriers a level, not the uncoalesced per-thread passes over global memory of
-:func:`~warp_ccd.stages.bvh_build._finish_kernel`. Tried: the three lists sorted once by counting,
-then each level a stable partition by a block scan of the sides (``wp.tile_scan_exclusive``): at
-10^5 x 80 triangles 4.8 ms against 2.3 for every member counting its node twice a level.
+Work per thread is ``O(c)`` reads that the whole node shares (broadcasts, no bank conflicts), not
+the uncoalesced per-thread passes over global memory of
+:func:`~warp_ccd.stages.bvh_build._finish_kernel`. Tried on an H200 at 10^5 shapes of 80 triangles
+(this kernel: 2.3 ms): the three lists sorted once by counting, then each level a stable partition
+by a block scan of the sides (``wp.tile_scan_exclusive``), 4.8 ms; each node's first member finding
+the node's axis alone for the others to count along it only (a second barrier a level), 3.1 ms.
 
 The trees are those of the numpy reference, bit for bit (the same keys, the same comparisons, the
 same float32 extents). On the CPU Warp runs a block as one lane unless
@@ -39,12 +42,11 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 __all__ = ["BLOCK_SUBTREE", "block_dim_for", "finish_blocks"]
 
 BLOCK_SUBTREE = 256
-"""Most triangles of a subtree one block finishes: the shared tables' size (28 bytes a triangle:
-three keys, an id, two slots, a node's axis; 7 KB a block)."""
+"""Most triangles of a subtree one block finishes: the shared tables' size (24 bytes a triangle:
+three keys, an id, two slots; 6 KB a block, so that 32 small blocks fit on a multiprocessor)."""
 
 _TILE = wp.constant(BLOCK_SUBTREE)
 _TILE2 = wp.constant(2 * BLOCK_SUBTREE)
-_TILE3 = wp.constant(3 * BLOCK_SUBTREE)
 
 
 @wp.kernel
@@ -84,12 +86,14 @@ def _block_finish_kernel(
         if d0 > 0:  # the subtree's triangles: its block of the x list, in the half the levels ended in
             tri = tri_list[(d0 % 2) * 3 * num_triangles + block + i]
         key = tri_key[tri]
-    keys = wp.tile_zeros(shape=_TILE3, dtype=wp.float32, storage="shared")  # member o's key along a: a * T + o
+    kx = wp.tile_zeros(shape=_TILE, dtype=wp.float32, storage="shared")
+    ky = wp.tile_zeros(shape=_TILE, dtype=wp.float32, storage="shared")
+    kz = wp.tile_zeros(shape=_TILE, dtype=wp.float32, storage="shared")
     kid = wp.tile_zeros(shape=_TILE, dtype=wp.int32, storage="shared")
     slot = wp.tile_zeros(shape=_TILE2, dtype=wp.int32, storage="shared")  # two halves: read one, write the other
-    node_axis = wp.tile_zeros(shape=_TILE, dtype=wp.int32, storage="shared")  # at each node's first position
-    for a in range(3):
-        wp.tile_scatter_masked(keys, a * _TILE + i, key[a], active)
+    wp.tile_scatter_masked(kx, i, key[0], active)
+    wp.tile_scatter_masked(ky, i, key[1], active)
+    wp.tile_scatter_masked(kz, i, key[2], active)
     wp.tile_scatter_masked(kid, i, tri, active)
     wp.tile_scatter_masked(slot, i, i, active)
     levels = int(0)  # the same in every thread: splits until the biggest node is a leaf
@@ -97,41 +101,39 @@ def _block_finish_kernel(
     while biggest > leaf_size:
         biggest -= biggest // 2
         levels += 1
-    ns = int(0)  # this thread's node: first position and count, within the subtree; its position
+    ns = int(0)  # this thread's node: first position and count, within the subtree
     nc = int(count)
     p = int(i)
     for level in range(levels):
         cur = (level % 2) * _TILE
-        splits = active and nc > leaf_size
-        lead = splits and p == ns  # the node's first member finds its longest axis (the first on ties)
-        axis = int(0)
-        if lead:
+        if active and nc > leaf_size:
             lo = key
             hi = key
+            rx = int(0)
+            ry = int(0)
+            rz = int(0)
             for k in range(ns, ns + nc):
                 o = slot[cur + k]
-                x = keys[o]
-                y = keys[_TILE + o]
-                z = keys[2 * _TILE + o]
+                x = kx[o]
+                y = ky[o]
+                z = kz[o]
                 lo = wp.vec3(wp.min(lo[0], x), wp.min(lo[1], y), wp.min(lo[2], z))
                 hi = wp.vec3(wp.max(hi[0], x), wp.max(hi[1], y), wp.max(hi[2], z))
-            extent = hi - lo
+                before = kid[o] < tri
+                if x < key[0] or (x == key[0] and before):
+                    rx += 1
+                if y < key[1] or (y == key[1] and before):
+                    ry += 1
+                if z < key[2] or (z == key[2] and before):
+                    rz += 1
+            extent = hi - lo  # the longest axis, the first on ties
+            rank = rx
             best = extent[0]
             if extent[1] > best:
-                axis = 1
+                rank = ry
                 best = extent[1]
             if extent[2] > best:
-                axis = 2
-        wp.tile_scatter_masked(node_axis, ns, axis, lead)
-        if splits:  # its rank along the axis among the node's members: left below the median
-            row = node_axis[ns] * _TILE
-            mine = keys[row + i]
-            rank = int(0)
-            for k in range(ns, ns + nc):
-                o = slot[cur + k]
-                y = keys[row + o]
-                if y < mine or (y == mine and kid[o] < tri):
-                    rank += 1
+                rank = rz
             half = nc // 2
             p = ns + rank
             if rank < half:
@@ -140,12 +142,12 @@ def _block_finish_kernel(
                 ns += half
                 nc -= half
         wp.tile_scatter_masked(slot, _TILE - cur + p, i, active)
-    if active:  # its place in its leaf: by key along x (the reference keeps the x list's order there)
+    if active:
         cur = (levels % 2) * _TILE
         rank = int(0)
         for k in range(ns, ns + nc):
             o = slot[cur + k]
-            x = keys[o]
+            x = kx[o]
             if x < key[0] or (x == key[0] and kid[o] < tri):
                 rank += 1
         tri_order[block + ns + rank] = tri - first
