@@ -93,6 +93,19 @@ def test_block_dims_follow_the_subtrees(device, finish):
         assert_same_trees(b, meshes, 1, 3)
     with pytest.raises(ValueError, match="at most 256"):
         built([soup(rng, 10)], device, finish=finish, small=512)
+    with pytest.raises(ValueError, match="at most 256"):
+        built([soup(rng, 10)], device, finish=finish, leaf_size=129)
+
+
+def test_default_finish(device):
+    """Blocks by default on CUDA, unless leaves or subtrees are too big for one; one thread on the CPU."""
+    meshes = [soup(np.random.default_rng(2), 600)]
+    block = "block" if wp.get_device(device).is_cuda else "thread"
+    for options, want in (({}, block), ({"leaf_size": 128}, block), ({"leaf_size": 129}, "thread"),
+                          ({"small": 300}, "thread")):
+        b = built(meshes, device, **options)
+        assert b.finish == want, options
+        assert_same_trees(b, meshes, b.leaf_size, 3)
 
 
 def test_shapes_of_one_count_share_a_layout(device):

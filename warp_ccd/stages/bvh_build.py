@@ -573,7 +573,8 @@ class TreeBuild:
         presort: radix-sort the lists before the splits (default: when some shape is split level by
             level, and with ``finish="thread"`` when some shape has more than
             :data:`INSERTION_SORT_MAX` triangles).
-        finish: ``"block"`` (default on CUDA): each subtree of at most ``small`` triangles finished
+        finish: ``"block"`` (default on CUDA where ``small`` and ``2 * leaf_size`` are at most
+            :data:`~warp_ccd.stages.bvh_block.BLOCK_SUBTREE`): each subtree of at most ``small`` triangles finished
             by a thread block in shared memory (:mod:`~warp_ccd.stages.bvh_block`; on the CPU only
             with ``wp.config.enable_cpu_blocks``); ``"thread"`` (default on the CPU): by one thread.
         device: Warp device.
@@ -602,8 +603,9 @@ class TreeBuild:
                              f"(limit {(2**31 - 1) // 6})")
         self.leaf_size = int(leaf_size)
         self.cut_depth = int(cut_depth)
-        if finish is None:
-            finish = "block" if d.is_cuda else "thread"
+        if finish is None:  # blocks on CUDA, where their subtrees fit (leaves of up to 128, small up to 256)
+            fits = max(int(small or 0), 2 * self.leaf_size) <= BLOCK_SUBTREE
+            finish = "block" if d.is_cuda and fits else "thread"
         if finish not in ("block", "thread"):
             raise ValueError(f"finish must be 'block' or 'thread', got {finish!r}")
         if finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
