@@ -97,6 +97,16 @@ def test_block_dims_follow_the_subtrees(device, finish):
         built([soup(rng, 10)], device, finish=finish, leaf_size=129)
 
 
+def test_no_shapes(device, finish):
+    """A scene without shapes builds nothing, presorted or not."""
+    for presort in (None, True):
+        b = TreeBuild(wp.empty(0, dtype=wp.vec3i, device=device), np.zeros(1, np.int64), presort=presort,
+                      finish=finish, device=device)
+        b.layout()
+        b.order(wp.empty(0, dtype=wp.vec3, device=device), wp.zeros(1, dtype=wp.int32, device=device))
+        assert b.tri_order.shape == (0,)
+
+
 def test_default_finish(device):
     """Blocks by default on CUDA, unless leaves or subtrees are too big for one; one thread on the CPU."""
     meshes = [soup(np.random.default_rng(2), 600)]
@@ -138,10 +148,15 @@ def test_identical_and_degenerate_triangles(device, finish):
 
 
 def test_block_finish_needs_cpu_blocks():
-    """On the CPU a block is one lane unless Warp's CPU blocks are on: the build says so."""
+    """On the CPU a block is one lane unless Warp's CPU blocks are on: the build says so, when made and
+    when its order is built after they were turned off."""
     saved = wp.config.enable_cpu_blocks
+    wp.config.enable_cpu_blocks = True
+    b = built([soup(np.random.default_rng(0), 10)], "cpu", finish="block")
     wp.config.enable_cpu_blocks = False
     try:
+        with pytest.raises(ValueError, match="turned off"):
+            b.order(wp.zeros(30, dtype=wp.vec3, device="cpu"), wp.array([0, 30], dtype=wp.int32, device="cpu"))
         with pytest.raises(ValueError, match="enable_cpu_blocks"):
             built([soup(np.random.default_rng(0), 10)], "cpu", finish="block")
         with pytest.raises(ValueError, match="finish must be"):

@@ -538,8 +538,9 @@ class SceneBVH:
             the cut's boxes are big, in small trees); ``"auto"`` (default) the vertices of objects
             of up to :data:`OBJECT_BOUNDS` ``["auto"]`` vertices, the tree of bigger ones; an integer
             ``n``, the vertices of objects of up to ``n`` vertices (0: ``"tree"``).
-        small_subtree: largest subtree the build finishes in one thread block (CUDA) or one thread
-            (CPU) (default: see :class:`~warp_ccd.stages.bvh_build.TreeBuild`).
+        small_subtree: largest subtree the build finishes in one thread block (CUDA, where it and
+            ``2 * leaf_size`` are at most 256) or one thread (default: see
+            :class:`~warp_ccd.stages.bvh_build.TreeBuild`).
         world_trees: every object's tree in the world, refit every frame as a deforming object's
             (a continuous frame's swept boxes: :meth:`refit` with ``world_vertex_start``); the
             traversal's frames are then identities.

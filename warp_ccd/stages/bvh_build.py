@@ -572,7 +572,11 @@ class TreeBuild:
             :data:`SMALL_SUBTREE` on CUDA, whole shapes on the CPU); at least ``2 * leaf_size``.
         presort: radix-sort the lists before the splits (default: when some shape is split level by
             level, and with ``finish="thread"`` when some shape has more than
-            :data:`INSERTION_SORT_MAX` triangles).
+            :data:`INSERTION_SORT_MAX` triangles; blocks read no lists of their own, so ``True``
+            with blocks and no level split only costs the sorts). Limits of the blocks: one shape
+            above ``small`` makes the whole scene's lists sorted and split level by level, and one
+            launch has one block size, that of its largest subtree (a 200-triangle shape among
+            20-triangle ones: every block of 256 threads).
         finish: ``"block"`` (default on CUDA where ``small`` and ``2 * leaf_size`` are at most
             :data:`~warp_ccd.stages.bvh_block.BLOCK_SUBTREE`): each subtree of at most ``small`` triangles finished
             by a thread block in shared memory (:mod:`~warp_ccd.stages.bvh_block`; on the CPU only
@@ -675,7 +679,7 @@ class TreeBuild:
         self._tri_list = wp.empty(6 * ln, dtype=wp.int32, device=d)
         self._tri_pos = wp.empty(3 * ln, dtype=wp.int32, device=d)
         self._side = self._side_before = self._sort_key = self._sort_value = None
-        if self.presort:
+        if self.presort and n:
             self._scratch = wp.empty(6 * n, dtype=wp.int32, device=d)
             self._side, self._side_before = self._scratch[: 3 * n], self._scratch[3 * n:]
             self._sort_key = wp.array(ptr=self._scratch.ptr, dtype=wp.uint64, shape=(2 * n,), device=d)
@@ -710,6 +714,9 @@ class TreeBuild:
         if n == 0:
             return
         d = self.device
+        if self.finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
+            raise ValueError("finish='block' on the CPU needs wp.config.enable_cpu_blocks "
+                             "(turned off since the build was made)")
         if world_vertex is None:
             world_vertex, shape_world_start = shape_vertex, self._no_world
         precision = "float64" if shape_vertex.dtype == wp.vec3d else "float32"
