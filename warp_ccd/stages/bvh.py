@@ -594,12 +594,11 @@ class SceneBVH:
         self.build = build
         build.layout()
         build.order(scene.shape_vertex, scene.shape_vertex_start)
-        sizes = build.sizes
         num_shapes = scene.num_shapes
         n = scene.num_objects
         inst_shape = scene.object_shape_np
         deforming = scene.object_deforming_np | self.world_trees  # world trees: every object's refit
-        nodes = sizes.num_nodes
+        nodes = build.layout_sizes.num_nodes[build.shape_layout]  # a tree's size is its layout's
         # Slots: the shapes of rigid objects first (shape space), then each deforming object's.
         has_rigid = np.zeros(num_shapes, bool)
         has_rigid[inst_shape[~deforming]] = True
@@ -610,7 +609,7 @@ class SceneBVH:
             raise ValueError(f"scene too large for the BVH: {own_slot[-1]} tree node boxes (limit 2**31 - 1)")
         self.num_node_slots = int(own_slot[-1])
         inode = np.where(deforming, own_slot[:-1], shape_slot[inst_shape] if n else 0)
-        self.num_levels = int(sizes.num_levels.max()) if num_shapes else 1
+        self.num_levels = int(build.layout_sizes.num_levels.max()) if num_shapes else 1  # every layout is used
         shape_tris = np.diff(scene.shape_triangle_start_np)
         self.max_triangles = int(shape_tris[inst_shape].max()) if n else 0
         self.min_triangles = int(shape_tris[inst_shape].min()) if n else 0

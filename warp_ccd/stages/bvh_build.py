@@ -43,6 +43,7 @@ Layout, per shape, nodes in breadth-first order (level ``d`` starts at ``2**d - 
   layout (``layout_cut_depth`` and one level deeper), deeper in big trees (:meth:`TreeSizes.cut_depth`).
 """
 
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -299,18 +300,21 @@ def _key_kernel(
     shape_triangle_start: wp.array[wp.int32],
     num_triangles: int,
     lists: int,
+    use_world: int,
     # Outputs
     tri_shape: wp.array[wp.int32],
     tri_key: wp.array[wp.vec3],
     tri_list: wp.array[wp.int32],
 ):
-    """One thread per shape triangle: its centroid key (from ``world_vertex`` at
-    ``shape_world_start[s]`` when that is not -1, else from the shape's own vertices) and, when
+    """One thread per shape triangle: its centroid key (with ``use_world`` 1, from ``world_vertex``
+    at ``shape_world_start[s]`` when that is not -1; else from the shape's own vertices) and, when
     ``lists`` is 1, its shape and its place in the three lists, in triangle order."""
     g = wp.tid()
     s = upper_bound(shape_triangle_start, 0, shape_triangle_start.shape[0], g) - 1
     idx = shape_triangle[g]
-    w = shape_world_start[s]
+    w = int(-1)
+    if use_world == 1:
+        w = shape_world_start[s]
     a = wp.vec3(0.0)
     b = wp.vec3(0.0)
     c = wp.vec3(0.0)
@@ -584,7 +588,8 @@ class TreeBuild:
         device: Warp device.
 
     Attributes:
-        sizes: the :class:`TreeSizes` of the shapes; ``layout_sizes`` those of the layouts.
+        sizes: the :class:`TreeSizes` of the shapes (made on first use); ``layout_sizes`` those of
+            the layouts.
         shape_layout: ``(S,)`` numpy layout of each shape.
         layout_node_start, layout_leaf_start, layout_inner_start, layout_cut_start: numpy offsets
             (``L + 1`` entries; ``2 L + 1`` for the cuts, two per layout), and ``*_device`` copies.
@@ -623,7 +628,6 @@ class TreeBuild:
                              f"got {self.small} (leaf_size {self.leaf_size})")
         self.shape_layout, layout_m = _distinct(m)
         self.layout_sizes = sizes = TreeSizes(layout_m, self.leaf_size)
-        self.sizes = sizes.take(self.shape_layout)  # per shape: numpy work per layout, not per shape
 
         def offsets(counts):
             return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -655,7 +659,6 @@ class TreeBuild:
          self.layout_cut_start_device, self._layout_cut_depth) = packed_upload(
             [tstart, self.global_levels, subtree_end, layout_m, self.shape_layout, self.layout_node_start,
              self.layout_leaf_start, self.layout_inner_start, self.layout_cut_start, self.layout_cut_depth], d)
-        self._no_world = wp.full(len(m), -1, dtype=wp.int32, device=d)
         k = int(self.layout_node_start[-1])
         n = self.num_triangles
         self.node_child = wp.empty(k, dtype=wp.vec2i, device=d)
@@ -687,6 +690,11 @@ class TreeBuild:
             self._key_bits = wp.array(ptr=self._tri_key.ptr, dtype=wp.uint32, shape=(3 * n,), device=d)
         self._sort_bits = 32 + int(_bit_length(np.array([max(len(m) - 1, 0)]))[0])
 
+    @cached_property
+    def sizes(self) -> TreeSizes:
+        """The :class:`TreeSizes` of every shape (gathered from its layout's on first use)."""
+        return self.layout_sizes.take(self.shape_layout)
+
     def layout(self) -> None:
         """Launches the layouts (one thread per node of each distinct triangle count)."""
         k = int(self.layout_node_start[-1])
@@ -717,12 +725,13 @@ class TreeBuild:
         if self.finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
             raise ValueError("finish='block' on the CPU needs wp.config.enable_cpu_blocks "
                              "(turned off since the build was made)")
+        use_world = int(world_vertex is not None)
         if world_vertex is None:
-            world_vertex, shape_world_start = shape_vertex, self._no_world
+            world_vertex, shape_world_start = shape_vertex, self._tstart  # not read
         precision = "float64" if shape_vertex.dtype == wp.vec3d else "float32"
         wp.launch(_KEY[precision], dim=n,
                   inputs=[shape_vertex, shape_vertex_start, world_vertex, shape_world_start, self.shape_triangle,
-                          self._tstart, n, int(self._lists)],
+                          self._tstart, n, int(self._lists), use_world],
                   outputs=[self._tri_shape, self._tri_key, self._tri_list], device=d)
         if self.presort:
             for axis in range(3):  # each list sorted by shape, then key (stable: then by triangle)
@@ -752,7 +761,7 @@ class TreeBuild:
         layout = int(self.shape_layout[s])
         a, b = int(self.layout_node_start[layout]), int(self.layout_node_start[layout + 1])
         t0, t1 = int(self.shape_triangle_start[s]), int(self.shape_triangle_start[s + 1])
-        levels = int(self.sizes.num_levels[s])
+        levels = int(self.layout_sizes.num_levels[layout])
         level_start = np.array([(1 << d) - 1 for d in range(levels)] + [b - a], np.int32)
         return ShapeTree(self.node_child.numpy()[a:b].astype(np.int32), self.node_parent.numpy()[a:b],
                          self.node_triangle.numpy()[a:b].astype(np.int32), self.tri_order.numpy()[t0:t1],
