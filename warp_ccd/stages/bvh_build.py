@@ -398,7 +398,7 @@ def _split_axis(tri_key: wp.array[wp.vec3], tri_list: wp.array[wp.int32], list_b
 
 
 @wp.kernel
-def _split_side_kernel(
+def _node_axis_kernel(
     level: int,
     num_triangles: int,
     tri_shape: wp.array[wp.int32],
@@ -406,12 +406,37 @@ def _split_side_kernel(
     shape_global_levels: wp.array[wp.int32],
     tri_key: wp.array[wp.vec3],
     tri_list: wp.array[wp.int32],
+    # Outputs
+    node_axis: wp.array[wp.int32],
+):
+    """One thread per list position: where a node split on ``level`` begins, its split axis
+    (:func:`_split_axis`), written at its first position; once a node, not once a list entry."""
+    g = wp.tid()
+    s = tri_shape[g]
+    if level >= shape_global_levels[s]:
+        return
+    first = shape_triangle_start[s]
+    start, count = _node_at(shape_triangle_start[s + 1] - first, level, g - first)
+    if g - first == start:
+        node_axis[g] = _split_axis(tri_key, tri_list, (level % 2) * 3 * num_triangles, num_triangles, g, count)
+
+
+@wp.kernel
+def _split_side_kernel(
+    level: int,
+    num_triangles: int,
+    tri_shape: wp.array[wp.int32],
+    shape_triangle_start: wp.array[wp.int32],
+    shape_global_levels: wp.array[wp.int32],
+    node_axis: wp.array[wp.int32],
+    tri_list: wp.array[wp.int32],
     tri_pos: wp.array[wp.int32],
     # Outputs
     side: wp.array[wp.int32],
 ):
     """One thread per (axis list, position): 1 when the triangle there goes right at the split of
-    its node on ``level`` (its rank along the node's axis reaches the median), else 0."""
+    its node on ``level`` (its rank along the node's axis, ``node_axis`` at the node's first
+    position, reaches the median), else 0."""
     t = wp.tid()
     a = t // num_triangles
     g = t - a * num_triangles
@@ -421,9 +446,8 @@ def _split_side_kernel(
         return
     first = shape_triangle_start[s]
     start, count = _node_at(shape_triangle_start[s + 1] - first, level, g - first)
-    list_base = (level % 2) * 3 * num_triangles
-    axis = _split_axis(tri_key, tri_list, list_base, num_triangles, first + start, count)
-    tri = tri_list[list_base + t]
+    axis = node_axis[first + start]
+    tri = tri_list[(level % 2) * 3 * num_triangles + t]
     if tri_pos[axis * num_triangles + tri] - first >= start + count // 2:
         side[t] = 1
     else:
@@ -743,7 +767,10 @@ class TreeBuild:
         if self.num_global_levels:
             for level in range(self.num_global_levels):
                 common = [level, n, self._tri_shape, self._tstart, self._global_levels]
-                wp.launch(_split_side_kernel, dim=3 * n, inputs=[*common, self._tri_key, self._tri_list, self._tri_pos],
+                node_axis = self._side_before[:n]  # read by the side kernel, then overwritten by the scan
+                wp.launch(_node_axis_kernel, dim=n, inputs=[*common, self._tri_key, self._tri_list],
+                          outputs=[node_axis], device=d)
+                wp.launch(_split_side_kernel, dim=3 * n, inputs=[*common, node_axis, self._tri_list, self._tri_pos],
                           outputs=[self._side], device=d)
                 wp.utils.array_scan(self._side, self._side_before, inclusive=False)
                 wp.launch(_split_scatter_kernel, dim=3 * n, inputs=[*common, self._side, self._side_before],
