@@ -147,20 +147,22 @@ def test_identical_and_degenerate_triangles(device, finish):
         assert_same_trees(b, [same, points, many], 1, 3)
 
 
-def test_block_finish_needs_cpu_blocks():
+def test_block_finish_needs_cpu_blocks(device):
     """On the CPU a block is one lane unless Warp's CPU blocks are on: the build says so, when made and
     when its order is built after they were turned off."""
+    if wp.get_device(device).is_cuda:
+        pytest.skip("the CPU's blocks")
     saved = wp.config.enable_cpu_blocks
     wp.config.enable_cpu_blocks = True
-    b = built([soup(np.random.default_rng(0), 10)], "cpu", finish="block")
+    b = built([soup(np.random.default_rng(0), 10)], device, finish="block")
     wp.config.enable_cpu_blocks = False
     try:
         with pytest.raises(ValueError, match="turned off"):
-            b.order(wp.zeros(30, dtype=wp.vec3, device="cpu"), wp.array([0, 30], dtype=wp.int32, device="cpu"))
+            b.order(wp.zeros(30, dtype=wp.vec3, device=device), wp.array([0, 30], dtype=wp.int32, device=device))
         with pytest.raises(ValueError, match="enable_cpu_blocks"):
-            built([soup(np.random.default_rng(0), 10)], "cpu", finish="block")
+            built([soup(np.random.default_rng(0), 10)], device, finish="block")
         with pytest.raises(ValueError, match="finish must be"):
-            built([soup(np.random.default_rng(0), 10)], "cpu", finish="warp")
+            built([soup(np.random.default_rng(0), 10)], device, finish="warp")
     finally:
         wp.config.enable_cpu_blocks = saved
 
