@@ -39,7 +39,7 @@ from .buffers import upper_bound
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["BLOCK_SUBTREE", "block_dim_for", "finish_blocks"]
+__all__ = ["BLOCK_SUBTREE", "block_dim_for", "finish_blocks", "subtree_of"]
 
 BLOCK_SUBTREE = 256
 """Most triangles of a subtree one block finishes: the shared tables' size (24 bytes a triangle:
@@ -47,6 +47,28 @@ three keys, an id, two slots; 6 KB a block, so that 32 small blocks fit on a mul
 
 _TILE = wp.constant(BLOCK_SUBTREE)
 _TILE2 = wp.constant(2 * BLOCK_SUBTREE)
+
+
+@wp.func
+def subtree_of(shape_triangle_start: wp.array[wp.int32], shape_global_levels: wp.array[wp.int32],
+               shape_subtree_end: wp.array[wp.int32], t: int):
+    """Subtree ``t`` of all shapes (the nodes left after each shape's ``shape_global_levels[s]``
+    levels, ``shape_subtree_end`` their inclusive scan): ``(s, levels, first, start, count)``, its
+    shape, the shape's levels and first triangle, and its triangle range within the shape."""
+    s = upper_bound(shape_subtree_end, 0, shape_subtree_end.shape[0], t)
+    d0 = shape_global_levels[s]
+    j = t - (shape_subtree_end[s] - (1 << d0))
+    first = shape_triangle_start[s]
+    start = int(0)
+    count = shape_triangle_start[s + 1] - first
+    for r in range(d0):
+        left = count // 2
+        if ((j >> (d0 - 1 - r)) & 1) == 1:
+            start += left
+            count -= left
+        else:
+            count = left
+    return s, d0, first, start, count
 
 
 @wp.kernel
@@ -65,19 +87,7 @@ def _block_finish_kernel(
     one thread per triangle of it: the subtree's splits down to the leaves, and its triangle order
     (shape-local ids). ``tri_list``: the lists after the global levels (read when there were some)."""
     blk, i = wp.tid()
-    s = upper_bound(shape_subtree_end, 0, shape_subtree_end.shape[0], blk)
-    d0 = shape_global_levels[s]
-    j = blk - (shape_subtree_end[s] - (1 << d0))
-    first = shape_triangle_start[s]
-    start = int(0)
-    count = shape_triangle_start[s + 1] - first
-    for r in range(d0):
-        left = count // 2
-        if ((j >> (d0 - 1 - r)) & 1) == 1:
-            start += left
-            count -= left
-        else:
-            count = left
+    s, d0, first, start, count = subtree_of(shape_triangle_start, shape_global_levels, shape_subtree_end, blk)
     block = first + start
     active = i < count
     tri = block + i

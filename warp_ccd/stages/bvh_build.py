@@ -14,11 +14,11 @@ batched build cheap:
    one launch (:func:`_layout_kernel`), no sort, no scan; the host computes the sizes with a few
    numpy operations over the layouts (:class:`TreeSizes`).
 2. **Only the order of the triangles depends on the geometry.** It comes from three lists of each
-   shape's triangles sorted by centroid along x, y, z (one stable radix sort per axis, then one by
-   shape), partitioned stably level by level (the classic O(m log m) k-d build): a node's side of
-   the split is its triangles' rank in the list of its axis. Nodes of more than ``small``
-   triangles are split level by level over all shapes at once (a flag kernel, a scan, a scatter:
-   three launches a level); every subtree of at most ``small`` triangles is then finished on CUDA
+   shape's triangles sorted by centroid along x, y, z (one stable radix sort per axis, by shape
+   then key), partitioned stably level by level (the classic O(m log m) k-d build): a node's side
+   of the split is its triangles' rank in the list of its axis. Nodes of more than ``small``
+   triangles are split level by level over all shapes at once (each node's axis, a side kernel, a
+   scan, a scatter: four launches a level); every subtree of at most ``small`` triangles is then finished on CUDA
    by one thread block in shared memory (:mod:`~warp_ccd.stages.bvh_block`, subtrees of up to 256:
    no lists needed, so a scene of shapes of at most 256 triangles builds from its keys in three
    launches, no sort), or by one thread (:func:`_finish_kernel`: insertion sort of its three
@@ -51,7 +51,7 @@ import warp as wp
 
 from ..geometry.precision import precision_overloads
 from .buffers import packed_upload, upper_bound
-from .bvh_block import BLOCK_SUBTREE, block_dim_for, finish_blocks
+from .bvh_block import BLOCK_SUBTREE, block_dim_for, finish_blocks, subtree_of
 from .bvh_reference import ShapeTree
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
@@ -506,20 +506,8 @@ def _finish_kernel(
     sorts its block of each list (insertion sort: stable, linear when the block is sorted already),
     splits its nodes down to the leaves, and writes its triangle order (shape-local ids)."""
     t = wp.tid()
-    s = upper_bound(shape_subtree_end, 0, shape_subtree_end.shape[0], t)
-    d0 = shape_global_levels[s]
-    j = t - (shape_subtree_end[s] - (1 << d0))
-    first = shape_triangle_start[s]
-    m = shape_triangle_start[s + 1] - first
-    start = int(0)
-    count = int(m)
-    for r in range(d0):
-        left = count // 2
-        if ((j >> (d0 - 1 - r)) & 1) == 1:
-            start += left
-            count -= left
-        else:
-            count = left
+    shape, d0, first, start, count = subtree_of(shape_triangle_start, shape_global_levels, shape_subtree_end, t)
+    m = shape_triangle_start[shape + 1] - first
     n = num_triangles
     lists = (d0 % 2) * 3 * n
     scratch = (1 - d0 % 2) * 3 * n
