@@ -104,19 +104,82 @@ def coordinate_message(max_coordinate: float, size: float, precision: str) -> st
 
 def shape_radius(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     """``(S,)`` float64 largest distance of each shape's vertices from its origin (0 for a shape
-    without vertices), from ``(V, 3)`` vertices and ``(S + 1,)`` offsets."""
+    without vertices), from ``(V, 3)`` vertices and ``(S + 1,)`` offsets.
+
+    Each distance is ``np.linalg.norm`` of the vertex in float64, taken only for the few vertices
+    whose squared distance lies within ``2**-40`` of its shape's largest: summed in any order, the
+    squares differ by a few units in the last place (``2**-51``), so no other vertex can have the
+    largest norm, and the maximum is that of the norm of every vertex, bit for bit.
+    """
     start = np.asarray(vertex_start, np.int64)
     radius = np.zeros(len(start) - 1)
-    if len(vertices):
-        norm = np.linalg.norm(np.asarray(vertices, np.float64), axis=1)
-        has = start[1:] > start[:-1]  # a shape's segment ends where the next non-empty one starts
-        radius[has] = np.maximum.reduceat(norm, start[:-1][has])
+    v = np.asarray(vertices)
+    if not len(v):
+        return radius
+    has = np.flatnonzero(start[1:] > start[:-1])  # a shape's segment ends where the next non-empty one starts
+    first = start[:-1][has]
+    x, y, z = (v[:, k].astype(np.float64) for k in range(3))
+    square = (x * x + y * y) + z * z
+    top = np.maximum.reduceat(square, first)
+    low = top - (top * 2.0**-40 + 2.0**-1070)  # NaN for an infinite top: then every vertex of the shape
+    near = first[0] + np.flatnonzero(~(square[first[0]:] < np.repeat(low, np.diff(first, append=len(v)))))
+    segment = np.searchsorted(first, near, side="right") - 1
+    np.maximum.at(radius, has[segment], np.linalg.norm(np.asarray(v[near], np.float64), axis=1))
     return radius
 
 
 SIZE_SAMPLE = 4096
 """Most triangles of one shape whose longest edges give its median (:func:`triangle_size`): a bigger
 shape's are evenly spaced through it, so that a scene of big meshes costs its check little."""
+
+
+def _longest_edges(v: np.ndarray, corner: np.ndarray) -> np.ndarray:
+    """``(t,)`` float64 longest edge of each triangle of ``(3, t)`` vertex rows ``corner`` of ``v``:
+    each squared edge summed ``(dx**2 + dy**2) + dz**2`` in float64, one square root of the largest."""
+    p = v.take(corner, axis=0).astype(np.float64, copy=False)  # (corner, t, xyz), gathered in the vertices' type
+    squared = np.empty((3, corner.shape[1]))
+    d = np.empty_like(squared)
+    for k in range(3):
+        x = p[:, :, k]
+        np.subtract(x[1], x[0], out=d[0])  # edges 0 -> 1, 1 -> 2, 2 -> 0
+        np.subtract(x[2], x[1], out=d[1])
+        np.subtract(x[0], x[2], out=d[2])
+        d *= d
+        if k:
+            squared += d
+        else:
+            squared, d = d, squared
+    return np.sqrt(np.maximum(np.maximum(squared[0], squared[1]), squared[2]))
+
+
+def _segment_medians(values: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """``(S,)`` lower median of each of ``S`` consecutive segments of ``values`` (``count`` long; 0
+    for an empty one): the value of rank ``(c - 1) // 2`` in its segment.
+
+    Segments of ``2**(e-1)`` to ``2**e - 1`` values share one ``(k, w)`` table (``w`` the longest),
+    each padded by ``-inf`` before and ``+inf`` after its values so that its median lands in the
+    same column ``(w - 1) // 2`` of every row, found by one ``np.partition``: one selection per
+    power of two, no sort.
+    """
+    median = np.zeros(len(count))
+    first = np.cumsum(count) - count
+    padded = np.concatenate([values, [-np.inf, np.inf]])  # padding at len(values) and len(values) + 1
+    width_class = np.frexp(count)[1]  # e of 2**(e-1) <= count < 2**e, 0 for an empty segment
+    for e in np.unique(width_class[width_class > 0]).tolist():
+        rows = np.flatnonzero(width_class == e)
+        c = count[rows]
+        w = int(c.max())
+        k = (w - 1) // 2
+        index = first[rows, None] + np.arange(w)
+        if not (c == w).all():
+            before = k - (c - 1) // 2  # -inf padding of each row: rank (c - 1) // 2 of its values lands at k
+            col = np.arange(w) - before[:, None]  # position in the row's segment
+            index = np.where(col < 0, len(values),
+                             np.where(col >= c[:, None], len(values) + 1, index - before[:, None]))
+        table = padded.take(index)
+        table.partition(k, axis=1)
+        median[rows] = table[:, k]
+    return median
 
 
 def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.ndarray,
@@ -143,37 +206,24 @@ def triangle_size(vertices: np.ndarray, triangles: np.ndarray, vertex_start: np.
     if not len(tri) or not inst.size:
         return 0.0
     tcount = np.diff(tstart)
-    num_shapes = len(tcount)
+    taken = np.minimum(tcount, SIZE_SAMPLE)
+    vbase = np.repeat(vstart[:-1], taken)  # each sampled triangle's first vertex row
+    rows = None  # every triangle
     if tcount.max() > SIZE_SAMPLE:  # big shapes: triangles (j * m) // SAMPLE, j < SAMPLE, evenly spaced
-        taken = np.minimum(tcount, SIZE_SAMPLE)
-        owner = np.repeat(np.arange(num_shapes), taken)
-        m = tcount[owner]
-        j = np.arange(len(owner)) - (np.cumsum(taken) - taken)[owner]
-        tri, tcount = tri[tstart[owner] + np.where(m > SIZE_SAMPLE, (j * m) // SIZE_SAMPLE, j)], taken
-    else:
-        owner = np.repeat(np.arange(num_shapes), tcount)
+        j = np.arange(len(vbase)) - np.repeat(np.cumsum(taken) - taken, taken)
+        m = np.repeat(np.where(tcount > SIZE_SAMPLE, tcount, SIZE_SAMPLE), taken)  # SAMPLE: j itself
+        rows = np.repeat(tstart[:-1], taken) + (j * m) // SIZE_SAMPLE
     v = np.asarray(vertices)
-    longest = np.empty(len(tri))
-    step = 1 << 18  # triangles a block: bounded temporaries for scenes of millions
-    for lo in range(0, len(tri), step):
-        corner = (tri[lo:lo + step] + vstart[owner[lo:lo + step], None]).T  # (3, t) vertex rows
-        x, y, z = (v[corner, k].astype(np.float64, copy=False) for k in range(3))  # (3, t) each
-
-        def squared(i: int, j: int) -> np.ndarray:  # |corner j - corner i|^2, summed x, y, z in turn
-            return ((x[j] - x[i]) ** 2 + (y[j] - y[i]) ** 2) + (z[j] - z[i]) ** 2
-
-        longest[lo:lo + step] = np.sqrt(np.maximum(np.maximum(squared(0, 1), squared(1, 2)), squared(2, 0)))
+    longest = np.empty(len(vbase))
+    step = 1 << 14  # triangles a block: temporaries that stay in the cache
+    for lo in range(0, len(vbase), step):
+        corner = tri[lo:lo + step] if rows is None else tri.take(rows[lo:lo + step], axis=0)
+        longest[lo:lo + step] = _longest_edges(v, np.add(corner.T, vbase[lo:lo + step], order="C"))
     keep = longest > 0.0
-    values, owner = longest[keep], owner[keep]
-    count = np.bincount(owner, minlength=num_shapes)
-    # Each shape's median: the values sorted once, then their ranks grouped by shape by one sort of
-    # the integers shape * K + rank (as a lexsort by shape, then size, orders them, at half its cost).
-    order = np.argsort(values)
-    key = np.sort(owner[order] * len(values) + np.arange(len(values)))
-    first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    median = np.zeros(num_shapes)
-    has = count > 0
-    median[has] = values[order[key[first[has] + (count[has] - 1) // 2] % len(values)]]
+    kept = np.concatenate([[0], np.cumsum(keep)])
+    ends = np.cumsum(taken)
+    count = kept[ends] - kept[ends - taken]
+    median = _segment_medians(longest[keep], count)
     scale = np.ones(inst.size) if object_scale is None else np.asarray(object_scale, np.float64)
     size = median[inst] * scale
     weight = count[inst]
