@@ -16,6 +16,10 @@ shared memory, then splits level by level inside the block, a barrier a level:
 * at the leaves, its rank along x among the leaf's triangles gives its place in ``tri_order``
   (the reference's leaves keep the x list's order).
 
+Where the build sorted its lists (a scene with a shape of more than ``small`` triangles), each
+subtree's block of each list is sorted already: the first level reads its ranks (positions) and
+bounds (first and last keys) off the lists instead of counting, half of a subtree's work.
+
 So a subtree needs no sorted lists at all: a scene whose shapes are all of at most ``small``
 triangles builds from its centroid keys in one launch (no radix sort, no level kernels), and a
 bigger shape needs ``log2(m / small)`` levels fewer than with subtrees finished by one thread.
@@ -80,6 +84,8 @@ def _block_finish_kernel(
     shape_subtree_end: wp.array[wp.int32],
     tri_key: wp.array[wp.vec3],
     tri_list: wp.array[wp.int32],
+    tri_pos: wp.array[wp.int32],
+    sorted_lists: int,
     # Outputs
     tri_order: wp.array[wp.int32],
 ):
@@ -122,20 +128,33 @@ def _block_finish_kernel(
             rx = int(0)
             ry = int(0)
             rz = int(0)
-            for k in range(ns, ns + nc):
-                o = slot[cur + k]
-                x = kx[o]
-                y = ky[o]
-                z = kz[o]
-                lo = wp.vec3(wp.min(lo[0], x), wp.min(lo[1], y), wp.min(lo[2], z))
-                hi = wp.vec3(wp.max(hi[0], x), wp.max(hi[1], y), wp.max(hi[2], z))
-                before = kid[o] < tri
-                if x < key[0] or (x == key[0] and before):
-                    rx += 1
-                if y < key[1] or (y == key[1] and before):
-                    ry += 1
-                if z < key[2] or (z == key[2] and before):
-                    rz += 1
+            if level == 0 and sorted_lists == 1:
+                # The subtree's block of each list is sorted already: its ranks and bounds read off them.
+                n = num_triangles
+                lists = (d0 % 2) * 3 * n
+                last = block + count - 1
+                rx = tri_pos[tri] - block
+                ry = tri_pos[n + tri] - block
+                rz = tri_pos[2 * n + tri] - block
+                lo = wp.vec3(tri_key[tri_list[lists + block]][0], tri_key[tri_list[lists + n + block]][1],
+                             tri_key[tri_list[lists + 2 * n + block]][2])
+                hi = wp.vec3(tri_key[tri_list[lists + last]][0], tri_key[tri_list[lists + n + last]][1],
+                             tri_key[tri_list[lists + 2 * n + last]][2])
+            else:
+                for k in range(ns, ns + nc):
+                    o = slot[cur + k]
+                    x = kx[o]
+                    y = ky[o]
+                    z = kz[o]
+                    lo = wp.vec3(wp.min(lo[0], x), wp.min(lo[1], y), wp.min(lo[2], z))
+                    hi = wp.vec3(wp.max(hi[0], x), wp.max(hi[1], y), wp.max(hi[2], z))
+                    before = kid[o] < tri
+                    if x < key[0] or (x == key[0] and before):
+                        rx += 1
+                    if y < key[1] or (y == key[1] and before):
+                        ry += 1
+                    if z < key[2] or (z == key[2] and before):
+                        rz += 1
             extent = hi - lo  # the longest axis, the first on ties
             rank = rx
             best = extent[0]
@@ -175,7 +194,8 @@ def block_dim_for(largest: int) -> int:
 
 
 def finish_blocks(num_subtrees: int, block_dim: int, num_triangles: int, leaf_size: int, shape_triangle_start,
-                  shape_global_levels, shape_subtree_end, tri_key, tri_list, tri_order, device) -> None:
+                  shape_global_levels, shape_subtree_end, tri_key, tri_list, tri_pos, sorted_lists: bool, tri_order,
+                  device) -> None:
     """Launches :func:`_block_finish_kernel`: ``num_subtrees`` blocks of ``block_dim`` threads.
 
     Args:
@@ -187,7 +207,11 @@ def finish_blocks(num_subtrees: int, block_dim: int, num_triangles: int, leaf_si
         shape_global_levels: ``(S,)`` int32 levels each shape was split level by level.
         shape_subtree_end: ``(S,)`` int32 inclusive scan of ``2**shape_global_levels``.
         tri_key: ``(T,)`` ``wp.vec3`` centroid keys.
-        tri_list: the build's lists (read only after global levels; any int32 array otherwise).
+        tri_list: the build's lists (read only where they were sorted; any int32 array otherwise).
+        tri_pos: each triangle's position in each list (read only where they were sorted).
+        sorted_lists: the lists were radix-sorted (and split ``shape_global_levels`` times): a
+            subtree's block of each list is sorted, and its first level reads ranks and bounds
+            there instead of counting.
         tri_order: ``(T,)`` int32 output.
         device: Warp device.
     """
@@ -195,5 +219,5 @@ def finish_blocks(num_subtrees: int, block_dim: int, num_triangles: int, leaf_si
         return
     wp.launch_tiled(_block_finish_kernel, dim=[num_subtrees],
                     inputs=[num_triangles, leaf_size, shape_triangle_start, shape_global_levels, shape_subtree_end,
-                            tri_key, tri_list],
+                            tri_key, tri_list, tri_pos, int(sorted_lists)],
                     outputs=[tri_order], block_dim=block_dim, device=device)

@@ -765,7 +765,8 @@ class TreeBuild:
                           outputs=[self._tri_list, self._tri_pos], device=d)
         if self.finish == "block":
             finish_blocks(self.num_subtrees, self.block_dim, n, self.leaf_size, self._tstart, self._global_levels,
-                          self._subtree_end, self._tri_key, self._tri_list, self.tri_order, d)
+                          self._subtree_end, self._tri_key, self._tri_list, self._tri_pos, self.presort, self.tri_order,
+                          d)
         else:
             wp.launch(_finish_kernel, dim=self.num_subtrees,
                       inputs=[n, self.leaf_size, self._tstart, self._global_levels, self._subtree_end, self._tri_key],
