@@ -119,3 +119,26 @@ def test_counter_read_generation():
     assert first.generation == g + 2 and second.generation == 0
     assert b.ensure(100)
     assert first.generation == g + 3 and second.generation == 1
+
+
+def test_packed_arrays_are_typed_views_of_one_upload(device):
+    """``packed_arrays``: each array as ``wp.array(host, dtype)`` would make it (vectors, transforms,
+    integers, empty ones, big ones uploaded alone), the small ones views of one block."""
+    from warp_ccd._arrays import PACK_ALIGN, packed_arrays, packed_upload
+    from warp_ccd.stages import buffers
+
+    assert buffers.packed_upload is packed_upload  # still importable where it lived
+    rng = np.random.default_rng(0)
+    items = [(rng.normal(size=(5, 3)).astype(np.float32), wp.vec3),
+             (rng.integers(0, 9, (4, 3)).astype(np.int32), wp.vec3i),
+             (np.arange(3, dtype=np.int32), wp.int32), (np.zeros(0, np.int32), wp.int32),
+             (rng.normal(size=(2, 7)), wp.transformd), (rng.normal(size=(3, 3)), wp.vec3d),
+             (rng.normal(size=(1000, 3)).astype(np.float32), wp.vec3)]
+    out = packed_arrays(items, device, alone=4096)
+    for (host, dtype), got in zip(items, out):
+        want = wp.array(host, dtype=dtype, device=device)
+        assert got.dtype == dtype and got.shape == want.shape and got.device == wp.get_device(device)
+        assert np.array_equal(got.numpy(), want.numpy())
+    small = [a for a, (h, _) in zip(out, items) if 0 < h.nbytes < 4096]
+    assert all(a._ref is small[0]._ref and a.ptr % PACK_ALIGN == 0 for a in small)
+    assert out[-1]._ref is not small[0]._ref  # a big one alone

@@ -20,7 +20,7 @@ import warp as wp
 
 from ._typing import ArrayLike, DeviceLike
 
-__all__ = ["ArrayLike", "DeviceLike", "device_view", "host_array", "is_device_array"]
+__all__ = ["ArrayLike", "DeviceLike", "device_view", "host_array", "is_device_array", "packed_arrays", "packed_upload"]
 
 
 
@@ -140,3 +140,64 @@ def device_view(x: ArrayLike, name: str, device: DeviceLike, *,
     if w.device != d:
         return wp.clone(w, device=d)
     return w
+
+
+def packed_upload(arrays: list, device: DeviceLike) -> list:
+    """Integer host arrays to int32 device arrays with one copy.
+
+    Args:
+        arrays: 1D integer numpy arrays (any lengths, any integer dtype; values must fit int32).
+        device: Warp device.
+
+    Returns:
+        One ``(len(a),)`` int32 device array per input, views of a single upload (an empty input
+        gets an empty array of its own).
+    """
+    lengths = [len(a) for a in arrays]
+    block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
+    ends = np.cumsum(lengths)
+    return [block[int(e - k):int(e)] if k else wp.empty(0, dtype=wp.int32, device=device)
+            for e, k in zip(ends, lengths)]
+
+
+PACK_ALIGN = 64
+"""Byte alignment of each array in a :func:`packed_arrays` block."""
+
+
+def packed_arrays(items: list, device: DeviceLike, alone: int = 1 << 20) -> list:
+    """Host arrays to device arrays of their Warp types with one copy for all the small ones.
+
+    Args:
+        items: ``(host array, Warp dtype)`` pairs; each host array holds the dtype's scalars
+            (``(n, 3)`` float32 for ``wp.vec3``, ``(n,)`` int32 for ``wp.int32``; other scalar types
+            are converted as ``wp.array(host, dtype)`` would).
+        device: Warp device.
+        alone: arrays of at least this many bytes get an upload of their own (copying them into the
+            block would cost more than the upload it saves).
+
+    Returns:
+        One ``(n,)`` device array per item, in order: the small ones views of a single upload,
+        each aligned to :data:`PACK_ALIGN` bytes and keeping the block alive.
+    """
+    out: list = [None] * len(items)
+    parts, layout, offset = [], [], 0
+    for i, (host, dtype) in enumerate(items):
+        scalar, length = getattr(dtype, "_wp_scalar_type_", dtype), getattr(dtype, "_length_", 1)
+        flat = np.ascontiguousarray(host, dtype=wp.dtype_to_numpy(scalar)).reshape(-1)
+        if flat.nbytes >= alone or not flat.nbytes:
+            out[i] = wp.array(flat.reshape(-1, length) if length > 1 else flat, dtype=dtype, device=device)
+            continue
+        pad = -offset % PACK_ALIGN
+        if pad:
+            parts.append(np.zeros(pad, np.uint8))
+        offset += pad
+        parts.append(flat.view(np.uint8))
+        layout.append((i, offset, flat.size // length, dtype))
+        offset += flat.nbytes
+    if layout:
+        block = wp.array(np.concatenate(parts), dtype=wp.uint8, device=device)
+        for i, start, count, dtype in layout:
+            view = wp.array(ptr=block.ptr + start, dtype=dtype, shape=(count,), device=block.device)
+            view._ref = block  # keeps the block alive as long as the view
+            out[i] = view
+    return out

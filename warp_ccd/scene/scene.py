@@ -25,12 +25,13 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 import math
 from collections.abc import Sequence
 from functools import cached_property
+from itertools import chain
 from typing import Any
 
 import numpy as np
 import warp as wp
 
-from .._arrays import ArrayLike, DeviceLike, device_view, host_array, is_device_array
+from .._arrays import ArrayLike, DeviceLike, device_view, host_array, is_device_array, packed_arrays
 from .._deprecated import renamed_arguments, renamed_attribute
 from ..geometry.precision import (
     coordinate_message,
@@ -425,16 +426,13 @@ class Scene:
 
         d = self.device
         vec3 = self.vec3_type
-        self.shape_vertex = wp.array(packed.vertices, dtype=vec3, device=d)
-        self.shape_triangle = wp.array(packed.triangles, dtype=wp.vec3i, device=d)
-        self.shape_vertex_start = wp.array(self.shape_vertex_start_np, dtype=wp.int32, device=d)
-        self.shape_triangle_start = wp.array(self.shape_triangle_start_np, dtype=wp.int32, device=d)
-        self.object_shape = wp.array(self.object_shape_np, dtype=wp.int32, device=d)
-        self.object_scale = wp.array(scale, dtype=wp.float32, device=d)
-        self.object_pose = wp.array(poses, dtype=self.transform_type, device=d)
-        self.object_vertex_start = wp.array(self.object_vertex_start_np, dtype=wp.int32, device=d)
-        self.object_triangle_start = wp.array(self.object_triangle_start_np, dtype=wp.int32, device=d)
-        self.vertex_object = wp.array(np.repeat(np.arange(n, dtype=np.int32), inst_nv), dtype=wp.int32, device=d)
+        (self.shape_vertex, self.shape_triangle, self.shape_vertex_start, self.shape_triangle_start,
+         self.object_shape, self.object_scale, self.object_pose, self.object_vertex_start, self.object_triangle_start,
+         self.vertex_object) = packed_arrays([  # the small ones in one copy
+            (packed.vertices, vec3), (packed.triangles, wp.vec3i), (self.shape_vertex_start_np, wp.int32),
+            (self.shape_triangle_start_np, wp.int32), (self.object_shape_np, wp.int32), (scale, wp.float32),
+            (poses, self.transform_type), (self.object_vertex_start_np, wp.int32),
+            (self.object_triangle_start_np, wp.int32), (np.repeat(np.arange(n, dtype=np.int32), inst_nv), wp.int32)], d)
         self.world_vertex = wp.zeros(self.num_world_vertices, dtype=vec3, device=d)
         self.topology = MeshTopology()
         self.topology.shape_triangle = self.shape_triangle
@@ -543,26 +541,29 @@ class Scene:
         """
         if isinstance(meshes, (str, bytes)) or not isinstance(meshes, Sequence):
             raise TypeError(f"meshes: expected a sequence of (vertices, triangles), got {type(meshes).__name__}")
-        pairs = [isinstance(m, (tuple, list)) and len(m) == 2 for m in meshes]
-        if not all(pairs):
-            i = pairs.index(False)
-            raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(meshes[i]).__name__}")
+        if not (set(map(type, meshes)) <= {tuple, list} and set(map(len, meshes)) <= {2}):  # else one by one
+            pairs = [isinstance(m, (tuple, list)) and len(m) == 2 for m in meshes]
+            if not all(pairs):
+                i = pairs.index(False)
+                raise ValueError(f"mesh {i}: expected a (vertices, triangles) pair, got {type(meshes[i]).__name__}")
         n = len(meshes)
         flags = _deforming_flags(deforming, n)
         if flags.any() or n == 0:
             source = np.arange(n)
             inst = source
         else:  # the very same arrays share one shape, numbered in order of first use
-            key = np.fromiter((id(a) for m in meshes for a in m), np.int64, 2 * n).reshape(n, 2)
+            key = np.fromiter(map(id, chain.from_iterable(meshes)), np.int64, 2 * n).reshape(n, 2)
             _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
             by_use = np.argsort(first)
             rank = np.empty_like(by_use)
             rank[by_use] = np.arange(len(by_use))
             source = first[by_use]
             inst = rank[inverse.reshape(-1)]
-        packed = validate_meshes([tuple(a if type(a) is np.ndarray else host_array(a, f"mesh {i}")  # numpy as is
-                                        for a in meshes[i]) for i in source.tolist()],
-                                 labels=source, kind="mesh", dtype=np.float64)
+        given = [meshes[i] for i in source.tolist()] if len(source) < n else list(meshes)
+        if not set(map(type, chain.from_iterable(given))) <= {np.ndarray}:  # numpy as is
+            given = [tuple(a if type(a) is np.ndarray else host_array(a, f"mesh {i}") for a in given[k])
+                     for k, i in enumerate(source.tolist())]
+        packed = validate_meshes(given, labels=source, kind="mesh", dtype=np.float64)
         poses = None
         if transforms is not None:
             if flags.ndim == 0 and flags:

@@ -14,6 +14,7 @@ malformed data reach a kernel.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from operator import attrgetter
 
 import numpy as np
 
@@ -350,16 +351,19 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
         return MeshSet(np.zeros((0, 3), dtype), np.zeros((0, 3), np.int32), np.zeros(1, np.int64),
                        np.zeros(1, np.int64))
     try:
-        vs = [np.asarray(v) for v, _ in meshes]
-        ts = [np.asarray(t) for _, t in meshes]
+        if set(map(len, meshes)) != {2}:
+            raise ValueError("not pairs")
+        vs, ts = (list(map(np.asarray, arrays)) for arrays in zip(*meshes))
     except Exception:  # ragged, not pairs: let the per-mesh checks say which
         each()
         raise
     # Ranks, widths and kinds of number, from one attribute of each array (bool, strings, objects,
-    # wrong shapes: the per-mesh checks name the mesh).
-    t_types = {x.dtype for x in ts}
-    if {x.shape[1:] for x in vs} != {(3,)} or {x.shape[1:] for x in ts} != {(3,)} \
-            or not {x.dtype.kind for x in vs} <= set("iuf") or not {d.kind for d in t_types} <= set("iu"):
+    # wrong shapes: the per-mesh checks name the mesh), each distinct value once.
+    t_types = set(map(attrgetter("dtype"), ts))
+    if {s[1:] for s in set(map(attrgetter("shape"), vs))} != {(3,)} \
+            or {s[1:] for s in set(map(attrgetter("shape"), ts))} != {(3,)} \
+            or not {d.kind for d in set(map(attrgetter("dtype"), vs))} <= set("iuf") \
+            or not {d.kind for d in t_types} <= set("iu"):
         each()
         raise ValueError("meshes: arrays of inconsistent shapes or types")  # not reached: some mesh is bad
     v = np.concatenate(vs)  # new arrays: converted below without another copy

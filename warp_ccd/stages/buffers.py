@@ -10,7 +10,8 @@ Device helpers every stage shares live here too: :func:`emit_pair` (an object pa
 protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),
 :func:`block_reserve` (slots for a whole block of threads with one atomic add) and
 :func:`device_fence` (for a kernel whose last block finishes the work of all); and one host helper,
-:func:`packed_upload` (many small integer arrays to the device in one copy).
+:func:`packed_upload` (many small integer arrays to the device in one copy; it lives in
+:mod:`warp_ccd._arrays`, beside the scene's own packed uploads, and is re-exported here).
 
 Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
 their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
@@ -26,6 +27,8 @@ from typing import Any
 
 import numpy as np
 import warp as wp
+
+from .._arrays import packed_upload  # re-exported: it lived here
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -130,24 +133,6 @@ def upper_bound(values: wp.array[Any], first: int, end: int, x: Any) -> int:
         else:
             lo = mid + 1
     return lo
-
-
-def packed_upload(arrays: list, device) -> list:
-    """Integer host arrays to int32 device arrays with one copy.
-
-    Args:
-        arrays: 1D integer numpy arrays (any lengths, any integer dtype; values must fit int32).
-        device: Warp device.
-
-    Returns:
-        One ``(len(a),)`` int32 device array per input, views of a single upload (an empty input
-        gets an empty array of its own).
-    """
-    lengths = [len(a) for a in arrays]
-    block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
-    ends = np.cumsum(lengths)
-    return [block[int(e - k):int(e)] if k else wp.empty(0, dtype=wp.int32, device=device)
-            for e, k in zip(ends, lengths)]
 
 
 class GrowableBuffer:
