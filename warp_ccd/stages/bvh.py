@@ -620,10 +620,10 @@ class SceneBVH:
         world_start = np.full(num_shapes, -1, np.int64)
         has = first < n
         world_start[has] = scene.object_vertex_start_np[first[has]]
-        self._shape_world_start = wp.array(world_start.astype(np.int32), dtype=wp.int32, device=d)
-
-        self.rigid_object = wp.array(np.nonzero(~deforming)[0].astype(np.int32), dtype=wp.int32, device=d)
-        self.object_deforming = wp.array(deforming.astype(np.int32), dtype=wp.int32, device=d)
+        # The small index arrays in one copy: views of one upload.
+        (self._shape_world_start, self.rigid_object, self.object_deforming, tree_node_start, shape_node_start,
+         shape_ids) = packed_upload([world_start, np.nonzero(~deforming)[0], deforming,
+                                     np.append(inode, self.num_node_slots), shape_slot, np.arange(num_shapes)], d)
         self.refit_plan = _RefitPlan(np.nonzero(deforming)[0], inst_shape, build, object_refit_max_nodes, d)
         self._shape_plan = _RefitPlan(np.nonzero(has_rigid)[0], np.arange(num_shapes), build,
                                       object_refit_max_nodes, d)
@@ -641,19 +641,19 @@ class SceneBVH:
             tv.layout_cut_start = build.layout_cut_start_device
             tv.cut_node = build.cut_node
             tv.tri_order = build.tri_order
-            tv.object_node_start = wp.array(node_start.astype(np.int32), dtype=wp.int32, device=d)
+            tv.object_node_start = node_start
             tv.node_lower = self._node_lower
             tv.node_upper = self._node_upper
             return tv
 
         self._node_lower = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
         self._node_upper = wp.zeros(self.num_node_slots, dtype=wp.vec3, device=d)
-        self.tree = view(np.append(inode, self.num_node_slots))
-        self._shape_tree = view(shape_slot)  # the shapes as objects of their own (their boxes' slots)
+        self.tree = view(tree_node_start)
+        self._shape_tree = view(shape_node_start)  # the shapes as objects of their own (their boxes' slots)
         self._shape_topology = MeshTopology()
         for name in ("shape_triangle", "shape_triangle_start"):
             setattr(self._shape_topology, name, getattr(scene, name))
-        self._shape_topology.object_shape = wp.array(np.arange(num_shapes, dtype=np.int32), device=d)
+        self._shape_topology.object_shape = shape_ids
         self._shape_topology.object_vertex_start = scene.shape_vertex_start
         self._shape_topology.object_triangle_start = scene.shape_triangle_start
         self._shape_lower = wp.zeros(num_shapes, dtype=wp.vec3, device=d)
