@@ -24,7 +24,7 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 
 import math
 from collections.abc import Sequence
-from functools import cached_property
+from functools import cached_property, reduce
 from itertools import chain
 from typing import Any
 
@@ -272,7 +272,7 @@ def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | No
     if not inst.size or not len(packed.vertices):
         return
     if poses is None:
-        far = np.abs(packed.vertices).max(axis=1)
+        far = reduce(np.maximum, np.abs(packed.vertices).T)  # not .max(axis=1): a reduction over rows of 3
         owner = np.repeat(np.arange(len(packed)), np.diff(packed.vertex_start))
         per_shape = np.zeros(len(packed))
         np.maximum.at(per_shape, owner, far)

@@ -407,7 +407,8 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
     with_t = num_t > 0
     t_max = np.full(len(num_t), -1, np.int64)
     if len(t):
-        t_max[with_t] = np.maximum.reduceat(t.max(axis=1), tstart[:-1][with_t])
+        row_max = np.maximum(np.maximum(t[:, 0], t[:, 1]), t[:, 2])  # not t.max(axis=1): 20x the time
+        t_max[with_t] = np.maximum.reduceat(row_max, tstart[:-1][with_t])
     if len(t) and (t.min() < 0 or (t_max >= num_v).any()):
         limit = np.repeat(num_v, num_t)[:, None]
         row = int(np.argmax(((t < 0) | (t >= limit)).any(axis=1)))
