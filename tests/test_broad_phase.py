@@ -7,6 +7,7 @@ import warp as wp
 import warp_ccd as wc
 from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, ALL_PAIRS_MAX, BroadPhaseAllPairs, make_broad_phase
 
+from conftest import DEFAULT_DEVICE
 from oracles import box_pairs_numpy
 
 
@@ -325,3 +326,12 @@ def test_find_pairs_box_sets_of_different_sizes(device):
         lo, hi, lower, upper = sets[k]
         got = bp.find_pairs(lower, upper).numpy().reshape(-1, 2)
         assert np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], box_pairs_numpy(lo, hi)), k
+
+
+@pytest.mark.parametrize("method", ["sap", "all_pairs"])
+@pytest.mark.parametrize("bad", [0, -1, 1.5, "3", True, 2**31])
+def test_entry_capacity_checked_for_every_method(method, bad):
+    """``entry_capacity`` is checked whichever broad phase takes it (the all-pairs one ignores a good one)."""
+    with pytest.raises(ValueError, match="entry_capacity"):
+        make_broad_phase(method, device=DEFAULT_DEVICE, entry_capacity=bad)
+    make_broad_phase(method, device=DEFAULT_DEVICE, entry_capacity=8)

@@ -305,6 +305,22 @@ def test_one_shot_runs_its_frame_once(device, monkeypatch):
     assert runs == [1, 1, 1]
 
 
+def test_validate_meshes_takes_any_iterable_pair():
+    """A mesh is any pair that unpacks: a list, a tuple, or an object that only iterates."""
+    class Pair:
+        def __init__(self, v, t):
+            self.v, self.t = v, t
+
+        def __iter__(self):
+            return iter((self.v, self.t))
+
+    v, t = wc.scene.shape("tetrahedron")
+    packed = validate_meshes([Pair(v, t), [v, t]])
+    assert len(packed) == 2 and np.array_equal(packed.triangles[4:], t)
+    with pytest.raises(ValueError, match="mesh 1"):
+        validate_meshes([(v, t), Pair(v, t[:, :2])])
+
+
 def test_validate_meshes_mixed_arrays():
     """Mixed kinds of arrays: bool ones are refused as validate_mesh refuses them, int64 beside
     uint64 indices are fine, pairs may be any tuple type, and the first bad mesh is named."""

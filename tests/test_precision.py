@@ -146,6 +146,7 @@ def test_edge_cases():
     assert triangle_size(v, t[2:], [0, 6], [0, 1], [0]) == 0.0
     assert triangle_size(v, t, [0, 6], [0, 3], []) == 0.0
     assert np.array_equal(shape_radius(np.zeros((0, 3)), [0, 0, 0]), np.zeros(2))
+    assert np.array_equal(shape_radius(np.ones((4, 3)), [0, 0, 0]), np.zeros(2))  # vertices, but no shape has any
     nan = v.copy()
     nan[4, 1] = np.nan  # a NaN vertex makes its shape's radius NaN, as the norm did
     with np.errstate(invalid="ignore"):

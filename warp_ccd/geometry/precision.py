@@ -117,6 +117,8 @@ def shape_radius(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     if not len(v):
         return radius
     has = np.flatnonzero(start[1:] > start[:-1])  # a shape's segment ends where the next non-empty one starts
+    if not len(has):
+        return radius
     first = start[:-1][has]
     x, y, z = (v[:, k].astype(np.float64) for k in range(3))
     square = (x * x + y * y) + z * z

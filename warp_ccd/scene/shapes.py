@@ -351,9 +351,10 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
         return MeshSet(np.zeros((0, 3), dtype), np.zeros((0, 3), np.int32), np.zeros(1, np.int64),
                        np.zeros(1, np.int64))
     try:
-        if set(map(len, meshes)) != {2}:
+        pairs = list(map(tuple, meshes))  # any iterable pair, as unpacking takes it
+        if set(map(len, pairs)) != {2}:
             raise ValueError("not pairs")
-        vs, ts = (list(map(np.asarray, arrays)) for arrays in zip(*meshes))
+        vs, ts = (list(map(np.asarray, arrays)) for arrays in zip(*pairs))
     except Exception:  # ragged, not pairs: let the per-mesh checks say which
         each()
         raise

@@ -66,6 +66,7 @@ from ..geometry.box import BOX_EMPTY, boxes_overlap
 from ..options import integer_option
 from ..scene.filter import CollisionFilter, PairFilter, inactive_filter, pair_allowed
 from .buffers import (
+    COUNT_LIMIT,
     ITEM_LIST_SIZE,
     CounterRead,
     GrowableBuffer,
@@ -469,7 +470,8 @@ class BroadPhaseSAP(BroadPhase):
         self._scratch_boxes = -1  # boxes the per-box scratch holds
         self._entry_box = None
         # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
-        entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, allow_none=True)
+        entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, high=COUNT_LIMIT // 2 - 1,
+                                        allow_none=True)  # stored twice over (the sort's halves)
         self.entry = GrowableBuffer(wp.int32, entry_capacity or 1024, d, "sap grid entries", factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
@@ -570,6 +572,8 @@ def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | No
     """
     if not isinstance(method, str) or method not in BROAD_METHODS:
         raise ValueError(f"broad phase method must be 'sap' or 'all_pairs' (or 'nxn', an alias), got {method!r}")
+    entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, high=COUNT_LIMIT // 2 - 1,
+                                    allow_none=True)  # checked whichever method takes it
     if entry_capacity is not None and BROAD_METHODS[method] is BroadPhaseSAP:
         return BroadPhaseSAP(device=device, graph=graph, entry_capacity=entry_capacity)
     return BROAD_METHODS[method](device=device, graph=graph)
