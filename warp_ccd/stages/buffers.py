@@ -39,6 +39,7 @@ __all__ = [
     "CounterRead",
     "GrowableBuffer",
     "block_dim_for",
+    "blocks_have_lanes",
     "block_reserve",
     "device_fence",
     "emit_pair",
@@ -62,10 +63,16 @@ ITEM_LIST_SIZE = wp.constant(16)
 vec_items = wp.types.vector(length=ITEM_LIST_SIZE, dtype=wp.int32)
 
 
+def blocks_have_lanes(device) -> bool:
+    """Whether a thread block on ``device`` runs its threads side by side: on CUDA, and on the CPU
+    only with ``wp.config.enable_cpu_blocks`` (else Warp runs a CPU block as one thread)."""
+    return wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks
+
+
 def block_dim_for(device) -> int:
-    """Block size of the per-block kernels on ``device``: :data:`BLOCK_DIM` on CUDA; on the CPU 1
-    (Warp runs a CPU block as one thread) unless ``wp.config.enable_cpu_blocks`` is set."""
-    return BLOCK_DIM if wp.get_device(device).is_cuda or wp.config.enable_cpu_blocks else 1
+    """Block size of the per-block kernels on ``device``: :data:`BLOCK_DIM` where a block has its
+    lanes (:func:`blocks_have_lanes`), else 1."""
+    return BLOCK_DIM if blocks_have_lanes(device) else 1
 
 
 @wp.func

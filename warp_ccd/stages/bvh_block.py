@@ -39,11 +39,11 @@ CPU blocks on.
 
 import warp as wp
 
-from .buffers import upper_bound
+from .buffers import blocks_have_lanes, upper_bound
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["BLOCK_SUBTREE", "block_dim_for", "finish_blocks", "subtree_of"]
+__all__ = ["BLOCK_SUBTREE", "finish_blocks", "require_lanes", "subtree_block_dim", "subtree_of"]
 
 BLOCK_SUBTREE = 256
 """Most triangles of a subtree one block finishes: the shared tables' size (24 bytes a triangle:
@@ -182,7 +182,15 @@ def _block_finish_kernel(
         tri_order[block + ns + rank] = tri - first
 
 
-def block_dim_for(largest: int) -> int:
+def require_lanes(device, why: str) -> None:
+    """ValueError unless a block on ``device`` has its lanes (:func:`~warp_ccd.stages.buffers.blocks_have_lanes`):
+    this kernel's threads share their block's work, which one lane would leave undone (``why``: the
+    message's note)."""
+    if not blocks_have_lanes(device):
+        raise ValueError(f"finish='block' on the CPU needs wp.config.enable_cpu_blocks ({why})")
+
+
+def subtree_block_dim(largest: int) -> int:
     """Threads of a block for subtrees of at most ``largest`` triangles: a power of two from 32
     (a warp) to :data:`BLOCK_SUBTREE`."""
     if largest > BLOCK_SUBTREE:
@@ -200,7 +208,7 @@ def finish_blocks(num_subtrees: int, block_dim: int, num_triangles: int, leaf_si
 
     Args:
         num_subtrees: subtrees of all shapes (``shape_subtree_end[-1]``).
-        block_dim: threads a block, at least the largest subtree (:func:`block_dim_for`).
+        block_dim: threads a block, at least the largest subtree (:func:`subtree_block_dim`).
         num_triangles: triangles of all shapes.
         leaf_size: most triangles per leaf.
         shape_triangle_start: ``(S + 1,)`` int32 offsets of the shapes' triangles.

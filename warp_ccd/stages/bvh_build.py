@@ -51,7 +51,7 @@ import warp as wp
 
 from ..geometry.precision import precision_overloads
 from .buffers import packed_upload, upper_bound
-from .bvh_block import BLOCK_SUBTREE, block_dim_for, finish_blocks, subtree_of
+from .bvh_block import BLOCK_SUBTREE, finish_blocks, require_lanes, subtree_block_dim, subtree_of
 from .bvh_reference import ShapeTree
 
 # Forward kernels only; no FMA contraction, so that centroid keys are the same bits everywhere.
@@ -629,8 +629,8 @@ class TreeBuild:
             finish = "block" if d.is_cuda and fits else "thread"
         if finish not in ("block", "thread"):
             raise ValueError(f"finish must be 'block' or 'thread', got {finish!r}")
-        if finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
-            raise ValueError("finish='block' on the CPU needs wp.config.enable_cpu_blocks (else a block is one lane)")
+        if finish == "block":
+            require_lanes(d, "else a block is one lane")
         self.finish = finish
         if small is None:
             small = BLOCK_SUBTREE if finish == "block" else SMALL_SUBTREE if d.is_cuda else 2**31 - 1
@@ -659,7 +659,7 @@ class TreeBuild:
         self.num_global_levels = int(layout_levels.max()) if len(m) else 0
         # Threads a block: the largest subtree left (ceil(m / 2**levels) triangles).
         largest = int((-(-layout_m // (np.int64(1) << layout_levels))).max()) if len(m) else 1
-        self.block_dim = block_dim_for(largest) if finish == "block" else 0
+        self.block_dim = subtree_block_dim(largest) if finish == "block" else 0
         subtree_end = np.cumsum(np.int64(1) << self.global_levels)
         self.num_subtrees = int(subtree_end[-1]) if len(m) else 0
 
@@ -693,12 +693,13 @@ class TreeBuild:
         self._tri_shape = wp.empty(ln, dtype=wp.int32, device=d)
         self._tri_list = wp.empty(6 * ln, dtype=wp.int32, device=d)
         self._tri_pos = wp.empty(3 * ln, dtype=wp.int32, device=d)
-        self._side = self._side_before = self._sort_key = self._sort_value = None
+        self._side = self._side_before = self._sort_key = self._sort_value = self._node_axis = None
         if self.presort and n:
             self._scratch = wp.empty(6 * n, dtype=wp.int32, device=d)
             self._side, self._side_before = self._scratch[: 3 * n], self._scratch[3 * n:]
             self._sort_key = wp.array(ptr=self._scratch.ptr, dtype=wp.uint64, shape=(2 * n,), device=d)
             self._sort_value = self._scratch[4 * n:]
+            self._node_axis = self._side_before[:n]  # a level's axes: read by the side kernel, then scanned over
             self._key_bits = wp.array(ptr=self._tri_key.ptr, dtype=wp.uint32, shape=(3 * n,), device=d)
         self._sort_bits = 32 + int(_bit_length(np.array([max(len(m) - 1, 0)]))[0])
 
@@ -734,9 +735,8 @@ class TreeBuild:
         if n == 0:
             return
         d = self.device
-        if self.finish == "block" and not d.is_cuda and not wp.config.enable_cpu_blocks:
-            raise ValueError("finish='block' on the CPU needs wp.config.enable_cpu_blocks "
-                             "(turned off since the build was made)")
+        if self.finish == "block":
+            require_lanes(d, "turned off since the build was made")
         use_world = int(world_vertex is not None)
         if world_vertex is None:
             world_vertex, shape_world_start = shape_vertex, self._tstart  # not read
@@ -755,10 +755,10 @@ class TreeBuild:
         if self.num_global_levels:
             for level in range(self.num_global_levels):
                 common = [level, n, self._tri_shape, self._tstart, self._global_levels]
-                node_axis = self._side_before[:n]  # read by the side kernel, then overwritten by the scan
                 wp.launch(_node_axis_kernel, dim=n, inputs=[*common, self._tri_key, self._tri_list],
-                          outputs=[node_axis], device=d)
-                wp.launch(_split_side_kernel, dim=3 * n, inputs=[*common, node_axis, self._tri_list, self._tri_pos],
+                          outputs=[self._node_axis], device=d)
+                wp.launch(_split_side_kernel, dim=3 * n,
+                          inputs=[*common, self._node_axis, self._tri_list, self._tri_pos],
                           outputs=[self._side], device=d)
                 wp.utils.array_scan(self._side, self._side_before, inclusive=False)
                 wp.launch(_split_scatter_kernel, dim=3 * n, inputs=[*common, self._side, self._side_before],
