@@ -150,14 +150,10 @@ def packed_upload(arrays: list, device: DeviceLike) -> list:
         device: Warp device.
 
     Returns:
-        One ``(len(a),)`` int32 device array per input, views of a single upload (an empty input
-        gets an empty array of its own).
+        One ``(len(a),)`` int32 device array per input, views of a single upload (:func:`packed_arrays`;
+        an empty input gets an empty array of its own).
     """
-    lengths = [len(a) for a in arrays]
-    block = wp.array(np.concatenate(arrays, dtype=np.int32, casting="unsafe"), dtype=wp.int32, device=device)
-    ends = np.cumsum(lengths)
-    return [block[int(e - k):int(e)] if k else wp.empty(0, dtype=wp.int32, device=device)
-            for e, k in zip(ends, lengths)]
+    return packed_arrays([(a, wp.int32) for a in arrays], device, alone=2**62)  # the big ones in the block too
 
 
 PACK_ALIGN = 64
