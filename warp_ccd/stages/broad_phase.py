@@ -470,9 +470,8 @@ class BroadPhaseSAP(BroadPhase):
         self._scratch_boxes = -1  # boxes the per-box scratch holds
         self._entry_box = None
         # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
-        entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, high=COUNT_LIMIT // 2 - 1,
-                                        allow_none=True)  # stored twice over (the sort's halves)
-        self.entry = GrowableBuffer(wp.int32, entry_capacity or 1024, d, "sap grid entries", factor=2, doubling=False)
+        self.entry = GrowableBuffer(wp.int32, _entry_capacity(entry_capacity) or 1024, d, "sap grid entries",
+                                    factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
         """Scratch for ``n`` boxes. It only grows: a captured frame holds its pointers, so a frame of
@@ -555,6 +554,12 @@ BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": B
 ``"all_pairs"``, kept as an alias."""
 
 
+def _entry_capacity(value: int | None) -> int | None:
+    """``entry_capacity`` checked (an integer >= 1, or None): stored twice over (the sort's halves),
+    so at most half the count limit."""
+    return integer_option("entry_capacity", value, low=1, high=COUNT_LIMIT // 2 - 1, allow_none=True)
+
+
 def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None,
                      entry_capacity: int | None = None) -> BroadPhase:
     """The broad phase of a method name.
@@ -572,10 +577,9 @@ def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | No
     """
     if not isinstance(method, str) or method not in BROAD_METHODS:
         raise ValueError(f"broad phase method must be 'sap' or 'all_pairs' (or 'nxn', an alias), got {method!r}")
-    entry_capacity = integer_option("entry_capacity", entry_capacity, low=1, high=COUNT_LIMIT // 2 - 1,
-                                    allow_none=True)  # checked whichever method takes it
-    if entry_capacity is not None and BROAD_METHODS[method] is BroadPhaseSAP:
+    if BROAD_METHODS[method] is BroadPhaseSAP:
         return BroadPhaseSAP(device=device, graph=graph, entry_capacity=entry_capacity)
+    _entry_capacity(entry_capacity)  # checked though the all-pairs reference has no grid
     return BROAD_METHODS[method](device=device, graph=graph)
 
 
