@@ -24,7 +24,7 @@ Three ways to move a scene: ``advance(dt)`` for scenes with an :class:`~warp_ccd
 
 import math
 from collections.abc import Sequence
-from functools import cached_property, reduce
+from functools import cached_property
 from itertools import chain
 from typing import Any
 
@@ -45,7 +45,7 @@ from ..options import integer_option, number_option
 from .filter import CollisionFilter
 from .inputs import InputCheck
 from .motion import EllipseMotion, advance_time
-from .shapes import MeshSet, validate_meshes
+from .shapes import MeshSet, row_max, validate_meshes
 from .shapes import shape as _named_shape
 
 # Forward kernels only; no FMA contraction, so that world vertices from the same poses are the same
@@ -272,7 +272,7 @@ def _check_coordinates(packed: MeshSet, inst: np.ndarray, poses: np.ndarray | No
     if not inst.size or not len(packed.vertices):
         return
     if poses is None:
-        far = reduce(np.maximum, np.abs(packed.vertices).T)  # not .max(axis=1): a reduction over rows of 3
+        far = row_max(np.abs(packed.vertices))
         owner = np.repeat(np.arange(len(packed)), np.diff(packed.vertex_start))
         per_shape = np.zeros(len(packed))
         np.maximum.at(per_shape, owner, far)

@@ -287,6 +287,12 @@ def validate_mesh(vertices: ArrayLike, triangles: ArrayLike, name: str = "mesh",
     return np.ascontiguousarray(out), np.ascontiguousarray(t.astype(np.int32))
 
 
+def row_max(a: np.ndarray) -> np.ndarray:
+    """``(n,)`` largest of each row of an ``(n, 3)`` array, column against column (numpy's
+    ``a.max(axis=1)`` over rows of three takes about 20x the time); NaN spreads as it does there."""
+    return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
+
+
 class MeshSet:
     """Many triangle meshes packed end to end (what :func:`validate_meshes` returns).
 
@@ -408,8 +414,7 @@ def validate_meshes(meshes: Sequence[tuple[ArrayLike, ArrayLike]], labels: Array
     with_t = num_t > 0
     t_max = np.full(len(num_t), -1, np.int64)
     if len(t):
-        row_max = np.maximum(np.maximum(t[:, 0], t[:, 1]), t[:, 2])  # not t.max(axis=1): 20x the time
-        t_max[with_t] = np.maximum.reduceat(row_max, tstart[:-1][with_t])
+        t_max[with_t] = np.maximum.reduceat(row_max(t), tstart[:-1][with_t])
     if len(t) and (t.min() < 0 or (t_max >= num_v).any()):
         limit = np.repeat(num_v, num_t)[:, None]
         row = int(np.argmax(((t < 0) | (t >= limit)).any(axis=1)))
