@@ -1,4 +1,4 @@
-"""Draws docs/crossing_cases.png: the verdict of :mod:`warp_ccd.stages.crossing` in the plane across an
+"""Draws docs/crossing_cases.png: the verdict of :mod:`warp_ccd._src.check.crossing` in the plane across an
 intersection segment, for the cases users meet. Run: ``.venv/bin/python docs/crossing_cases.py``
 (needs matplotlib: ``pip install -e '.[bench]'``)."""
 

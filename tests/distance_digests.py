@@ -18,9 +18,9 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.geometry.distance import tri_tri_distance_batch_kernel
+from warp_ccd._src.scene.shapes import icosphere
 from warp_ccd.bench.awkward_pairs import PRECISIONS, awkward_pairs
-from warp_ccd.geometry.distance import tri_tri_distance_batch_kernel
-from warp_ccd.scene.shapes import icosphere
 
 REFERENCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "distance_digests.json")
 

@@ -1,5 +1,5 @@
 """Convex solids in exact rational arithmetic, and whether two of them overlap: the oracle of the
-penetrating / touching verdict (:mod:`warp_ccd.stages.crossing`).
+penetrating / touching verdict (:mod:`warp_ccd._src.check.crossing`).
 
 Two closed convex solids penetrate exactly when their interiors share a point: when the largest
 ``t`` with ``n . x + t <= c`` for every face plane ``n . x <= c`` of both (and ``t <= 1``) is

@@ -1,4 +1,4 @@
-"""Arrays from anywhere (:mod:`warp_ccd._arrays`, :mod:`warp_ccd.scene.inputs`): torch tensors (on the
+"""Arrays from anywhere (:mod:`warp_ccd._src.runtime.arrays`, :mod:`warp_ccd._src.scene.inputs`): torch tensors (on the
 CPU here), Warp arrays and bare DLPack / ``__cuda_array_interface__`` producers are read in place, give the
 results numpy gives, and bad rows are named by the frame that reads them; on CUDA, a frame driven from
 device arrays issues no memory copy."""
@@ -8,7 +8,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd._arrays import device_view, host_array, is_device_array
+from warp_ccd._src.runtime.arrays import device_view, host_array, is_device_array
 from warp_ccd.scene import icosphere, matrix_to_quat, quat_to_matrix, shape
 
 torch = pytest.importorskip("torch", reason="torch (a test extra) is not installed")

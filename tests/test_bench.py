@@ -8,6 +8,10 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.broadphase.sap import find_pairs
+from warp_ccd._src.cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
+from warp_ccd._src.runtime.buffers import CounterRead, GrowableBuffer, reserve_slot
+from warp_ccd._src.runtime.frame import MODES, CountedFrame
 from warp_ccd.bench import box_tests, deforming, host_breakdown, methods, scaling
 from warp_ccd.bench import broad_phase as broad_phase_bench
 from warp_ccd.bench import pipeline as pipeline_bench
@@ -23,10 +27,7 @@ from warp_ccd.bench.memory import _tracker_peak
 from warp_ccd.bench.meshes import parse_triangles
 from warp_ccd.bench.methods import device_modes
 from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase, WarpMeshPipeline
-from warp_ccd.bench.timing import MODES, CountedFrame, StageTimes
-from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
-from warp_ccd.stages.broad_phase import find_pairs
-from warp_ccd.stages.buffers import CounterRead, GrowableBuffer, reserve_slot
+from warp_ccd.bench.timing import StageTimes
 
 ROW_KEYS = {"method", "n_objects", "triangles_per_object", "stage", "ms_min", "ms_median", "object_pairs",
             "triangle_pairs"}
@@ -131,7 +132,7 @@ def test_mixed_meshes_are_valid_and_of_real_sizes(device):
     counts = sorted(len(t) for _, t in meshes)
     assert counts[0] == 120 and counts[-1] == 12640 and len(counts) == 7
     for v, t in meshes:
-        wc.scene.shapes.validate_mesh(v, t)
+        wc.scene.validate_mesh(v, t)
         assert abs(np.linalg.norm(v, axis=1).max() - 1.0) < 1e-6
     scene = wc.Scene.random(8, seed=1, shapes=meshes, device=device)
     assert scene.num_shapes == 7 and wc.CollisionPipeline(scene).detect().num_objects == 8

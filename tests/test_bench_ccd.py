@@ -9,8 +9,8 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.cli.common import EXIT_INTERNAL, EXIT_OK
 from warp_ccd.bench import ccd_queries, continuous
-from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
 
 TINY = ["--queries", "400", "--objects", "60", "--ipctk-queries", "100", "--repeats", "1", "--cpu-repeats", "1"]
 

@@ -7,7 +7,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.stages.buffers import BLOCK_DIM, block_dim_for, block_reserve
+from warp_ccd._src.runtime.buffers import BLOCK_DIM, block_dim_for, block_reserve
 
 from oracles import box_pairs_numpy
 from test_broad_phase import pairs_from_capacity_one

@@ -5,7 +5,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, ALL_PAIRS_MAX, BroadPhaseAllPairs, make_broad_phase
+from warp_ccd._src.broadphase.sap import ALL_PAIRS_LIMIT, ALL_PAIRS_MAX, BroadPhaseAllPairs, make_broad_phase
 
 from conftest import DEFAULT_DEVICE
 from oracles import box_pairs_numpy
@@ -119,7 +119,7 @@ def test_equals_numpy(device, method, dist):
 
 def test_sap_key_bits():
     """16-bit keys (two radix passes) up to 16,384 boxes, wider keys above, never past 31 bits."""
-    from warp_ccd.stages.broad_phase import SMALL_SCENE_BOXES, sap_key_bits
+    from warp_ccd._src.broadphase.grid import SMALL_SCENE_BOXES, sap_key_bits
 
     assert sap_key_bits(2) == sap_key_bits(1000) == sap_key_bits(SMALL_SCENE_BOXES) == (8, 8)
     assert sum(sap_key_bits(SMALL_SCENE_BOXES + 1)) > 16
@@ -147,7 +147,7 @@ def test_tiny_counts(device, n):
 def pairs_from_capacity_one(bp, wlo, whi, device):
     """Runs ``bp`` from a pair buffer of capacity 1 (and its own buffers as they are) until every
     buffer holds its items, growing them as the counters ask; returns ``(sorted pairs, runs)``."""
-    from warp_ccd.stages.buffers import CounterRead, GrowableBuffer
+    from warp_ccd._src.runtime.buffers import CounterRead, GrowableBuffer
 
     pairs = GrowableBuffer(wp.vec2i, 1, device, "pairs")
     counters = CounterRead([pairs, *bp.counters], device)
@@ -248,18 +248,13 @@ def test_unknown_method():
         wc.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")
 
 
-def test_old_names():
-    """``"nxn"``, the all-pairs method's old name, is an alias; the old names of its class and limit
-    warn and reach the new ones."""
-    import warp_ccd.stages.broad_phase as broad_phase
+def test_nxn_is_an_alias_of_all_pairs(device):
+    """``"nxn"`` names the all-pairs method too (the contract's name for it); no other old name remains."""
+    import warp_ccd._src.broadphase.sap as broad_phase
 
-    assert type(make_broad_phase("nxn", device="cpu")) is BroadPhaseAllPairs
-    with pytest.warns(DeprecationWarning, match="BroadPhaseNxN is deprecated"):
-        assert broad_phase.BroadPhaseNxN is BroadPhaseAllPairs
-    with pytest.warns(DeprecationWarning, match="NXN_MAX_BOXES is deprecated"):
-        assert broad_phase.NXN_MAX_BOXES == ALL_PAIRS_LIMIT
-    with pytest.raises(AttributeError):
-        broad_phase.BroadPhaseN2  # noqa: B018
+    assert type(make_broad_phase("nxn", device=device)) is BroadPhaseAllPairs
+    for gone in ("BroadPhaseNxN", "NXN_MAX_BOXES"):
+        assert not hasattr(broad_phase, gone)
 
 
 @pytest.mark.parametrize("method", ["sap", "all_pairs"])
@@ -288,7 +283,7 @@ def test_sap_statistics_last_block(device):
     frame after frame (moving boxes), the sweep axis is that of greatest variance of the centres,
     the grid starts at the lowest box, every accumulator is empty again after the frame, and the
     pairs are the numpy truth."""
-    from warp_ccd.geometry.box import BOX_EMPTY
+    from warp_ccd._src.geometry.box import BOX_EMPTY
 
     rng = np.random.default_rng(5)
     n = 9000  # three blocks on the CPU, 36 on CUDA

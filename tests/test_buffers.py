@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_ccd.stages.buffers import CounterRead, GrowableBuffer, reserve_slot, upper_bound
-from warp_ccd.stages.frame import CountedFrame
+from warp_ccd._src.runtime.buffers import CounterRead, GrowableBuffer, reserve_slot, upper_bound
+from warp_ccd._src.runtime.frame import CountedFrame
 
 
 @wp.kernel
@@ -124,8 +124,8 @@ def test_counter_read_generation():
 def test_packed_arrays_are_typed_views_of_one_upload(device):
     """``packed_arrays``: each array as ``wp.array(host, dtype)`` would make it (vectors, transforms,
     integers, empty ones, big ones uploaded alone), the small ones views of one block."""
-    from warp_ccd._arrays import PACK_ALIGN, packed_arrays, packed_upload
-    from warp_ccd.stages import buffers
+    from warp_ccd._src.runtime import buffers
+    from warp_ccd._src.runtime.arrays import PACK_ALIGN, packed_arrays, packed_upload
 
     assert buffers.packed_upload is packed_upload  # still importable where it lived
     rng = np.random.default_rng(0)

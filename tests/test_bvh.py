@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.stages.bvh_reference import build_tree, centroid_keys
+from warp_ccd._src.trees.reference import build_tree, centroid_keys
 
 from oracles import triangle_pairs_fcl, triangle_pairs_warp64
 
@@ -200,7 +200,7 @@ def deforming_copy(scene, mask=True):
 
 def test_refit_paths_agree(device):
     """Leaves then inner nodes (small trees) and level by level give the same boxes."""
-    from warp_ccd.stages.bvh import SceneBVH
+    from warp_ccd._src.trees.bvh import SceneBVH
 
     rigid = mixed_scene(device, n=25, seed=6)
     rigid.advance(0.3)

@@ -6,9 +6,9 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.scene.shapes import validate_mesh, validate_meshes
-from warp_ccd.stages.bvh_build import CUT_DEPTH_MAX, CUT_TRIANGLES, TreeBuild, TreeSizes
-from warp_ccd.stages.bvh_reference import build_tree
+from warp_ccd._src.scene.shapes import validate_mesh, validate_meshes
+from warp_ccd._src.trees.build import CUT_DEPTH_MAX, CUT_TRIANGLES, TreeBuild, TreeSizes
+from warp_ccd._src.trees.reference import build_tree
 
 
 def soup(rng, m: int, ties: bool = False) -> tuple[np.ndarray, np.ndarray]:

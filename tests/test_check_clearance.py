@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.check.clearance import COLOR_CLEARANCE, COLOR_SOFT_CLASH
+from warp_ccd._src.cli import commands as cli
 from warp_ccd.usd import check_usd
-from warp_ccd.usd.clearance import COLOR_CLEARANCE, COLOR_SOFT_CLASH
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom  # noqa: E402

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.check.sweep import COLOR_TUNNELLING
+from warp_ccd._src.cli import commands as cli
 from warp_ccd.usd import check_usd
-from warp_ccd.usd.sweep import COLOR_TUNNELLING
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom  # noqa: E402

@@ -4,7 +4,7 @@ the original (penetrating). An exact copy, one with its triangles shuffled and i
 and one turned half a turn (its triangles land on the original's) are duplicates at 0 and 1, not
 penetrating; a copy moved by 1e-3 of its size, or turned a quarter turn (the same box, other
 triangles), is not. The report's section and rows (schema-valid), the summary, the overlay's colour, the
-exit status; without ``--duplicates`` nothing changes. And :func:`~warp_ccd.usd.duplicates.coincident`
+exit status; without ``--duplicates`` nothing changes. And :func:`~warp_ccd._src.check.duplicates.coincident`
 itself on triangle soups: shuffled, wound the other way, a few ulps apart; a moved, replaced or
 missing triangle."""
 
@@ -14,10 +14,10 @@ import json
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.check.duplicates import COLOR_DUPLICATE, coincident
+from warp_ccd._src.check.overlay import COLOR_PENETRATING
+from warp_ccd._src.cli import commands as cli
 from warp_ccd.usd import check_usd, report_schema
-from warp_ccd.usd.check import COLOR_PENETRATING
-from warp_ccd.usd.duplicates import COLOR_DUPLICATE, coincident
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom  # noqa: E402
@@ -152,7 +152,7 @@ def test_coincident_triangle_sets():
 def test_near_ties_in_the_sort_are_matched():
     # Clusters of triangles whose sort keys tie (translates of one triangle along a line the sort
     # direction is blind to): a perturbation of an ulp reorders them, the window matches them again.
-    from warp_ccd.usd.duplicates import _SORT
+    from warp_ccd._src.check.duplicates import _SORT
 
     blind = np.cross(_SORT, [0.0, 0.0, 1.0])
     blind *= 1e-2 / np.linalg.norm(blind)

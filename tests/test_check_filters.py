@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.cli import commands as cli
 from warp_ccd.usd import check_usd, report_schema, scene_from_usd
 
 from conftest import DEFAULT_DEVICE

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.cli import commands as cli
-from warp_ccd.geometry.precision import PrecisionWarning, needed_precision, triangle_size
-from warp_ccd.usd.check import check_usd
-from warp_ccd.usd.importer import UsdMeshImport
-from warp_ccd.usd.stage import MAX_FRAMES, stage_time_codes
+from warp_ccd._src.check.check import check_usd
+from warp_ccd._src.cli import commands as cli
+from warp_ccd._src.geometry.precision import PrecisionWarning, needed_precision, triangle_size
+from warp_ccd._src.usd.importer import UsdMeshImport
+from warp_ccd._src.usd.stage import MAX_FRAMES, stage_time_codes
 
 from conftest import DEFAULT_DEVICE
 

@@ -1,5 +1,5 @@
 """``check_many``: files and long animations checked in parts, in this process or on a Ray cluster, and merged
-into the report of the serial check (:func:`~warp_ccd.usd.check.check_usd` over the whole file).
+into the report of the serial check (:func:`~warp_ccd._src.check.check.check_usd` over the whole file).
 
 The oracle is the serial check itself: a merged report's JSON equals the serial one's text for text (``seconds``
 apart, floats bit for bit), and so do its pair summary, findings, worst frame, precision and summary; the
@@ -17,21 +17,12 @@ import warnings
 import numpy as np
 import pytest
 
-from warp_ccd.geometry.precision import PrecisionWarning
-from warp_ccd.usd.batch import (
-    EXIT_BAD_INPUT,
-    EXIT_CLEAN,
-    EXIT_FINDINGS,
-    EXIT_INTERNAL,
-    MIN_FRAMES_PER_TASK,
-    check_many,
-    expand_paths,
-    merge_reports,
-    plan_tasks,
-    run_task,
-)
-from warp_ccd.usd.check import check_usd, write_overlay
-from warp_ccd.usd.cluster import FAULT_ENV
+from warp_ccd._src.check.batch import MIN_FRAMES_PER_TASK, check_many, expand_paths, merge_reports, plan_tasks
+from warp_ccd._src.check.check import check_usd
+from warp_ccd._src.check.cluster import FAULT_ENV
+from warp_ccd._src.check.overlay import write_overlay
+from warp_ccd._src.check.tasks import EXIT_BAD_INPUT, EXIT_CLEAN, EXIT_FINDINGS, EXIT_INTERNAL, run_task
+from warp_ccd._src.geometry.precision import PrecisionWarning
 
 from conftest import DEFAULT_DEVICE
 
@@ -270,7 +261,7 @@ def test_exit_status_is_the_worst(files, device):
 
 
 def test_an_internal_error_is_reported_and_the_others_go_on(files, device, monkeypatch):
-    import warp_ccd.usd.check as check_module
+    import warp_ccd._src.check.check as check_module
 
     def failing(path, **options):
         if str(path).endswith("abc.usda"):
@@ -514,7 +505,7 @@ def test_a_part_at_fault_checks_its_file_whole(tmp_path, device):
 
 def test_cli_ray_before_the_file(ray_cluster, files, tmp_path):
     """``warp-ccd check --ray IN.usd``: the file is a file, not the cluster's address; the report is one run's."""
-    from warp_ccd.cli import main
+    from warp_ccd._src.cli.commands import main
 
     out = tmp_path / "ray.json"
     assert main(["check", "--ray", files["abc"], "--workers", "2", "--frames-per-task", "5",
@@ -531,8 +522,8 @@ def test_ray_read_tasks_equal_one_process(ray_cluster, files, monkeypatch):
     import numpy as np
     from pxr import Usd
 
-    from warp_ccd.usd import workers
-    from warp_ccd.usd.cluster import _ray_pool
+    from warp_ccd._src.check.cluster import _ray_pool
+    from warp_ccd._src.usd import workers
 
     stage = Usd.Stage.Open(files["mixed"])
     prims = [p for p in stage.Traverse() if p.GetTypeName() == "Mesh"]

@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
-from warp_ccd.cli import common as cli_common
+from warp_ccd._src.cli import commands as cli
+from warp_ccd._src.cli import common as cli_common
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom  # noqa: E402
@@ -126,7 +126,8 @@ def test_outputs_never_overwrite_an_input(layered, capsys, case):
 
 
 def test_write_overlay_refuses_a_layer_of_the_stage(layered):
-    from warp_ccd.usd.check import check_usd, write_overlay
+    from warp_ccd._src.check.check import check_usd
+    from warp_ccd._src.check.overlay import write_overlay
 
     report = check_usd(layered, frames=[0.0], device=DEFAULT_DEVICE)
     before = (layered.parent / "sub.usda").read_bytes()
@@ -178,7 +179,7 @@ def test_findings_touching_and_penetrating(resting, tmp_path, capsys):
 
 
 def test_report_findings_property(resting):
-    from warp_ccd.usd.check import check_usd
+    from warp_ccd._src.check.check import check_usd
 
     strict = check_usd(resting, frames=[0.0], device=DEFAULT_DEVICE)
     assert (strict.findings, strict.penetrating, strict.touching) == (None, False, True)
@@ -190,7 +191,7 @@ def test_report_findings_property(resting):
 
 
 def test_internal_error_is_one_line_exit_3(resting, capsys, monkeypatch):
-    from warp_ccd.usd import check
+    from warp_ccd._src.check import check
 
     def broken(*args, **kwargs):
         raise RuntimeError("device lost\nsecond line")
@@ -252,8 +253,8 @@ def test_missing_reference_is_an_error_unless_allowed(missing_ref, tmp_path, cap
 
 
 def test_missing_layers_and_check_usd_allow_missing(missing_ref, layered, tmp_path):
-    from warp_ccd.usd.check import check_usd
-    from warp_ccd.usd.stage import missing_layers, open_stage
+    from warp_ccd._src.check.check import check_usd
+    from warp_ccd._src.usd.stage import missing_layers, open_stage
 
     sub = tmp_path / "withsub.usda"
     stage = new_stage(sub)
@@ -288,7 +289,7 @@ def test_failed_overlay_leaves_every_output_as_it_was(mixed_file, tmp_path, caps
     for name, data in outs.items():
         (tmp_path / name).write_bytes(data)
     prepared = []
-    from warp_ccd.usd.check import CheckReport
+    from warp_ccd._src.check.report import CheckReport
 
     prepare_json = CheckReport.prepare_json
 
@@ -330,7 +331,7 @@ def test_interrupt_while_drawing_leaves_every_output_as_it_was(mixed_file, tmp_p
 
 
 def test_all_outputs_written_together(mixed_file, tmp_path, capsys, monkeypatch):
-    from warp_ccd import output
+    from warp_ccd._src import output
 
     order = []
     commit = output.PendingFile.commit
@@ -380,7 +381,7 @@ def test_prims_do_not_swallow_the_input(mixed_file, tmp_path, capsys):
     rc, captured = run_cli(capsys, ["check", "--prims", "/World/Floor,", str(mixed_file)])
     assert rc == 2 and "--prims" in message_lines(captured.err)[0]
     # Paths and patterns together: each path's subtree, and what the patterns match.
-    from warp_ccd.usd.importer import UsdMeshImport
+    from warp_ccd._src.usd.importer import UsdMeshImport
 
     imp = UsdMeshImport(mixed_file, prims=["/World/Floor", "/World/Movers/*"])
     assert sorted(imp.object_path) == ["/World/Floor", "/World/Movers/A/Geom", "/World/Movers/B/Geom"]
@@ -404,7 +405,7 @@ def test_negative_frames_without_equals(tmp_path, capsys):
 
 
 def test_summary_counts_face_pairs_per_frame(mixed_file, capsys):
-    from warp_ccd.usd.check import check_usd
+    from warp_ccd._src.check.check import check_usd
 
     rc, captured = run_cli(capsys, ["check", str(mixed_file), "--frames", "0:6:3", "--device", DEFAULT_DEVICE])
     assert rc == 1, captured.err
@@ -429,14 +430,14 @@ def test_compiling_kernels_notice(resting, capsys, monkeypatch):
 
     def uncached(device, names):
         seen.append((str(device), tuple(names)))
-        return ["warp_ccd.stages.narrow_phase"]
+        return ["warp_ccd._src.narrowphase.discrete"]
 
     monkeypatch.setattr(cli, "uncached_modules", uncached)
     rc, captured = run_cli(capsys, ["check", str(resting), "--device", DEFAULT_DEVICE, "--frames", "0"])
     assert rc == 0, captured.err
     (line,) = [x for x in captured.err.splitlines() if "compiling" in x]
     assert f"compiling kernels for {DEFAULT_DEVICE}" in line
-    assert seen and "warp_ccd.stages.narrow_phase" in seen[0][1]
+    assert seen and "warp_ccd._src.narrowphase.discrete" in seen[0][1]
     monkeypatch.setattr(cli, "uncached_modules", lambda device, names: [])
     rc, captured = run_cli(capsys, ["check", str(resting), "--device", DEFAULT_DEVICE, "--frames", "0"])
     assert rc == 0 and "compiling" not in captured.err
@@ -514,7 +515,7 @@ def test_report_to_stdout_bad_input_and_internal_error(tmp_path, resting, capsys
     rc, captured = run_cli(capsys, ["check", str(resting), "--report", "-", "--usd-out", "-"])
     assert rc == 2 and captured.out == "" and "--usd-out" not in captured.out  # '-' is for the report only
     assert "unknown USD extension" in message_lines(captured.err)[0]
-    from warp_ccd.usd import check
+    from warp_ccd._src.check import check
 
     def broken(*args, **kwargs):
         raise RuntimeError("device lost")

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.check.self_intersection import COLOR_SELF
+from warp_ccd._src.cli import commands as cli
 from warp_ccd.usd import check_usd
-from warp_ccd.usd.self_intersection import COLOR_SELF
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, Vt  # noqa: E402

@@ -7,8 +7,8 @@ as small stages."""
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
-from warp_ccd.usd.check import check_usd
+from warp_ccd._src.check.check import check_usd
+from warp_ccd._src.cli import commands as cli
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, Vt  # noqa: E402

@@ -17,7 +17,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.scene.shapes import cube, icosphere, shape
+from warp_ccd._src.scene.shapes import cube, icosphere, shape
 
 from distance_reference import point_on_triangle_sq, triangle_distance
 from oracles import clearance_pairs_brute, fcl_model, fcl_pair_distance, pair_distance_brute

@@ -8,7 +8,7 @@ import types
 import numpy as np
 import pytest
 
-from warp_ccd.cli import commands as cli
+from warp_ccd._src.cli import commands as cli
 
 from conftest import DEFAULT_DEVICE, message_lines
 
@@ -40,8 +40,8 @@ def test_demo_writes_usd_and_png_and_prints_a_summary(tmp_path, device, capsys):
 def test_demo_segments_writes_the_intersection_segments_of_every_frame(tmp_path, capsys, monkeypatch):
     # --segments: a curve of two points per finite intersection segment of each frame's result.
     pxr = pytest.importorskip("pxr")
-    from warp_ccd import pipeline
-    from warp_ccd.usd.export import segment_points
+    from warp_ccd._src.pipeline import pipeline
+    from warp_ccd._src.usd.export import segment_points
 
     seen = []
     detect = pipeline.CollisionPipeline.detect
@@ -130,7 +130,7 @@ def test_unwritable_out_fails_before_the_run(tmp_path, capsys):
 
 
 def test_interrupt_leaves_no_file(tmp_path, capsys, monkeypatch):
-    from warp_ccd.usd import export as usd
+    from warp_ccd._src.usd import export as usd
 
     out = tmp_path / "x.usd"
     out.write_bytes(b"previous")
@@ -201,7 +201,7 @@ def test_python_dash_m_bad_argument_has_no_traceback(tmp_path):
 
 def test_summary_means(tmp_path, capsys, monkeypatch):
     # The summary's means are those of the frames' results.
-    from warp_ccd import pipeline
+    from warp_ccd._src.pipeline import pipeline
 
     seen = []
     detect = pipeline.CollisionPipeline.detect

@@ -1,6 +1,6 @@
 """Continuous detection at the scene level: ``CollisionPipeline(continuous=True)`` and ``collide(...,
 transforms_end=, vertices_end=)`` against a brute-force reference that runs the same device
-function, :func:`~warp_ccd.geometry.ccd.triangle_pair_toi`, on every triangle pair of every object pair."""
+function, :func:`~warp_ccd._src.geometry.ccd.triangle_pair_toi`, on every triangle pair of every object pair."""
 
 from itertools import combinations
 from typing import Any
@@ -10,8 +10,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.awkward_pairs import awkward_pairs
-from warp_ccd.geometry.ccd import (
+from warp_ccd._src.geometry.ccd import (
     CCD_MAX_ITERATIONS,
     CCD_TOLERANCE,
     MEETS_UNDECIDED,
@@ -19,8 +18,9 @@ from warp_ccd.geometry.ccd import (
     pair_meets_common,
     triangle_pair_toi,
 )
-from warp_ccd.scene.scene import MeshTopology, mesh_triangle
-from warp_ccd.scene.shapes import icosphere, shape
+from warp_ccd._src.scene.scene import MeshTopology, mesh_triangle
+from warp_ccd._src.scene.shapes import icosphere, shape
+from warp_ccd.bench.awkward_pairs import awkward_pairs
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})  # as the pipeline's module: same bits
 

@@ -1,4 +1,4 @@
-"""Penetrating or touching (:mod:`warp_ccd.stages.crossing`): a property of the surfaces, not of their
+"""Penetrating or touching (:mod:`warp_ccd._src.check.crossing`): a property of the surfaces, not of their
 triangulation. Crafted scenes (a crate sunk into or resting on floors cut every way, flush boxes,
 CAD-like contacts), and random boxes judged against the exact rational oracle of ``solids.py``,
 under re-triangulation, mirroring and non-uniform scale."""
@@ -11,8 +11,8 @@ import warp as wp
 from solids import Box, interiors_overlap, rotation, vertex_depth
 
 import warp_ccd as wc
-from warp_ccd.stages.crossing import CrossingClassifier
-from warp_ccd.stages.surface import surface_topology
+from warp_ccd._src.check.crossing import CrossingClassifier
+from warp_ccd._src.check.surface import surface_topology
 
 
 def grid(n: int, size: float = 3.0, angle: float = 0.0, offset=(0.0, 0.0), z: float = 0.0, flip: bool = False):
@@ -242,7 +242,7 @@ def test_far_from_the_origin_and_tiny(device):
 def test_tree_and_reference_depths_agree(device, precision, rng):
     """Depths found down the pipeline's trees equal those measured against every triangle (the
     reference), for rigid objects under poses and deforming ones."""
-    sphere = wc.scene.shapes.icosphere(3)
+    sphere = wc.scene.icosphere(3)
     meshes, transforms = [], []
     for _ in range(12):
         q = rng.normal(size=4)

@@ -13,9 +13,9 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.geometry.precision import precision_types
-from warp_ccd.geometry.triangle import CONTACT_NONE, CONTACT_SEGMENT, TOLERANCE, tri_tri_segment_batch_kernel
-from warp_ccd.stages.narrow_phase import NARROW_METHODS
+from warp_ccd._src.geometry.precision import precision_types
+from warp_ccd._src.geometry.triangle import CONTACT_NONE, CONTACT_SEGMENT, TOLERANCE, tri_tri_segment_batch_kernel
+from warp_ccd._src.narrowphase.discrete import NARROW_METHODS
 
 from oracles import closed_triangle_distance, tolerance_length, touching_band
 from test_narrow_phase import run_test

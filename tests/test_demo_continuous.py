@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.cli import commands as cli
-from warp_ccd.cli.tunnelling import BOX_HALF, WALL_SPACING, ContactTally, ThinWalls
+from warp_ccd._src.cli import commands as cli
+from warp_ccd._src.cli.tunnelling import BOX_HALF, WALL_SPACING, ContactTally, ThinWalls
 
 
 def test_the_boxes_fly_between_the_walls_and_the_tally_matches_collide(device):
@@ -54,7 +54,7 @@ def test_demo_continuous_counts_contacts_only_the_continuous_detection_saw(tmp_p
     assert only >= 1 and over_steps >= only
     assert "continuous ms / frame" in captured.out
     # Coloured in the USD: the objects that collide at the frame or at any time of the step to it.
-    from warp_ccd.usd.export import COLOR_COLLIDING
+    from warp_ccd._src.usd.export import COLOR_COLLIDING
 
     walls = ThinWalls(10, seed=1, device=device)
     local = [walls.scene.shape_meshes[k] for k in walls.scene.object_shape_np]

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.geometry.triangle import TOLERANCE
+from warp_ccd._src.geometry.triangle import TOLERANCE
 
 import awkward_pairs
 import scene_results

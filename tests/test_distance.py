@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import warp_ccd as wc
-from warp_ccd.geometry.distance import DISTANCE_ERROR_ULPS, tri_tri_distance_batch_kernel
+from warp_ccd._src.geometry.distance import DISTANCE_ERROR_ULPS, tri_tri_distance_batch_kernel
 
 import distance_digests
 from conftest import DEFAULT_DEVICE
@@ -43,7 +43,7 @@ def run_distance(tri_a: np.ndarray, tri_b: np.ndarray, precision: str, device, t
 
 def centred_extent(tri_a: np.ndarray, tri_b: np.ndarray, precision: str) -> np.ndarray:
     """``R`` of each pair: the largest coordinate relative to the pair's centroid (module docstring of
-    :mod:`warp_ccd.geometry.distance`)."""
+    :mod:`warp_ccd._src.geometry.distance`)."""
     both = np.concatenate([tri_a, tri_b], axis=1).astype(np.float64)
     return np.abs(both - both.mean(axis=1, keepdims=True)).max(axis=(1, 2))
 

@@ -1,4 +1,4 @@
-"""Worlds, collision groups and masks, excluded pairs (:mod:`warp_ccd.scene.filter`): the broad phase's
+"""Worlds, collision groups and masks, excluded pairs (:mod:`warp_ccd._src.scene.filter`): the broad phase's
 pairs equal numpy's brute force over every box pair with the filter's rule written out again here; a
 frame of many worlds equals a Python loop of one scene per world; bad filters are named."""
 
@@ -9,10 +9,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import warp_ccd as wc
+from warp_ccd._src.broadphase.grid import sap_world_bits
+from warp_ccd._src.broadphase.sap import BroadPhaseSAP, find_pairs
+from warp_ccd._src.runtime.buffers import GrowableBuffer
+from warp_ccd._src.scene.filter import WORLDS_MAX
 from warp_ccd.scene import CollisionFilter, icosphere, shape
-from warp_ccd.scene.filter import WORLDS_MAX
-from warp_ccd.stages.broad_phase import BroadPhaseSAP, find_pairs, sap_world_bits
-from warp_ccd.stages.buffers import GrowableBuffer
 
 
 def brute_pairs(lo, hi, world=None, group=None, mask=None, exclude=()):

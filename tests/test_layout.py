@@ -1,47 +1,49 @@
-"""The package's layout keeps its rule (docs/ARCHITECTURE.md, "Rooms"): the core (geometry, scene, stages,
-pipeline) never imports I/O (usd, preview, output) or the applications (cli, bench), every room imports only
-the rooms below it, no module imports another in a circle, and no module grows past its size.
+"""The package's layout keeps its rule (``warp_ccd/_src/__init__.py``, docs/architecture): the implementation
+lives under ``warp_ccd._src`` in one folder per concept, each importing only the concepts below it; the core
+(runtime to pipeline) never imports USD, the check, the CLI, pictures or benchmarks; no module imports another
+in a circle; the private core never imports a public module; the public modules are few.
 
 The graph is read from the source (``ast``), every import counted wherever it stands (a function-level
-import is an edge too: it is how ``Scene.from_usd`` once closed a circle). A package's ``__init__`` that
-gathers its own modules' names is an edge from the package to them, as written. The top-level
-``warp_ccd/__init__.py`` is the façade: it may import anything, and only the applications (cli, bench)
-import it.
+import or one under ``TYPE_CHECKING`` is an edge too).
 """
 
 from __future__ import annotations
 
 import ast
 import os
-import re
 
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE = os.path.join(ROOT, "warp_ccd")
 
-ROOMS = {
-    # room: (module prefixes, rooms it may import besides itself)
-    "floor": (("warp_ccd._arrays", "warp_ccd._deprecated", "warp_ccd._typing", "warp_ccd.options"), ()),
-    "geometry": (("warp_ccd.geometry",), ("floor",)),
-    "scene": (("warp_ccd.scene",), ("floor", "geometry")),
-    "stages": (("warp_ccd.stages",), ("floor", "geometry", "scene")),
-    "pipeline": (("warp_ccd.pipeline", "warp_ccd.result", "warp_ccd.query"), ("floor", "geometry", "scene", "stages")),
-    "output": (("warp_ccd.output",), ("floor",)),
-    "usd": (("warp_ccd.usd",), ("floor", "geometry", "scene", "stages", "pipeline", "output")),
-    "preview": (("warp_ccd.preview",), ("floor", "geometry", "scene", "stages", "pipeline", "output")),
-    "cli": (("warp_ccd.cli", "warp_ccd.__main__"),
-            ("floor", "geometry", "scene", "stages", "pipeline", "output", "usd", "preview", "bench", "facade")),
-    "bench": (("warp_ccd.bench",),
-              ("floor", "geometry", "scene", "stages", "pipeline", "output", "usd", "preview", "cli", "facade")),
-    "facade": (("warp_ccd",), tuple()),  # may import anything (see the module docstring)
+CORE_ROOMS = {
+    # concept: the concepts it may import besides itself
+    "runtime": (),
+    "geometry": ("runtime",),
+    "scene": ("runtime", "geometry"),
+    "trees": ("runtime", "geometry", "scene"),
+    "broadphase": ("runtime", "geometry", "scene", "trees"),
+    "midphase": ("runtime", "geometry", "scene", "trees"),
+    "narrowphase": ("runtime", "geometry", "scene", "trees"),
+    "queries": ("runtime", "geometry", "scene", "trees", "narrowphase"),
+    "pipeline": ("runtime", "geometry", "scene", "trees", "broadphase", "midphase", "narrowphase", "queries"),
 }
-CORE = ("geometry", "scene", "stages", "pipeline")
+CORE = tuple(CORE_ROOMS)
+ROOMS = {
+    **CORE_ROOMS,
+    "output": ("runtime",),
+    "usd": (*CORE, "output"),
+    "check": (*CORE, "output", "usd"),
+    "preview": (*CORE, "output"),
+    "cli": (*CORE, "output", "usd", "check", "preview", "bench"),
+    "bench": (*CORE, "output", "usd", "check", "preview", "cli"),
+    "_src": (),
+}
+"""Every folder (or single module) of ``warp_ccd/_src`` and what it may import: a new concept gets its row here."""
 CORE_THIRD_PARTY = {"warp", "numpy"}
 """What the core imports beyond the standard library: never pxr, PIL, tqdm, matplotlib."""
-
-MODULE_LINES_MAX = 800
-STAGE_LINES_MAX = {"warp_ccd.stages.narrow_phase": 500}
+PUBLIC_MAX = 25
 
 
 def module_files() -> dict[str, str]:
@@ -59,9 +61,12 @@ MODULES = module_files()
 
 
 def room_of(module: str) -> str:
-    best = max((p for r, (prefixes, _) in ROOMS.items() for p in prefixes
-                if module == p or module.startswith(p + ".")), key=len)
-    return next(r for r, (prefixes, _) in ROOMS.items() if best in prefixes)
+    """The concept folder of a private module (``warp_ccd._src.trees.bvh``: ``trees``), ``"public"`` for the
+    public modules (no part starting with an underscore, and ``warp_ccd.__main__``)."""
+    parts = module.split(".")
+    if parts[1:2] == ["_src"]:
+        return parts[2] if len(parts) > 2 else "_src"
+    return "public"
 
 
 def imports_of(module: str) -> tuple[set[str], set[str]]:
@@ -103,18 +108,29 @@ GRAPH = {m: imports_of(m)[0] for m in MODULES}
 
 def test_the_graph_was_read():
     """The parser sees the edges it must (a guard against a test that passes on an empty graph)."""
-    assert "warp_ccd.scene.scene" in GRAPH["warp_ccd.pipeline"]
-    assert any(m.startswith("warp_ccd.stages") for m in GRAPH["warp_ccd.pipeline"])
-    assert "warp_ccd.usd.importer" in set().union(*(GRAPH[m] for m in MODULES if m.startswith("warp_ccd.usd")))
-    assert all(room_of(m) for m in MODULES)
+    assert "warp_ccd._src.scene.scene" in GRAPH["warp_ccd._src.pipeline.pipeline"]
+    assert any(room_of(m) == "trees" for m in GRAPH["warp_ccd._src.midphase.bvh"])
+    assert "warp_ccd._src.usd.importer" in set().union(*(GRAPH[m] for m in MODULES if room_of(m) == "check"))
+    assert {room_of(m) for m in MODULES} >= set(CORE) | {"usd", "check", "cli", "public"}
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
-def test_rooms_import_only_rooms_below(module):
+def test_every_private_module_is_in_a_known_concept():
+    unknown = sorted(m for m in MODULES if room_of(m) not in ROOMS and room_of(m) != "public")
+    assert not unknown, f"modules outside the concepts of ROOMS (add the concept, with what it may import): {unknown}"
+
+
+def test_each_concept_says_what_it_holds():
+    """Each concept folder opens with a docstring (what it holds), the room a newcomer reads first."""
+    for room in ROOMS:
+        init = os.path.join(PACKAGE, "_src", room, "__init__.py")
+        if os.path.exists(init):
+            assert ast.get_docstring(ast.parse(open(init).read())), f"_src/{room}/__init__.py has no docstring"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if room_of(m) != "public"))
+def test_concepts_import_only_concepts_below(module):
     room = room_of(module)
-    if room == "facade":
-        return
-    allowed = set(ROOMS[room][1]) | {room}
+    allowed = set(ROOMS.get(room, ())) | {room}
     wrong = sorted(f"{m} ({room_of(m)})" for m in GRAPH[module] if room_of(m) not in allowed)
     assert not wrong, f"{module} ({room}) imports {', '.join(wrong)}"
 
@@ -124,6 +140,16 @@ def test_core_imports_no_io_library(module):
     stdlib = __import__("sys").stdlib_module_names
     third = sorted(n for n in imports_of(module)[1] if n not in stdlib and n not in CORE_THIRD_PARTY)
     assert not third, f"{module} (core) imports {third}"
+
+
+def test_public_modules_are_few_and_thin():
+    """At most PUBLIC_MAX public module paths; each re-exports (its own code is imports and ``__all__``)."""
+    public = sorted(m for m in MODULES if room_of(m) == "public")
+    assert len(public) <= PUBLIC_MAX, public
+    for module in public:
+        tree = ast.parse(open(MODULES[module]).read())
+        defs = [n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef))]
+        assert not defs, f"{module} defines {defs}: public modules re-export, the code lives in warp_ccd._src"
 
 
 def test_no_import_cycle():
@@ -159,36 +185,24 @@ def test_no_import_cycle():
 
 def test_cycle_and_room_checks_catch_a_bad_edge():
     """The checks fail on the edges they exist for: scene -> usd (a core -> I/O edge closing a circle)."""
-    saved = set(GRAPH["warp_ccd.scene.scene"])
+    saved = set(GRAPH["warp_ccd._src.scene.scene"])
     try:
-        GRAPH["warp_ccd.scene.scene"].add("warp_ccd.usd.importer")
+        GRAPH["warp_ccd._src.scene.scene"].add("warp_ccd._src.usd.importer")
         with pytest.raises(AssertionError, match="circle"):
             test_no_import_cycle()
-        with pytest.raises(AssertionError, match="imports warp_ccd.usd.importer"):
-            test_rooms_import_only_rooms_below("warp_ccd.scene.scene")
+        with pytest.raises(AssertionError, match="imports warp_ccd._src.usd.importer"):
+            test_concepts_import_only_concepts_below("warp_ccd._src.scene.scene")
     finally:
-        GRAPH["warp_ccd.scene.scene"] = saved
+        GRAPH["warp_ccd._src.scene.scene"] = saved
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
-def test_module_size(module):
-    lines = sum(1 for _ in open(MODULES[module]))
-    limit = STAGE_LINES_MAX.get(module, MODULE_LINES_MAX)
-    assert lines < limit, f"{module} has {lines} lines (at most {limit - 1}: split it along a seam)"
-
-
-def test_readme_layout_table_matches_the_tree():
-    """Every module of the package has its row in the README's layout table, and every row names a file."""
+def test_readme_layout_names_folders_that_exist():
+    """The README's layout table, where it has one, names concept folders (not modules), each of which exists."""
     text = open(os.path.join(ROOT, "README.md")).read()
+    if "\n## Layout" not in text:
+        return
     table = text.split("\n## Layout", 1)[1].split("\n## ", 1)[0]
-    named = set()
     for row in table.splitlines():
         if row.startswith("| `"):
-            folder, modules = (c.strip() for c in row.split("|")[1:3])
-            folder = folder.strip("`").rstrip("/")
-            for name in re.findall(r"`([\w.]+)`", modules):
-                named.add(f"{folder}/{name}")
-    files = {os.path.relpath(f, ROOT).replace(os.sep, "/") for f in MODULES.values()}
-    files = {f for f in files if not f.endswith(("__init__.py", "__main__.py"))}
-    assert sorted(named - files) == [], "README's layout table names files that do not exist"
-    assert sorted(files - named) == [], "modules missing from README's layout table"
+            name = row.split("|")[1].strip().strip("`").rstrip("/")
+            assert os.path.isdir(os.path.join(ROOT, name)), f"README's layout names {name!r}, not a folder"

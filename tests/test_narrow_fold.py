@@ -9,7 +9,7 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd import geometry
-from warp_ccd.stages.buffers import GrowableBuffer
+from warp_ccd._src.runtime.buffers import GrowableBuffer
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 

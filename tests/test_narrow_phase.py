@@ -6,10 +6,10 @@ import warp as wp
 
 import warp_ccd as wc
 from warp_ccd import geometry
-from warp_ccd.geometry.precision import precision_types
-from warp_ccd.geometry.triangle import TOLERANCE, tri_tri_batch_kernel
-from warp_ccd.stages.buffers import GrowableBuffer
-from warp_ccd.stages.narrow_phase import NARROW_METHODS
+from warp_ccd._src.geometry.precision import precision_types
+from warp_ccd._src.geometry.triangle import TOLERANCE, tri_tri_batch_kernel
+from warp_ccd._src.narrowphase.discrete import NARROW_METHODS
+from warp_ccd._src.runtime.buffers import GrowableBuffer
 
 from oracles import intersect_tri_tri_f64
 

@@ -123,7 +123,7 @@ def test_whole_object_pairs_deforming(device):
 
 def test_whole_object_pairs_default_by_scene_size():
     """Whole-object pairs by default up to WHOLE_OBJECTS_MAX objects, trees for every pair above."""
-    from warp_ccd.stages.mid_phase import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
+    from warp_ccd._src.midphase.bvh import WHOLE_OBJECTS_MAX, WHOLE_TRIANGLES_MAX
 
     bvh = wc.stages.SceneBVH(wc.Scene.random(50, seed=0))
     assert wc.stages.MidPhaseBVH(bvh).whole_triangles_max == WHOLE_TRIANGLES_MAX
@@ -146,7 +146,7 @@ def test_bad_whole_triangles_max(value):
 
 def test_stages_keep_their_contracts():
     """Every stage the factories make, with either method, has what the frame relies on of its kind
-    (the protocols of :mod:`warp_ccd.stages.kinds`); the pipeline holds such stages."""
+    (the protocols of :mod:`warp_ccd._src.pipeline.stages`); the pipeline holds such stages."""
     from warp_ccd import stages
 
     scene = wc.Scene.random(6, seed=0)
@@ -198,7 +198,7 @@ def test_factories_name_the_methods():
 def test_mid_phases_share_whole_pair_options():
     """Both mid phases take the whole-object pair options, checked alike (the all-pairs reference,
     whose pairs are all whole, leaves them unused)."""
-    from warp_ccd.stages.mid_phase import WHOLE_LANES, MidPhase
+    from warp_ccd._src.midphase.bvh import WHOLE_LANES, MidPhase
 
     mid = wc.stages.MidPhaseAllPairs()
     assert isinstance(mid, MidPhase)
@@ -240,7 +240,7 @@ def test_mid_phases_share_whole_pair_options():
 )
 def test_option_messages(check, message):
     """One message shape for every integer and real option: the name, what it allows, the value."""
-    from warp_ccd import options
+    from warp_ccd._src.runtime import checks as options
 
     with pytest.raises(ValueError) as err:
         check(options)
@@ -248,7 +248,7 @@ def test_option_messages(check, message):
 
 
 def test_options_accept_numpy_scalars():
-    from warp_ccd.options import integer_option, is_integer, number_option
+    from warp_ccd._src.runtime.checks import integer_option, is_integer, number_option
 
     assert integer_option("n", np.int16(3), low=0) == 3 and type(integer_option("n", np.uint8(3))) is int
     assert integer_option("n", None, allow_none=True) is None

@@ -1,14 +1,14 @@
-"""The precision guard's measures of a scene (:mod:`warp_ccd.geometry.precision`) against the
+"""The precision guard's measures of a scene (:mod:`warp_ccd._src.geometry.precision`) against the
 straightforward versions they replaced, kept here as references: the same float64 values bit for
 bit, on seeded random scenes and on edge cases (empty shapes, degenerate triangles, ties, shapes
-sampled above :data:`~warp_ccd.geometry.precision.SIZE_SAMPLE`, coordinates near underflow and
+sampled above :data:`~warp_ccd._src.geometry.precision.SIZE_SAMPLE`, coordinates near underflow and
 overflow)."""
 
 import numpy as np
 import pytest
 
-from warp_ccd.geometry import precision
-from warp_ccd.geometry.precision import shape_radius, triangle_size
+from warp_ccd._src.geometry import precision
+from warp_ccd._src.geometry.precision import shape_radius, triangle_size
 
 
 def reference_shape_radius(vertices, vertex_start):

@@ -9,7 +9,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.scene.shapes import icosphere, shape
+from warp_ccd._src.scene.shapes import icosphere, shape
 
 from oracles import fcl_model, fcl_pair_distance, pair_distance_brute
 from test_clearance import _box, asset_meshes

@@ -252,8 +252,8 @@ def test_precision_validation():
 
 def test_counters_do_not_wrap(device):
     """Counters are int64: past 2**31 items a stage raises OverflowError instead of wrapping."""
-    from warp_ccd.stages.broad_phase import BroadPhaseAllPairs
-    from warp_ccd.stages.buffers import CounterRead, GrowableBuffer
+    from warp_ccd._src.broadphase.sap import BroadPhaseAllPairs
+    from warp_ccd._src.runtime.buffers import CounterRead, GrowableBuffer
 
     lo = np.zeros((4, 3), np.float32)
     hi = np.ones((4, 3), np.float32)

@@ -21,8 +21,8 @@ from hypothesis import strategies as st
 from self_reference import pair_meets, reference_self_pairs
 
 import warp_ccd as wc
+from warp_ccd._src.narrowphase.self_intersection import weld_vertices
 from warp_ccd.scene import figure_eight_torus, icosphere, sheet
-from warp_ccd.stages.self_intersection import weld_vertices
 
 from test_clearance import asset_meshes
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.scene import shapes
+from warp_ccd._src.scene import shapes
 
 ALL = [*shapes.SHAPES, "icosphere0", "icosphere1", "icosphere3"]
 

@@ -75,11 +75,11 @@ def missing_annotations(fn) -> list[str]:
 def test_the_walk_finds_the_api():
     """The walk sees the functions it must (a guard against a test that passes on nothing)."""
     found = public_functions()
-    for name in ("warp_ccd.pipeline.collide", "warp_ccd.scene.shapes.icosphere",
-                 "warp_ccd.stages.narrow_phase.NarrowPhase.launch", "warp_ccd.usd.importer.scene_from_usd",
-                 "warp_ccd.preview.render_frame", "warp_ccd.geometry.ccd_queries.ccd_queries"):
+    for name in ("warp_ccd._src.pipeline.pipeline.collide", "warp_ccd._src.scene.shapes.icosphere",
+                 "warp_ccd._src.narrowphase.discrete.NarrowPhase.launch", "warp_ccd._src.usd.importer.scene_from_usd",
+                 "warp_ccd._src.preview.render_frame", "warp_ccd._src.queries.ccd.ccd_queries"):
         assert name in found, name
-    assert not any(name.startswith("warp_ccd.geometry.triangle.") for name in found), "Warp functions walked"
+    assert not any(name.startswith("warp_ccd._src.geometry.triangle.") for name in found), "Warp functions walked"
 
 
 def test_public_api_is_annotated():

@@ -16,7 +16,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.usd.export import COLOR_COLLIDING, COLOR_FREE, UsdAnimationWriter, validate_stage_path
+from warp_ccd._src.usd.export import COLOR_COLLIDING, COLOR_FREE, UsdAnimationWriter, validate_stage_path
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, UsdValidation  # noqa: E402
@@ -347,7 +347,7 @@ def test_writer_reads_every_private_attribute_it_stores():
     import ast
     import inspect
 
-    from warp_ccd.usd import export
+    from warp_ccd._src.usd import export
 
     tree = ast.parse(inspect.getsource(export))
     stored, read = set(), set()

@@ -13,11 +13,12 @@ from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 import warp_ccd as wc
-from warp_ccd.cli import commands as cli
-from warp_ccd.stages.crossing import pair_crossing_depth
-from warp_ccd.usd.check import COLOR_PENETRATING, check_usd
-from warp_ccd.usd.importer import UsdMeshImport, scene_from_usd
-from warp_ccd.usd.stage import stage_time_codes
+from warp_ccd._src.check.check import check_usd
+from warp_ccd._src.check.crossing import pair_crossing_depth
+from warp_ccd._src.check.overlay import COLOR_PENETRATING
+from warp_ccd._src.cli import commands as cli
+from warp_ccd._src.usd.importer import UsdMeshImport, scene_from_usd
+from warp_ccd._src.usd.stage import stage_time_codes
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt  # noqa: E402
@@ -904,7 +905,7 @@ def test_worker_processes_name_a_transform_that_is_not_finite(tmp_path):
 def test_deepest_face_pair_rows_match_the_full_sort():
     """The frame's rows without segments (one sort of a packed key, or of two keys where it does not fit in 63
     bits) equal the full sort by (a, b, face_a, face_b, deepest first, triangles) and its first row per face pair."""
-    from warp_ccd.usd.check import _deepest_per_face_pair
+    from warp_ccd._src.check.check import _deepest_per_face_pair
 
     rng = np.random.default_rng(1)
     for _ in range(100):

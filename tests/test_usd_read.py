@@ -1,24 +1,24 @@
-"""The bulk transform read (``warp_ccd.usd.xforms``) against ``UsdGeom.XformCache``, and the import with it and
+"""The bulk transform read (``warp_ccd._src.usd.xforms``) against ``UsdGeom.XformCache``, and the import with it and
 without it.
 
-Every case compares the world matrices that :func:`~warp_ccd.usd.xforms.read_world_matrices` composes with one
+Every case compares the world matrices that :func:`~warp_ccd._src.usd.xforms.read_world_matrices` composes with one
 ``XformCache`` lookup per prim and time code (within 1e-12 of the matrix's size), at time codes on samples,
 between them, before the first and after the last: every op type in double, float and half precision, inverse
 ops and pivots, ``resetXformStack``, animated parents over static children, layer offsets of sublayers and
 references, held and linear interpolation, defaults over weaker samples, value clips and value blocks (which
 fall back), a seeded random stage of random op stacks; and checks which prims the bulk read took. The import
 (``UsdMeshImport``) gives the same poses and world vertices with the bulk read as without it
-(:data:`~warp_ccd.usd.xforms.FAST_XFORMS` off), in this process and in worker processes; the batched mesh read
+(:data:`~warp_ccd._src.usd.xforms.FAST_XFORMS` off), in this process and in worker processes; the batched mesh read
 gives what the one-by-one read gives.
 """
 
 import numpy as np
 import pytest
 
-from warp_ccd.usd import xforms
-from warp_ccd.usd.importer import UsdMeshImport
-from warp_ccd.usd.meshes import read_mesh, read_meshes
-from warp_ccd.usd.xforms import read_world_matrices
+from warp_ccd._src.usd import xforms
+from warp_ccd._src.usd.importer import UsdMeshImport
+from warp_ccd._src.usd.meshes import read_mesh, read_meshes
+from warp_ccd._src.usd.xforms import read_world_matrices
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Sdf, Usd, UsdGeom  # noqa: E402

@@ -177,7 +177,7 @@ def world_polygon_meshes(stage, time) -> dict:
 
     Returns:
         ``{object path: (world vertices (n, 3) float64, triangles (m, 3) int32, USD face of each triangle)}``,
-        named as :class:`warp_ccd.usd.importer.UsdMeshImport` names its objects. Guides, invisible
+        named as :class:`warp_ccd._src.usd.importer.UsdMeshImport` names its objects. Guides, invisible
         prims and a PointInstancer's prototypes (drawn through the instancer only) are left out.
     """
     from pxr import Usd, UsdGeom
@@ -352,7 +352,7 @@ def far_flight_stage(path=None, num_frames: int = 12, flight: int = 3, far: floa
     stays at the origin; ``/World/B`` and ``/World/C`` start through it from either side and slide apart by 0.1 a
     time code, then fly ``far`` away together (B at ``(far, far, -far)``, C 0.5 from it along x: they penetrate
     each other there). ``far = 1e6`` is beyond float32 at that triangle size, well within float64
-    (:func:`~warp_ccd.geometry.precision.needed_precision`: float32 up to about ``8.4e3`` times the size).
+    (:func:`~warp_ccd._src.geometry.precision.needed_precision`: float32 up to about ``8.4e3`` times the size).
 
     Returns:
         The ``Usd.Stage`` (saved to ``path`` when given).

@@ -25,19 +25,17 @@ The API in levels: this module holds what a user of :func:`collide`, :class:`Sce
 * :mod:`warp_ccd.preview`: preview pictures.
 """
 
-import importlib
-from typing import Any
-
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
-from ._deprecated import install_moved_modules, module_aliases, warn_renamed
-from .geometry import TOLERANCE
-from .geometry.ccd_queries import ccd_queries
-from .geometry.precision import PrecisionWarning
-from .pipeline import CollisionPipeline, CollisionResult, collide
-from .query import DistanceQuery, distance, self_intersections
-from .scene import Scene
-from .stages import broad_phase_pairs
-from .usd import CheckReport, check_usd
+from ._src.broadphase.sap import broad_phase_pairs
+from ._src.check.check import check_usd
+from ._src.check.report import CheckReport
+from ._src.geometry.precision import PrecisionWarning
+from ._src.geometry.triangle import TOLERANCE
+from ._src.pipeline.pipeline import CollisionPipeline, collide
+from ._src.pipeline.result import CollisionResult
+from ._src.queries.ccd import ccd_queries
+from ._src.queries.distance import DistanceQuery, distance, self_intersections
+from ._src.scene.scene import Scene
 
 __version__ = "0.1.0"
 
@@ -56,52 +54,3 @@ __all__ = [
     "distance",
     "self_intersections",
 ]
-
-# Names of the top level until 0.1, kept one release: each use warns and reaches its new home.
-_moved_name = module_aliases(__name__, {
-    **{name: f"warp_ccd.scene:{name}" for name in ("SHAPES", "EllipseMotion", "icosphere", "shape",
-                                                      "validate_mesh")},
-    **{name: f"warp_ccd.stages:{name}" for name in ("BroadPhaseSAP", "MidPhaseAllPairs", "MidPhaseBVH",
-                                                       "NarrowPhase", "SceneBVH", "build_tree")},
-    "BroadPhaseNxN": "warp_ccd.stages:BroadPhaseAllPairs",
-    **{name: f"warp_ccd.geometry:{name}" for name in ("tri_tri_edge_face", "tri_tri_moller")},
-    **{name: f"warp_ccd.preview:{name}" for name in ("render_frame", "save_preview")},
-    "UsdAnimationWriter": "warp_ccd.usd:UsdAnimationWriter",
-})
-
-# Modules of 0.1 that moved into a room: their old paths import (with a warning) for one release, and
-# their names are found in their new homes (the main one first).
-_MOVED_MODULES = {
-    "aabb": ("geometry.box", "stages.bounds"),
-    "precision": ("geometry.precision",),
-    "shapes": ("scene.shapes",),
-    "motion": ("scene.motion",),
-    "buffers": ("stages.buffers",),
-    "frame": ("stages.frame",),
-    "bvh": ("stages.bvh",),
-    "bvh_build": ("stages.bvh_build", "stages.bvh_reference"),
-    "broad_phase": ("stages.broad_phase",),
-    "mid_phase": ("stages.mid_phase",),
-    "narrow_phase": ("stages.narrow_phase", "geometry.triangle", "geometry.primitives", "stages.crossing"),
-    "crossing": ("stages.crossing", "stages.surface"),
-    "usd_import": ("usd.importer", "usd.stage", "usd.meshes", "usd.poses", "usd.workers"),
-    "check": ("usd.check",),
-    "cli_common": ("cli.common",),
-}
-install_moved_modules({f"warp_ccd.{old}": tuple(f"warp_ccd.{h}" for h in homes)
-                       for old, homes in _MOVED_MODULES.items()})
-
-
-def __getattr__(name: str) -> Any:
-    if name in _MOVED_MODULES:  # wc.narrow_phase, as the package's attribute it was
-        return importlib.import_module(f"warp_ccd.{name}")
-    return _moved_name(name)
-
-
-def _scene_from_usd(cls: type[Scene], *args: Any, **kwargs: Any) -> Scene:
-    """Deprecated: :func:`warp_ccd.usd.scene_from_usd` (the scene room does not read USD)."""
-    warn_renamed("Scene.from_usd", "warp_ccd.usd.scene_from_usd", stacklevel=3)
-    return usd.scene_from_usd(*args, **kwargs)
-
-
-Scene.from_usd = classmethod(_scene_from_usd)

@@ -1,7 +1,7 @@
-"""``python -m warp_ccd``: the ``warp-ccd`` command (see :mod:`warp_ccd.cli.commands`)."""
+"""``python -m warp_ccd``: the ``warp-ccd`` command (see :mod:`warp_ccd._src.cli.commands`)."""
 
 import sys
 
-from .cli import main
+from ._src.cli.commands import main
 
 sys.exit(main())

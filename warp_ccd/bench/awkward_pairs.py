@@ -8,7 +8,7 @@ several scales and offsets, rotated. They are built from ``Generator.random`` an
 numpy on every processor; no BLAS, no transcendental functions, no reductions whose order could
 change), so every machine builds the very same inputs (:func:`inputs_digest` is their SHA-256).
 
-:func:`verdicts` runs both triangle tests of :mod:`warp_ccd.geometry.triangle` and Möller's segments on
+:func:`verdicts` runs both triangle tests of :mod:`warp_ccd._src.geometry.triangle` and Möller's segments on
 them, on one device. :mod:`warp_ccd.bench.narrow_phase` times them and compares each device with the
 CPU; the tests (``tests/awkward_pairs.py``) hold the CPU's verdicts, recorded, and judge every device
 against them.
@@ -21,9 +21,9 @@ import hashlib
 import numpy as np
 import warp as wp
 
-from ..geometry.precision import precision_types
-from ..geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_batch_kernel, tri_tri_segment_batch_kernel
-from ..stages.narrow_phase import NARROW_METHODS
+from .._src.geometry.precision import precision_types
+from .._src.geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_batch_kernel, tri_tri_segment_batch_kernel
+from .._src.narrowphase.discrete import NARROW_METHODS
 
 __all__ = ["METHODS", "NUM_PAIRS", "OFFSETS", "PRECISIONS", "SCALES", "SEED", "SMALL", "awkward_pairs",
            "inputs_digest", "verdicts"]

@@ -5,8 +5,8 @@ leaf size and the traversal's threads per multiprocessor.
 For each scene (``--cases`` of ``TRIANGLES:N``, a ``--triangles`` spec of the scaling benchmark and
 an object count), for each ``--max-registers`` (the heavy kernels compiled with at most that many
 registers a thread), each combination of ``--axes``, ``--bounds``, ``--leaf-sizes`` and
-``--threads-per-sm`` (:class:`~warp_ccd.pipeline.CollisionPipeline` options ``separating_axes``,
-``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd.stages.mid_phase.MidPhaseBVH.num_blocks`
+``--threads-per-sm`` (:class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` options ``separating_axes``,
+``object_bounds``, ``leaf_size``, and the expansion grid, :attr:`~warp_ccd._src.midphase.bvh.MidPhaseBVH.num_blocks`
 on CUDA), after ``--warmup`` frames: ``--frames``
 frames of ``detect(advance=dt)`` as the pipeline runs them (a CUDA graph on CUDA), wall-clock with
 a synchronisation before and after (``frame``), then as many timed stage by stage
@@ -29,21 +29,22 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.timing import ms_stats
-from warp_ccd.geometry.precision import PRECISIONS
-from warp_ccd.pipeline import STAGES, CollisionPipeline
-from warp_ccd.scene.scene import Scene
-from warp_ccd.stages import mid_phase, narrow_phase
-from warp_ccd.stages.bvh import OBJECT_BOUNDS
-from warp_ccd.stages.mid_phase import EXPAND_THREADS_PER_SM
+from .._src.geometry.precision import PRECISIONS
+from .._src.midphase import bvh as mid_phase
+from .._src.midphase.bvh import EXPAND_THREADS_PER_SM
+from .._src.narrowphase import discrete as narrow_phase
+from .._src.pipeline.pipeline import STAGES, CollisionPipeline
+from .._src.scene.scene import Scene
+from .._src.trees.bvh import OBJECT_BOUNDS
+from .command import add_run_options, bench_parser, start, write_result
+from .meshes import parse_triangles
+from .timing import ms_stats
 
 DT = 1.0 / 60.0
 
 
 def _bounds(text: str) -> str | int:
-    """``--bounds`` value: a name of :data:`~warp_ccd.stages.bvh.OBJECT_BOUNDS` or a vertex count."""
+    """``--bounds`` value: a name of :data:`~warp_ccd._src.trees.bvh.OBJECT_BOUNDS` or a vertex count."""
     if text in OBJECT_BOUNDS:
         return text
     if text.isdigit():

@@ -9,8 +9,8 @@ within ``h_i + h_j`` on every axis, so a box expects ``(N - 1) * E[(2 (h_i + h_j
 
 Methods, in the same run on the same boxes, each frame in turn:
 
-* ``sap``: this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP`, the reference;
-* ``nxn``: this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseAllPairs`, for ``N <= --nxn-max``;
+* ``sap``: this package's :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP`, the reference;
+* ``nxn``: this package's :class:`~warp_ccd._src.broadphase.sap.BroadPhaseAllPairs`, for ``N <= --nxn-max``;
 * ``warp_bvh``: Warp's ``wp.Bvh`` over the boxes, rebuilt every frame, one ``wp.bvh_query_aabb``
   per box (:class:`~warp_ccd.bench.peers.WarpBvhBroadPhase`);
 * ``warp_bvh_refit``: the same tree only refit every frame (boxes do not move here, so this is
@@ -18,7 +18,7 @@ Methods, in the same run on the same boxes, each frame in turn:
 * ``newton_sap``: newton's ``BroadPhaseSAP`` when newton is installed, for ``N <= --newton-max``.
 
 A frame is: reset the buffers, launch, copy the counters to pinned host memory, one wait
-(:class:`~warp_ccd.stages.frame.CountedFrame`); a buffer that overflowed grows and the frame runs
+(:class:`~warp_ccd._src.runtime.frame.CountedFrame`); a buffer that overflowed grows and the frame runs
 again. Every method is launched from Python and, on CUDA, also replayed as a captured graph (as
 ``BroadPhaseSAP.find_pairs`` does); its time is the faster of the two by median (the ``mode``
 column), and both are in the JSON (``broad_eager``, ``broad_graph``). ``--warmup`` frames grow
@@ -41,15 +41,15 @@ import sys
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.compare import box_overlap_truth, compare_exact
-from warp_ccd.bench.methods import device_modes
-from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
-from warp_ccd.bench.report import RESULTS
-from warp_ccd.bench.timing import ModeFrames, StageTimes
-from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
-from warp_ccd.stages.broad_phase import ALL_PAIRS_LIMIT, BroadPhaseAllPairs, BroadPhaseSAP
-from warp_ccd.stages.buffers import GrowableBuffer
+from .._src.broadphase.sap import ALL_PAIRS_LIMIT, BroadPhaseAllPairs, BroadPhaseSAP
+from .._src.cli.common import EXIT_INTERNAL, EXIT_OK
+from .._src.runtime.buffers import GrowableBuffer
+from .command import add_run_options, bench_parser, start, write_result
+from .compare import box_overlap_truth, compare_exact
+from .methods import device_modes
+from .peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
+from .report import RESULTS
+from .timing import ModeFrames, StageTimes
 
 METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
 OURS = ("sap", "nxn")

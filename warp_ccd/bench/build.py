@@ -4,12 +4,12 @@ Three parts, in one process on one device:
 
 * **builds**: every tree of ``S`` distinct shapes of ``m`` triangles (noisy icospheres: 80, 1,280,
   ... 1.3M triangles; perturbed icosahedra for 20) built by the kernels
-  (:class:`~warp_ccd.stages.bvh_build.TreeBuild`, layout then triangle order, as ``SceneBVH`` does;
+  (:class:`~warp_ccd._src.trees.build.TreeBuild`, layout then triangle order, as ``SceneBVH`` does;
   ``kernels`` the default, subtrees finished by a thread block on CUDA, ``kernels_thread`` by one
   thread each, as before the blocks),
   against Warp's own device builds of the same triangles: one ``wp.Mesh`` (LBVH) for a single
   shape, a ``wp.Bvh`` (LBVH) over all triangle boxes grouped by shape for many; and the numpy
-  reference (:func:`~warp_ccd.stages.bvh_reference.build_tree`, shape by shape) where it takes under a few
+  reference (:func:`~warp_ccd._src.trees.reference.build_tree`, shape by shape) where it takes under a few
   seconds. Wall time from the first launch to the device's end (what a user waits for), min and
   median over ``--repeats`` after a warm-up. ``--small`` adds rows of the kernels with other
   subtree sizes finished per thread; small shapes also get a row without the radix presort
@@ -18,7 +18,7 @@ Three parts, in one process on one device:
 * **rebuild**: deforming meshes whose vertices move far from where their trees were built
   (icospheres stretched and twisted into long spirals): candidate triangle pairs and mid-phase
   time of a frame with the refit trees, then after :meth:`SceneBVH.rebuild
-  <warp_ccd.stages.bvh.SceneBVH.rebuild>`, and the rebuild's own time.
+  <warp_ccd._src.trees.bvh.SceneBVH.rebuild>`, and the rebuild's own time.
 * **one-shot**: ``warp_ccd.collide(meshes, transforms)`` from Python lists of numpy meshes (each
   mesh its own array: no instancing) against python-fcl doing the same with its BVH builds
   (``BVHModel`` per mesh, ``DynamicAABBTreeCollisionManager``, contacts on), on 1,000 distinct
@@ -43,13 +43,14 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
-from warp_ccd.bench.peers import fcl_bvh
-from warp_ccd.bench.report import environment
-from warp_ccd.bench.timing import synced_ms
-from warp_ccd.stages.bvh_block import BLOCK_SUBTREE
-from warp_ccd.stages.bvh_build import SMALL_SUBTREE, TreeBuild
-from warp_ccd.stages.bvh_reference import build_tree
+
+from .._src.trees.build import SMALL_SUBTREE, TreeBuild
+from .._src.trees.build_block import BLOCK_SUBTREE
+from .._src.trees.reference import build_tree
+from .command import add_out_option, bench_parser, parse_options, write_result
+from .peers import fcl_bvh
+from .report import environment
+from .timing import synced_ms
 
 POLYHEDRA = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
 

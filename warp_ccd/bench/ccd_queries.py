@@ -4,7 +4,7 @@ Two query sets, each half vertex-face and half edge-edge queries (``--queries`` 
 
 * ``mixed``: queries as a simulation produces them. The scaling scene (``Scene.random(--objects,
   --seed)``) moves by ``--step-frames`` frames of 1/60 s at once (a large step, so that there are
-  contacts); a continuous :class:`~warp_ccd.pipeline.CollisionPipeline` gives its candidate triangle
+  contacts); a continuous :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` gives its candidate triangle
   pairs over that motion, and each candidate expands into its 6 vertex-face and 9 edge-edge
   queries (duplicates removed). Each kind is shuffled and tiled, every copy after the first
   translated by a random offset within the scene's extent, to reach its count.
@@ -48,11 +48,12 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.narrow_phase import gpu_ms
-from warp_ccd.cli.common import EXIT_INTERNAL, EXIT_OK
-from warp_ccd.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE
-from warp_ccd.geometry.ccd_queries import run_queries
+
+from .._src.cli.common import EXIT_INTERNAL, EXIT_OK
+from .._src.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE
+from .._src.queries.ccd import run_queries
+from .command import add_run_options, bench_parser, start, write_result
+from .narrow_phase import gpu_ms
 
 DT = 1.0 / 60.0
 KINDS = ("vertex_face", "edge_edge")

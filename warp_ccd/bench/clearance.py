@@ -2,7 +2,7 @@
 
 For each ``N`` of ``--objects`` and each distance of ``--clearance``, on the scaling scene
 ``Scene.random(N, --seed)`` (polyhedra of radius 0.5 to 1.5), a discrete
-:class:`~warp_ccd.pipeline.CollisionPipeline` and one with ``clearance=d`` share the scene. Each frame:
+:class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` and one with ``clearance=d`` share the scene. Each frame:
 
 * ``discrete``: ``detect(advance=dt)``: the scene moves by 1/60 s and the discrete pipeline detects
   (on CUDA one replayed graph, motion included);
@@ -29,8 +29,9 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.timing import ms_stats, synced_ms
+
+from .command import add_run_options, bench_parser, start, write_result
+from .timing import ms_stats, synced_ms
 
 DT = 1.0 / 60.0
 

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..cli.common import quiet_warp, resolve_device
-from ..output import check_output_path
+from .._src.cli.common import quiet_warp, resolve_device
+from .._src.output import check_output_path
 from .report import JSON_EXTENSIONS, environment, write_json
 
 __all__ = ["add_out_option", "add_row", "add_run_options", "bench_parser", "parse_options", "start", "write_result"]
@@ -33,7 +33,7 @@ def bench_parser(description: str | None, *, device: str | None = None, device_h
     Args:
         description: the ``--help`` text above the options.
         device: ``--device``'s default (``None``: Warp's preferred device, see
-            :func:`~warp_ccd.cli.common.resolve_device`).
+            :func:`~warp_ccd._src.cli.common.resolve_device`).
         device_help: ``--device``'s help (``None``: none).
         **options: passed on to :class:`argparse.ArgumentParser` (``formatter_class``, ...).
     """

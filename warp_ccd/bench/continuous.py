@@ -1,7 +1,7 @@
 """Benchmark: the continuous frame against the discrete frame of the same scene.
 
 For each ``N`` of ``--objects``, on the scaling scene ``Scene.random(N, --seed)``, a discrete
-:class:`~warp_ccd.pipeline.CollisionPipeline` and a continuous one (``continuous=True``) share the
+:class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` and a continuous one (``continuous=True``) share the
 scene. Each frame:
 
 * ``discrete``: ``detect(advance=dt)``: the scene moves by 1/60 s and the discrete pipeline
@@ -37,9 +37,10 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.profile_frame import activities
-from warp_ccd.bench.timing import ms_stats, synced_ms
+
+from .command import add_run_options, bench_parser, start, write_result
+from .profile_frame import activities
+from .timing import ms_stats, synced_ms
 
 DT = 1.0 / 60.0
 

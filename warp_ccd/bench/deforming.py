@@ -35,12 +35,13 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.compare import compare_triangle_pairs
-from warp_ccd.bench.methods import DevicePeerMethod
-from warp_ccd.bench.peers import WarpMeshPipeline
-from warp_ccd.bench.timing import ms_stats, synced_ms
-from warp_ccd.pipeline import STAGES
+
+from .._src.pipeline.pipeline import STAGES
+from .command import add_run_options, bench_parser, start, write_result
+from .compare import compare_triangle_pairs
+from .methods import DevicePeerMethod
+from .peers import WarpMeshPipeline
+from .timing import ms_stats, synced_ms
 
 DT = 1.0 / 60.0
 

@@ -5,9 +5,9 @@ blobs of :mod:`warp_ccd.bench.meshes`, radius 1) are placed ``--gap`` apart (the
 bounding spheres; several gaps, each a row), both rigid in their world positions. Measured, each
 with ``--warmup`` untimed runs first, min and median of ``--frames`` runs:
 
-* ``query``: :meth:`~warp_ccd.query.DistanceQuery.query` with the trees built (on CUDA one replayed
+* ``query``: :meth:`~warp_ccd._src.queries.distance.DistanceQuery.query` with the trees built (on CUDA one replayed
   graph), synchronised; the persistent form, as a user asks again after moving the objects;
-* ``one_shot``: :func:`~warp_ccd.query.distance` from numpy meshes: scene, validation, tree builds,
+* ``one_shot``: :func:`~warp_ccd._src.queries.distance.distance` from numpy meshes: scene, validation, tree builds,
   query; ``one_shot_phases_ms`` splits it: the scene, the query's set-up (trees, buffers), its first
   query (eager), each synchronised;
 * ``fcl_query``: python-fcl's ``fcl.distance`` (nearest points) on its two BVH models (OBBRSS),
@@ -31,11 +31,12 @@ import time
 import numpy as np
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.meshes import _blob
-from warp_ccd.bench.peers import fcl_bvh
-from warp_ccd.bench.profile_frame import activities
-from warp_ccd.bench.timing import synced_ms
+
+from .command import add_run_options, bench_parser, start, write_result
+from .meshes import _blob
+from .peers import fcl_bvh
+from .profile_frame import activities
+from .timing import synced_ms
 
 
 def blob_pair(triangles: int, gap: float, seed: int) -> list:

@@ -2,7 +2,7 @@
 
 Stages, written first into a temporary folder (not timed as part of a check), each of rigid prims as
 :mod:`~warp_ccd.bench.usd_check` writes them (an ``Xform`` with time-sampled ``translate`` and ``orient`` over a
-polyhedron ``Mesh``, the motion of :meth:`Scene.random <warp_ccd.scene.scene.Scene.random>`):
+polyhedron ``Mesh``, the motion of :meth:`Scene.random <warp_ccd._src.scene.scene.Scene.random>`):
 
 * **rigid**: ``--objects`` prims x ``--frames`` time codes in one layer: the whole check in one process on one
   GPU (reading included), the target of "10,000 x 240 in 3 s".
@@ -33,8 +33,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
-from warp_ccd.bench.usd_check import _commit_label, write_rigid_prims, write_rigid_stage
+from .command import add_out_option, bench_parser, parse_options, write_result
+from .usd_check import _commit_label, write_rigid_prims, write_rigid_stage
 
 
 def write_part(task) -> None:
@@ -42,7 +42,7 @@ def write_part(task) -> None:
     path, num_objects, num_frames, lo, hi, seed, device = task
     from pxr import Sdf
 
-    from warp_ccd.scene.scene import Scene
+    from .._src.scene.scene import Scene
 
     scene = Scene.random(num_objects, seed=seed, device=device)
     poses = np.empty((num_frames, hi - lo, 7))
@@ -107,8 +107,8 @@ def main(argv=None) -> int:
     parser.add_argument("--parts", default="rigid,long,batch", help="which parts to run")
     add_out_option(parser)
     args, device = parse_options(parser, argv)
-    from warp_ccd.usd.batch import check_many
-    from warp_ccd.usd.check import check_usd
+    from .._src.check.batch import check_many
+    from .._src.check.check import check_usd
 
     gpus = wp.get_cuda_device_count() if device.is_cuda else 0
     result = {"benchmark": "distributed", "device": str(device), "gpu": device.name if device.is_cuda else None,

@@ -1,6 +1,6 @@
 """How fast the host runs right after it waited: the same host work timed after waits of 0.05 to 50 ms.
 
-A frame's host time (:attr:`~warp_ccd.pipeline.CollisionResult.host_ms`) is measured right after
+A frame's host time (:attr:`~warp_ccd._src.pipeline.pipeline.CollisionResult.host_ms`) is measured right after
 the host waited for the previous frame. This measures how much that wait alone slows the host, with
 work that does not change with the wait. After a wait of ``T`` ms, one of
 
@@ -41,9 +41,9 @@ import types
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_out_option, add_row, bench_parser, start, write_result
-from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene.scene import Scene
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.scene.scene import Scene
+from .command import add_out_option, add_row, bench_parser, start, write_result
 
 DT = 1.0 / 60.0
 METHODS = ("sleep", "spin", "sync")

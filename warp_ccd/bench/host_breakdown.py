@@ -7,7 +7,7 @@ back to back, measured twice in a row (variants ``plain`` and ``again``). ``wp.c
 and ``wp.synchronize_device`` are wrapped with timestamps, so each frame splits into ``pre``
 (``detect()`` up to the launch), ``launch`` (the call), ``between`` (launch to wait), ``wait`` and
 ``post`` (after the wait: the counters read, the result made), in ms; ``host`` is the frame's
-:attr:`~warp_ccd.pipeline.CollisionResult.host_ms`. Medians and minima per variant.
+:attr:`~warp_ccd._src.pipeline.pipeline.CollisionResult.host_ms`. Medians and minima per variant.
 
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"n", "shapes",
 "variant", "build_s", "median": {...}, "min": {...}}``.
@@ -24,10 +24,10 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene.scene import Scene
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.scene.scene import Scene
+from .command import add_row, add_run_options, bench_parser, start, write_result
+from .meshes import parse_triangles
 
 DT = 1.0 / 60.0
 VARIANTS = ("plain", "again")

@@ -9,11 +9,15 @@ from __future__ import annotations
 import ctypes
 import sys
 
-from warp_ccd.bench.command import add_out_option, bench_parser, parse_options, write_result
-from warp_ccd.bench.report import environment
-from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene import motion, scene
-from warp_ccd.stages import broad_phase, bvh, continuous, mid_phase, narrow_phase
+from .._src.broadphase import sap as broad_phase
+from .._src.midphase import bvh as mid_phase
+from .._src.narrowphase import continuous
+from .._src.narrowphase import discrete as narrow_phase
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.scene import motion, scene
+from .._src.trees import bvh
+from .command import add_out_option, bench_parser, parse_options, write_result
+from .report import environment
 
 # CUfunction_attribute values (CUDA driver API).
 _ATTRIBUTES = {"max_threads_per_block": 0, "shared_bytes": 1, "local_bytes": 3, "registers": 4}

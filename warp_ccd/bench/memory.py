@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..pipeline import CollisionPipeline
-from ..scene.scene import Scene
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.scene.scene import Scene
 
 __all__ = ["array_bytes", "measure_pipeline_memory"]
 
@@ -80,7 +80,7 @@ def _tracker_peak(text: str, device) -> int | None:
 
 
 def measure_pipeline_memory(scene: Scene, frames: int = 2) -> dict:
-    """Memory of a fresh default :class:`~warp_ccd.pipeline.CollisionPipeline` over ``frames`` frames.
+    """Memory of a fresh default :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` over ``frames`` frames.
 
     Returns:
         ``scene_bytes`` (arrays the scene holds), ``pipeline_resident_bytes`` (arrays the

@@ -132,7 +132,7 @@ def real_mesh_set() -> tuple:
 
 
 def parse_triangles(spec: str) -> tuple[str, tuple | None]:
-    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd.scene.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
+    """``"poly"`` -> the five polyhedra of :meth:`~warp_ccd._src.scene.scene.Scene.random`; ``"80"`` (``20 * 4**L``)
     or ``"icosphereL"`` -> icosphere level L; ``"mixed"`` -> meshes of the sizes of real assets, 120
     to 12,640 triangles (:func:`real_mesh_set`).
 

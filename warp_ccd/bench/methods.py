@@ -6,7 +6,7 @@ peers find against this package (:mod:`warp_ccd.bench.compare`) and measures mem
 (:mod:`warp_ccd.bench.memory`); :mod:`warp_ccd.bench.scaling` describes the stages each method
 reports.
 
-* :class:`PipelineMethod`: this package's :class:`~warp_ccd.pipeline.CollisionPipeline`, per stage and
+* :class:`PipelineMethod`: this package's :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`, per stage and
   as whole frames, eager and (on CUDA) as a graph.
 * :class:`HostPeerMethod`: a host peer (python-fcl), stage by stage.
 * :class:`DevicePeerMethod`: a device peer (Warp's built-in pipeline) at its best, in every mode.
@@ -20,15 +20,16 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from ..pipeline import CollisionPipeline
-from ..scene.scene import Scene
-from ..stages.broad_phase import find_pairs, make_broad_phase
-from ..stages.buffers import GrowableBuffer
+from .._src.broadphase.sap import find_pairs, make_broad_phase
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.runtime.buffers import GrowableBuffer
+from .._src.runtime.frame import MODES
+from .._src.scene.scene import Scene
 from .compare import PairCheck, box_overlap_truth, compare_exact, compare_triangle_pairs
 from .memory import measure_pipeline_memory
 from .meshes import parse_triangles
 from .peers import FclPipeline, NewtonBroadPhaseSAP, PeerUnavailable, WarpMeshPipeline
-from .timing import MODES, ModeFrames, StageTimes, run_stages, synced_ms
+from .timing import ModeFrames, StageTimes, run_stages, synced_ms
 
 __all__ = [
     "DT",
@@ -67,7 +68,7 @@ class PipelineMethod:
     Args:
         name: row name.
         scene: the scene.
-        **options: :class:`~warp_ccd.pipeline.CollisionPipeline` options (e.g. ``broad_phase``).
+        **options: :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` options (e.g. ``broad_phase``).
     """
 
     def __init__(self, name: str, scene: Scene, **options):
@@ -221,7 +222,7 @@ class BroadPhaseMethod:
         return box_overlap_truth(*self.source.object_boxes())
 
     def reference_box_pairs(self) -> np.ndarray:
-        """``(K, 2)`` pairs of this package's :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP` on the same boxes."""
+        """``(K, 2)`` pairs of this package's :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP` on the same boxes."""
         lower, upper = self.source.object_boxes()
         pairs = GrowableBuffer(wp.vec2i, self.pairs.capacity, self.device, "reference box pairs")
         count = find_pairs(make_broad_phase("sap", device=self.device), lower, upper, pairs)

@@ -26,12 +26,13 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
-from warp_ccd.bench.command import add_out_option, bench_parser, start, write_result
-from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.geometry import triangle
-from warp_ccd.geometry.precision import precision_types
-from warp_ccd.stages import narrow_phase
+
+from .._src.geometry import triangle
+from .._src.geometry.precision import precision_types
+from .._src.narrowphase import discrete as narrow_phase
+from .awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
+from .command import add_out_option, bench_parser, start, write_result
+from .meshes import parse_triangles
 
 
 def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:

@@ -1,6 +1,6 @@
 """Peers: other ways to find the same pairs, for benchmarks and cross-checks in the same run.
 
-Each peer works on the same :class:`~warp_ccd.scene.scene.Scene` (or the same boxes) as this package,
+Each peer works on the same :class:`~warp_ccd._src.scene.scene.Scene` (or the same boxes) as this package,
 so :mod:`warp_ccd.bench.scaling` can time them frame by frame and compare what they find. Optional
 libraries are imported inside the class that needs them; a missing one raises
 :class:`PeerUnavailable` naming the package, and the benchmark skips that peer with a note.
@@ -26,8 +26,8 @@ Scene peers are run at their best, as a careful user of each library runs it:
   scene's poses, a ``DynamicAABBTreeCollisionManager`` updated and queried for triangle contacts.
   This is what a user of FCL with rigid objects does.
 
-Broad-phase peers follow :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP`'s interface,
-``launch(lower, upper, pairs)`` into a :class:`~warp_ccd.stages.buffers.GrowableBuffer` of ``wp.vec2i``
+Broad-phase peers follow :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP`'s interface,
+``launch(lower, upper, pairs)`` into a :class:`~warp_ccd._src.runtime.buffers.GrowableBuffer` of ``wp.vec2i``
 (the caller resets it and checks its counter after) and ``counters`` (buffers of their own with
 counters: none here):
 
@@ -43,9 +43,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..geometry.box import boxes_overlap
-from ..scene.scene import Scene
-from ..stages.buffers import GrowableBuffer, emit_pair, reserve_slot
+from .._src.geometry.box import boxes_overlap
+from .._src.runtime.buffers import GrowableBuffer, emit_pair, reserve_slot
+from .._src.scene.scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 

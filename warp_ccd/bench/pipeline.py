@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import sys
 
-from warp_ccd.bench.report import RESULTS
-from warp_ccd.bench.scaling import build_parser
-from warp_ccd.bench.scaling import main as bench_main
-from warp_ccd.cli.common import CliError, resolve_device
+from .._src.cli.common import CliError, resolve_device
+from .report import RESULTS
+from .scaling import build_parser
+from .scaling import main as bench_main
 
 PROG = "python -m warp_ccd.bench.pipeline"
 DEFAULTS = ["--triangles", "80", "1280", "--peers", "builtin", "--objects", "100", "1000", "3000"]

@@ -27,12 +27,12 @@ import sys
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.meshes import parse_triangles
-from warp_ccd.bench.timing import detect_frames
-from warp_ccd.pipeline import CollisionPipeline
-from warp_ccd.scene.scene import Scene
-from warp_ccd.stages.frame import MODES
+from .._src.pipeline.pipeline import CollisionPipeline
+from .._src.runtime.frame import MODES
+from .._src.scene.scene import Scene
+from .command import add_out_option, add_run_options, bench_parser, start, write_result
+from .meshes import parse_triangles
+from .timing import detect_frames
 
 DT = 1.0 / 60.0
 KINDS = {wp.TIMING_KERNEL: "kernel", wp.TIMING_KERNEL_BUILTIN: "kernel (warp)", wp.TIMING_MEMCPY: "copy",

@@ -24,7 +24,7 @@ import numpy as np
 import warp as wp
 
 from .. import __version__
-from ..output import PendingFile, check_output_path, prepare_text
+from .._src.output import PendingFile, check_output_path, prepare_text
 from .methods import REFERENCE, CaseResult
 
 __all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "RESULTS", "BenchReport", "environment", "git_commit", "write_json"]
@@ -93,7 +93,7 @@ def environment(device) -> dict:
 
 
 def write_json(path: str, document: dict) -> None:
-    """Writes ``document`` to ``path``, replaced in one step (see :mod:`warp_ccd.output`).
+    """Writes ``document`` to ``path``, replaced in one step (see :mod:`warp_ccd._src.output`).
 
     Raises:
         ValueError: ``path`` is not a writable ``.json`` destination.

@@ -20,7 +20,7 @@ runs:
    median over the timed frames.
 2. **Methods** (:mod:`warp_ccd.bench.methods`).
 
-   * ``warp_ccd``: this package's :class:`~warp_ccd.pipeline.CollisionPipeline`: with
+   * ``warp_ccd``: this package's :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`: with
      ``timings=True`` for the stages it reports (whatever their names; it synchronises after each,
      and the sum is ``detect_synced``), and timed around ``detect()`` (the frame's launches, its one
      counter read, the result's views) launched eagerly (``detect_eager``) and, on CUDA, replayed
@@ -50,7 +50,7 @@ runs:
    difference is charged to whichever method an independent arbiter (Warp's float64 test on the
    scaled pair) finds wrong; ``warp_ccd_nxn`` must find the very same triangle pairs and as many
    broad-phase pairs; ``newton_sap`` the same box pairs as this package's
-   :class:`~warp_ccd.stages.broad_phase.BroadPhaseSAP` on the same boxes, each differing pair judged by
+   :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP` on the same boxes, each differing pair judged by
    an exact overlap test in numpy. A peer found wrong is a finding: its rows are marked ``*``
    (``peer_wrong`` in the JSON). A difference charged to ``warp_ccd`` is a mismatch: the command
    ends with status 3 after everything is written.
@@ -68,7 +68,7 @@ of eager and graph behind a best-of stage), ``memory``, ``checks``, ``notes``; r
 each case so that a long run that dies keeps what it measured) and a log-log plot of ms per frame
 against ``N`` (``--plot``, needs matplotlib).
 
-Exit status (:mod:`warp_ccd.cli.common`'s codes): 0 ``EXIT_OK``, ``warp_ccd`` stands (peers' wrong answers
+Exit status (:mod:`warp_ccd._src.cli.common`'s codes): 0 ``EXIT_OK``, ``warp_ccd`` stands (peers' wrong answers
 and failures are reported, not failed); 2 ``EXIT_USAGE``, bad arguments; 3 ``EXIT_INTERNAL``, a real
 mismatch charged to ``warp_ccd`` (a bug in it).
 """
@@ -79,8 +79,8 @@ import argparse
 import math
 import sys
 
-from ..cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, CliError, OneLineParser, quiet_warp, resolve_device
-from ..output import check_output_path
+from .._src.cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, CliError, OneLineParser, quiet_warp, resolve_device
+from .._src.output import check_output_path
 from .meshes import parse_triangles
 from .methods import PEERS, REFERENCE, run_case
 from .report import JSON_EXTENSIONS, PLOT_EXTENSIONS, BenchReport

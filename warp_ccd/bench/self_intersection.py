@@ -3,7 +3,7 @@
 **One mesh** (``--mesh-triangles``, about 1.3M by default): a figure-eight torus (it crosses itself all
 around its circle) and an icosphere (none), each
 
-* as a deforming object of a :class:`~warp_ccd.pipeline.CollisionPipeline` with
+* as a deforming object of a :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` with
   ``self_intersections=True``: a frame refits its tree and walks it against itself (on CUDA one replayed
   graph): ``frame`` ms, min and median over ``--frames`` after ``--warmup``;
 * one-shot :func:`warp_ccd.self_intersections` (scene, tree build, walk, read): ``one_shot`` ms;
@@ -32,9 +32,10 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_row, add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.timing import ms_stats, synced_ms
-from warp_ccd.scene import figure_eight_torus, icosphere, sheet
+
+from .._src.scene.shapes import figure_eight_torus, icosphere, sheet
+from .command import add_row, add_run_options, bench_parser, start, write_result
+from .timing import ms_stats, synced_ms
 
 
 def crumpled_sheets(k: int, n: int, seed: int = 0, kind: str = "crumpled") -> list[tuple[np.ndarray, np.ndarray]]:
@@ -75,7 +76,7 @@ def _frames(pipe, args, device) -> list[float]:
 
 def _profile(scene, args) -> list[dict]:
     """The slowest activities of an eager frame (median of 3) of a self-intersecting pipeline, rounded."""
-    from warp_ccd.bench.profile_frame import activities
+    from .profile_frame import activities
 
     pipe = wc.CollisionPipeline(scene, self_intersections=True, graph=False, leaf_size=args.leaf_size)
     pipe.detect()

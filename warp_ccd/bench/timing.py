@@ -2,7 +2,7 @@
 
 * :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
 * :func:`detect_frames`: a pipeline's ``detect`` frames, each timed that way, with their host time.
-* :class:`~warp_ccd.stages.frame.CountedFrame` (the library's): one frame of device work followed by one
+* :class:`~warp_ccd._src.runtime.frame.CountedFrame` (the library's): one frame of device work followed by one
   small kernel copying its counters into pinned host memory and one wait, launched eagerly from
   Python or replayed as a captured graph. A counter past its buffer's capacity grows the buffer,
   and the frame is captured again and rerun: nothing is dropped.
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from ..stages.buffers import CounterRead
-from ..stages.frame import MODES, CountedFrame
+from .._src.runtime.buffers import CounterRead
+from .._src.runtime.frame import MODES, CountedFrame
 
 __all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "detect_frames", "ms_stats", "run_stages", "synced_ms"]
 
@@ -44,7 +44,7 @@ def detect_frames(pipe, count: int, dt: float) -> tuple[list[float], list[float]
     """``count`` frames of ``pipe.detect(advance=dt)``, each timed by :func:`synced_ms`.
 
     Args:
-        pipe: a :class:`~warp_ccd.pipeline.CollisionPipeline`, warmed up.
+        pipe: a :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`, warmed up.
         count: frames to time.
         dt: s the scene advances each frame.
 
@@ -61,11 +61,11 @@ def detect_frames(pipe, count: int, dt: float) -> tuple[list[float], list[float]
 
 class ModeFrames:
     """The same frame in each of several modes (a :class:`CountedFrame` each, all reading one
-    :class:`~warp_ccd.stages.buffers.CounterRead`), run in turn.
+    :class:`~warp_ccd._src.runtime.buffers.CounterRead`), run in turn.
 
     Args:
         launch: enqueues the frame's work (see :class:`CountedFrame`; the counters are reset before it).
-        buffers: the :class:`~warp_ccd.stages.buffers.GrowableBuffer` s whose counters the frame reads.
+        buffers: the :class:`~warp_ccd._src.runtime.buffers.GrowableBuffer` s whose counters the frame reads.
         device: Warp device.
         modes: the modes (:data:`MODES`, or a subset).
     """

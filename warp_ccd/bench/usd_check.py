@@ -5,12 +5,12 @@ Two stages, written first (not timed as part of the check) into a temporary fold
 * **rigid**: ``--rigid`` prims (default 10,000), each an ``Xform`` with a time-sampled
   ``translate`` and ``orient`` at every frame and a static uniform ``scale``, over a ``Mesh`` of a
   polyhedron (4-20 faces, its own copy of the points: shapes are shared by content); the motion
-  of :meth:`Scene.random <warp_ccd.scene.scene.Scene.random>` (inclined ellipses with spin).
+  of :meth:`Scene.random <warp_ccd._src.scene.scene.Scene.random>` (inclined ellipses with spin).
 * **deforming**: ``--deforming`` meshes (default 100) of 10,000 triangles (latitude-longitude
   spheres of 4,900 quads and 200 pole triangles), whose ``points`` are time-sampled at every
   frame (a wobble of the surface), each on an ellipse, dense enough that some overlap.
 
-For each, :func:`~warp_ccd.usd.check.check_usd` runs over ``--frames`` time codes and reports its
+For each, :func:`~warp_ccd._src.check.check.check_usd` runs over ``--frames`` time codes and reports its
 seconds: ``read`` (open, traverse, topology, every frame's transforms), ``build`` (scene,
 trees, pipeline), ``set`` (moving the scene to each frame: poses, or reading and copying the
 deforming points), ``detect`` (the pipeline's frames) and ``classify`` (depths, USD faces, the
@@ -32,10 +32,10 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import add_out_option, add_run_options, bench_parser, parse_options, write_result
-from warp_ccd.bench.report import git_commit
-from warp_ccd.scene.scene import Scene
-from warp_ccd.usd.check import check_usd
+from .._src.check.check import check_usd
+from .._src.scene.scene import Scene
+from .command import add_out_option, add_run_options, bench_parser, parse_options, write_result
+from .report import git_commit
 
 
 def _commit_label() -> str:
@@ -152,8 +152,8 @@ def write_deforming_stage(path: str, num_meshes: int, num_frames: int, seed: int
 
 def _fcl_peer(report, every: int) -> dict:
     """python-fcl on the checked scene at every ``every``-th frame; our pairs (touching included) beside it."""
-    from warp_ccd.bench.peers import FclPipeline, PeerUnavailable
-    from warp_ccd.pipeline import CollisionPipeline
+    from .._src.pipeline.pipeline import CollisionPipeline
+    from .peers import FclPipeline, PeerUnavailable
 
     imp = report.source
     try:

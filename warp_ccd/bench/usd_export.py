@@ -1,4 +1,4 @@
-"""Benchmark: writing a USD animation of many rigid objects (``warp_ccd.usd.export.UsdAnimationWriter``).
+"""Benchmark: writing a USD animation of many rigid objects (``warp_ccd._src.usd.export.UsdAnimationWriter``).
 
 Measures the writer alone: ``add_frame`` for every frame plus ``close`` (building the stage's time
 samples, then writing the file and renaming it). Moving the scene between frames is timed
@@ -22,14 +22,14 @@ import time
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.command import bench_parser, parse_options, write_result
+from .command import bench_parser, parse_options, write_result
 
 TARGET_S = 3.0
 
 
 def export_once(scene, flags: np.ndarray, path: str, aabb: bool) -> dict:
     """Writes ``flags.shape[0]`` frames of ``scene`` to ``path``; returns the timings in seconds."""
-    from warp_ccd.usd.export import UsdAnimationWriter
+    from .._src.usd.export import UsdAnimationWriter
 
     t0 = time.perf_counter()
     writer = UsdAnimationWriter(path, scene, fps=60, aabb=aabb)
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     if args.num_objects < 1 or args.num_frames < 1 or args.repeat < 1:
         parser.error("counts must be positive")
 
-    from warp_ccd.scene.scene import Scene
+    from .._src.scene.scene import Scene
 
     rng = np.random.default_rng(0)
     flags = rng.random((args.num_frames, args.num_objects)) < 0.1

@@ -4,7 +4,7 @@ and newton's per-world broad phase; the cost of filters; a frame driven from dev
 The scene (:func:`robot_world`): ``--worlds`` copies (4,096 by default) of a robot-like cell of 20 objects
 (an arm of 8 links in a chain, each touching the next; a table; 11 parts on and around it, some touching
 the arm or each other), each copy jittered by its own seed, so the worlds differ. Rows, each a frame of
-:meth:`~warp_ccd.pipeline.CollisionPipeline.detect` (a replayed graph on CUDA), min and median ms over
+:meth:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline.detect` (a replayed graph on CUDA), min and median ms over
 ``--frames`` after ``--warmup``, with the pairs found:
 
 * ``worlds``: every world at the same place, ``world=`` ids (the case worlds are for: a simulator's
@@ -16,7 +16,7 @@ the arm or each other), each copy jittered by its own seed, so the worlds differ
 * ``worlds_filtered``: ``worlds`` plus excluded pairs (each arm's 7 adjacent links) and groups and masks
   (the table ignores the arm's base): the cost of filters, and the pairs they remove;
 * ``worlds_floor``: ``worlds`` plus one floor in world -1 under every world (a box that meets them all);
-* ``python_loop``: one :class:`~warp_ccd.pipeline.CollisionPipeline` per world, ``detect()`` on each in
+* ``python_loop``: one :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` per world, ``detect()`` on each in
   a Python loop, as a user without worlds writes it: timed over ``--loop-worlds`` worlds and scaled to
   all of them (each world is the same work; the row says so), the ratio against ``worlds``;
 * ``newton_sap`` and ``sap``: the broad phase alone on the ``worlds`` scene's boxes, newton's
@@ -38,14 +38,15 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd.bench.command import add_row as _add_row
-from warp_ccd.bench.command import add_run_options, bench_parser, start, write_result
-from warp_ccd.bench.methods import device_modes
-from warp_ccd.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable
-from warp_ccd.bench.timing import ModeFrames, StageTimes, ms_stats, synced_ms
-from warp_ccd.scene import icosphere, shape
-from warp_ccd.stages.broad_phase import BroadPhaseSAP
-from warp_ccd.stages.buffers import GrowableBuffer
+
+from .._src.broadphase.sap import BroadPhaseSAP
+from .._src.runtime.buffers import GrowableBuffer
+from .._src.scene.shapes import icosphere, shape
+from .command import add_row as _add_row
+from .command import add_run_options, bench_parser, start, write_result
+from .methods import device_modes
+from .peers import NewtonBroadPhaseSAP, PeerUnavailable
+from .timing import ModeFrames, StageTimes, ms_stats, synced_ms
 
 OBJECTS_PER_WORLD = 20
 LINKS = 8

@@ -1,0 +1,328 @@
+"""Checking a USD animation for interpenetration, frame by frame (``warp-ccd check``).
+
+:func:`check_usd` reads a stage once (:class:`~warp_ccd._src.usd.importer.UsdMeshImport`), runs the
+collision pipeline at every time code asked for, and returns a :class:`CheckReport`: per frame,
+the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross.
+
+**Touching is not penetrating.** Objects resting on each other touch every frame, and the exact
+test reports their triangle pairs (triangles are closed sets). Each reported pair is classified
+from the surfaces around it (:mod:`~warp_ccd._src.check.crossing`): the surfaces *cross* where one enters
+the region behind the other (their insides overlap), and only *touch* where they meet face to
+face, edge on edge, edge or vertex on a face. That verdict is a property of the surfaces, not of
+how they are cut into triangles. A crossing pair's depth is how far a vertex of either triangle
+lies behind the other surface (a vertex poking ``h`` through a face, or a crate sunk ``h`` into a
+floor, has depth ``h``); touching pairs have depth 0. A pair penetrates when it crosses deeper
+than ``min_depth`` (scene units, default 0: every crossing); the others are counted as touching,
+not reported as collisions, unless ``count_touching`` asks for them.
+
+The overlay (:func:`write_overlay`) is a new layer whose sublayer is the checked stage: the
+colliding mesh prims get a time-sampled ``primvars:displayColor`` (red while they penetrate,
+their own constant colour or grey otherwise); instance proxies are coloured through their
+instanceable ancestor, PointInstancer instances through the instancer's per-instance
+``displayColor`` (``vertex`` interpolation); with segments, the intersection segments of every
+frame are one ``BasisCurves`` prim.
+
+**Clearance** (``clearance=D``, :mod:`~warp_ccd._src.check.clearance`): the pipeline also reports the prim
+pairs within ``D`` of each other; those a frame does not report as collisions are its *soft clashes*,
+with their least distance, closest points and USD faces (:attr:`FrameContacts.soft_clashes`). In the
+overlay a prim in a soft clash is yellow at that time code (red and orange win), and each soft
+clash's closest points are joined by a curve.
+
+**Self-intersection** (``self_intersections=True``, :mod:`~warp_ccd._src.check.self_intersection`): the pipeline
+also reports each prim's own triangles that meet beyond the vertices they share, as pairs of its USD
+faces with their depth (:attr:`FrameContacts.self_intersections`). In the overlay a prim through itself
+is magenta at that time code (red and orange win).
+
+**Continuous** (``continuous=True``, :mod:`~warp_ccd._src.check.sweep`): one continuous pipeline more, whose
+every detection covers the linear motion since the previous time code, reports per interval between
+consecutive time codes the prim pairs that touch at some time in it (:attr:`CheckReport.intervals`),
+and marks *tunnelling* those that neither end frame shows intersecting. In the overlay a prim that
+tunnels in the interval starting at a time code is orange there (red still wins: it penetrates), and
+its ``warpCcd:tunnelling`` attribute is true there.
+
+**Duplicates** (``duplicates=True``, :mod:`~warp_ccd._src.check.duplicates`): a pair the detection reports whose
+world-space triangle sets coincide (the same geometry placed twice at the same place, a common fault of CAD
+exports) is a *duplicate* at that frame (:attr:`FrameContacts.duplicates`), not a touching or penetrating
+pair: its rows leave the frame's collisions (and it is no soft clash). In the overlay a duplicate prim is
+blue at that time code (red, orange and magenta win). A finding after self-intersections.
+
+**The JSON report** (:meth:`CheckReport.to_json`) carries ``"schema_version"`` (:data:`SCHEMA_VERSION`) and
+follows the JSON Schema (draft 2020-12) shipped beside this module, ``report.schema.json``
+(:data:`REPORT_SCHEMA_PATH`; :func:`report_schema` returns it as a dict). Every object in it lists its
+fields (``additionalProperties: false``), so a report with a field the schema does not know fails
+validation. The version's policy: the minor number grows when optional fields are added (a reader of
+``1.x`` reads every later ``1.y``), the major number when a field is removed or changes its meaning or
+type. ``1.1`` added the ``filters`` section.
+
+**Filters** (:mod:`~warp_ccd._src.usd.filters`): pairs of two ``worlds``, excluded pairs (``ignore_pairs``, the
+stage's ``UsdPhysics`` filters) and, with ``set_a`` / ``set_b``, pairs not of one prim of each set are dropped
+by the broad phase (so for every kind of check; self-intersection, per prim, is not filtered).
+"""
+
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..geometry.precision import precision_types
+from ..geometry.triangle import TOLERANCE
+from ..narrowphase.clearance import CLEARANCE_MAX
+from ..runtime.aliases import DeviceLike, PathLike
+from ..runtime.checks import integer_option, number_option
+from ..usd.filters import PairFilters
+from .clearance import soft_clashes
+from .crossing import CrossingClassifier
+from .duplicates import duplicate_pairs
+from .overlay import COLOR_CLEAR, COLOR_PENETRATING, prepare_overlay, write_overlay
+from .report import REPORT_SCHEMA_PATH, SCHEMA_VERSION, CheckReport, FrameContacts, report_schema
+from .self_intersection import self_intersections as find_self_intersections
+from .sweep import sweep_interval
+
+if TYPE_CHECKING:
+    from pxr import Usd
+
+__all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts",
+           "check_usd", "checked_options", "prepare_overlay", "report_schema", "write_overlay"]
+
+
+def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
+                    time_code: float, duplicates: bool, num_faces: int) -> FrameContacts:
+    """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
+    penetrating ones kept, the others counted. With ``duplicates``, the object pairs whose meshes
+    coincide are found among the rows' pairs and their rows left out. ``num_faces``: more than the largest
+    USD face index."""
+    rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
+    seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
+    dup = None
+    if duplicates:
+        dup = duplicate_pairs(imp.scene, np.unique(rows[:, [0, 2]], axis=0)) if len(rows) else np.zeros((0, 2),
+                                                                                                       np.int32)
+        if len(dup):
+            n = imp.scene.num_objects
+            gone = np.isin(rows[:, 0] * n + rows[:, 2], dup[:, 0].astype(np.int64) * n + dup[:, 1])
+            rows, depth = rows[~gone], depth[~gone]
+            seg = seg[~gone] if seg is not None else None
+    faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
+                      imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
+    if len(faces) and seg is None:
+        # By (a, b, fa, fb), each face pair once with its deepest crossing (which of its triangle
+        # pairs is deepest does not show without segments): one sort of one key where it fits in 63 bits.
+        faces, depth = _deepest_per_face_pair(faces, depth, imp.scene.num_objects, num_faces)
+    elif len(faces):
+        # By (a, b, fa, fb), deepest first, then by triangles: the same row (and segment) on every
+        # device, whatever order the device's hits came in.
+        order = np.lexsort((rows[:, 3], rows[:, 1], -depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))
+        faces, depth = faces[order], depth[order]
+        first = np.ones(len(faces), bool)
+        first[1:] = (faces[1:] != faces[:-1]).any(axis=1)
+        faces, depth = faces[first], depth[first]
+        seg = seg[order][first]
+    keep = np.ones(len(faces), bool) if count_touching else depth > min_depth
+    return FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
+                         seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup)
+
+
+def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: int,
+                           num_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, 4)`` rows ``(a, face_a, b, face_b)`` and their depths as unique rows sorted by ``(a, b, face_a,
+    face_b)``, each with its largest depth: one sort of a packed key (a sort of two where it does not fit)."""
+    a, fa, b, fb = (faces[:, k].astype(np.int64) for k in range(4))
+    pair, face = a * num_objects + b, fa * max(num_faces, 1) + fb
+    if (max(num_objects, 1) ** 2) * (max(num_faces, 1) ** 2) < 2**63:
+        key = pair * max(num_faces, 1) ** 2 + face
+        order = np.argsort(key)
+        key = key[order]
+        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    else:
+        order = np.lexsort((face, pair))
+        p, f = pair[order], face[order]
+        starts = np.flatnonzero(np.r_[True, (p[1:] != p[:-1]) | (f[1:] != f[:-1])])
+    return faces[order][starts], np.maximum.reduceat(depth[order], starts)
+
+
+def checked_options(*, min_depth: float = 0.0, min_distance: float = 0.0, clearance: float = 0.0,
+                    continuous: bool = False, precision: str = "float32", read_workers: int | None = None) -> float:
+    """Checks :func:`check_usd`'s numbers and precision before anything is read.
+
+    Returns:
+        ``clearance`` as a float.
+
+    Raises:
+        ValueError: a negative depth or distance, a clearance beyond
+            :data:`~warp_ccd._src.narrowphase.clearance.CLEARANCE_MAX`, ``min_distance`` without ``continuous``, an
+            unknown precision, a negative number of readers.
+    """
+    number_option("min_depth", min_depth, low=0.0)
+    if read_workers is not None:
+        integer_option("read_workers", read_workers, low=0)
+    number_option("min_distance", min_distance, low=0.0)
+    clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
+    if min_distance > 0.0 and not continuous:
+        raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
+    precision_types(precision)
+    return clearance
+
+
+def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[float] | None = None,
+              prims: str | Sequence[str] | None = None, device: DeviceLike = None, precision: str = "float32",
+              min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
+              include_invisible: bool = False, include_purposes: Sequence[str] = (), tolerance: float = TOLERANCE,
+              progress: bool = False, allow_missing: bool = False, continuous: bool = False,
+              min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False,
+              duplicates: bool = False, worlds: str | Sequence[str] | None = None,
+              ignore_pairs: PathLike | Sequence[Any] | None = None, usd_filters: bool = True,
+              set_a: str | Sequence[str] | None = None, set_b: str | Sequence[str] | None = None,
+              read_workers: int | None = None) -> CheckReport:
+    """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
+
+    Args:
+        stage_or_path: a ``Usd.Stage`` or a USD file path.
+        frames: time codes (see :func:`~warp_ccd._src.usd.stage.stage_time_codes`; default: every
+            integer time code of the stage's range).
+        prims: prim paths or patterns to check (default: the whole stage).
+        device: Warp device (default: Warp's preferred device).
+        precision: ``"float32"`` or ``"float64"``; float32 becomes float64, with a
+            :class:`~warp_ccd._src.geometry.precision.PrecisionWarning` (``report.source.precision_note``), where
+            the coordinates are too far from the origin for it at the triangles' size
+            (:func:`~warp_ccd._src.geometry.precision.needed_precision`).
+        min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
+        count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
+        segments: keep the intersection segments (for the report and the overlay).
+        include_invisible: also check invisible prims.
+        include_purposes: also check prims of these purposes (``"guide"``, ``"proxy"``).
+        tolerance: relative tolerance of the triangle test.
+        progress: show progress bars on stderr (reading the transforms of every time code, then
+            the frames).
+        allow_missing: check a stage whose sublayers, references or payloads cannot all be
+            opened (without them; :attr:`CheckReport.missing` lists them) instead of raising; likewise
+            an ``ignore_pairs`` pair naming no prim, a ``worlds``, ``set_a`` or ``set_b`` pattern matching no
+            checked mesh: a note in the report (``filters.notes``) instead of a ValueError.
+        continuous: also report, per interval between consecutive time codes, the prim pairs that
+            touch at some time in it (every vertex moving linearly between its positions at the
+            two time codes), and which of them tunnel (:attr:`CheckReport.intervals`).
+        min_distance: with ``continuous``, pairs that come within this distance (scene units,
+            >= 0) count as touching.
+        clearance: also report, per frame, the prim pairs within this distance (scene units, >= 0)
+            that the frame does not report as collisions: soft clashes (:attr:`FrameContacts.soft_clashes`).
+        self_intersections: also report, per frame, the prims that pass through themselves, as pairs of
+            their USD faces with a depth (:attr:`FrameContacts.self_intersections`).
+        duplicates: report, per frame, the pairs whose meshes coincide (the same triangles at the same
+            place, :mod:`~warp_ccd._src.check.duplicates`) as duplicates (:attr:`FrameContacts.duplicates`) instead
+            of as collisions.
+        worlds: prim paths or ``fnmatch`` patterns, every prim they match rooting a world: pairs of two
+            worlds are never checked (meshes under no root pair with every world; see
+            :class:`~warp_ccd._src.usd.importer.UsdMeshImport`).
+        ignore_pairs: prim pairs never checked: an ignore-pairs file (text: two prim paths or patterns a
+            line, separated by whitespace or a comma, ``#`` comments; ``.json``: a list of ``[a, b]``), or
+            a sequence of such files and ``(a, b)`` pairs. Every mesh at or under ``a`` is excluded against
+            every mesh at or under ``b`` (:mod:`~warp_ccd._src.usd.filters`).
+        usd_filters: also exclude the pairs the stage's ``UsdPhysics.FilteredPairsAPI`` and
+            ``UsdPhysics.CollisionGroup`` prims filter out.
+        set_a: prim paths or patterns (a string may hold several, comma-separated): with ``set_b``, only
+            pairs of one mesh of set A and one of set B are checked (a mesh may be in both).
+        set_b: the other set, given with ``set_a``.
+        read_workers: processes that read the transforms (:class:`~warp_ccd._src.usd.importer.UsdMeshImport`'s
+            ``workers``; default: chosen by the stage's size; 0: read in this process).
+
+    Returns:
+        The :class:`CheckReport`.
+
+    Raises:
+        ValueError: naming the file or prim: see :class:`~warp_ccd._src.usd.importer.UsdMeshImport`; or
+            a sublayer, reference or payload cannot be opened (unless ``allow_missing``); a bad
+            ``ignore_pairs`` file (naming it and the line), a pair naming no prim, a pattern matching
+            no checked mesh (unless ``allow_missing``), ``set_a`` without ``set_b``.
+    """
+    import warp as wp
+    from tqdm import tqdm
+
+    from ..pipeline.pipeline import CollisionPipeline
+    from ..usd.importer import UsdMeshImport
+    from ..usd.stage import open_stage, require_layers, stage_time_codes
+
+    clearance = checked_options(min_depth=min_depth, min_distance=min_distance, clearance=clearance,
+                                continuous=continuous, precision=precision, read_workers=read_workers)
+    filters = PairFilters(ignore_pairs=ignore_pairs, usd_filters=usd_filters, set_a=set_a, set_b=set_b,
+                          allow_missing=allow_missing)
+    t = time.perf_counter()
+    stage = open_stage(stage_or_path)
+    missing = require_layers(stage, allow_missing)
+    times = stage_time_codes(stage, frames)
+    opened = time.perf_counter() - t
+    imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
+                        include_purposes=include_purposes, device=device, precision=precision, progress=progress,
+                        worlds=worlds, filters=filters, workers=read_workers)
+    seconds = dict(imp.seconds)
+    seconds["read"] += opened  # the import got the stage open
+    t = time.perf_counter()
+    scene = imp.scene
+    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance, clearance=clearance,
+                             self_intersections=bool(self_intersections))
+    classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
+    # One continuous pipeline for the whole animation: each detect covers the motion since the last.
+    sweep = CollisionPipeline(scene, continuous=True, min_distance=min_distance) if continuous else None
+    seconds["build"] += time.perf_counter() - t
+    seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
+    if continuous:
+        seconds["continuous"] = 0.0
+    name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
+    report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
+                         count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
+                         clearance=clearance, self_checked=bool(self_intersections),
+                         duplicates_checked=bool(duplicates), filters=imp.filters)
+    if continuous:
+        report.intervals = []
+        report.min_distance = float(min_distance)
+        report.ccd_tolerance = float(sweep.narrow.tolerance)
+    intersecting = None  # the object pairs of the previous time code (touching included)
+    num_faces = int(imp.triangle_face.max(initial=-1)) + 1
+    bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not progress or None, leave=False)
+    for k in bar:
+        t = time.perf_counter()
+        imp.set_frame(k)
+        t1 = time.perf_counter()
+        res = pipe.detect()
+        t_detect = time.perf_counter()
+        pairs = res.device_triangle_pairs
+        _, depth = classify(pairs)  # 0 where the surfaces only touch
+        contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k],
+                                   bool(duplicates), num_faces)
+        if clearance > 0.0:
+            reported = contacts.object_pairs
+            if contacts.duplicates is not None and len(contacts.duplicates):  # a duplicate is no soft clash
+                reported = np.unique(np.concatenate([reported, contacts.duplicates]), axis=0)
+            contacts.soft_clashes = soft_clashes(imp, res, reported)
+        if self_intersections:
+            contacts.self_intersections = find_self_intersections(imp, res, pipe.self_phase)
+        t2 = time.perf_counter()
+        seconds["set"] += t1 - t
+        seconds["detect"] += t_detect - t1
+        seconds["classify"] += t2 - t_detect
+        report.frames.append(contacts)
+        if continuous:
+            t3 = time.perf_counter()
+            now = res.intersecting_pairs  # the discrete result's, read before it can change
+            if k == 0:
+                wp.copy(sweep.world_vertex_start, scene.world_vertex)  # the motion starts at the first time code
+            else:
+                report.intervals.append(sweep_interval(imp, sweep.detect(), times[k - 1], times[k], intersecting, now))
+            intersecting = now
+            seconds["continuous"] += time.perf_counter() - t3
+        bar.set_postfix(pairs=len(contacts.triangle_pairs), refresh=False)
+    bar.close()
+    wp.synchronize_device(scene.device)
+    report.seconds = {k: round(v, 4) for k, v in seconds.items()}
+    report.source = imp
+    report.missing = missing
+    report.object_instancer = list(imp.object_instancer)
+    report.object_instance = np.asarray(imp.object_instance, np.int64)
+    world = scene.world_vertex.numpy()
+    report.extent = float(np.max(world.max(axis=0) - world.min(axis=0))) if len(world) else 0.0
+    report.precision = str(scene.precision)
+    report.precision_note = imp.precision_note
+    report.max_coordinate = float(imp.max_coordinate)
+    return report

@@ -1,0 +1,233 @@
+"""What the ``warp-ccd`` subcommands share: one-line argument errors, exit codes, device names.
+
+:mod:`warp_ccd._src.cli.commands` (``demo``) and :mod:`warp_ccd.bench` (``bench``) both import from here, and
+neither imports the other at module level.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+
+__all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "REPORT_STDOUT",
+           "CliError", "OneLineParser", "check_arguments", "check_options", "flat_values", "init_warp",
+           "pending_outputs", "quiet_warp", "refuse_overwriting", "require_usd", "resolve_device", "uncached_modules"]
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_FINDINGS = EXIT_ERROR
+"""``check``: something penetrates (or, with ``--count-touching``, touches)."""
+EXIT_USAGE = 2
+EXIT_INTERNAL = 3
+"""An unexpected exception: a bug or the machine (out of memory), not the input."""
+EXIT_INTERRUPTED = 130
+
+DRIVER_NOTICE = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
+"""The start of the line Warp's native library prints on initialisation when there is no CUDA
+driver (a machine without a GPU): the device list says as much, so the commands leave it out."""
+
+
+class CliError(Exception):
+    """A problem to report in one line, with the exit status to end with."""
+
+    def __init__(self, message: str, status: int = EXIT_USAGE):
+        super().__init__(message)
+        self.status = status
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (no usage dump) and exit status 2."""
+
+    def error(self, message: str):
+        raise CliError(f"{self.prog}: error: {message} (see --help)", EXIT_USAGE)
+
+
+def quiet_warp() -> None:
+    """Keeps Warp's start-up banner and module-load messages out of a command's output."""
+    import warp as wp
+
+    if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
+        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
+    wp.config.quiet = True
+
+
+def init_warp() -> None:
+    """Initialises Warp, without its no-CUDA-driver notice on stderr.
+
+    Warp's native library prints :data:`DRIVER_NOTICE` to the process's stderr on
+    initialisation on a machine without a CUDA driver. Here stderr (file descriptor 2) goes to a
+    temporary file while Warp initialises, and every other line written meanwhile is passed on.
+    Nothing happens when Warp is initialised already.
+    """
+    import warp as wp
+
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to redirect
+        wp.init()
+        return
+    try:
+        with tempfile.TemporaryFile() as held:
+            os.dup2(held.fileno(), 2)
+            try:
+                wp.init()
+            finally:
+                sys.stderr.flush()
+                os.dup2(saved, 2)
+            held.seek(0)
+            text = held.read().decode(errors="replace")
+    finally:
+        os.close(saved)
+    rest = [line for line in text.splitlines(keepends=True) if not line.startswith(DRIVER_NOTICE)]
+    if rest:
+        sys.stderr.write("".join(rest))
+        sys.stderr.flush()
+
+
+def uncached_modules(device, names) -> list[str] | None:
+    """The Warp modules among ``names`` whose kernels for ``device`` are not in Warp's kernel cache.
+
+    Warp compiles a module's kernels at its first launch on a device and keeps the binary in
+    its kernel cache (``wp.config.kernel_cache_dir``), under a name that carries a hash of the
+    module's code and options; this looks for that file as ``Module.load`` does.
+
+    Args:
+        device: a Warp device.
+        names: Python module names whose Warp kernels will run (``"warp_ccd._src.narrowphase.discrete"``).
+
+    Returns:
+        The names to be compiled, or None when that cannot be told (kernel caching off, or a Warp
+        without the methods used here).
+    """
+    import warp as wp
+
+    try:
+        from warp._src import context
+
+        if not wp.config.cache_kernels or not wp.config.kernel_cache_dir:
+            return None
+        device = wp.get_device(device)
+        out = []
+        for name in names:
+            module = context.user_modules.get(name)
+            if module is None:
+                continue
+            default = None if device.is_cpu else module.options["block_dim"]  # as a launch resolves it
+            block_dim = context._resolve_launch_block_dim(device, default)
+            binary = os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(block_dim),
+                                  module._get_compile_output_name(device, block_dim=block_dim))
+            if not os.path.exists(binary):
+                out.append(name)
+        return out
+    except Exception:  # Warp's internals differ: say nothing rather than something wrong
+        return None
+
+
+def resolve_device(name: str | None):
+    """A Warp device from a command-line name.
+
+    Args:
+        name: ``None`` (Warp's preferred device: ``cuda:0`` when there is one, else ``cpu``),
+            ``"cuda"`` (``cuda:0``), or a device name Warp lists.
+
+    Raises:
+        ValueError: an unknown name; the message lists the devices available.
+    """
+    import warp as wp
+
+    if name is None:
+        return wp.get_preferred_device()
+    if name == "cuda" and wp.is_cuda_available():
+        name = "cuda:0"
+    available = [str(d) for d in wp.get_devices()]
+    if name not in available:
+        raise ValueError(f"unknown device {name!r} (available: {', '.join(available)})")
+    return wp.get_device(name)
+
+
+def flat_values(prims: list[list[str]] | None) -> list[str] | None:
+    """``--prims`` (``--set-a``, ``--set-b``) values (lists, one per use of the option) as one list, or None."""
+    return None if prims is None else [p for group in prims for p in group]
+
+
+@contextlib.contextmanager
+def pending_outputs(fail: Callable[[str], CliError]) -> Iterator[tuple[list, list]]:
+    """Outputs written whole or not at all: the block appends :class:`~warp_ccd._src.output.PendingFile` s and, for
+    each,
+    a line naming it (``"  report : {}"``); when it ends they are all moved into place and the lines printed. On an
+    error every one is discarded (a ValueError becomes ``fail``'s error: exit status 2)."""
+    from ..output import commit_all
+
+    pending: list = []
+    lines: list = []
+    try:
+        yield pending, lines
+        written = commit_all(pending)
+    except BaseException as exc:
+        for p in pending:
+            if not p.done:
+                p.discard()
+        if isinstance(exc, ValueError):
+            raise fail(str(exc)) from None
+        raise
+    for line, path in zip(lines, written):
+        print(line.format(path))
+
+
+def check_options(args: argparse.Namespace) -> dict:
+    """``check``'s arguments as :func:`~warp_ccd._src.check.check.check_usd`'s keyword arguments (all but the stage, the
+    frames, the device, progress and the readers)."""
+    return dict(prims=flat_values(args.prims), precision=args.precision, min_depth=args.min_depth,
+                count_touching=args.count_touching, segments=args.segments, include_invisible=args.include_invisible,
+                include_purposes=tuple(args.include_purpose), allow_missing=args.allow_missing,
+                continuous=args.continuous, min_distance=args.min_distance, clearance=args.clearance,
+                self_intersections=args.self_intersections, duplicates=args.duplicates, worlds=args.worlds,
+                ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters, set_a=flat_values(args.set_a),
+                set_b=flat_values(args.set_b))
+
+
+def require_usd(fail: Callable[[str], CliError]) -> None:
+    """Raises ``fail``'s error where usd-core is not installed."""
+    try:
+        import pxr  # noqa: F401
+    except ImportError:
+        raise fail("usd-core is not installed (pip install usd-core)") from None
+
+
+REPORT_STDOUT = "-"
+"""``--report -``: the JSON report on standard output."""
+
+
+def refuse_overwriting(inputs: list[tuple[str, str]], outputs: list[tuple[str, str]]) -> None:
+    """Raises ValueError when an output names the same file as an input (or an earlier output).
+
+    Args:
+        inputs: ``(what, path)`` of the files that must not be written.
+        outputs: ``(option, path)`` of the destinations.
+    """
+    from ..output import same_file
+
+    for flag, out in outputs:
+        for what, path in inputs:
+            if same_file(out, path):
+                where = "" if os.path.realpath(path) == os.path.abspath(out) else f" ({os.path.realpath(path)})"
+                raise ValueError(f"{flag} {out} is {what}{where}: it would be written over")
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Raises ValueError for ``check`` options that do not go together, or an ``--ignore-pairs`` file that cannot
+    be read (read again by the check: here, its errors come before any stage is read)."""
+    if args.min_distance > 0.0 and not args.continuous:
+        raise ValueError("--min-distance is an option of --continuous")
+    if (args.set_a is None) != (args.set_b is None):
+        given, other = ("--set-a", "--set-b") if args.set_b is None else ("--set-b", "--set-a")
+        raise ValueError(f"{given} needs {other}: only pairs of one prim of each set are checked")
+    from ..usd.filters import read_pair_file
+
+    for path in args.ignore_pairs or ():
+        read_pair_file(path)
