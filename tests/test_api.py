@@ -41,7 +41,7 @@ def test_unknown_top_level_name_is_an_attribute_error():
 
 
 @pytest.mark.parametrize("old", ["SceneBVH", "icosphere", "BroadPhaseNxN", "render_frame", "narrow_phase",
-"stages.kinds"])
+                                 "stages.kinds"])
 def test_names_never_released_are_gone(old):
     """Nothing was released before 0.1.0: no alias of an earlier name, no module path kept by a shim."""
     *module, name = ["warp_ccd", *old.split(".")]
