@@ -70,7 +70,7 @@ def test_traversal_front(device, front_capacity):
     assert ref.num_triangle_pairs > 0
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     assert mid.num_levels == pipe.boxes.num_levels - 1 == 9  # icosphere2: 320 leaves of 1 triangle, 10 levels
-    levels = mid._level_count.numpy()
+    levels = mid.walk.level_count.numpy()
     assert levels[-1] == 0 and levels[1:-1].min() > 0
     assert mid.front.last_count == levels.max() <= mid.front.capacity
     if front_capacity is not None:

@@ -3,7 +3,8 @@
 A mesh passes through itself where two of its triangles meet beyond what they share
 (:func:`~warp_ccd._src.geometry.adjacent.tri_tri_self`: a vertex, an edge; coincident vertices are one,
 :func:`weld_vertices`). Each mesh's tree is walked against itself, level by level as the mid phase walks
-two trees (:mod:`warp_ccd._src.midphase.bvh`), for every mesh at once:
+two trees, for every mesh at once: the tree-pair walk (:mod:`warp_ccd._src.trees.traversal`) with
+``self_pairs`` and this stage's tests plugged in:
 
 * a front entry ``(item, na, nb)`` is a pair of nodes of one tree, ``na <= nb`` in effect: level 0 holds
   each item's ``(root, root)``. A node against itself opens into its children against themselves and
@@ -33,12 +34,9 @@ from ..geometry.adjacent import tri_tri_self
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..geometry.triangle import TOLERANCE, crossing_depth
-from ..midphase.bvh import CHILD_LEAF, CHILD_NONE, CHILD_PUSH, EXPAND_THREADS_PER_SM, _is_push, _push
 from ..runtime.buffers import (
-    BLOCK_DIM,
     CounterRead,
     GrowableBuffer,
-    block_dim_for,
     block_reserve,
     reserve_slot,
     used_count,
@@ -47,15 +45,12 @@ from ..runtime.checks import number_option
 from ..runtime.frame import FrameCache
 from ..scene.scene import MeshTopology, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
+from ..trees.traversal import CHILD_LEAF, CHILD_SELF_LEAF, FrontWalk, front_kernel
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["SelfIntersection", "SelfTraversal", "weld_vertices"]
-
-CHILD_SELF_LEAF = wp.constant(3)
-"""Kind of a child pair: a leaf against itself (its triangle pairs ``i < j`` are candidates)."""
-
 
 def weld_vertices(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     """Each vertex's id for adjacency: the least local index of the vertices of its shape at exactly
@@ -86,157 +81,85 @@ def weld_vertices(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     return weld
 
 
-@wp.func
-def _self_child(tree: TreeView, slot: int, node_start: int, xa: int, xb: int) -> int:
-    """Kind of the child pair ``(xa, xb)`` of one tree (local ids; boxes at ``slot + id``)."""
-    if xa == xb:
-        if tree.node_child[node_start + xa][0] < 0:
-            return CHILD_SELF_LEAF
-        return CHILD_PUSH
-    if not boxes_overlap(tree.node_lower[slot + xa], tree.node_upper[slot + xa], tree.node_lower[slot + xb],
-                         tree.node_upper[slot + xb]):
-        return CHILD_NONE
-    if tree.node_child[node_start + xa][0] < 0 and tree.node_child[node_start + xb][0] < 0:
-        return CHILD_LEAF
-    return CHILD_PUSH
+@wp.struct
+class SelfParams:
+    """What the self traversal's walk reads and writes besides the tree
+    (:func:`~warp_ccd._src.trees.traversal.front_kernel`)."""
+
+    object_shape: wp.array[wp.int32]
+    item: wp.array[wp.int32]  # the objects (or shapes) walked
+    candidate: wp.array[wp.vec3i]
+    candidate_count: wp.array[wp.int64]
+    candidate_capacity: int
+
+
+@wp.struct
+class SelfItem:
+    """An item's tree: its object, its shape's node 0 and triangle order, its boxes' first slot."""
+
+    obj: int
+    node_start: int
+    tri_start: int
+    slot: int
 
 
 @wp.func
-def _self_rows(tree: TreeView, node_start: int, kind: int, xa: int, xb: int) -> int:
+def _entry(p: SelfParams, tree: TreeView, k: int, na: int, nb: int, roots: int):
+    """Item ``k``'s tree; every entry is opened (its pair of nodes was kept when it was pushed)."""
+    c = SelfItem()
+    c.obj = p.item[k]
+    shape = p.object_shape[c.obj]
+    c.node_start = tree.layout_node_start[tree.shape_layout[shape]]
+    c.tri_start = tree.shape_tri_order_start[shape]
+    c.slot = tree.object_node_start[c.obj]
+    return c, c.node_start, c.node_start, True
+
+
+@wp.func
+def _near(p: SelfParams, tree: TreeView, c: SelfItem, xa: int, xb: int) -> bool:
+    """Two nodes of one tree are kept where their boxes (one space) overlap."""
+    return boxes_overlap(tree.node_lower[c.slot + xa], tree.node_upper[c.slot + xa], tree.node_lower[c.slot + xb],
+                         tree.node_upper[c.slot + xb])
+
+
+@wp.func
+def _rows(p: SelfParams, tree: TreeView, c: SelfItem, kind: int, xa: int, xb: int) -> int:
     """Candidate rows of a child pair: a leaf's pairs ``i < j``, two leaves' product, or none."""
     if kind == CHILD_SELF_LEAF:
-        m = tree.node_triangle[node_start + xa][1]
+        m = tree.node_triangle[c.node_start + xa][1]
         return m * (m - 1) // 2
     if kind == CHILD_LEAF:
-        return tree.node_triangle[node_start + xa][1] * tree.node_triangle[node_start + xb][1]
+        return tree.node_triangle[c.node_start + xa][1] * tree.node_triangle[c.node_start + xb][1]
     return 0
 
 
 @wp.func
-def _self_emit(tree: TreeView, item: int, node_start: int, tri_start: int, kind: int, xa: int, xb: int,
-               slot: wp.int64, candidate: wp.array[wp.vec3i], candidate_capacity: int) -> wp.int64:
+def _reserve(p: SelfParams, lane: int, rows: int) -> wp.int64:
+    return block_reserve(p.candidate_count, lane, rows)
+
+
+@wp.func
+def _emit(p: SelfParams, tree: TreeView, c: SelfItem, k: int, kind: int, xa: int, xb: int,
+          slot: wp.int64) -> wp.int64:
     """Writes the candidate rows ``(item, tri, tri)`` of a child pair from ``slot``; returns the next slot."""
     if kind != CHILD_SELF_LEAF and kind != CHILD_LEAF:
         return slot
-    ra = tree.node_triangle[node_start + xa]
-    rb = tree.node_triangle[node_start + xb]
+    ra = tree.node_triangle[c.node_start + xa]
+    rb = tree.node_triangle[c.node_start + xb]
     for i in range(ra[0], ra[0] + ra[1]):
-        tri_a = tree.tri_order[tri_start + i]
+        tri_a = tree.tri_order[c.tri_start + i]
         j0 = rb[0]
         if kind == CHILD_SELF_LEAF:
             j0 = i + 1
         for j in range(j0, rb[0] + rb[1]):
-            if slot < wp.int64(candidate_capacity):
-                candidate[int(slot)] = wp.vec3i(item, tri_a, tree.tri_order[tri_start + j])
+            if slot < wp.int64(p.candidate_capacity):
+                p.candidate[int(slot)] = wp.vec3i(c.obj, tri_a, tree.tri_order[c.tri_start + j])
             slot += wp.int64(1)
     return slot
 
 
-@wp.kernel
-def _self_expand_kernel(
-    tree: TreeView,
-    object_shape: wp.array[wp.int32],
-    item: wp.array[wp.int32],
-    front_in: wp.array[wp.vec3i],
-    front_in_count: wp.array[wp.int64],
-    front_in_capacity: int,
-    roots: int,
-    num_blocks: int,
-    front_capacity: int,
-    candidate_capacity: int,
-    # Outputs
-    front_out: wp.array[wp.vec3i],
-    front_out_count: wp.array[wp.int64],
-    front_peak: wp.array[wp.int64],
-    candidate: wp.array[wp.vec3i],
-    candidate_count: wp.array[wp.int64],
-):
-    """One level of the self traversal (module docs): each entry ``(k, na, nb)`` of ``front_in``
-    (item ``k``'s nodes, local ids; with ``roots``, entry ``k`` is ``(k, 0, 0)``) opens into up to
-    four child pairs; pairs with a leaf's triangles become candidate rows, the others go to
-    ``front_out``. Blocks stride over the entries and reserve their slots with one atomic add each
-    (:func:`~warp_ccd._src.runtime.buffers.block_reserve`); ``front_peak`` keeps the largest level's count."""
-    block, lane = wp.tid()
-    width = wp.block_dim()
-    n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
-    base = block * width
-    while base < n:
-        e = base + lane
-        k = int(0)
-        obj = int(0)
-        node_start = int(0)
-        tri_start = int(0)
-        xa0 = int(0)
-        xa1 = int(0)
-        xb0 = int(0)
-        xb1 = int(0)
-        k00 = CHILD_NONE
-        k01 = CHILD_NONE
-        k10 = CHILD_NONE
-        k11 = CHILD_NONE
-        if e < n:
-            na = int(0)
-            nb = int(0)
-            if roots != 0:
-                k = e
-            else:
-                f = front_in[e]
-                k = f[0]
-                na = f[1]
-                nb = f[2]
-            obj = item[k]
-            shape = object_shape[obj]
-            node_start = tree.layout_node_start[tree.shape_layout[shape]]
-            tri_start = tree.shape_tri_order_start[shape]
-            slot = tree.object_node_start[obj]
-            ca = tree.node_child[node_start + na]
-            cb = tree.node_child[node_start + nb]
-            xa0 = na
-            xa1 = na
-            xb0 = nb
-            xb1 = nb
-            if na == nb:
-                if ca[0] < 0:
-                    k00 = CHILD_SELF_LEAF  # a root that is a leaf
-                else:
-                    xa0 = ca[0]  # (c0, c0), (c0, c1), (c1, c1): k00, k01, k11
-                    xb0 = ca[0]
-                    xa1 = ca[1]
-                    xb1 = ca[1]
-                    k00 = _self_child(tree, slot, node_start, xa0, xb0)
-                    k01 = _self_child(tree, slot, node_start, xa0, xb1)
-                    k11 = _self_child(tree, slot, node_start, xa1, xb1)
-            else:
-                if ca[0] >= 0:
-                    xa0 = ca[0]
-                    xa1 = ca[1]
-                if cb[0] >= 0:
-                    xb0 = cb[0]
-                    xb1 = cb[1]
-                k00 = _self_child(tree, slot, node_start, xa0, xb0)
-                if cb[0] >= 0:
-                    k01 = _self_child(tree, slot, node_start, xa0, xb1)
-                if ca[0] >= 0:
-                    k10 = _self_child(tree, slot, node_start, xa1, xb0)
-                    if cb[0] >= 0:
-                        k11 = _self_child(tree, slot, node_start, xa1, xb1)
-        num_push = _is_push(k00) + _is_push(k01) + _is_push(k10) + _is_push(k11)
-        rows = (_self_rows(tree, node_start, k00, xa0, xb0) + _self_rows(tree, node_start, k01, xa0, xb1)
-                + _self_rows(tree, node_start, k10, xa1, xb0) + _self_rows(tree, node_start, k11, xa1, xb1))
-        slot_f = block_reserve(front_out_count, lane, num_push)
-        if lane == width - 1:
-            wp.atomic_max(front_peak, 0, slot_f + wp.int64(num_push))
-        slot_f = _push(front_out, front_capacity, slot_f, k00, k, xa0, xb0)
-        slot_f = _push(front_out, front_capacity, slot_f, k01, k, xa0, xb1)
-        slot_f = _push(front_out, front_capacity, slot_f, k10, k, xa1, xb0)
-        slot_f = _push(front_out, front_capacity, slot_f, k11, k, xa1, xb1)
-        slot_c = block_reserve(candidate_count, lane, rows)
-        if rows > 0:
-            slot_c = _self_emit(tree, obj, node_start, tri_start, k00, xa0, xb0, slot_c, candidate, candidate_capacity)
-            slot_c = _self_emit(tree, obj, node_start, tri_start, k01, xa0, xb1, slot_c, candidate, candidate_capacity)
-            slot_c = _self_emit(tree, obj, node_start, tri_start, k10, xa1, xb0, slot_c, candidate, candidate_capacity)
-            slot_c = _self_emit(tree, obj, node_start, tri_start, k11, xa1, xb1, slot_c, candidate, candidate_capacity)
-        base += num_blocks * width
+_WALK = front_kernel(name="self_walk", module=__name__, params_type=SelfParams, context_type=SelfItem,
+                     entry=_entry, near=_near, leaf_rows=_rows, reserve=_reserve, emit=_emit, self_pairs=True)
 
 
 @wp.func
@@ -376,14 +299,11 @@ class SelfTraversal:
                  front_capacity: int = 1024, hit_capacity: int = 256, device=None):
         self.device = d = wp.get_device(device)
         self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
-        self.num_levels = max(1, int(num_levels) - 1)
-        self.front = GrowableBuffer(wp.vec3i, front_capacity, d, "self-traversal front", factor=2)
+        self.walk = FrontWalk(num_levels, front_capacity, "self-traversal front", d)
+        self.num_levels = self.walk.num_levels
+        self.front = self.walk.front
         self.candidates = GrowableBuffer(wp.vec3i, capacity, d, "self candidate triangle pairs")
         self.hits = GrowableBuffer(wp.vec3i, hit_capacity, d, "self-intersecting triangle pairs")
-        self.block_dim = block_dim_for(d)
-        self.num_blocks = d.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if d.is_cuda else 1
-        self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=d)
-        self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
         self._item_count = wp.zeros(1, dtype=wp.int64, device=d)
 
     @property
@@ -401,21 +321,14 @@ class SelfTraversal:
             return
         d = self.device
         self._item_count.fill_(num_items)
-        self._level_count.zero_()
-        cap = self.front.capacity
         cand = self.candidates
-        halves = (self.front.data[:cap], self.front.data[cap:])
-        for level in range(self.num_levels):
-            roots = level == 0
-            slots = num_items if roots else cap
-            blocks = min(self.num_blocks, (slots + self.block_dim - 1) // self.block_dim)
-            wp.launch_tiled(
-                _self_expand_kernel, dim=[blocks],
-                inputs=[tree, topology.object_shape, items, halves[(level + 1) % 2],
-                        self._item_count if roots else self._level_views[level], slots, int(roots), blocks, cap,
-                        cand.capacity],
-                outputs=[halves[level % 2], self._level_views[level + 1], self.front.count, cand.data, cand.count],
-                block_dim=self.block_dim, device=d)
+        params = SelfParams()
+        params.object_shape = topology.object_shape
+        params.item = items
+        params.candidate = cand.data
+        params.candidate_count = cand.count
+        params.candidate_capacity = cand.capacity
+        self.walk.launch(_WALK, tree, params, self._item_count, num_items)
         wp.launch(_NARROW[precision], dim=cand.capacity,
                   inputs=[topology, vertex, shape_vertex_start, weld, wp.float64(self.tolerance), cand.data,
                           cand.count, cand.capacity, self.hits.capacity],

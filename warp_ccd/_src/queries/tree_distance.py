@@ -2,10 +2,9 @@
 
 :class:`TreeDistance` answers, for each queried object pair ``(a, b)``, how close their surfaces come,
 with no cut-off distance (where the clearance stage, :mod:`warp_ccd._src.narrowphase.clearance`, reports only
-pairs within one). It walks the two objects' trees (:mod:`warp_ccd._src.trees.bvh`) together, level by
-level for every queried pair at once, as the mid phase does (:mod:`warp_ccd._src.midphase.bvh`: a
-front of node pairs, each launch a fixed grid striding over it, a block reserving its front slots
-with one atomic), but keeps a node pair only while it may still hold the pair's closest triangles:
+pairs within one). It walks the two objects' trees together, level by level for every queried pair at
+once, as the mid phase does: the tree-pair walk (:mod:`warp_ccd._src.trees.traversal`) with this query's
+tests plugged in, which keep a node pair only while it may still hold the pair's closest triangles:
 
 * every queried pair has an upper bound ``U`` on its distance, lowered with ``atomic_min`` by every
   triangle distance measured (:func:`~warp_ccd._src.geometry.distance.tri_tri_distance`): first by one
@@ -42,12 +41,12 @@ from ..geometry.distance import DISTANCE_ERROR_ULPS, feature_distance, tri_tri_d
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _unit_normal
 from ..geometry.triangle import TOLERANCE
-from ..midphase.bvh import _PAIR, EXPAND_THREADS_PER_SM, TreePair, _is_leaf
 from ..runtime.aliases import DeviceLike
-from ..runtime.buffers import BLOCK_DIM, GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
+from ..runtime.buffers import GrowableBuffer, reserve_slot, used_count
 from ..runtime.checks import number_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix
+from ..trees.traversal import CHILD_LEAF, PAIR_KERNELS, FrontWalk, TreePair, front_kernel
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -157,140 +156,78 @@ def _leaf_pairs(tree: TreeView, mesh: MeshTopology, world_vertex: wp.array[Any],
                      listed_capacity, listed, listed_distance, listed_count, True)
 
 
-@wp.func
-def _kind(tree: TreeView, r: TreePair, xa: int, xb: int, scale_a: float, scale_b: float, bound: Any,
-          ulp: wp.float64) -> int:
-    """0: node pair ``(xa, xb)`` beyond ``bound`` (:func:`_beyond`); 1: to the next level; 2: two leaves."""
-    if _beyond(tree, r, xa, xb, scale_a, scale_b, bound, ulp):
-        return 0
-    if _is_leaf(tree, r.node_a_start + xa) and _is_leaf(tree, r.node_b_start + xb):
-        return 2
-    return 1
+@wp.struct
+class DistancePair:
+    """An entry's pair: its :class:`~warp_ccd._src.trees.traversal.TreePair`, the factors from its box
+    spaces to the world, its bound (in float64: a float32 bound widens exactly)."""
+
+    r: TreePair
+    scale_a: float
+    scale_b: float
+    bound: wp.float64
+
+
+def _params_struct(name: str, scalar: type, vec3: type):
+    """The ``@wp.struct`` of what the walk reads and writes besides the trees, in one precision."""
+    fields = {"mesh": MeshTopology, "world_vertex": wp.array[vec3], "object_scale": wp.array[wp.float32],
+              "object_deforming": wp.array[wp.int32], "tree_pair": wp.array[TreePair], "tol_rel": wp.float64,
+              "ulp": wp.float64, "upper": wp.array[scalar], "listed": wp.array[wp.vec4i],
+              "listed_distance": wp.array[scalar], "listed_count": wp.array[wp.int64], "listed_capacity": int}
+    return wp.struct(type(name, (), {"__annotations__": fields, "__module__": __name__, "__qualname__": name}))
+
+
+_PARAMS = {"float32": _params_struct("DistanceParams32", wp.float32, wp.vec3),
+           "float64": _params_struct("DistanceParams64", wp.float64, wp.vec3d)}
 
 
 @wp.func
-def _push(front_out: wp.array[wp.vec3i], front_capacity: int, slot: wp.int64, kind: int, k: int, xa: int,
-          xb: int) -> wp.int64:
-    """Writes a node pair of kind 1 into the front at ``slot`` (below the capacity); the next slot."""
-    if kind != 1:
-        return slot
-    if slot < wp.int64(front_capacity):
-        front_out[int(slot)] = wp.vec3i(k, xa, xb)
-    return slot + wp.int64(1)
+def _entry(p: Any, tree: TreeView, k: int, na: int, nb: int, roots: int):
+    """Pair ``k`` and its bound; an entry still within the bound (the roots always) lowers it by the
+    feature distance of the nodes' first triangles (:func:`_measure`) and is opened."""
+    c = DistancePair()
+    c.r = p.tree_pair[k]
+    c.scale_a = _scale(p.object_scale, p.object_deforming, c.r.a)
+    c.scale_b = _scale(p.object_scale, p.object_deforming, c.r.b)
+    c.bound = wp.float64(p.upper[k])
+    opened = roots != 0 or not _beyond(tree, c.r, na, nb, c.scale_a, c.scale_b, c.bound, p.ulp)
+    if opened:
+        _measure(p.mesh, p.world_vertex, c.r, k, _first_triangle(tree, c.r.node_a_start, c.r.tri_a_start, na),
+                 _first_triangle(tree, c.r.node_b_start, c.r.tri_b_start, nb), p.tol_rel, p.upper,
+                 p.listed_capacity, p.listed, p.listed_distance, p.listed_count, False)
+        c.bound = wp.float64(p.upper[k])
+    return c, c.r.node_a_start, c.r.node_b_start, opened
 
 
-@wp.kernel
-def _descend_kernel(
-    tree: TreeView,
-    mesh: MeshTopology,
-    world_vertex: wp.array[Any],
-    object_scale: wp.array[wp.float32],
-    object_deforming: wp.array[wp.int32],
-    tree_pair: wp.array[TreePair],
-    front_in: wp.array[wp.vec3i],
-    front_in_count: wp.array[wp.int64],
-    front_in_capacity: int,
-    roots: int,
-    tol_rel: wp.float64,
-    ulp: wp.float64,
-    num_blocks: int,
-    front_capacity: int,
-    listed_capacity: int,
-    # Outputs
-    upper: wp.array[Any],
-    front_out: wp.array[wp.vec3i],
-    front_out_count: wp.array[wp.int64],
-    front_peak: wp.array[wp.int64],
-    listed: wp.array[wp.vec4i],
-    listed_distance: wp.array[Any],
-    listed_count: wp.array[wp.int64],
-):
-    """One level of the walk: each node pair ``(k, na, nb)`` of ``front_in`` (with ``roots``, entry
-    ``k`` is pair ``k``'s roots) still within pair ``k``'s bound lowers it by the feature distance
-    of the nodes' first triangles (:func:`_measure`), opens both nodes (a leaf stays itself) and
-    keeps the child pairs within the bound: pairs of leaves are measured (:func:`_leaf_pairs`), the
-    others go to ``front_out``."""
-    block, lane = wp.tid()
-    width = wp.block_dim()
-    n = int(wp.min(front_in_count[0], wp.int64(front_in_capacity)))
-    base = block * width
-    while base < n:
-        e = base + lane
-        k = int(0)
-        r = TreePair()
-        xa0 = int(0)
-        xa1 = int(0)
-        xb0 = int(0)
-        xb1 = int(0)
-        k00 = int(0)
-        k01 = int(0)
-        k10 = int(0)
-        k11 = int(0)
-        scale_a = float(1.0)
-        scale_b = float(1.0)
-        if e < n:
-            na = int(0)
-            nb = int(0)
-            if roots != 0:
-                k = e
-            else:
-                f = front_in[e]
-                k = f[0]
-                na = f[1]
-                nb = f[2]
-            r = tree_pair[k]
-            scale_a = _scale(object_scale, object_deforming, r.a)
-            scale_b = _scale(object_scale, object_deforming, r.b)
-            bound = upper[k]
-            if roots != 0 or not _beyond(tree, r, na, nb, scale_a, scale_b, bound, ulp):
-                _measure(mesh, world_vertex, r, k, _first_triangle(tree, r.node_a_start, r.tri_a_start, na),
-                         _first_triangle(tree, r.node_b_start, r.tri_b_start, nb), tol_rel, upper, listed_capacity,
-                         listed, listed_distance, listed_count, False)
-                bound = upper[k]
-                ca = tree.node_child[r.node_a_start + na]
-                cb = tree.node_child[r.node_b_start + nb]
-                xa0 = na
-                xa1 = na
-                xb0 = nb
-                xb1 = nb
-                if ca[0] < 0 and cb[0] < 0:
-                    k00 = 2  # two leaves (roots that are leaves)
-                else:
-                    if ca[0] >= 0:
-                        xa0 = ca[0]
-                        xa1 = ca[1]
-                    if cb[0] >= 0:
-                        xb0 = cb[0]
-                        xb1 = cb[1]
-                    k00 = _kind(tree, r, xa0, xb0, scale_a, scale_b, bound, ulp)
-                    if cb[0] >= 0:
-                        k01 = _kind(tree, r, xa0, xb1, scale_a, scale_b, bound, ulp)
-                    if ca[0] >= 0:
-                        k10 = _kind(tree, r, xa1, xb0, scale_a, scale_b, bound, ulp)
-                        if cb[0] >= 0:
-                            k11 = _kind(tree, r, xa1, xb1, scale_a, scale_b, bound, ulp)
-        num_push = wp.where(k00 == 1, 1, 0) + wp.where(k01 == 1, 1, 0) + wp.where(k10 == 1, 1, 0)
-        num_push += wp.where(k11 == 1, 1, 0)
-        slot = block_reserve(front_out_count, lane, num_push)
-        if lane == width - 1:
-            wp.atomic_max(front_peak, 0, slot + wp.int64(num_push))
-        slot = _push(front_out, front_capacity, slot, k00, k, xa0, xb0)
-        slot = _push(front_out, front_capacity, slot, k01, k, xa0, xb1)
-        slot = _push(front_out, front_capacity, slot, k10, k, xa1, xb0)
-        slot = _push(front_out, front_capacity, slot, k11, k, xa1, xb1)
-        if k00 == 2:
-            _leaf_pairs(tree, mesh, world_vertex, r, k, xa0, xb0, tol_rel, upper, listed_capacity, listed,
-                        listed_distance, listed_count)
-        if k01 == 2:
-            _leaf_pairs(tree, mesh, world_vertex, r, k, xa0, xb1, tol_rel, upper, listed_capacity, listed,
-                        listed_distance, listed_count)
-        if k10 == 2:
-            _leaf_pairs(tree, mesh, world_vertex, r, k, xa1, xb0, tol_rel, upper, listed_capacity, listed,
-                        listed_distance, listed_count)
-        if k11 == 2:
-            _leaf_pairs(tree, mesh, world_vertex, r, k, xa1, xb1, tol_rel, upper, listed_capacity, listed,
-                        listed_distance, listed_count)
-        base += num_blocks * width
+@wp.func
+def _near(p: Any, tree: TreeView, c: DistancePair, xa: int, xb: int) -> bool:
+    """A child pair is kept while it is within the bound (:func:`_beyond`)."""
+    return not _beyond(tree, c.r, xa, xb, c.scale_a, c.scale_b, c.bound, p.ulp)
+
+
+@wp.func
+def _rows(p: Any, tree: TreeView, c: DistancePair, kind: int, xa: int, xb: int) -> int:
+    """A pair of leaves is one visit (its triangle pairs measured, nothing written)."""
+    return wp.where(kind == CHILD_LEAF, 1, 0)
+
+
+@wp.func
+def _reserve(p: Any, lane: int, rows: int) -> wp.int64:
+    return wp.int64(0)  # measured triangle pairs are listed one by one (reserve_slot), not per block
+
+
+@wp.func
+def _emit(p: Any, tree: TreeView, c: DistancePair, k: int, kind: int, xa: int, xb: int,
+          slot: wp.int64) -> wp.int64:
+    """Measures every triangle pair of a pair of leaves (:func:`_leaf_pairs`)."""
+    if kind == CHILD_LEAF:
+        _leaf_pairs(tree, p.mesh, p.world_vertex, c.r, k, xa, xb, p.tol_rel, p.upper, p.listed_capacity, p.listed,
+                    p.listed_distance, p.listed_count)
+    return slot
+
+
+_WALK = {prec: front_kernel(name=f"distance_walk_{prec}", module=__name__, params_type=params,
+                            context_type=DistancePair, entry=_entry, near=_near, leaf_rows=_rows, reserve=_reserve,
+                            emit=_emit) for prec, params in _PARAMS.items()}
 
 
 @wp.func
@@ -323,7 +260,7 @@ def _greedy_kernel(
     """One thread per queried pair: a first bound, from one descent of both trees that always takes
     the child pair whose boxes are nearest (their gaps, :func:`_box_gap`), down to a pair of leaves
     whose triangles it measures. For objects apart this lands at or near the closest triangles, so
-    that the walk (:func:`_descend_kernel`) keeps few node pairs from the first level on."""
+    that the walk keeps few node pairs from the first level on."""
     k = wp.tid()
     if k >= used_count(pair_count, pair_capacity):
         return
@@ -445,8 +382,6 @@ def _answer_kernel(
     triangle[k] = wp.vec2i(tri_a, tri_b)
 
 
-_DESCEND = precision_overloads(_descend_kernel, lambda s, v, q, t: {
-    "world_vertex": wp.array[v], "upper": wp.array[s], "listed_distance": wp.array[s]})
 _GREEDY = precision_overloads(_greedy_kernel, lambda s, v, q, t: {
     "world_vertex": wp.array[v], "upper": wp.array[s], "listed_distance": wp.array[s]})
 _RESET = precision_overloads(_reset_kernel, lambda s, v, q, t: {"upper": wp.array[s]})
@@ -482,13 +417,9 @@ class TreeDistance:
         self.bvh = bvh
         self.device = wp.get_device(device)
         self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
-        self.front = GrowableBuffer(wp.vec3i, front_capacity, self.device, "distance front", factor=2)
+        self.walk = FrontWalk(bvh.num_levels, front_capacity, "distance front", self.device)
+        self.front = self.walk.front
         self.listed = GrowableBuffer(wp.vec4i, listed_capacity, self.device, "measured triangle pairs")
-        self.num_levels = max(1, bvh.num_levels - 1)
-        self.block_dim = block_dim_for(self.device)
-        self.num_blocks = self.device.sm_count * EXPAND_THREADS_PER_SM // BLOCK_DIM if self.device.is_cuda else 1
-        self._level_count = wp.zeros(self.num_levels + 1, dtype=wp.int64, device=self.device)
-        self._level_views = [self._level_count[i : i + 1] for i in range(self.num_levels + 1)]
         self._pairs_for = None
         self._listed_for = None
 
@@ -526,30 +457,31 @@ class TreeDistance:
         eps = float(np.finfo(np.float64 if prec == "float64" else np.float32).eps)
         wp.launch(_RESET[prec], dim=pairs.capacity, inputs=[pairs.count, pairs.capacity],
                   outputs=[self.upper, self.best], device=d)
-        wp.launch(_PAIR[prec], dim=pairs.capacity,
+        wp.launch(PAIR_KERNELS[prec], dim=pairs.capacity,
                   inputs=[tree, scene.object_shape, scene.object_pose, scene.object_scale,
                           self.bvh.object_deforming, WORLD_ERROR_ULPS * eps, wp.float64(0.0), pairs.data, pairs.count,
                           pairs.capacity],
-                  outputs=[self._tree_pair, self._pair_rows, self._level_count], device=d)
-        cap = self.front.capacity
-        halves = (self.front.data[:cap], self.front.data[cap:])
+                  outputs=[self._tree_pair, self._pair_rows, self.walk.level_count], device=d)
         listed = self.listed
         wp.launch(_GREEDY[prec], dim=pairs.capacity,
                   inputs=[tree, scene.topology, scene.world_vertex, scene.object_scale, self.bvh.object_deforming,
                           self._tree_pair, pairs.count, pairs.capacity, tol, listed.capacity],
                   outputs=[self.upper, listed.data, self.listed_distance, listed.count], device=d)
-        for level in range(self.num_levels):
-            roots = level == 0
-            slots = pairs.capacity if roots else cap
-            blocks = min(self.num_blocks, (slots + self.block_dim - 1) // self.block_dim)
-            wp.launch_tiled(
-                _DESCEND[prec], dim=[blocks],
-                inputs=[tree, scene.topology, scene.world_vertex, scene.object_scale, self.bvh.object_deforming,
-                        self._tree_pair, halves[(level + 1) % 2], pairs.count if roots else self._level_views[level],
-                        slots, int(roots), tol, wp.float64(0.5 * eps), blocks, cap, listed.capacity],
-                outputs=[self.upper, halves[level % 2], self._level_views[level + 1], self.front.count, listed.data,
-                         self.listed_distance, listed.count],
-                block_dim=self.block_dim, device=d)
+        params = _PARAMS[prec]()
+        params.mesh = scene.topology
+        params.world_vertex = scene.world_vertex
+        params.object_scale = scene.object_scale
+        params.object_deforming = self.bvh.object_deforming
+        params.tree_pair = self._tree_pair
+        params.tol_rel = tol
+        params.ulp = wp.float64(0.5 * eps)
+        params.upper = self.upper
+        params.listed = listed.data
+        params.listed_distance = self.listed_distance
+        params.listed_count = listed.count
+        params.listed_capacity = listed.capacity
+        # The pair kernel zeroed the levels' counts below the roots.
+        self.walk.launch(_WALK[prec], tree, params, pairs.count, pairs.capacity, zero_levels=False)
         wp.launch(_PICK[prec], dim=listed.capacity,
                   inputs=[listed.data, self.listed_distance, listed.count, listed.capacity, self.upper],
                   outputs=[self.best], device=d)
