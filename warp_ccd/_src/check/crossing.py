@@ -75,7 +75,7 @@ from ..geometry.primitives import (
     _unit_normal,
 )
 from ..geometry.triangle import TOLERANCE, crossing_depth
-from ..narrowphase.discrete import _pair_triangles
+from ..narrowphase.pairs import pair_triangles
 from ..scene.scene import MeshTopology, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from .surface import SurfaceTopology, _local_triangle, _neighbour, _side_at, surface_topology
@@ -488,7 +488,7 @@ def _crossing_depth_kernel(
 ):
     """One thread per triangle pair ``(obj_a, tri_a, obj_b, tri_b)``: :func:`crossing_depth`."""
     k = wp.tid()
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, pair[k])
+    v0, v1, v2, u0, u1, u2 = pair_triangles(mesh, world_vertex, pair[k])
     depth[k] = wp.float64(crossing_depth(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)))
 
 

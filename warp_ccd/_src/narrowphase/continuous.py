@@ -56,7 +56,7 @@ from ..geometry.precision import precision_overloads
 from ..runtime.buffers import GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
 from ..runtime.checks import integer_option, number_option
 from ..scene.scene import MeshTopology
-from .discrete import _pair_triangles
+from .pairs import PairList, append_hit, pair_count, pair_list, pair_triangles
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -80,21 +80,19 @@ QUERY_BITS = wp.constant((1 << PAIR_QUERIES) - 1)
 @wp.func
 def _row_vertices(mesh: MeshTopology, world_vertex_start: wp.array[Any], world_vertex: wp.array[Any], c: wp.vec4i):
     """The two triangles of row ``c`` at the start and at the end of the motion."""
-    a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex_start, c)
-    a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
+    a0, a1, a2, b0, b1, b2 = pair_triangles(mesh, world_vertex_start, c)
+    a0e, a1e, a2e, b0e, b1e, b2e = pair_triangles(mesh, world_vertex, c)
     return a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e
 
 
 @wp.func
-def _append_hit(c: wp.vec4i, toi: wp.float64, hit_capacity: int, hit: wp.array[wp.vec4i],
-                hit_toi: wp.array[wp.float64], hit_count: wp.array[wp.int64], object_colliding: wp.array[wp.int32]):
+def _append_timed_hit(c: wp.vec4i, toi: wp.float64, hits: PairList, hit_toi: wp.array[wp.float64],
+                      object_colliding: wp.array[wp.int32]):
+    """Appends row ``c`` with its toi (same slot) and flags its objects, when the toi is in ``[0, 1]``."""
     if toi <= wp.float64(1.0):
-        slot = reserve_slot(hit_count, hit_capacity)
+        slot = append_hit(hits, object_colliding, c)
         if slot >= 0:
-            hit[slot] = c
             hit_toi[slot] = toi
-        object_colliding[c[0]] = 1
-        object_colliding[c[2]] = 1
 
 
 @wp.func
@@ -110,17 +108,13 @@ def _first_pass_kernel(
     mesh: MeshTopology,
     world_vertex_start: wp.array[Any],
     world_vertex: wp.array[Any],
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    candidate_capacity: int,
+    candidates: PairList,
     min_distance: wp.float64,
-    hit_capacity: int,
     deferred_capacity: int,
     query_capacity: int,
     # Outputs
-    hit: wp.array[wp.vec4i],
+    hits: PairList,
     hit_toi: wp.array[wp.float64],
-    hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
     deferred: wp.array[wp.vec2i],
     deferred_toi: wp.array[wp.float64],
@@ -140,8 +134,8 @@ def _first_pass_kernel(
     c = wp.vec4i()
     mask = int(0)
     toi = NO_HIT
-    if k < used_count(candidate_count, candidate_capacity):
-        c = candidate[k]
+    if k < pair_count(candidates):
+        c = candidates.row[k]
         a0, a1, a2, b0, b1, b2, a0e, a1e, a2e, b0e, b1e, b2e = _row_vertices(mesh, world_vertex_start, world_vertex,
                                                                               c)
         meets = pair_meets_common(a0, a1, a2, b0, b1, b2)
@@ -155,10 +149,10 @@ def _first_pass_kernel(
     is_hit = int(0)
     if toi <= wp.float64(1.0):
         is_hit = 1
-    slot = block_reserve(hit_count, lane, is_hit)
+    slot = block_reserve(hits.count, lane, is_hit)
     if is_hit != 0:
-        if slot < wp.int64(hit_capacity):
-            hit[int(slot)] = c
+        if slot < wp.int64(hits.capacity):
+            hits.row[int(slot)] = c
             hit_toi[int(slot)] = toi
         object_colliding[c[0]] = 1
         object_colliding[c[2]] = 1
@@ -264,12 +258,10 @@ def _last_pass_kernel(
     deferred_toi: wp.array[wp.float64],
     deferred_count: wp.array[wp.int64],
     deferred_capacity: int,
-    hit_capacity: int,
     undecided_capacity: int,
     # Outputs
-    hit: wp.array[wp.vec4i],
+    hits: PairList,
     hit_toi: wp.array[wp.float64],
-    hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
     undecided: wp.array[wp.int32],
     undecided_count: wp.array[wp.int64],
@@ -286,7 +278,7 @@ def _last_pass_kernel(
     toi = deferred_toi[i]
     later = (d[1] & START_UNDECIDED) != 0
     if not later and toi > wp.float64(1.0):
-        a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
+        a0e, a1e, a2e, b0e, b1e, b2e = pair_triangles(mesh, world_vertex, c)
         meets = pair_meets_common(a0e, a1e, a2e, b0e, b1e, b2e)
         if meets == 1:
             toi = wp.float64(1.0)
@@ -296,7 +288,7 @@ def _last_pass_kernel(
         if slot >= 0:
             undecided[slot] = i
         return
-    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
+    _append_timed_hit(c, toi, hits, hit_toi, object_colliding)
 
 
 @wp.kernel(cuda_max_registers=MAX_REGISTERS)
@@ -310,11 +302,9 @@ def _undecided_pass_kernel(
     undecided: wp.array[wp.int32],
     undecided_count: wp.array[wp.int64],
     undecided_capacity: int,
-    hit_capacity: int,
     # Outputs
-    hit: wp.array[wp.vec4i],
+    hits: PairList,
     hit_toi: wp.array[wp.float64],
-    hit_count: wp.array[wp.int64],
     object_colliding: wp.array[wp.int32],
 ):
     """One thread per row left undecided (a few): the whole discrete test
@@ -328,14 +318,14 @@ def _undecided_pass_kernel(
     c = candidate[d[0]]
     toi = deferred_toi[i]
     if (d[1] & START_UNDECIDED) != 0:
-        a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex_start, c)
+        a0, a1, a2, b0, b1, b2 = pair_triangles(mesh, world_vertex_start, c)
         if pair_meets(a0, a1, a2, b0, b1, b2):
             toi = wp.float64(0.0)
     if toi > wp.float64(1.0) and (d[1] & QUERY_BITS) != 0:
-        a0e, a1e, a2e, b0e, b1e, b2e = _pair_triangles(mesh, world_vertex, c)
+        a0e, a1e, a2e, b0e, b1e, b2e = pair_triangles(mesh, world_vertex, c)
         if pair_meets(a0e, a1e, a2e, b0e, b1e, b2e):
             toi = wp.float64(1.0)
-    _append_hit(c, toi, hit_capacity, hit, hit_toi, hit_count, object_colliding)
+    _append_timed_hit(c, toi, hits, hit_toi, object_colliding)
 
 
 _SWEPT = lambda s, v, q, t: {"world_vertex_start": wp.array[v], "world_vertex": wp.array[v]}  # noqa: E731
@@ -446,11 +436,11 @@ class ContinuousNarrowPhase:
         d64, tol64 = wp.float64(self.min_distance), wp.float64(self.tolerance)
         block = block_dim_for(d)
         swept = [scene.topology, world_vertex_start, scene.world_vertex, candidates.data]
+        hit_list = pair_list(hits)
         wp.launch_tiled(_FIRST[scene.precision], dim=[(candidates.capacity + block - 1) // block],
-                        inputs=[*swept, candidates.count, candidates.capacity, d64, hits.capacity, deferred.capacity,
-                                queries.capacity],
-                        outputs=[hits.data, self.toi, hits.count, self.object_colliding, deferred.data,
-                                 self.deferred_toi, deferred.count, queries.data, queries.count],
+                        inputs=[*swept[:3], pair_list(candidates), d64, deferred.capacity, queries.capacity],
+                        outputs=[hit_list, self.toi, self.object_colliding, deferred.data, self.deferred_toi,
+                                 deferred.count, queries.data, queries.count],
                         block_dim=block, device=d)
         wp.launch_tiled(_FILTER[scene.precision], dim=[(queries.capacity + block - 1) // block],
                         inputs=[*swept, deferred.data, queries.data, queries.count, queries.capacity, d64,
@@ -462,10 +452,9 @@ class ContinuousNarrowPhase:
                   outputs=[self.deferred_toi], device=d)
         wp.launch(_LAST[scene.precision], dim=deferred.capacity,
                   inputs=[scene.topology, scene.world_vertex, candidates.data, deferred.data, self.deferred_toi,
-                          deferred.count, deferred.capacity, hits.capacity, undecided.capacity],
-                  outputs=[hits.data, self.toi, hits.count, self.object_colliding, undecided.data, undecided.count],
-                  device=d)
+                          deferred.count, deferred.capacity, undecided.capacity],
+                  outputs=[hit_list, self.toi, self.object_colliding, undecided.data, undecided.count], device=d)
         wp.launch(_UNDECIDED[scene.precision], dim=undecided.capacity,
-                  inputs=[*swept, deferred.data, self.deferred_toi, undecided.data, undecided.count, undecided.capacity,
-                          hits.capacity],
-                  outputs=[hits.data, self.toi, hits.count, self.object_colliding], device=d)
+                  inputs=[*swept, deferred.data, self.deferred_toi, undecided.data, undecided.count,
+                          undecided.capacity],
+                  outputs=[hit_list, self.toi, self.object_colliding], device=d)

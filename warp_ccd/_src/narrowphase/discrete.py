@@ -62,6 +62,7 @@ from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, reserve_slot, used_count
 from ..runtime.checks import number_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
+from .pairs import PairList, append_hit, append_pair, pair_count, pair_list, pair_triangles
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
@@ -113,50 +114,18 @@ def _point_in_box(p: wp.vec3, lo: wp.vec3, hi: wp.vec3) -> bool:
     return lo[0] <= p[0] and p[0] <= hi[0] and lo[1] <= p[1] and p[1] <= hi[1] and lo[2] <= p[2] and p[2] <= hi[2]
 
 
-@wp.func
-def _pair_triangles(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i):
-    """World vertices of the two triangles of row ``c = (obj_a, tri_a, obj_b, tri_b)``."""
-    a0, a1, a2 = mesh_triangle(mesh, world_vertex, c[0], c[1])
-    b0, b1, b2 = mesh_triangle(mesh, world_vertex, c[2], c[3])
-    return a0, a1, a2, b0, b1, b2
-
-
-@wp.func
-def _append_hit(
-    c: wp.vec4i,
-    hit_capacity: int,
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
-    object_colliding: wp.array[wp.int32],
-):
-    """Appends the triangle pair ``c`` to the hits (capacity + counter) and flags its two objects."""
-    slot = reserve_slot(hit_count, hit_capacity)
-    if slot >= 0:
-        hit[slot] = c
-    object_colliding[c[0]] = 1
-    object_colliding[c[2]] = 1
-
-
 @wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _narrow_moller_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    candidate_capacity: int,
+    candidates: PairList,
     tol_rel: wp.float64,
-    hit_capacity: int,
-    touch_capacity: int,
-    rare_capacity: int,
     # Outputs
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
+    hits: PairList,
     object_colliding: wp.array[wp.int32],
-    touch: wp.array[wp.vec4i],
-    touch_count: wp.array[wp.int64],
+    touch: PairList,
     touch_flag: wp.array[wp.int32],
-    rare: wp.array[wp.vec4i],
-    rare_count: wp.array[wp.int64],
+    rare: PairList,
 ):
     """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: steps 1 to 3 of Möller's test
     (:func:`_moller_steps`); a crossing is a hit, a pair that does not cross goes to the touch
@@ -164,10 +133,10 @@ def _narrow_moller_kernel(
     degenerate triangle, or coplanar, to the rare list (taken by the touch kernel's threads past the
     touch rows): their code stays out of this kernel, whose registers then hold the common path."""
     k = wp.tid()
-    if k >= used_count(candidate_count, candidate_capacity):
+    if k >= pair_count(candidates):
         return
-    c = candidate[k]
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    c = candidates.row[k]
+    v0, v1, v2, u0, u1, u2 = pair_triangles(mesh, world_vertex, c)
     tol = type(v0[0])(tol_rel)
     na, degenerate_a = _unit_normal(v0, v1, v2, tol)
     nb, degenerate_b = _unit_normal(u0, u1, u2, tol)
@@ -178,54 +147,35 @@ def _narrow_moller_kernel(
         kind, p, q = _moller_steps(a0, a1, a2, b0, b1, b2, na, nb, eps)
         is_rare = kind == CONTACT_COPLANAR_A or kind == CONTACT_COPLANAR_B
     if kind == CONTACT_TOUCH_TEST:
-        slot = reserve_slot(touch_count, touch_capacity)
+        slot = append_pair(touch, c)
         if slot >= 0:
-            touch[slot] = c
             touch_flag[slot] = 0
     elif is_rare:
-        slot = reserve_slot(rare_count, rare_capacity)
-        if slot >= 0:
-            rare[slot] = c
+        append_pair(rare, c)
     elif kind != CONTACT_NONE:
-        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
+        append_hit(hits, object_colliding, c)
 
 
 @wp.func
-def _rare_row(
-    mesh: MeshTopology,
-    world_vertex: wp.array[Any],
-    rare: wp.array[wp.vec4i],
-    k: int,
-    tol_rel: wp.float64,
-    hit_capacity: int,
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
-    object_colliding: wp.array[wp.int32],
-):
-    """Row ``k`` of the rare list (a degenerate triangle, or coplanar triangles): the whole of
-    Möller's test (:func:`tri_tri_moller`); appends a hit."""
-    c = rare[k]
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+def _rare_row(mesh: MeshTopology, world_vertex: wp.array[Any], c: wp.vec4i, tol_rel: wp.float64, hits: PairList,
+              object_colliding: wp.array[wp.int32]):
+    """A row of the rare list (a degenerate triangle, or coplanar triangles): the whole of Möller's test
+    (:func:`tri_tri_moller`); appends a hit."""
+    v0, v1, v2, u0, u1, u2 = pair_triangles(mesh, world_vertex, c)
     if tri_tri_moller(v0, v1, v2, u0, u1, u2, type(v0[0])(tol_rel)):
-        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
+        append_hit(hits, object_colliding, c)
 
 
 @wp.kernel(cuda_max_registers=MAX_REGISTERS)
 def _narrow_touch_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
-    touch: wp.array[wp.vec4i],
-    touch_count: wp.array[wp.int64],
-    touch_capacity: int,
-    rare: wp.array[wp.vec4i],
-    rare_count: wp.array[wp.int64],
-    rare_capacity: int,
+    touch: PairList,
+    rare: PairList,
     tol_rel: wp.float64,
-    hit_capacity: int,
     # Outputs
     touch_flag: wp.array[wp.int32],
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
+    hits: PairList,
     object_colliding: wp.array[wp.int32],
 ):
     """Step 4 of Möller's test, two threads per row ``u`` of the touch list: thread ``2 u`` tests
@@ -240,17 +190,17 @@ def _narrow_touch_kernel(
     the touch list is. Their branch holds the whole test, beside the touch step's and not in its
     way: it is taken by no thread of the touch rows (see the module docstring on registers)."""
     t = wp.tid()
-    if t >= 2 * touch_capacity:
-        k = t - 2 * touch_capacity
-        if k < used_count(rare_count, rare_capacity):
-            _rare_row(mesh, world_vertex, rare, k, tol_rel, hit_capacity, hit, hit_count, object_colliding)
+    if t >= 2 * touch.capacity:
+        k = t - 2 * touch.capacity
+        if k < pair_count(rare):
+            _rare_row(mesh, world_vertex, rare.row[k], tol_rel, hits, object_colliding)
         return
     u = t / 2
     side = t - 2 * u
-    if u >= used_count(touch_count, touch_capacity):
+    if u >= pair_count(touch):
         return
-    c = touch[u]
-    v0, v1, v2, u0, u1, u2 = _pair_triangles(mesh, world_vertex, c)
+    c = touch.row[u]
+    v0, v1, v2, u0, u1, u2 = pair_triangles(mesh, world_vertex, c)
     tol = type(v0[0])(tol_rel)
     a0, a1, a2, b0, b1, b2, eps = _centre(v0, v1, v2, u0, u1, u2, tol)
     near = False
@@ -261,50 +211,44 @@ def _narrow_touch_kernel(
         na, degenerate_a = _unit_normal(v0, v1, v2, tol)
         near, p, q = _edges_near_face(b0, b1, b2, a0, a1, a2, na, eps)
     if near and wp.atomic_add(touch_flag, u, 1) == 0:
-        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
+        append_hit(hits, object_colliding, c)
 
 
 @wp.kernel
 def _narrow_edge_face_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
-    candidate: wp.array[wp.vec4i],
-    candidate_count: wp.array[wp.int64],
-    candidate_capacity: int,
+    candidates: PairList,
     tol_rel: wp.float64,
-    hit_capacity: int,
     # Outputs
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
+    hits: PairList,
     object_colliding: wp.array[wp.int32],
 ):
     """One thread per candidate ``(obj_a, tri_a, obj_b, tri_b)``: the edge-face test, append hits."""
     k = wp.tid()
-    if k >= used_count(candidate_count, candidate_capacity):
+    if k >= pair_count(candidates):
         return
-    c = candidate[k]
-    a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex, c)
+    c = candidates.row[k]
+    a0, a1, a2, b0, b1, b2 = pair_triangles(mesh, world_vertex, c)
     if tri_tri_edge_face(a0, a1, a2, b0, b1, b2, tol_rel):
-        _append_hit(c, hit_capacity, hit, hit_count, object_colliding)
+        append_hit(hits, object_colliding, c)
 
 
 @wp.kernel
 def _segment_kernel(
     mesh: MeshTopology,
     world_vertex: wp.array[Any],
-    hit: wp.array[wp.vec4i],
-    hit_count: wp.array[wp.int64],
-    hit_capacity: int,
+    hits: PairList,
     tol_rel: wp.float64,
     # Outputs
     segment: wp.array2d[Any],
 ):
     """One thread per triangle pair found: its intersection segment (NaN for coplanar areas)."""
     k = wp.tid()
-    if k >= used_count(hit_count, hit_capacity):
+    if k >= pair_count(hits):
         return
-    c = hit[k]
-    a0, a1, a2, b0, b1, b2 = _pair_triangles(mesh, world_vertex, c)
+    c = hits.row[k]
+    a0, a1, a2, b0, b1, b2 = pair_triangles(mesh, world_vertex, c)
     kind, p, q = tri_tri_segment(a0, a1, a2, b0, b1, b2, tol_rel)
     if kind != CONTACT_SEGMENT:
         nan = type(p[0])(wp.nan)
@@ -439,29 +383,26 @@ class NarrowPhase:
         hits = self.hits
         if self.touch is None:
             wp.launch(_NARROW_EDGE_FACE[scene.precision], dim=candidates.capacity,
-                      inputs=[scene.topology, scene.world_vertex, candidates.data, candidates.count,
-                              candidates.capacity, tol, hits.capacity],
-                      outputs=[hits.data, hits.count, self.object_colliding], device=d)
+                      inputs=[scene.topology, scene.world_vertex, pair_list(candidates), tol],
+                      outputs=[pair_list(hits), self.object_colliding], device=d)
         else:
             touch = self.touch
             if self.touch_flag is None or self.touch_flag.shape[0] != touch.capacity:  # follows the capacity
                 self.touch_flag = wp.zeros(touch.capacity, dtype=wp.int32, device=d)
             rare = self.rare
+            hit_list, touch_list, rare_list = pair_list(hits), pair_list(touch), pair_list(rare)
             wp.launch(_NARROW_MOLLER[scene.precision], dim=candidates.capacity,
-                      inputs=[scene.topology, scene.world_vertex, candidates.data, candidates.count,
-                              candidates.capacity, tol, hits.capacity, touch.capacity, rare.capacity],
-                      outputs=[hits.data, hits.count, self.object_colliding, touch.data, touch.count,
-                               self.touch_flag, rare.data, rare.count], device=d)
+                      inputs=[scene.topology, scene.world_vertex, pair_list(candidates), tol],
+                      outputs=[hit_list, self.object_colliding, touch_list, self.touch_flag, rare_list], device=d)
             # The touch step's rows, two threads each, then the rare rows, one thread each: one launch.
             wp.launch(_NARROW_TOUCH[scene.precision], dim=2 * touch.capacity + rare.capacity,
-                      inputs=[scene.topology, scene.world_vertex, touch.data, touch.count, touch.capacity,
-                              rare.data, rare.count, rare.capacity, tol, hits.capacity],
-                      outputs=[self.touch_flag, hits.data, hits.count, self.object_colliding], device=d)
+                      inputs=[scene.topology, scene.world_vertex, touch_list, rare_list, tol],
+                      outputs=[self.touch_flag, hit_list, self.object_colliding], device=d)
         if self.segments:
             if self.segment is None or self.segment.shape[0] != hits.capacity or self.segment.dtype != scene.vec3_type:
                 self.segment = wp.zeros((hits.capacity, 2), dtype=scene.vec3_type, device=d)
             wp.launch(_SEGMENT[scene.precision], dim=hits.capacity,
-                      inputs=[scene.topology, scene.world_vertex, hits.data, hits.count, hits.capacity, tol],
+                      inputs=[scene.topology, scene.world_vertex, pair_list(hits), tol],
                       outputs=[self.segment], device=d)
         if self.contained is not None:
             wp.launch(
