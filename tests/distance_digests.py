@@ -1,6 +1,6 @@
 """Recorded digests of distances, one verdict on every device: the SHA-256 of what
 :func:`warp_ccd.geometry.tri_tri_distance` gives on the near-degenerate pairs of
-:mod:`warp_ccd.bench.awkward_pairs`, and of a clearance frame's rows and a distance query's answers on
+``tests/awkward_pairs.py``, and of a clearance frame's rows and a distance query's answers on
 fixed scenes, as computed on the CPU (``tests/data/distance_digests.json``). A device whose digests
 differ rounds differently (see ``fuse_fp``). To record them anew after a deliberate change:
 
@@ -20,7 +20,8 @@ import warp as wp
 import warp_ccd as wc
 from warp_ccd._src.geometry.distance import tri_tri_distance_batch_kernel
 from warp_ccd._src.scene.shapes import icosphere
-from warp_ccd.bench.awkward_pairs import PRECISIONS, awkward_pairs
+
+from awkward_pairs import PRECISIONS, awkward_pairs
 
 REFERENCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "distance_digests.json")
 

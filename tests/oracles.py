@@ -5,7 +5,8 @@
   overlap, each tested with Warp's float64 ``wp.intersect_tri_tri``. That built-in snaps plane
   distances below an absolute 1e-6 (on the unnormalised normal), so callers scale scenes up first
   (``scale``): uniform scaling changes no intersection.
-* :func:`triangle_pairs_fcl`: python-fcl's BVH collision with per-triangle contacts.
+* :func:`triangle_pairs_fcl`: python-fcl's BVH collision with per-triangle contacts (one
+  :func:`fcl_bvh` model per mesh).
 * :func:`closed_triangle_distance`: distances of closed triangles (numpy float64), and from it
   :func:`pair_distance_brute` / :func:`clearance_pairs_brute`, the least distance of mesh pairs over
   all their triangle pairs (within a reach); :func:`fcl_pair_distance`, python-fcl's.
@@ -16,9 +17,18 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from warp_ccd.bench.peers import fcl_bvh
-
 wp.set_module_options({"enable_backward": False})  # forward kernels only
+
+
+def fcl_bvh(vertices, triangles):
+    """A python-fcl ``BVHModel`` (its default OBBRSS) of one mesh: float64 vertices, int64 triangles."""
+    import fcl
+
+    model = fcl.BVHModel()
+    model.beginModel(len(vertices), len(triangles))
+    model.addSubModel(np.asarray(vertices, np.float64), np.asarray(triangles, np.int64))
+    model.endModel()
+    return model
 
 
 def box_pairs_numpy(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -20,7 +20,8 @@ from warp_ccd._src.geometry.ccd import (
 )
 from warp_ccd._src.scene.scene import MeshTopology, mesh_triangle
 from warp_ccd._src.scene.shapes import icosphere, shape
-from warp_ccd.bench.awkward_pairs import awkward_pairs
+
+from awkward_pairs import awkward_pairs
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})  # as the pipeline's module: same bits
 
