@@ -1,20 +1,16 @@
-"""The README runs as written: its Python blocks, its commands, its example, its output names.
+"""The README runs as written: its Python blocks, its commands, its example, its links, its size.
 
-Every ```` ```python ```` block of README.md runs on its own, from a file in a temporary folder
-(Warp reads a kernel's source from its file), with two things provided:
+Every ```` ```python ```` block of README.md runs as it stands, as a reader pastes it on a machine without a
+GPU: nothing is defined for it, nothing in it is replaced, and no block names a CUDA device (each takes
+Warp's default device: the GPU where there is one, else the CPU). The blocks run one after the other in one
+temporary folder, each from a file of its own (Warp reads a kernel's source from its file); what they
+print is checked where it is the point of the block.
 
-* a hidden preamble (:data:`PREAMBLE`) defining what the blocks take from the reader's own code:
-  ``meshes`` (two crossing cubes), ``transforms`` (their rigid poses), ``lower`` and ``upper``
-  (``(N, 3)`` box corners, some overlapping); and in the folder, ``anim.usd``, the test stages'
-  mixed animation (rigid, deforming and instanced prims, 24 time codes);
-* the substitutions of :data:`SUBSTITUTIONS`, which keep the README's sizes and device for the
-  reader and make them small and CPU-bound here: ``"cuda:0"`` becomes the test device, 1,000
-  objects 30 and 120 frames 3. Each must occur in the README (a stale one fails the test).
-
-The commands: every ``python`` the README tells one to run is the project's
-``.venv/bin/python`` (it runs without activating the environment), and every example it names
-exists. The USD check example runs as the README gives it, from the repository root, with its
-exit status 1 (it builds penetrations on purpose) explained and its temporary folder removed.
+The commands: every ``python`` the README tells one to run is the project's ``.venv/bin/python`` (it
+runs without activating the environment), every example it names exists, and the commands CI runs
+(``.ci/run``) are the ones the README gives. The USD check example runs as the README gives it, from the
+repository root, with its exit status 1 (it builds penetrations on purpose) explained and its temporary
+folder removed. The README stays short (:data:`README_MAX_BYTES`), and its links name files that exist.
 """
 
 import os
@@ -32,20 +28,12 @@ from conftest import DEFAULT_DEVICE
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 README = os.path.join(ROOT, "README.md")
 
-SUBSTITUTIONS = {
-    '"cuda:0"': lambda device: repr(device),
-    "num_objects=1000": lambda device: "num_objects=30",
-    "range(120)": lambda device: "range(3)",
-}
-"""README text -> what the test runs instead (given the test device)."""
+README_MAX_BYTES = 15 * 1024
+"""What a newcomer reads: the rest is on the documentation site (``docs/site/``)."""
 
-PREAMBLE = {
-    "meshes": "two unit cubes, the second moved by 0.5 on every axis: they cross",
-    "transforms": "(2, 4, 4) rigid transforms of them (identity, then a shift by -0.25: they still cross)",
-    "lower": "(5, 3) float32 lower box corners",
-    "upper": "(5, 3) float32 upper box corners (boxes 0-1 and 3-4 overlap)",
-}
-"""What the preamble defines for the blocks (see :func:`preamble`)."""
+CUDA_DEVICE = re.compile(r"""["']cuda(:\d+)?["']""")
+"""A string naming a CUDA device (``"cuda:0"``): a block that names one would not run as pasted on a machine
+without a GPU."""
 
 
 def readme() -> str:
@@ -54,59 +42,59 @@ def readme() -> str:
 
 
 def python_blocks(text: str) -> list[str]:
-    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+    """The code of every ```` ```python ```` block of a Markdown text (whatever follows ``python`` on the
+    fence line, such as markdown-exec's ``exec="on"``), in order."""
+    return re.findall(r"^```python[^\n]*\n(.*?)^```", text, flags=re.S | re.M)
 
 
-def preamble() -> dict:
-    """The namespace every block starts from (:data:`PREAMBLE`)."""
-    import warp_ccd as wc
-
-    v, t = wc.scene.shape("cube")
-    v = (np.sign(v).astype(np.float64) + 1.0) / 2.0  # the unit cube [0, 1]^3
-    moved = (v + 0.5, t)
-    transforms = np.tile(np.eye(4), (2, 1, 1))
-    transforms[1, :3, 3] = -0.25  # the second cube at 0.25: they still cross
-    lower = np.array([[0, 0, 0], [0.5, 0.5, 0.5], [3, 3, 3], [6, 0, 0], [6.9, 0, 0]], np.float32)
-    upper = lower + 1.0
-    ns = {"meshes": [(v, t), moved], "transforms": transforms, "lower": lower, "upper": upper}
-    assert set(ns) == set(PREAMBLE)
-    return ns
-
-
-def test_readme_python_blocks_run(tmp_path, monkeypatch):
-    pytest.importorskip("pxr")
-    from usd_stages import mixed_stage
-
-    text = readme()
-    blocks = python_blocks(text)
-    assert len(blocks) >= 2, "the API block and the USD check block"
-    for old in SUBSTITUTIONS:
-        assert any(old in b for b in blocks), f"substitution {old!r} matches no README block"
-    stage = mixed_stage(tmp_path / "anim.usd", num_frames=24)
-    del stage
-    monkeypatch.chdir(tmp_path)
-    uses_usd = False
+def run_blocks(blocks: list[str], folder, name: str) -> list[dict]:
+    """Runs ``blocks`` one after the other as files of ``folder`` (the current directory), each in a fresh
+    namespace (``name_block_k``, a module name of its own for Warp), and returns their namespaces. A block
+    that fails raises an AssertionError naming it and showing its code."""
+    namespaces = []
     for k, block in enumerate(blocks):
-        code = block
-        for old, new in SUBSTITUTIONS.items():
-            code = code.replace(old, new(DEFAULT_DEVICE))
-        path = tmp_path / f"readme_block_{k}.py"
-        path.write_text(code)
+        assert not CUDA_DEVICE.search(block), f"{name} block {k} names a CUDA device: it must run on the CPU\n{block}"
+        path = folder / f"{name}_block_{k}.py"
+        path.write_text(block)
         try:
-            ns = runpy.run_path(str(path), init_globals=preamble(), run_name=f"readme_block_{k}")
+            namespaces.append(runpy.run_path(str(path), run_name=f"{name}_block_{k}"))
         except Exception as exc:
-            raise AssertionError(f"README python block {k} failed: {type(exc).__name__}: {exc}\n{block}") from exc
+            raise AssertionError(f"{name} python block {k} failed: {type(exc).__name__}: {exc}\n{block}") from exc
+    return namespaces
+
+
+def test_readme_is_short():
+    size = len(readme().encode("utf-8"))
+    assert size <= README_MAX_BYTES, f"README.md is {size} bytes: move the detail to a page of docs/site/"
+
+
+def test_readme_python_blocks_run_as_pasted(tmp_path, monkeypatch):
+    pytest.importorskip("pxr")
+    blocks = python_blocks(readme())
+    assert len(blocks) >= 5, "the API tour: collide and the pipeline, continuous, clearance, the check, a kernel"
+    monkeypatch.chdir(tmp_path)
+    namespaces = run_blocks(blocks, tmp_path, "readme")
+    found = set()
+    for ns in namespaces:
         if "hit" in ns:  # the kernel of one's own: the two triangles cross
             assert ns["hit"].numpy().tolist() == [1]
+            found.add("kernel")
         if "swept" in ns:  # the continuous example: the box reaches the wall at (1 - 0.1 / sqrt(3)) / 2, never later
             assert ns["swept"].object_pairs.tolist() == [[0, 1]]
             assert 0.4711 < ns["swept"].toi <= (1 - 0.1 / np.sqrt(3)) / 2
             assert ns["hits"].tolist() == [True] and 0.4999 < ns["tois"][0] <= 0.5
+            found.add("continuous")
+        if "far" in ns:  # clearance: the cubes 1.2 apart are 0.0453 apart; the far one 1.8453
+            assert ns["far"].pairs.tolist() == [[0, 0]] and abs(ns["far"].distance[0] - (3 - 2 / np.sqrt(3))) < 1e-5
+            found.add("clearance")
         if "report" in ns:
-            uses_usd = True
             assert ns["report"].penetrating and len(ns["report"].frames) == 24
-    assert uses_usd, "a block checks anim.usd"
-    assert (tmp_path / "out.usd").exists()
+            found.add("check")
+        if "pipe" in ns and "meshes" in ns and "transforms" in ns:  # the spheres' frames: 1 has moved on to 2
+            assert ns["pipe"].detect().object_pairs.tolist() == [[1, 2]]
+            found.add("pipeline")
+    assert found == {"kernel", "continuous", "clearance", "check", "pipeline"}, found
+    assert (tmp_path / "collisions.usd").exists()
 
 
 def test_readme_commands_use_the_venv():
@@ -127,12 +115,34 @@ def test_readme_commands_use_the_venv():
                 assert os.path.isfile(os.path.join(ROOT, words[1])), f"README names a missing {words[1]}"
 
 
+def test_ci_runs_what_the_readme_says():
+    """``.ci/run`` installs and tests the project with the README's commands (its own venv's paths)."""
+    with open(os.path.join(ROOT, ".ci", "run"), encoding="utf-8") as fh:
+        ci = fh.read()
+    text = readme()
+    for command in ("python3 -m venv .venv", "-e '.[test]'", ".venv/bin/ruff check .", ".venv/bin/python -m pytest -q",
+                    ".venv/bin/mkdocs build --strict"):
+        assert command in text, f"the README does not say {command!r}"
+        assert command in ci, f".ci/run does not run {command!r}, which the README says"
+    assert re.search(r"pip install -e '\.\[test\]'", text) and re.search(r"pip install (-q )?-e '\.\[test\]'", ci)
+
+
+def test_readme_links_name_files_that_exist():
+    """Relative links and pictures of the README (``docs/site/...md``, ``docs/preview.png``, a plot of
+    ``bench/results/``) name files of the repository: they work on GitHub, and the site serves them."""
+    targets = re.findall(r"\]\(([^)\s]+)\)", readme())
+    local = [t.split("#")[0] for t in targets if not re.match(r"[a-z][a-z0-9+.-]*:|#", t)]
+    assert any(t.startswith("docs/site/") for t in local) and "docs/preview.png" in local
+    missing = [t for t in local if not os.path.isfile(os.path.join(ROOT, t))]
+    assert not missing, f"README links to files that do not exist: {missing}"
+
+
 def test_readme_outputs_are_ignored_by_git():
     if shutil.which("git") is None or subprocess.run(["git", "rev-parse", "--git-dir"], cwd=ROOT,
                                                      capture_output=True).returncode != 0:
         pytest.skip("not a git checkout")
     text = readme()
-    names = ["report.json", "overlay.usda", "worst.png", "preview.png", "collisions.usd", "out.usd"]
+    names = ["report.json", "overlay.usda", "worst.png", "preview.png", "collisions.usd"]
     for name in names:
         assert name in text
     proc = subprocess.run(["git", "check-ignore", "--no-index", *names], cwd=ROOT, capture_output=True, text=True)
