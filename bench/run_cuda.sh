@@ -80,18 +80,18 @@ for part in $parts; do
         if [ "$device" = cpu ]; then
             echo "run_cuda.sh: resources skipped: registers and spills are a CUDA device's" >&2
         else
-            step python3 -m warp_ccd.bench.kernel_resources --device "$device" --out "$out/kernel_resources_$tag.json"
+            step python3 -m bench.kernel_resources --device "$device" --out "$out/kernel_resources_$tag.json"
         fi ;;
     stages)
-        step python3 -m warp_ccd.bench.frame_stages --device "$device" --cases $staged --frames $((frames * 2)) \
+        step python3 -m bench.frame_stages --device "$device" --cases $staged --frames $((frames * 2)) \
             --out "$out/frame_stages_$tag.json"
-        step python3 -m warp_ccd.bench.frame_stages --device "$device" --cases $staged_big --variants default trees whole \
+        step python3 -m bench.frame_stages --device "$device" --cases $staged_big --variants default trees whole \
             --frames $((frames / 2)) --replays 10 --out "$out/frame_stages_big_$tag.json" ;;
     profile)
-        step python3 -m warp_ccd.bench.profile_frame --device "$device" --objects $profiled --frames $((frames * 5)) \
+        step python3 -m bench.profile_frame --device "$device" --objects $profiled --frames $((frames * 5)) \
             --out "$out/profile_$tag.json" ;;
     narrow)
-        step python3 -m warp_ccd.bench.narrow_phase --device "$device" --objects $narrow \
+        step python3 -m bench.narrow_phase --device "$device" --objects $narrow \
             --out "$out/narrow_phase_$tag.json" ;;
     scaling)
         step python3 -m warp_ccd.bench --device "$device" --objects $big --triangles poly 80 --frames $frames \
@@ -99,45 +99,45 @@ for part in $parts; do
         step python3 -m warp_ccd.bench --device "$device" --objects $mixed --triangles mixed --frames $frames \
             --warmup 3 --peers builtin --out "$out/scaling_mixed_$tag.json" --plot "$out/scaling_mixed_$tag.png" ;;
     boxes)
-        step python3 -m warp_ccd.bench.box_tests --device "$device" --cases $boxcases --frames $((frames / 2)) \
+        step python3 -m bench.box_tests --device "$device" --cases $boxcases --frames $((frames / 2)) \
             --out "$out/box_tests_$tag.json" ;;
     deforming)
-        step python3 -m warp_ccd.bench.deforming --device "$device" --objects $deforming --level $level \
+        step python3 -m bench.deforming --device "$device" --objects $deforming --level $level \
             --frames $((frames / 2)) --out "$out/deforming_$tag.json" ;;
     spheres)
         step python3 -m warp_ccd.bench --device "$device" --objects $spheres --triangles 1280 --frames $frames \
             --warmup 3 --peers builtin,fcl --out "$out/scaling1280_$tag.json" --plot "$out/scaling1280_$tag.png" ;;
     broad)
-        step python3 -m warp_ccd.bench.broad_phase --device "$device" --n $boxes --newton-max 1000000 \
+        step python3 -m bench.broad_phase --device "$device" --n $boxes --newton-max 1000000 \
             --frames $((frames / 2)) --out "$out/broad_phase_$tag.json" ;;
     build)
-        step python3 -m warp_ccd.bench.build --device "$device" --cases $builds --small $small --repeats $((frames / 2)) \
+        step python3 -m bench.build --device "$device" --cases $builds --small $small --repeats $((frames / 2)) \
             --rebuild "$rebuild" --profile "$out/build_profile_$tag.txt" --out "$out/build_$tag.json" ;;
     host)
-        step python3 -m warp_ccd.bench.host_breakdown --device "$device" --objects $hosted --triangles 80 --frames $frames \
+        step python3 -m bench.host_breakdown --device "$device" --objects $hosted --triangles 80 --frames $frames \
             --out "$out/host_breakdown_$tag.json"
-        step python3 -m warp_ccd.bench.host_after_wait --device "$device" --waits $waits \
+        step python3 -m bench.host_after_wait --device "$device" --waits $waits \
             --out "$out/host_after_wait_$tag.json" ;;
     usd)
-        step python3 -m warp_ccd.bench.usd_check --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
+        step python3 -m bench.usd_check --device "$device" $usd --out "$out/usd_check_$tag.json" ;;
     distributed)
-        step python3 -m warp_ccd.bench.distributed --device "$device" $distributed --out "$out/distributed_$tag.json" ;;
+        step python3 -m bench.distributed --device "$device" $distributed --out "$out/distributed_$tag.json" ;;
     ccd)
-        step python3 -m warp_ccd.bench.ccd_queries --device "$device" $ccd --out "$out/ccd_queries_$tag.json" ;;
+        step python3 -m bench.ccd_queries --device "$device" $ccd --out "$out/ccd_queries_$tag.json" ;;
     continuous)
-        step python3 -m warp_ccd.bench.continuous --device "$device" --objects $continuous --frames $frames --warmup 3 --profile \
+        step python3 -m bench.continuous --device "$device" --objects $continuous --frames $frames --warmup 3 --profile \
             --out "$out/continuous_$tag.json" ;;
     clearance)
-        step python3 -m warp_ccd.bench.clearance --device "$device" --objects $clearance --clearance 0.05 0.2 \
+        step python3 -m bench.clearance --device "$device" --objects $clearance --clearance 0.05 0.2 \
             --frames $frames --warmup 3 --profile --out "$out/clearance_$tag.json" ;;
     distance)
-        step python3 -m warp_ccd.bench.distance --device "$device" $distance --gap 0.5 0.01 --frames $frames \
+        step python3 -m bench.distance --device "$device" $distance --gap 0.5 0.01 --frames $frames \
             --warmup 3 --profile --out "$out/distance_$tag.json" ;;
     self)
-        step python3 -m warp_ccd.bench.self_intersection --device "$device" $selfargs --frames $frames --warmup 3 \
+        step python3 -m bench.self_intersection --device "$device" $selfargs --frames $frames --warmup 3 \
             --out "$out/self_intersection_$tag.json" ;;
     worlds)
-        step python3 -m warp_ccd.bench.worlds --device "$device" $worldargs --frames $frames --warmup 3 \
+        step python3 -m bench.worlds --device "$device" $worldargs --frames $frames --warmup 3 \
             --out "$out/worlds_$tag.json" ;;
     *)
         echo "run_cuda.sh: unknown part $part (tests, resources, profile, narrow, scaling, spheres, boxes, deforming, broad, build," \

@@ -37,7 +37,7 @@ ROOMS = {
     "check": (*CORE, "output", "usd"),
     "preview": (*CORE, "output"),
     "cli": (*CORE, "output", "usd", "check", "preview", "bench"),
-    "bench": (*CORE, "output", "usd", "check", "preview", "cli"),
+    "bench": (*CORE, "output", "cli"),
     "_src": (),
 }
 """Every folder (or single module) of ``warp_ccd/_src`` and what it may import: a new concept gets its row here."""

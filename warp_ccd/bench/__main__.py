@@ -1,7 +1,7 @@
-"""``python -m warp_ccd.bench``: the scaling benchmark (see :mod:`warp_ccd.bench.scaling`)."""
+"""``python -m warp_ccd.bench``: the scaling benchmark (see :mod:`warp_ccd.bench`)."""
 
 import sys
 
-from .scaling import main
+from .._src.bench.scaling import main
 
 sys.exit(main(prog="python -m warp_ccd.bench"))

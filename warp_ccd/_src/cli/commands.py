@@ -21,7 +21,7 @@ Subcommands:
   input or one of its layers; every output is written to a temporary file and all are moved into
   place at the end, so a failed run writes nothing. ``--report -`` prints the JSON report on standard
   output (last, once every file is in place) and everything else the command prints on stderr.
-* ``bench``: the benchmarks of :mod:`warp_ccd.bench`; every argument after ``bench`` goes there.
+* ``bench``: the scaling benchmark against peers (:mod:`warp_ccd.bench`); every argument after ``bench`` goes there.
 
 Bad arguments end with one line on stderr and a non-zero exit status, never a traceback; so does
 an unexpected exception (exit status 3), unless ``--debug`` asks for its traceback.
@@ -251,7 +251,8 @@ def _build_parser() -> OneLineParser:
     for command in (demo, check):
         command.add_argument("--debug", action="store_true",
                              help="on an internal error, print the traceback (default: one line)")
-    sub.add_parser("bench", help="benchmarks (arguments after 'bench' go to warp_ccd.bench)", add_help=False)
+    sub.add_parser("bench", help="the scaling benchmark against peers (arguments after 'bench' go to "
+                   "warp_ccd.bench)", add_help=False)
     return parser
 
 

@@ -1,7 +1,7 @@
-"""The benchmarks' command-line set-up, written once.
+"""The lab's command-line set-up, written once.
 
-Every benchmark of :mod:`warp_ccd.bench` but the scaling one (whose ``warp-ccd bench`` command has
-its own one-line errors and exit statuses) starts the same way:
+Every benchmark of the lab (``bench/``; the scaling benchmark, ``warp-ccd bench``, has its own one-line
+errors and exit statuses) starts the same way:
 
 * :func:`bench_parser`: the parser with ``--device`` (its default and help are the benchmark's).
 * :func:`add_run_options`: ``--frames``, ``--warmup`` and ``--seed`` where the benchmark has them
@@ -10,20 +10,26 @@ its own one-line errors and exit statuses) starts the same way:
 * :func:`parse_options`: the arguments parsed, Warp quietened and the device resolved; a bad device
   or JSON destination is a usage error before anything is measured.
 * :func:`start`: that, and the result document ``{**environment(device), "config": vars(args),
-  "rows": []}`` (see :func:`~warp_ccd.bench.report.environment`), which the benchmark fills;
+  "rows": []}`` (see :func:`~warp_ccd._src.bench.report.environment`), which the benchmark fills;
   :func:`add_row` shows a row as it comes and records it; :func:`write_result` writes the document
-  where ``--out`` says.
+  where ``--out`` says (those with a default destination put it under :data:`RESULTS`).
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from .._src.cli.common import quiet_warp, resolve_device
-from .._src.output import check_output_path
-from .report import JSON_EXTENSIONS, environment, write_json
+from warp_ccd._src.bench.report import JSON_EXTENSIONS, environment, write_json
+from warp_ccd._src.cli.common import quiet_warp, resolve_device
+from warp_ccd._src.output import check_output_path
 
-__all__ = ["add_out_option", "add_row", "add_run_options", "bench_parser", "parse_options", "start", "write_result"]
+__all__ = ["RESULTS", "add_out_option", "add_row", "add_run_options", "bench_parser", "parse_options", "start",
+           "write_result"]
+
+RESULTS = Path("bench", "results")
+"""Where the benchmarks that write results by default put them: ``bench/results`` under the working
+directory (the repository root, where ``bench/run_cuda.sh`` runs them)."""
 
 
 def bench_parser(description: str | None, *, device: str | None = None, device_help: str | None = None,
@@ -104,7 +110,7 @@ def start(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> tup
 
     Returns:
         ``(args, device, document)``; ``document`` is ``{**environment(device), "config": vars(args),
-        "rows": []}``: where it was measured (see :func:`~warp_ccd.bench.report.environment`), the
+        "rows": []}``: where it was measured (see :func:`~warp_ccd._src.bench.report.environment`), the
         options (the arguments' own dictionary: a value set on ``args`` later is recorded too) and an
         empty list of rows.
     """
@@ -119,7 +125,7 @@ def add_row(document: dict, row: dict) -> None:
 
 
 def write_result(path: str | None, document: dict) -> None:
-    """Writes ``document`` to ``path`` (see :func:`~warp_ccd.bench.report.write_json`); nothing
+    """Writes ``document`` to ``path`` (see :func:`~warp_ccd._src.bench.report.write_json`); nothing
     when ``path`` is ``None`` or empty (no ``--out``)."""
     if path:
         write_json(path, document)

@@ -28,7 +28,7 @@ Three parts, in one process on one device:
 Rows: ``{"method", "n_shapes", "triangles_per_shape", "ms_min", "ms_median"}`` under ``builds``;
 ``rebuild`` and ``one_shot`` rows say what they measured.
 
-    python -m warp_ccd.bench.build --device cuda:0 --out bench/results/build_cuda0.json
+    python -m bench.build --device cuda:0 --out bench/results/build_cuda0.json
 """
 
 from __future__ import annotations
@@ -43,14 +43,14 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.peers import fcl_bvh
+from warp_ccd._src.bench.report import environment
+from warp_ccd._src.bench.timing import synced_ms
+from warp_ccd._src.trees.build import SMALL_SUBTREE, TreeBuild
+from warp_ccd._src.trees.build_block import BLOCK_SUBTREE
+from warp_ccd.stages import build_tree
 
-from .._src.trees.build import SMALL_SUBTREE, TreeBuild
-from .._src.trees.build_block import BLOCK_SUBTREE
-from .._src.trees.reference import build_tree
 from .command import add_out_option, bench_parser, parse_options, write_result
-from .peers import fcl_bvh
-from .report import environment
-from .timing import synced_ms
 
 POLYHEDRA = ("tetrahedron", "cube", "octahedron", "dodecahedron", "icosahedron")
 

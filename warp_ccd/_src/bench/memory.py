@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.scene.scene import Scene
+from ..pipeline.pipeline import CollisionPipeline
+from ..scene.scene import Scene
 
 __all__ = ["array_bytes", "measure_pipeline_memory"]
 

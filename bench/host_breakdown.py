@@ -12,7 +12,7 @@ and ``wp.synchronize_device`` are wrapped with timestamps, so each frame splits 
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"n", "shapes",
 "variant", "build_s", "median": {...}, "min": {...}}``.
 
-    python -m warp_ccd.bench.host_breakdown --device cuda:0 --objects 1e6 --triangles poly 80 \\
+    python -m bench.host_breakdown --device cuda:0 --objects 1e6 --triangles poly 80 \\
         --out bench/results/host_breakdown_cuda0.json
 """
 
@@ -24,10 +24,10 @@ import time
 import numpy as np
 import warp as wp
 
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.scene.scene import Scene
+from warp_ccd import CollisionPipeline, Scene
+from warp_ccd._src.bench.meshes import parse_triangles
+
 from .command import add_row, add_run_options, bench_parser, start, write_result
-from .meshes import parse_triangles
 
 DT = 1.0 / 60.0
 VARIANTS = ("plain", "again")

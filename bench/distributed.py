@@ -1,7 +1,7 @@
 """Benchmark: ``warp-ccd check`` in one process and on Ray (``check_many``), one GPU and several.
 
 Stages, written first into a temporary folder (not timed as part of a check), each of rigid prims as
-:mod:`~warp_ccd.bench.usd_check` writes them (an ``Xform`` with time-sampled ``translate`` and ``orient`` over a
+:mod:`bench.usd_check` writes them (an ``Xform`` with time-sampled ``translate`` and ``orient`` over a
 polyhedron ``Mesh``, the motion of :meth:`Scene.random <warp_ccd._src.scene.scene.Scene.random>`):
 
 * **rigid**: ``--objects`` prims x ``--frames`` time codes in one layer: the whole check in one process on one
@@ -17,7 +17,7 @@ Each Ray result is compared with the one-process result: the same frames, rows, 
 (``identical``). Times are wall clock of the whole call, the Ray cluster already started (its actors' start,
 Warp's initialisation and kernel loads included).
 
-    python -m warp_ccd.bench.distributed --device cuda:0 --out bench/results/distributed_cuda0.json
+    python -m bench.distributed --device cuda:0 --out bench/results/distributed_cuda0.json
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def write_part(task) -> None:
     path, num_objects, num_frames, lo, hi, seed, device = task
     from pxr import Sdf
 
-    from .._src.scene.scene import Scene
+    from warp_ccd import Scene
 
     scene = Scene.random(num_objects, seed=seed, device=device)
     poses = np.empty((num_frames, hi - lo, 7))
@@ -107,8 +107,8 @@ def main(argv=None) -> int:
     parser.add_argument("--parts", default="rigid,long,batch", help="which parts to run")
     add_out_option(parser)
     args, device = parse_options(parser, argv)
-    from .._src.check.batch import check_many
-    from .._src.check.check import check_usd
+    from warp_ccd import check_usd
+    from warp_ccd._src.check.batch import check_many
 
     gpus = wp.get_cuda_device_count() if device.is_cuda else 0
     result = {"benchmark": "distributed", "device": str(device), "gpu": device.name if device.is_cuda else None,

@@ -15,15 +15,15 @@ For each ``--leaf-sizes`` value, from the same start (the clock at 0), after ``-
 * ``refit_kernels``: the refit alone (the deforming objects' trees and the object boxes), as a
   captured graph on CUDA (eagerly on the CPU), wall-clock;
 
-and Warp's built-in pipeline (:class:`~warp_ccd.bench.peers.WarpMeshPipeline`: one ``wp.Mesh``
+and Warp's built-in pipeline (:class:`~warp_ccd._src.bench.peers.WarpMeshPipeline`: one ``wp.Mesh``
 refit over all world vertices, a query per triangle, ``wp.intersect_tri_tri``), its frame
 (``detect``: the faster of eager and graph) and its refit alone (``refit``). Every leaf size ends on
 the same vertices and must find the same triangle pairs there (else the run stops); the peer's
 triangle pairs on them are judged against ours as the scaling benchmark judges them
-(:func:`~warp_ccd.bench.compare.compare_triangle_pairs`: pairs near touching may differ, and every
+(:func:`~warp_ccd._src.bench.compare.compare_triangle_pairs`: pairs near touching may differ, and every
 real difference is charged to the method an exact arbiter finds wrong).
 
-    python -m warp_ccd.bench.deforming --device cuda:0 --objects 1000 10000 \\
+    python -m bench.deforming --device cuda:0 --objects 1000 10000 \\
         --out bench/results/deforming_cuda0.json
 """
 
@@ -35,13 +35,14 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.compare import compare_triangle_pairs
+from warp_ccd._src.bench.methods import DevicePeerMethod
+from warp_ccd._src.bench.peers import WarpMeshPipeline
+from warp_ccd._src.bench.timing import synced_ms
+from warp_ccd._src.pipeline.pipeline import STAGES
 
-from .._src.pipeline.pipeline import STAGES
 from .command import add_run_options, bench_parser, start, write_result
-from .compare import compare_triangle_pairs
-from .methods import DevicePeerMethod
-from .peers import WarpMeshPipeline
-from .timing import ms_stats, synced_ms
+from .timing import ms_stats
 
 DT = 1.0 / 60.0
 

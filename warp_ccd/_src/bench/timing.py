@@ -1,7 +1,6 @@
-"""Timing a frame the way a careful Warp user runs it, and summarising the times.
+"""Timing a frame the way a careful Warp user runs it, and summarising the times (the scaling benchmark's).
 
 * :func:`synced_ms`: wall-clock ms of a call, the device synchronised before and after.
-* :func:`detect_frames`: a pipeline's ``detect`` frames, each timed that way, with their host time.
 * :class:`~warp_ccd._src.runtime.frame.CountedFrame` (the library's): one frame of device work followed by one
   small kernel copying its counters into pinned host memory and one wait, launched eagerly from
   Python or replayed as a captured graph. A counter past its buffer's capacity grows the buffer,
@@ -20,15 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from .._src.runtime.buffers import CounterRead
-from .._src.runtime.frame import MODES, CountedFrame
+from ..runtime.buffers import CounterRead
+from ..runtime.frame import CountedFrame
 
-__all__ = ["MODES", "CountedFrame", "ModeFrames", "StageTimes", "detect_frames", "ms_stats", "run_stages", "synced_ms"]
-
-
-def ms_stats(values) -> dict:
-    """``{"ms_min", "ms_median"}`` of timings in ms (a benchmark row's numbers)."""
-    return {"ms_min": float(np.min(values)), "ms_median": float(np.median(values))}
+__all__ = ["ModeFrames", "StageTimes", "run_stages", "synced_ms"]
 
 
 def synced_ms(fn, device) -> float:
@@ -40,25 +34,6 @@ def synced_ms(fn, device) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
-def detect_frames(pipe, count: int, dt: float) -> tuple[list[float], list[float]]:
-    """``count`` frames of ``pipe.detect(advance=dt)``, each timed by :func:`synced_ms`.
-
-    Args:
-        pipe: a :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`, warmed up.
-        count: frames to time.
-        dt: s the scene advances each frame.
-
-    Returns:
-        ``(wall, host)``: ms per frame, wall-clock and Python's own (``FrameResult.host_ms``).
-    """
-    wall, host = [], []
-    for _ in range(count):
-        result = []
-        wall.append(synced_ms(lambda: result.append(pipe.detect(advance=dt)), pipe.device))
-        host.append(result[0].host_ms)
-    return wall, host
-
-
 class ModeFrames:
     """The same frame in each of several modes (a :class:`CountedFrame` each, all reading one
     :class:`~warp_ccd._src.runtime.buffers.CounterRead`), run in turn.
@@ -67,7 +42,7 @@ class ModeFrames:
         launch: enqueues the frame's work (see :class:`CountedFrame`; the counters are reset before it).
         buffers: the :class:`~warp_ccd._src.runtime.buffers.GrowableBuffer` s whose counters the frame reads.
         device: Warp device.
-        modes: the modes (:data:`MODES`, or a subset).
+        modes: the modes (:data:`~warp_ccd._src.runtime.frame.MODES`, or a subset).
     """
 
     def __init__(self, launch, buffers: list, device, modes):
@@ -134,7 +109,7 @@ def run_stages(stages: list, finish, device) -> dict:
 class StageTimes:
     """ms per stage over the timed frames of one method.
 
-    A method timed in both :data:`MODES` records ``<stage>_eager`` and ``<stage>_graph``;
+    A method timed in both :data:`~warp_ccd._src.runtime.frame.MODES` records ``<stage>_eager`` and ``<stage>_graph``;
     :meth:`summary` then also gives ``<stage>``, the mode with the lower median (its min and median
     together), and :attr:`best_mode` says which (a stage timed eagerly only is ``<stage>`` too).
     """

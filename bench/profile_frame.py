@@ -16,7 +16,7 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"n_objects"
 "mode", "ms_min", "ms_median", "host_ms_median"}`` and ``activities`` of ``{"n_objects", "triangles",
 "name", "kind", "count", "ms"}``.
 
-    python -m warp_ccd.bench.profile_frame --device cuda:0 --objects 1000 10000 \\
+    python -m bench.profile_frame --device cuda:0 --objects 1000 10000 \\
         --out bench/results/profile_cuda0.json
 """
 
@@ -27,11 +27,11 @@ import sys
 import numpy as np
 import warp as wp
 
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.runtime.frame import MODES
-from .._src.scene.scene import Scene
+from warp_ccd import CollisionPipeline, Scene
+from warp_ccd._src.bench.meshes import parse_triangles
+from warp_ccd._src.runtime.frame import MODES
+
 from .command import add_out_option, add_run_options, bench_parser, start, write_result
-from .meshes import parse_triangles
 from .timing import detect_frames
 
 DT = 1.0 / 60.0

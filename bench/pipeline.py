@@ -8,21 +8,22 @@ in the same run, triangle pairs compared and their differences classified, resul
 stage: ``motion``, this pipeline's own stages (refit of the bounds and trees, broad, mid, narrow),
 ``detect`` and ``total``. Every option of ``warp-ccd bench`` is accepted and overrides these defaults.
 
-    python -m warp_ccd.bench.pipeline
-    python -m warp_ccd.bench.pipeline --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6
-    python -m warp_ccd.bench.pipeline --peers builtin,fcl,nxn,newton
+    python -m bench.pipeline
+    python -m bench.pipeline --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6
+    python -m bench.pipeline --peers builtin,fcl,nxn,newton
 """
 
 from __future__ import annotations
 
 import sys
 
-from .._src.cli.common import CliError, resolve_device
-from .report import RESULTS
-from .scaling import build_parser
-from .scaling import main as bench_main
+from warp_ccd._src.bench.scaling import build_parser
+from warp_ccd._src.bench.scaling import main as bench_main
+from warp_ccd._src.cli.common import CliError, resolve_device
 
-PROG = "python -m warp_ccd.bench.pipeline"
+from .command import RESULTS
+
+PROG = "python -m bench.pipeline"
 DEFAULTS = ["--triangles", "80", "1280", "--peers", "builtin", "--objects", "100", "1000", "3000"]
 
 

@@ -18,7 +18,7 @@ report's rows); per frame in ms. On the rigid stage python-fcl (the same scene's
 ``BVHModel`` each, its dynamic AABB tree, contacts on) runs every ``--fcl-every``-th frame as a
 peer, timed (update + collide), with its object pairs compared with ours (touching included).
 
-    python -m warp_ccd.bench.usd_check --device cuda:0 --out bench/results/usd_check_cuda0.json
+    python -m bench.usd_check --device cuda:0 --out bench/results/usd_check_cuda0.json
 """
 
 from __future__ import annotations
@@ -32,14 +32,14 @@ import time
 import numpy as np
 import warp as wp
 
-from .._src.check.check import check_usd
-from .._src.scene.scene import Scene
+from warp_ccd import Scene, check_usd
+from warp_ccd._src.bench.report import git_commit
+
 from .command import add_out_option, add_run_options, bench_parser, parse_options, write_result
-from .report import git_commit
 
 
 def _commit_label() -> str:
-    """The commit measured (:func:`~warp_ccd.bench.report.git_commit`) as this file records it: the
+    """The commit measured (:func:`~warp_ccd._src.bench.report.git_commit`) as this file records it: the
     commit, ``-dirty`` when the tracked code was modified, or ``unknown``."""
     commit, dirty = git_commit()
     return "unknown" if commit is None else commit + ("-dirty" if dirty else "")
@@ -152,8 +152,8 @@ def write_deforming_stage(path: str, num_meshes: int, num_frames: int, seed: int
 
 def _fcl_peer(report, every: int) -> dict:
     """python-fcl on the checked scene at every ``every``-th frame; our pairs (touching included) beside it."""
-    from .._src.pipeline.pipeline import CollisionPipeline
-    from .peers import FclPipeline, PeerUnavailable
+    from warp_ccd import CollisionPipeline
+    from warp_ccd._src.bench.peers import FclPipeline, PeerUnavailable
 
     imp = report.source
     try:

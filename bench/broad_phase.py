@@ -12,7 +12,7 @@ Methods, in the same run on the same boxes, each frame in turn:
 * ``sap``: this package's :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP`, the reference;
 * ``nxn``: this package's :class:`~warp_ccd._src.broadphase.sap.BroadPhaseAllPairs`, for ``N <= --nxn-max``;
 * ``warp_bvh``: Warp's ``wp.Bvh`` over the boxes, rebuilt every frame, one ``wp.bvh_query_aabb``
-  per box (:class:`~warp_ccd.bench.peers.WarpBvhBroadPhase`);
+  per box (:class:`WarpBvhBroadPhase`, here);
 * ``warp_bvh_refit``: the same tree only refit every frame (boxes do not move here, so this is
   refitting's best case);
 * ``newton_sap``: newton's ``BroadPhaseSAP`` when newton is installed, for ``N <= --newton-max``.
@@ -29,8 +29,8 @@ each peer's differences from ``sap`` are judged by an exact overlap test in nump
 ``sap`` got wrong ends the run with status 3 (``EXIT_INTERNAL``, after the JSON is written); a peer's wrong pairs
 are a finding, reported in the table (``*``) and the JSON (``peer_wrong``).
 
-    python -m warp_ccd.bench.broad_phase                             # CPU: N = 1e3..1e5
-    python -m warp_ccd.bench.broad_phase --device cuda:0 --max-n 1e7  # N = 1e3..1e7
+    python -m bench.broad_phase                             # CPU: N = 1e3..1e5
+    python -m bench.broad_phase --device cuda:0 --max-n 1e7  # N = 1e3..1e7
 """
 
 from __future__ import annotations
@@ -41,20 +41,86 @@ import sys
 import numpy as np
 import warp as wp
 
-from .._src.broadphase.sap import ALL_PAIRS_LIMIT, BroadPhaseAllPairs, BroadPhaseSAP
-from .._src.cli.common import EXIT_INTERNAL, EXIT_OK
-from .._src.runtime.buffers import GrowableBuffer
-from .command import add_run_options, bench_parser, start, write_result
-from .compare import box_overlap_truth, compare_exact
-from .methods import device_modes
-from .peers import NewtonBroadPhaseSAP, PeerUnavailable, WarpBvhBroadPhase
-from .report import RESULTS
-from .timing import ModeFrames, StageTimes
+from warp_ccd._src.bench.compare import box_overlap_truth, compare_exact
+from warp_ccd._src.bench.methods import device_modes
+from warp_ccd._src.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable
+from warp_ccd._src.bench.timing import ModeFrames, StageTimes
+from warp_ccd._src.broadphase.sap import ALL_PAIRS_LIMIT
+from warp_ccd._src.cli.common import EXIT_INTERNAL, EXIT_OK
+from warp_ccd._src.geometry.box import boxes_overlap
+from warp_ccd._src.runtime.buffers import GrowableBuffer, emit_pair
+from warp_ccd.stages import BroadPhaseAllPairs, BroadPhaseSAP
+
+from .command import RESULTS, add_run_options, bench_parser, start, write_result
 
 METHODS = ("sap", "nxn", "warp_bvh", "warp_bvh_refit", "newton_sap")
 OURS = ("sap", "nxn")
 """This package's methods: they must agree exactly; the others are peers, judged by the truth."""
 REFERENCE = "sap"
+
+
+@wp.kernel
+def _bvh_box_pairs_kernel(
+    bvh: wp.uint64,
+    lower: wp.array[wp.vec3],
+    upper: wp.array[wp.vec3],
+    pair_capacity: int,
+    # Outputs
+    pair: wp.array[wp.vec2i],
+    pair_count: wp.array[wp.int64],
+):
+    """One thread per box ``i``: query the tree with the box, keep exact overlaps with ``j > i``."""
+    i = wp.tid()
+    lo = lower[i]
+    hi = upper[i]
+    query = wp.bvh_query_aabb(bvh, lo, hi)
+    j = int(0)
+    while wp.bvh_query_next(query, j):
+        if j > i:
+            if boxes_overlap(lo, hi, lower[j], upper[j]):
+                emit_pair(i, j, pair, pair_count, pair_capacity)
+
+
+class WarpBvhBroadPhase:
+    """Broad phase with Warp's ``wp.Bvh`` over the boxes and one AABB query per box.
+
+    The tree is built on the first launch (and whenever the box arrays change), then rebuilt in
+    place (``refit=False``, Warp's default constructor for the device) or only refit
+    (``refit=True``: cheaper, but the tree's quality decays as boxes move) at every launch.
+
+    Args:
+        device: Warp device.
+        refit: refit the tree instead of rebuilding it.
+        constructor: ``wp.Bvh`` constructor (None: Warp's default: ``"sah"`` on CPU, ``"lbvh"``
+            on CUDA).
+    """
+
+    def __init__(self, *, device=None, refit: bool = False, constructor: str | None = None):
+        self.device = wp.get_device(device)
+        self.refit = bool(refit)
+        self.constructor = constructor
+        self.bvh = None
+        self._boxes = None
+
+    @property
+    def counters(self) -> list[GrowableBuffer]:
+        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
+        return []
+
+    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
+        """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing."""
+        n = lower.shape[0]
+        if n < 2:
+            return
+        if self.bvh is None or self._boxes != (lower.ptr, upper.ptr, n):
+            self.bvh = wp.Bvh(lower, upper, constructor=self.constructor)
+            self._boxes = (lower.ptr, upper.ptr, n)
+        elif self.refit:
+            self.bvh.refit()
+        else:
+            self.bvh.rebuild()
+        wp.launch(_bvh_box_pairs_kernel, dim=n, inputs=[self.bvh.id, lower, upper, pairs.capacity],
+                  outputs=[pairs.data, pairs.count], device=self.device)
 
 
 def random_boxes(num_boxes: int, overlaps: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -226,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         write_result(out, doc)
     print(f"results written to {out}")
     if not ok:
-        print("warp_ccd.bench.broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)
+        print("python -m bench.broad_phase: MISMATCH between broad phases (see above)", file=sys.stderr)
         return EXIT_INTERNAL
     return EXIT_OK
 

@@ -16,7 +16,7 @@ within ``d``), candidates of the last frame, and ``mismatches``: frames where th
 intersecting pairs differ from the discrete frame's (none expected). With ``--profile`` each
 clearance row also holds one eager frame stage by stage (``timings=True``, median of 5 frames).
 
-    python -m warp_ccd.bench.clearance --device cuda:0 --objects 1e3 1e4 1e5 1e6 --clearance 0.05 0.2 \\
+    python -m bench.clearance --device cuda:0 --objects 1e3 1e4 1e5 1e6 --clearance 0.05 0.2 \\
         --profile --out bench/results/clearance_cuda0.json
 """
 
@@ -29,9 +29,10 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.timing import synced_ms
 
 from .command import add_run_options, bench_parser, start, write_result
-from .timing import ms_stats, synced_ms
+from .timing import ms_stats
 
 DT = 1.0 / 60.0
 

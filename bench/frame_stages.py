@@ -21,7 +21,7 @@ JSON (``--out``): device, date, versions, git commit, ``rows`` of ``{"case", "tr
 "n_objects", "variant", "measure", "ms_min", "ms_median", "launches"}``: ``measure`` is
 ``frame``, ``host``, ``loop`` or ``upto_<stage>``.
 
-    python -m warp_ccd.bench.frame_stages --device cuda:0 --cases poly:1000 poly:10000 \\
+    python -m bench.frame_stages --device cuda:0 --cases poly:1000 poly:10000 \\
         --out bench/results/frame_stages_cuda0.json
 """
 
@@ -33,10 +33,10 @@ import time
 import numpy as np
 import warp as wp
 
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.scene.scene import Scene
+from warp_ccd import CollisionPipeline, Scene
+from warp_ccd._src.bench.meshes import parse_triangles
+
 from .command import add_out_option, add_run_options, bench_parser, start, write_result
-from .meshes import parse_triangles
 from .timing import detect_frames
 
 DT = 1.0 / 60.0

@@ -7,14 +7,14 @@ both builds of the module (the option is switched and the module rebuilt in betw
 * **time**: the narrow-phase kernel (``NarrowPhase.launch``: exact test of every candidate triangle
   pair, hits appended) on the candidates of a real frame of the scaling scene (``--objects`` objects
   of ``--triangles`` triangles), and the batch kernel on the 10^5 near-degenerate pairs of
-  :mod:`warp_ccd.bench.awkward_pairs`; GPU time per launch from CUDA events (wall time on the CPU), min
+  ``tests/awkward_pairs.py``; GPU time per launch from CUDA events (wall time on the CPU), min
   and median over ``--repeats`` launches after a warm-up;
 * **verdicts**: how many of the near-degenerate pairs' verdicts (both tests, float32 and float64)
   differ from the CPU's with the shipped build (computed in the same run; the tests hold them
   recorded, ``tests/data/narrow_phase_verdicts.npz``, and check that the CPU still gives them), and
   how many hits the scene frame has.
 
-    python -m warp_ccd.bench.narrow_phase --device cuda:0 --out bench/results/narrow_phase_cuda0.json
+    python -m bench.narrow_phase --device cuda:0 --out bench/results/narrow_phase_cuda0.json
 """
 
 from __future__ import annotations
@@ -26,13 +26,13 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from tests.awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
+from warp_ccd._src.bench.meshes import parse_triangles
+from warp_ccd._src.geometry import triangle
+from warp_ccd._src.geometry.precision import precision_types
+from warp_ccd._src.narrowphase import discrete as narrow_phase
 
-from .._src.geometry import triangle
-from .._src.geometry.precision import precision_types
-from .._src.narrowphase import discrete as narrow_phase
-from .awkward_pairs import METHODS, PRECISIONS, awkward_pairs, verdicts
 from .command import add_out_option, bench_parser, start, write_result
-from .meshes import parse_triangles
 
 
 def gpu_ms(fn, device, repeats: int) -> tuple[float, float]:
@@ -66,7 +66,7 @@ def set_fuse_fp(fuse: bool) -> None:
 def measure(fuse: bool, args, device, scene, pipe, cpu: dict) -> list[dict]:
     """Rows of one build of the narrow-phase module (``fuse_fp=fuse``): the scene frame's narrow phase,
     then each precision and test on the near-degenerate pairs, their verdicts against ``cpu`` (per
-    precision, :func:`~warp_ccd.bench.awkward_pairs.verdicts` on the CPU with the shipped build)."""
+    precision, ``verdicts`` of ``tests/awkward_pairs.py`` on the CPU with the shipped build)."""
     set_fuse_fp(fuse)
     rows = []
     narrow = pipe.narrow

@@ -1,9 +1,9 @@
 """The scaling benchmark's methods, run on one scene frame by frame, and its cases.
 
 :func:`run_case` builds the scaling scene of one ``(triangles, N)``, moves it and runs every method
-on the same world vertices each frame, times them (:mod:`warp_ccd.bench.timing`), checks what the
-peers find against this package (:mod:`warp_ccd.bench.compare`) and measures memory
-(:mod:`warp_ccd.bench.memory`); :mod:`warp_ccd.bench.scaling` describes the stages each method
+on the same world vertices each frame, times them (:mod:`warp_ccd._src.bench.timing`), checks what the
+peers find against this package (:mod:`warp_ccd._src.bench.compare`) and measures memory
+(:mod:`warp_ccd._src.bench.memory`); :mod:`warp_ccd._src.bench.scaling` describes the stages each method
 reports.
 
 * :class:`PipelineMethod`: this package's :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`, per stage and
@@ -20,11 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .._src.broadphase.sap import find_pairs, make_broad_phase
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.runtime.buffers import GrowableBuffer
-from .._src.runtime.frame import MODES
-from .._src.scene.scene import Scene
+from ..broadphase.sap import find_pairs, make_broad_phase
+from ..pipeline.pipeline import CollisionPipeline
+from ..runtime.buffers import GrowableBuffer
+from ..runtime.frame import MODES
+from ..scene.scene import Scene
 from .compare import PairCheck, box_overlap_truth, compare_exact, compare_triangle_pairs
 from .memory import measure_pipeline_memory
 from .meshes import parse_triangles
@@ -149,7 +149,7 @@ def device_modes(device) -> tuple:
 
 
 class HostPeerMethod:
-    """A host peer of :mod:`warp_ccd.bench.peers` (python-fcl), timed stage by stage (:func:`run_stages`)."""
+    """A host peer of :mod:`warp_ccd._src.bench.peers` (python-fcl), timed stage by stage (:func:`run_stages`)."""
 
     def __init__(self, peer, device):
         self.name = peer.name
@@ -171,8 +171,8 @@ class HostPeerMethod:
 
 
 class DevicePeerMethod(HostPeerMethod):
-    """A device peer of :mod:`warp_ccd.bench.peers` at its best: each frame is its ``launch()`` and one
-    read of its counters into pinned memory (:class:`~warp_ccd.bench.timing.CountedFrame`), run in
+    """A device peer of :mod:`warp_ccd._src.bench.peers` at its best: each frame is its ``launch()`` and one
+    read of its counters into pinned memory (:class:`~warp_ccd._src.runtime.frame.CountedFrame`), run in
     every mode of :func:`device_modes` in turn. Stages ``detect_eager``, ``detect_graph``; the
     report's ``detect`` is the faster of the two (by median)."""
 
@@ -218,7 +218,8 @@ class BroadPhaseMethod:
         return self.pairs.numpy(self.num_pairs).reshape(-1, 2)
 
     def box_truth(self):
-        """The exact overlap test of the boxes this method saw (:func:`~warp_ccd.bench.compare.box_overlap_truth`)."""
+        """The exact overlap test of the boxes this method saw
+        (:func:`~warp_ccd._src.bench.compare.box_overlap_truth`)."""
         return box_overlap_truth(*self.source.object_boxes())
 
     def reference_box_pairs(self) -> np.ndarray:

@@ -18,7 +18,7 @@ crest rises through the fold) or crumpled (through itself and its neighbours nea
 :func:`crumpled_sheets`). Frames of a pipeline with ``self_intersections=True`` (self plus pairwise) against one without
 (pairwise alone), on the same vertices: min and median ms, pairs found.
 
-    python -m warp_ccd.bench.self_intersection --device cuda:0 --sheets 1e2 1e3 1e4 \\
+    python -m bench.self_intersection --device cuda:0 --sheets 1e2 1e3 1e4 \\
         --out bench/results/self_intersection_cuda0.json
 """
 
@@ -32,10 +32,11 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.timing import synced_ms
+from warp_ccd.scene import figure_eight_torus, icosphere, sheet
 
-from .._src.scene.shapes import figure_eight_torus, icosphere, sheet
 from .command import add_row, add_run_options, bench_parser, start, write_result
-from .timing import ms_stats, synced_ms
+from .timing import ms_stats
 
 
 def crumpled_sheets(k: int, n: int, seed: int = 0, kind: str = "crumpled") -> list[tuple[np.ndarray, np.ndarray]]:

@@ -26,7 +26,7 @@ the arm or each other), each copy jittered by its own seed, so the worlds differ
   through ``__cuda_array_interface__`` (standing in for a torch or JAX tensor): Warp's memcpy activities
   counted over the timed frames (0: no data through the host), eager and replayed.
 
-    python -m warp_ccd.bench.worlds --device cuda:0 --out bench/results/worlds_cuda0.json
+    python -m bench.worlds --device cuda:0 --out bench/results/worlds_cuda0.json
 """
 
 from __future__ import annotations
@@ -38,15 +38,16 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.methods import device_modes
+from warp_ccd._src.bench.peers import NewtonBroadPhaseSAP, PeerUnavailable
+from warp_ccd._src.bench.timing import ModeFrames, StageTimes, synced_ms
+from warp_ccd._src.runtime.buffers import GrowableBuffer
+from warp_ccd.scene import icosphere, shape
+from warp_ccd.stages import BroadPhaseSAP
 
-from .._src.broadphase.sap import BroadPhaseSAP
-from .._src.runtime.buffers import GrowableBuffer
-from .._src.scene.shapes import icosphere, shape
 from .command import add_row as _add_row
 from .command import add_run_options, bench_parser, start, write_result
-from .methods import device_modes
-from .peers import NewtonBroadPhaseSAP, PeerUnavailable
-from .timing import ModeFrames, StageTimes, ms_stats, synced_ms
+from .timing import ms_stats
 
 OBJECTS_PER_WORLD = 20
 LINKS = 8

@@ -8,8 +8,8 @@ small warm-up export first.
 
 Target: 10,000 objects x 240 frames in at most 3 s on a CPU (binary ``.usd``, no wireframes).
 
-    python -m warp_ccd.bench.usd_export
-    python -m warp_ccd.bench.usd_export --num-objects 1000 --num-frames 60 --format usda
+    python -m bench.usd_export
+    python -m bench.usd_export --num-objects 1000 --num-frames 60 --format usda
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ TARGET_S = 3.0
 
 def export_once(scene, flags: np.ndarray, path: str, aabb: bool) -> dict:
     """Writes ``flags.shape[0]`` frames of ``scene`` to ``path``; returns the timings in seconds."""
-    from .._src.usd.export import UsdAnimationWriter
+    from warp_ccd.usd import UsdAnimationWriter
 
     t0 = time.perf_counter()
     writer = UsdAnimationWriter(path, scene, fps=60, aabb=aabb)
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     if args.num_objects < 1 or args.num_frames < 1 or args.repeat < 1:
         parser.error("counts must be positive")
 
-    from .._src.scene.scene import Scene
+    from warp_ccd import Scene
 
     rng = np.random.default_rng(0)
     flags = rng.random((args.num_frames, args.num_objects)) < 0.1

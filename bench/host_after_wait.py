@@ -28,7 +28,7 @@ The ``sync`` wait is as long as the kernel calibrated once at the start, about `
 JSON (``--out``): device, date, versions, git commit, ``config`` and ``rows`` of ``{"method",
 "wait_ms", "work", "us_min", "us_median", "cpu_us_median", "steal_ms"}``.
 
-    python -m warp_ccd.bench.host_after_wait --device cuda:0 --out bench/results/host_after_wait_cuda0.json
+    python -m bench.host_after_wait --device cuda:0 --out bench/results/host_after_wait_cuda0.json
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ import types
 import numpy as np
 import warp as wp
 
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.scene.scene import Scene
+from warp_ccd import CollisionPipeline, Scene
+
 from .command import add_out_option, add_row, bench_parser, start, write_result
 
 DT = 1.0 / 60.0

@@ -15,7 +15,7 @@ and the counts of the last frame: broad-phase pairs, the traversal front's large
 triangle pairs, those the exact test sent to its touch step, triangle pairs (the same for every
 combination: checked).
 
-    python -m warp_ccd.bench.box_tests --device cuda:0 --cases poly:1000000 80:100000 \\
+    python -m bench.box_tests --device cuda:0 --cases poly:1000000 80:100000 \\
         --out bench/results/box_tests_cuda0.json
 """
 
@@ -29,15 +29,16 @@ import time
 import numpy as np
 import warp as wp
 
-from .._src.geometry.precision import PRECISIONS
-from .._src.midphase import bvh as mid_phase
-from .._src.midphase.bvh import EXPAND_THREADS_PER_SM
-from .._src.narrowphase import discrete as narrow_phase
-from .._src.pipeline.pipeline import STAGES, CollisionPipeline
-from .._src.scene.scene import Scene
-from .._src.trees.bvh import OBJECT_BOUNDS
+from warp_ccd import Scene
+from warp_ccd._src.bench.meshes import parse_triangles
+from warp_ccd._src.geometry.precision import PRECISIONS
+from warp_ccd._src.midphase import bvh as mid_phase
+from warp_ccd._src.midphase.bvh import EXPAND_THREADS_PER_SM
+from warp_ccd._src.narrowphase import discrete as narrow_phase
+from warp_ccd._src.pipeline.pipeline import STAGES, CollisionPipeline
+from warp_ccd._src.trees.bvh import OBJECT_BOUNDS
+
 from .command import add_run_options, bench_parser, start, write_result
-from .meshes import parse_triangles
 from .timing import ms_stats
 
 DT = 1.0 / 60.0

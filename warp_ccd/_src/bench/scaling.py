@@ -6,9 +6,9 @@ the same run.
     python -m warp_ccd.bench --device cuda:0 --objects 1e2 1e3 1e4 1e5 1e6 --triangles poly 80 \\
         --out bench/results/scaling_cuda0.json --plot bench/results/scaling_cuda0.png
 
-For each triangle count (``--triangles``, :func:`~warp_ccd.bench.meshes.parse_triangles`) and each
+For each triangle count (``--triangles``, :func:`~warp_ccd._src.bench.meshes.parse_triangles`) and each
 object count ``N`` (``--objects``), on the scaling scene ``Scene.random(N, seed, shapes)`` (constant
-density, so the work per object does not depend on ``N``), :func:`~warp_ccd.bench.methods.run_case`
+density, so the work per object does not depend on ``N``), :func:`~warp_ccd._src.bench.methods.run_case`
 runs:
 
 1. **Frames.** ``--warmup`` frames (kernel loading, buffers growing, graphs captured), then
@@ -18,7 +18,7 @@ runs:
    again by 0 s (the same poses). Times are wall-clock ms with
    ``wp.synchronize_device`` before and after what is timed; each row gives the min and the
    median over the timed frames.
-2. **Methods** (:mod:`warp_ccd.bench.methods`).
+2. **Methods** (:mod:`warp_ccd._src.bench.methods`).
 
    * ``warp_ccd``: this package's :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline`: with
      ``timings=True`` for the stages it reports (whatever their names; it synchronises after each,
@@ -31,10 +31,10 @@ runs:
      work, not this frame's). After the checks, on CUDA, ``--frames`` more fused frames run back
      to back, as a simulation loop runs them: ``loop_graph`` (wall ms) and ``host_loop_graph``.
    * ``warp_builtin`` (peer ``builtin``): Warp's own tools,
-     :class:`~warp_ccd.bench.peers.WarpMeshPipeline`, at its best: a frame is refit + query + one
+     :class:`~warp_ccd._src.bench.peers.WarpMeshPipeline`, at its best: a frame is refit + query + one
      read of its counter into pinned memory, launched eagerly (``detect_eager``) and, on CUDA, as a
      captured graph (``detect_graph``); ``detect`` is the faster by median.
-   * ``fcl`` (peer ``fcl``): python-fcl, :class:`~warp_ccd.bench.peers.FclPipeline`, on the host, for
+   * ``fcl`` (peer ``fcl``): python-fcl, :class:`~warp_ccd._src.bench.peers.FclPipeline`, on the host, for
      ``N <= --fcl-max-objects``; its stages timed in turn.
    * ``warp_ccd_nxn`` (peer ``nxn``): this pipeline with the all-pairs broad phase, for
      ``N <= --nxn-max-objects``.
@@ -44,7 +44,7 @@ runs:
 
    Peers report ``detect`` and ``total`` (``motion + detect``). A peer whose library is missing
    is skipped with a note; a peer that raises is reported with an ``ERROR`` note.
-3. **Checks**, on the last frame (:mod:`warp_ccd.bench.compare`), which judge this package, not
+3. **Checks**, on the last frame (:mod:`warp_ccd._src.bench.compare`), which judge this package, not
    its peers: ``warp_builtin`` and ``fcl`` must find the same object pairs as ``warp_ccd`` up to
    near-touching pairs, their triangle-level differences are classified and counted, and a real
    difference is charged to whichever method an independent arbiter (Warp's float64 test on the
@@ -54,12 +54,12 @@ runs:
    an exact overlap test in numpy. A peer found wrong is a finding: its rows are marked ``*``
    (``peer_wrong`` in the JSON). A difference charged to ``warp_ccd`` is a mismatch: the command
    ends with status 3 after everything is written.
-4. **Memory** (:mod:`warp_ccd.bench.memory`) of a fresh ``warp_ccd`` pipeline over two frames: the
+4. **Memory** (:mod:`warp_ccd._src.bench.memory`) of a fresh ``warp_ccd`` pipeline over two frames: the
    peak of Warp's allocation tracker (``wp.ScopedMemoryTracker``; it sees every Warp allocation,
    native trees included), on CUDA also the memory pool's high-water mark when it rose, and the
    bytes of the arrays the pipeline and the scene hold; per scene triangle too.
 
-Output (:mod:`warp_ccd.bench.report`): a table per case and a summary on stdout (ratios are a peer's
+Output (:mod:`warp_ccd._src.bench.report`): a table per case and a summary on stdout (ratios are a peer's
 median over ``warp_ccd``'s for the same stage: above 1, ``warp_ccd`` is faster), a JSON file (``--out``:
 device, date, versions, git commit, ``rows`` of ``method, n_objects, triangles,
 triangles_per_object, stage, ms_min, ms_median, object_pairs, triangle_pairs, frames, mode,
@@ -79,8 +79,8 @@ import argparse
 import math
 import sys
 
-from .._src.cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, CliError, OneLineParser, quiet_warp, resolve_device
-from .._src.output import check_output_path
+from ..cli.common import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, CliError, OneLineParser, quiet_warp, resolve_device
+from ..output import check_output_path
 from .meshes import parse_triangles
 from .methods import PEERS, REFERENCE, run_case
 from .report import JSON_EXTENSIONS, PLOT_EXTENSIONS, BenchReport

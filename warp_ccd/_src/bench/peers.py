@@ -1,7 +1,7 @@
-"""Peers: other ways to find the same pairs, for benchmarks and cross-checks in the same run.
+"""The scaling benchmark's peers: other ways to find the same pairs, timed and cross-checked in the same run.
 
 Each peer works on the same :class:`~warp_ccd._src.scene.scene.Scene` (or the same boxes) as this package,
-so :mod:`warp_ccd.bench.scaling` can time them frame by frame and compare what they find. Optional
+so :mod:`warp_ccd._src.bench.scaling` can time them frame by frame and compare what they find. Optional
 libraries are imported inside the class that needs them; a missing one raises
 :class:`PeerUnavailable` naming the package, and the benchmark skips that peer with a note.
 
@@ -19,7 +19,7 @@ Scene peers are run at their best, as a careful user of each library runs it:
   ``wp.intersect_tri_tri`` on candidates of different objects. Cost: O(T log T) queries plus the
   candidates. Warp's test snaps plane distances below an absolute 1e-6 (on the unnormalised
   normal), so on small triangles it reports some pairs that are apart by up to about
-  ``1e-6 / |n|``: compare with it through :mod:`warp_ccd.bench.compare`, never for equality.
+  ``1e-6 / |n|``: compare with it through :mod:`warp_ccd._src.bench.compare`, never for equality.
 * :class:`FclPipeline`: python-fcl (CPU). One ``BVHModel`` per object, built once with the
   object's uniform scale baked into its vertices (FCL transforms are rigid, and every object of a
   random scene has its own scale), one ``fcl.Transform`` per object updated every frame from the
@@ -31,8 +31,6 @@ Broad-phase peers follow :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP`'s 
 (the caller resets it and checks its counter after) and ``counters`` (buffers of their own with
 counters: none here):
 
-* :class:`WarpBvhBroadPhase`: a ``wp.Bvh`` over the boxes, rebuilt (or refit) every frame, and one
-  ``wp.bvh_query_aabb`` per box. Pairs ``(a, b)`` with ``a < b``.
 * :class:`NewtonBroadPhaseSAP`: newton's ``newton.geometry.BroadPhaseSAP`` (one fixed sweep
   direction, every box in one world and one collision group). Its rows are unordered: ``(a, b)``
   or ``(b, a)``.
@@ -43,9 +41,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .._src.geometry.box import boxes_overlap
-from .._src.runtime.buffers import GrowableBuffer, emit_pair, reserve_slot
-from .._src.scene.scene import Scene
+from ..runtime.buffers import GrowableBuffer, reserve_slot
+from ..scene.scene import Scene
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -54,7 +51,6 @@ __all__ = [
     "FclPipeline",
     "NewtonBroadPhaseSAP",
     "PeerUnavailable",
-    "WarpBvhBroadPhase",
     "WarpMeshPipeline",
     "scene_triangle_vertex_index",
 ]
@@ -196,7 +192,7 @@ class WarpMeshPipeline:
     def launch(self) -> None:
         """One frame on the device: reset the counter, refit, query. The host reads nothing and
         nothing is allocated, so the frame can be captured in a graph
-        (:class:`~warp_ccd.bench.timing.CountedFrame` reads :attr:`counters` after it)."""
+        (:class:`~warp_ccd._src.runtime.frame.CountedFrame` reads :attr:`counters` after it)."""
         self.hits.reset()
         self.refit()
         self.query()
@@ -303,74 +299,6 @@ class FclPipeline:
             return np.zeros((0, 4), np.int32)
         t = np.array(sorted(rows), np.int32)
         return t
-
-
-# ---------------------------------------------------------------------------------------------
-# Broad phase with wp.Bvh
-
-
-@wp.kernel
-def _bvh_box_pairs_kernel(
-    bvh: wp.uint64,
-    lower: wp.array[wp.vec3],
-    upper: wp.array[wp.vec3],
-    pair_capacity: int,
-    # Outputs
-    pair: wp.array[wp.vec2i],
-    pair_count: wp.array[wp.int64],
-):
-    """One thread per box ``i``: query the tree with the box, keep exact overlaps with ``j > i``."""
-    i = wp.tid()
-    lo = lower[i]
-    hi = upper[i]
-    query = wp.bvh_query_aabb(bvh, lo, hi)
-    j = int(0)
-    while wp.bvh_query_next(query, j):
-        if j > i:
-            if boxes_overlap(lo, hi, lower[j], upper[j]):
-                emit_pair(i, j, pair, pair_count, pair_capacity)
-
-
-class WarpBvhBroadPhase:
-    """Broad phase with Warp's ``wp.Bvh`` over the boxes and one AABB query per box.
-
-    The tree is built on the first launch (and whenever the box arrays change), then rebuilt in
-    place (``refit=False``, Warp's default constructor for the device) or only refit
-    (``refit=True``: cheaper, but the tree's quality decays as boxes move) at every launch.
-
-    Args:
-        device: Warp device.
-        refit: refit the tree instead of rebuilding it.
-        constructor: ``wp.Bvh`` constructor (None: Warp's default: ``"sah"`` on CPU, ``"lbvh"``
-            on CUDA).
-    """
-
-    def __init__(self, *, device=None, refit: bool = False, constructor: str | None = None):
-        self.device = wp.get_device(device)
-        self.refit = bool(refit)
-        self.constructor = constructor
-        self.bvh = None
-        self._boxes = None
-
-    @property
-    def counters(self) -> list[GrowableBuffer]:
-        """The buffers of its own with counters that :meth:`launch` writes: none (only ``pairs``)."""
-        return []
-
-    def launch(self, lower: wp.array, upper: wp.array, pairs: GrowableBuffer) -> None:
-        """Writes overlapping pairs of the ``(N,)`` boxes into ``pairs``; host reads nothing."""
-        n = lower.shape[0]
-        if n < 2:
-            return
-        if self.bvh is None or self._boxes != (lower.ptr, upper.ptr, n):
-            self.bvh = wp.Bvh(lower, upper, constructor=self.constructor)
-            self._boxes = (lower.ptr, upper.ptr, n)
-        elif self.refit:
-            self.bvh.refit()
-        else:
-            self.bvh.rebuild()
-        wp.launch(_bvh_box_pairs_kernel, dim=n, inputs=[self.bvh.id, lower, upper, pairs.capacity],
-                  outputs=[pairs.data, pairs.count], device=self.device)
 
 
 # ---------------------------------------------------------------------------------------------

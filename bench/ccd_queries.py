@@ -35,7 +35,7 @@ than ipctk's by more than 1e-5, reported); the CPU's tois must equal the device'
 float64's, bit for bit. A ``missed`` query or a differing toi makes the command end with status 3
 after the results are written.
 
-    python -m warp_ccd.bench.ccd_queries --device cuda:0 --queries 1e7 --out bench/results/ccd_queries_cuda0.json
+    python -m bench.ccd_queries --device cuda:0 --queries 1e7 --out bench/results/ccd_queries_cuda0.json
 """
 
 from __future__ import annotations
@@ -48,10 +48,10 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.cli.common import EXIT_INTERNAL, EXIT_OK
+from warp_ccd._src.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE
+from warp_ccd._src.queries.ccd import run_queries
 
-from .._src.cli.common import EXIT_INTERNAL, EXIT_OK
-from .._src.geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE
-from .._src.queries.ccd import run_queries
 from .command import add_run_options, bench_parser, start, write_result
 from .narrow_phase import gpu_ms
 

@@ -24,7 +24,7 @@ With ``--profile`` the continuous row also holds one eager frame activity by act
 launched kernel by kernel, ``wp.timing``: GPU ms per kernel, median of 5 frames) and the counts of
 its stages (candidates, candidates with queries left to search after the first pass).
 
-    python -m warp_ccd.bench.continuous --device cuda:0 --objects 1e3 1e4 1e5 1e6 --profile \\
+    python -m bench.continuous --device cuda:0 --objects 1e3 1e4 1e5 1e6 --profile \\
         --out bench/results/continuous_cuda0.json
 """
 
@@ -37,10 +37,11 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.bench.timing import synced_ms
 
 from .command import add_run_options, bench_parser, start, write_result
 from .profile_frame import activities
-from .timing import ms_stats, synced_ms
+from .timing import ms_stats
 
 DT = 1.0 / 60.0
 

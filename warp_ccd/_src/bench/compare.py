@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from .._src.scene.scene import Scene
+from ..scene.scene import Scene
 from .peers import scene_triangle_vertex_index
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Registers, local memory (spills) and resident threads per multiprocessor of the frame's kernels
 on a CUDA device: what bounds the occupancy of each (``cuFuncGetAttribute`` on the loaded kernels).
 
-    python -m warp_ccd.bench.kernel_resources --device cuda:0 --out bench/results/kernel_resources_cuda0.json
+    python -m bench.kernel_resources --device cuda:0 --out bench/results/kernel_resources_cuda0.json
 """
 
 from __future__ import annotations
@@ -9,15 +9,16 @@ from __future__ import annotations
 import ctypes
 import sys
 
-from .._src.broadphase import sap as broad_phase
-from .._src.midphase import bvh as mid_phase
-from .._src.narrowphase import continuous
-from .._src.narrowphase import discrete as narrow_phase
-from .._src.pipeline.pipeline import CollisionPipeline
-from .._src.scene import motion, scene
-from .._src.trees import bvh
+from warp_ccd import CollisionPipeline
+from warp_ccd._src.bench.report import environment
+from warp_ccd._src.broadphase import sap as broad_phase
+from warp_ccd._src.midphase import bvh as mid_phase
+from warp_ccd._src.narrowphase import continuous
+from warp_ccd._src.narrowphase import discrete as narrow_phase
+from warp_ccd._src.scene import motion, scene
+from warp_ccd._src.trees import bvh
+
 from .command import add_out_option, bench_parser, parse_options, write_result
-from .report import environment
 
 # CUfunction_attribute values (CUDA driver API).
 _ATTRIBUTES = {"max_threads_per_block": 0, "shared_bytes": 1, "local_bytes": 3, "registers": 4}

@@ -1,7 +1,7 @@
 """Benchmark: the least distance between two big meshes, against python-fcl with its builds.
 
 For each size of ``--triangles``, two lumpy closed surfaces of that many triangles each (seeded
-blobs of :mod:`warp_ccd.bench.meshes`, radius 1) are placed ``--gap`` apart (the gap between their
+blobs of :mod:`warp_ccd._src.bench.meshes`, radius 1) are placed ``--gap`` apart (the gap between their
 bounding spheres; several gaps, each a row), both rigid in their world positions. Measured, each
 with ``--warmup`` untimed runs first, min and median of ``--frames`` runs:
 
@@ -18,7 +18,7 @@ Each row also gives the two distances and their difference (the same pair of mes
 ``fcl_query / query`` and ``fcl_one_shot / one_shot``; with ``--profile`` (CUDA), an eager query's
 kernels, GPU ms each (``wp.timing``), and their sum.
 
-    python -m warp_ccd.bench.distance --device cuda:0 --triangles 1e4 1e5 --gap 0.5 0.01 \\
+    python -m bench.distance --device cuda:0 --triangles 1e4 1e5 --gap 0.5 0.01 \\
         --out bench/results/distance_cuda0.json
 """
 
@@ -31,12 +31,12 @@ import time
 import numpy as np
 
 import warp_ccd as wc
+from warp_ccd._src.bench.meshes import _blob
+from warp_ccd._src.bench.peers import fcl_bvh
+from warp_ccd._src.bench.timing import synced_ms
 
 from .command import add_run_options, bench_parser, start, write_result
-from .meshes import _blob
-from .peers import fcl_bvh
 from .profile_frame import activities
-from .timing import synced_ms
 
 
 def blob_pair(triangles: int, gap: float, seed: int) -> list:

@@ -1,13 +1,12 @@
 """The scaling benchmark's report: what a result file records, its rows, tables, JSON and plot.
 
-* :func:`environment`: where a result was measured (device, date, versions, git commit); every
-  benchmark of :mod:`warp_ccd.bench` records it.
-* :func:`write_json`: a result file, replaced in one step; every benchmark writes its results with it
-  (those with a default destination under :data:`RESULTS`).
-* :class:`BenchReport`: the scaling benchmark's cases (:class:`~warp_ccd.bench.methods.CaseResult`):
+* :func:`environment`: where a result was measured (device, date, versions, git commit); the scaling
+  benchmark records it (and so do the developers' benchmarks of ``bench/``, the repository's lab).
+* :func:`write_json`: a result file, replaced in one step.
+* :class:`BenchReport`: the scaling benchmark's cases (:class:`~warp_ccd._src.bench.methods.CaseResult`):
   a table per case and a summary on stdout (ratios are a peer's median over ``warp_ccd``'s for the
   same stage: above 1, ``warp_ccd`` is faster), the JSON document (its fields: see
-  :mod:`warp_ccd.bench.scaling`) and a log-log plot of ms per frame against ``N`` (needs matplotlib).
+  :mod:`warp_ccd._src.bench.scaling`) and a log-log plot of ms per frame against ``N`` (needs matplotlib).
 """
 
 from __future__ import annotations
@@ -23,19 +22,13 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from .. import __version__
-from .._src.output import PendingFile, check_output_path, prepare_text
+from ..output import PendingFile, check_output_path, prepare_text
 from .methods import REFERENCE, CaseResult
 
-__all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "RESULTS", "BenchReport", "environment", "git_commit", "write_json"]
+__all__ = ["JSON_EXTENSIONS", "PLOT_EXTENSIONS", "BenchReport", "environment", "git_commit", "write_json"]
 
 JSON_EXTENSIONS = (".json",)
 PLOT_EXTENSIONS = (".png", ".svg", ".pdf")
-
-RESULTS = Path("bench", "results")
-"""Where the benchmarks that write results by default put them: ``bench/results`` under the working
-directory (the repository root, where ``bench/run_cuda.sh`` runs them)."""
-
 
 def _bytes(n: float | None) -> str:
     if n is None:
@@ -53,7 +46,7 @@ def git_commit() -> tuple[str | None, bool | None]:
     if os.environ.get("WARP_CCD_GIT_COMMIT"):
         dirty = os.environ.get("WARP_CCD_GIT_DIRTY")
         return os.environ["WARP_CCD_GIT_COMMIT"], (None if dirty is None else dirty == "1")
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]  # warp_ccd/_src/bench/report.py: the checkout
     try:
         commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
         if commit.returncode != 0:
@@ -74,13 +67,14 @@ def environment(device) -> dict:
         warp_ccd, Warp, numpy and the optional peers' packages, None when missing),
         ``git_commit`` and ``git_dirty``.
     """
-    versions = {"python": platform.python_version(), "platform": platform.platform(), "warp_ccd": __version__,
+    versions = {"python": platform.python_version(), "platform": platform.platform(), "warp_ccd": None,
                 "warp": wp.__version__, "numpy": np.__version__}
-    for dist in ("python-fcl", "newton", "matplotlib"):
+    for key, dist in (("warp_ccd", "warp-ccd"), ("python-fcl", "python-fcl"), ("newton", "newton"),
+                      ("matplotlib", "matplotlib")):
         try:
-            versions[dist] = importlib.metadata.version(dist)
+            versions[key] = importlib.metadata.version(dist)
         except importlib.metadata.PackageNotFoundError:
-            versions[dist] = None
+            versions[key] = None
     commit, dirty = git_commit()
     return {
         "device": str(device),
