@@ -33,10 +33,11 @@ from warp_ccd import Scene
 from warp_ccd._src.bench.meshes import parse_triangles
 from warp_ccd._src.geometry.precision import PRECISIONS
 from warp_ccd._src.midphase import bvh as mid_phase
-from warp_ccd._src.midphase.bvh import EXPAND_THREADS_PER_SM
 from warp_ccd._src.narrowphase import discrete as narrow_phase
 from warp_ccd._src.pipeline.pipeline import STAGES, CollisionPipeline
+from warp_ccd._src.trees import traversal
 from warp_ccd._src.trees.bvh import OBJECT_BOUNDS
+from warp_ccd._src.trees.traversal import EXPAND_THREADS_PER_SM
 
 from .command import add_run_options, bench_parser, start, write_result
 from .timing import ms_stats
@@ -65,19 +66,20 @@ def _case(text: str) -> tuple[str, int]:
 
 
 def _set_grid(pipe: CollisionPipeline, threads_per_sm: int) -> None:
-    """The expansion grid of ``threads_per_sm`` threads per multiprocessor (CUDA; the CPU keeps one block)."""
+    """The expansion grid of ``threads_per_sm`` threads per multiprocessor (CUDA; the CPU keeps one block): the
+    mid phase's walk (:class:`~warp_ccd._src.trees.traversal.FrontWalk`) and its own launches."""
     mid = pipe.mid
     if mid.device.is_cuda:
-        mid.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim
+        mid.num_blocks = mid.walk.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim
 
 
 def _heavy_kernels() -> list:
     """The kernels whose register budget ``--max-registers`` sets: the exact test's two, the
-    traversal's expansion and its pair set-up (both precisions)."""
-    kernels = [mid_phase._expand_kernel]
+    traversal's expansion (the mid phase's walk) and its pair set-up (both precisions)."""
+    kernels = [mid_phase._WALK]
     for precision in PRECISIONS:
         kernels += [narrow_phase._NARROW_MOLLER[precision], narrow_phase._NARROW_TOUCH[precision],
-                    mid_phase._PAIR[precision]]
+                    traversal.PAIR_KERNELS[precision]]
     return kernels
 
 

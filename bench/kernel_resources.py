@@ -16,7 +16,7 @@ from warp_ccd._src.midphase import bvh as mid_phase
 from warp_ccd._src.narrowphase import continuous
 from warp_ccd._src.narrowphase import discrete as narrow_phase
 from warp_ccd._src.scene import motion, scene
-from warp_ccd._src.trees import bvh
+from warp_ccd._src.trees import bvh, traversal
 
 from .command import add_out_option, bench_parser, parse_options, write_result
 
@@ -31,9 +31,9 @@ def _kernels() -> dict:
     return {
         "narrow moller": narrow_phase._NARROW_MOLLER["float32"],
         "narrow touch": narrow_phase._NARROW_TOUCH["float32"],
-        "expand": mid_phase._expand_kernel,
+        "expand": mid_phase._WALK,
         "whole pairs": mid_phase._WHOLE["float32"],
-        "pair": mid_phase._PAIR["float32"],
+        "pair": traversal.PAIR_KERNELS["float32"],
         "rigid bounds": bvh._RIGID_BOUNDS["float32"],
         "sap sweep": broad_phase._sap_sweep_kernel,
         "motion pose": motion._MOTION_POSE["float32"],
