@@ -66,8 +66,8 @@ def sap_key_bits(num_boxes: int, num_worlds: int = 1) -> tuple[int, int]:
     never a pair. 26 bits at 10^6 boxes, 23 at 10^5.
 
     Up to :data:`SMALL_SCENE_BOXES` boxes the keys have 16 bits (8 + 8: at most 255 cells), two
-    radix passes: on an H100 a third pass costs 0.017 ms at 2 x 10^4 keys (0.047 ms for 16 bits,
-    0.064 for 20, sort alone in a graph), more than the sweep loses to columns a few times fuller.
+    radix passes: a third pass measured costlier on a GPU than what the sweep loses to columns a few
+    times fuller (``docs/site/architecture/broad-phase.md``).
 
     With ``num_worlds`` ``W > 1`` worlds, each world's grid is sized for its share of the boxes and
     the cell field of a key holds ``slot * cells + cell`` (``cell_bits`` counts the world's bits too):

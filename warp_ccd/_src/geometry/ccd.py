@@ -505,8 +505,8 @@ def _search(kind: int, x0: MAT34D, x1: MAT34D, min_distance: wp.float64, toleran
         if used >= max_iterations:
             return _F0, int(1)  # nothing proved yet: the conservative answer is the start
     # Root proofs pay at min_distance 0 (a proved root is the contact); with a least distance the
-    # first contact comes before any root, and the proofs only cost (twice the time of a 10^7-query
-    # set with d = 1e-3 on the H100, bench/results/ccd_queries_cuda0.json).
+    # first contact comes before any root, and the proofs only cost (they doubled the time of a query
+    # set with d > 0 on a GPU: docs/site/architecture/continuous.md, "Root proofs").
     best, boxes, exhausted = _box_search(kind, x0, x1, lo, w, tol, eps, err, tolerance, max_iterations - used,
                                          t_end, min_distance == _F0)
     return best, exhausted

@@ -13,10 +13,11 @@ protocol), :func:`upper_bound` (which block of a scanned count a flat work item 
 :func:`packed_upload` (many small integer arrays to the device in one copy; it lives in
 :mod:`warp_ccd._src.runtime.arrays`, beside the scene's own packed uploads, and is re-exported here).
 
-Atomic adds on one counter are served one at a time, about one per nanosecond on an H100 when
-their increments differ from thread to thread (0.08 ms for 10^5 boxes reserving their grid
-entries one by one): a kernel that emits many items reserves them per block
-(:func:`block_reserve`: a scan of the block's counts in shared memory, one atomic, a broadcast).
+Atomic adds on one counter are served one at a time when their increments differ from thread to
+thread, which measured slow on a GPU where every thread reserved its own items (the measurements:
+``docs/site/architecture/frame.md``, "Output reserved per block"): a kernel that emits many items
+reserves them per block (:func:`block_reserve`: a scan of the block's counts in shared memory, one
+atomic, a broadcast).
 """
 
 from __future__ import annotations
@@ -316,8 +317,8 @@ class CounterRead:
 
     def enqueue(self) -> None:
         """Copies every counter to the host: one kernel writing into the pinned block, which CUDA maps
-        into the device's address space (capturable; a kernel node of a graph ends sooner than a
-        device-to-host copy node: 0.002-0.007 ms a frame on an H100). A device without unified
+        into the device's address space (capturable; a kernel node of a graph measured faster than a
+        device-to-host copy node: ``docs/site/architecture/frame.md``). A device without unified
         addressing gets the copy."""
         if self.buffers:
             if self._host_mapped is not None:

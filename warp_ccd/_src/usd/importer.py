@@ -41,18 +41,17 @@ Cost: the stage is traversed once, a few ``pxr`` calls a prim (its type's schema
 name, purpose and visibility only where authored); meshes are read as raw arrays, a few calls each,
 and validated, fanned and hashed together (:func:`~warp_ccd._src.usd.meshes.read_meshes`). The world
 transforms of animated prims are read in bulk (:func:`~warp_ccd._src.usd.xforms.read_world_poses`): their
-xform ops' time samples, about 0.5-0.7 us a sample read with its attribute's dictionary, composed and
-split into poses in numpy (about 0.3 us per prim and time code); only what the bulk read cannot
-reproduce takes one ``UsdGeom.XformCache`` lookup per prim and time code (10-20 us each). From
-:data:`PARALLEL_LOOKUPS` prim-time codes on, worker processes (each opening the file) read shares of
-the prims while this process reads one. Per time code, one ``ComputeInstanceTransformsAtTime`` per
-animated PointInstancer and one ``points`` read per time-sampled mesh; static transforms and points
-are read once. Measured on 10,000 rigid prims over 240 time codes (2 slow cores, one process): 77-80 s
-before the bulk read, 8-9 s with it, 6 s of which the transforms (4.8 million samples); the rest about
-130 us a prim. Poses of every time code are read and decomposed up front, which is where an animated
-transform that does not stay a similarity is found. Objects are ordered static rigid, animated rigid,
-then deforming, so that a frame copies two contiguous pose slices and one contiguous tail of world
-vertices.
+xform ops' time samples, each read with its attribute's dictionary, composed and split into poses in
+numpy; only what the bulk read cannot reproduce takes one ``UsdGeom.XformCache`` lookup per prim and
+time code (an order of magnitude costlier than a sample read in bulk). From :data:`PARALLEL_LOOKUPS`
+prim-time codes on, worker processes (each opening the file) read shares of the prims while this
+process reads one. Per time code, one ``ComputeInstanceTransformsAtTime`` per animated PointInstancer
+and one ``points`` read per time-sampled mesh; static transforms and points are read once. The bulk
+read made a check of 10,000 rigid prims over 240 time codes about nine times faster, most of what is
+left being the transforms (the measurements: ``docs/site/architecture/usd.md``). Poses of every time
+code are read and decomposed up front, which is where an animated transform that does not stay a
+similarity is found. Objects are ordered static rigid, animated rigid, then deforming, so that a frame
+copies two contiguous pose slices and one contiguous tail of world vertices.
 
 :func:`scene_from_usd` is the short way to the scene of one time code. The stage is opened by
 :mod:`~warp_ccd._src.usd.stage`, meshes are read and fanned by :mod:`~warp_ccd._src.usd.meshes`, world matrices
@@ -90,8 +89,8 @@ __all__ = ["PARALLEL_LOOKUPS", "UsdMeshImport", "scene_from_usd"]
 
 PARALLEL_LOOKUPS = 1_000_000
 """Prim-time codes (animated prims times time codes) from which a file's transforms are read by worker
-processes too, each opening the file and reading a share of the prims (about 1 s to start one and open
-the file, against about 1-3 us a prim-time code read in bulk)."""
+processes too, each opening the file and reading a share of the prims (starting one and opening the file
+costs about what reading several hundred thousand prim-time codes in bulk does: ``docs/site/architecture/usd.md``)."""
 
 
 @dataclass

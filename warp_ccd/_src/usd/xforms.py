@@ -42,9 +42,10 @@ Everything else (PointInstancers aside, which the import reads on its own) falls
 of about :data:`BATCH` prim-time codes at a time, one numpy pass per matrix entry.
 
 Cost: per animated prim a few dozen ``pxr`` calls (its ops, their resolve info and spec); per sample
-about 0.5-0.7 us read with its dictionary (most of the time: the ``Gf`` values made for Python) or 2 us
-read alone; the numpy composition and poses about 0.3 us per prim and time code. An ``XformCache``
-lookup (the fallback) is 10-20 us. The garbage collector is paused while reading (:func:`paused_gc`).
+one read with its dictionary (most of the time: the ``Gf`` values made for Python; a sample read alone
+costs about three times as much); the numpy composition and poses less than the reads. An
+``XformCache`` lookup (the fallback) costs an order of magnitude more than a sample read in bulk (the
+measurements: ``docs/site/architecture/usd.md``). The garbage collector is paused while reading (:func:`paused_gc`).
 :data:`FAST_XFORMS` turns the bulk path off (every lookup through ``XformCache``), for comparison.
 """
 
@@ -87,7 +88,7 @@ this share of its samples (a sample of the dictionary costs about 0.4 of one rea
 
 BATCH = 16_384
 """Prim-time codes composed at once: the numpy passes' arrays stay small (128 KB), cached and reused
-(larger ones are mapped and unmapped each time; measured 290 ns a prim-time code here, 480 at 65,536)."""
+(larger ones are mapped and unmapped each time, which measured slower: ``docs/site/architecture/usd.md``)."""
 
 _RESET = "!resetXformStack!"
 _INVERT = "!invert!"
