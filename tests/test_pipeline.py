@@ -144,25 +144,52 @@ def test_bad_whole_triangles_max(value):
             mid.whole_lanes = lanes
 
 
-def test_stages_keep_their_contracts():
-    """Every stage the factories make, with either method, has what the frame relies on of its kind
-    (the protocols of :mod:`warp_ccd._src.pipeline.stages`); the pipeline holds such stages."""
+def _kinds_built(scene):
+    """Every stage class the factories make, with each method, by the protocol of its kind."""
     from warp_ccd import stages
 
-    scene = wc.Scene.random(6, seed=0)
     built = {stages.BroadPhaseStage: [stages.make_broad_phase(m) for m in ("sap", "all_pairs")],
-             stages.NarrowPhaseStage: [stages.make_narrow_phase(m, 6, segments=True, containment=True)
-                                       for m in ("moller", "edge_face")]}
-    for method, (bounds, mid) in ((m, stages.make_mid_phase(m, scene)) for m in ("bvh", "all_pairs")):
+             stages.NarrowPhaseStage: [stages.make_narrow_phase(6, narrow_phase=m, segments=True, containment=True)
+                                       for m in ("moller", "edge_face")]
+             + [stages.make_narrow_phase(6, continuous=True)]}
+    for method, (bounds, mid) in ((m, stages.make_mid_phase(scene, mid_phase=m)) for m in ("bvh", "all_pairs")):
         built.setdefault(stages.BoundsStage, []).append(bounds)
         built.setdefault(stages.MidPhaseStage, []).append(mid)
         assert type(mid) is {"bvh": stages.MidPhaseBVH, "all_pairs": stages.MidPhaseAllPairs}[method]
+    pipe = wc.CollisionPipeline(scene, clearance=0.1, self_intersections=True)
+    built[stages.ClearanceStage] = [pipe.near_phase]
+    built[stages.SelfStage] = [pipe.self_phase]
+    return built
+
+
+def test_stages_keep_their_contracts():
+    """Every stage the factories make, with every method, has what the frame calls of its kind (the
+    protocols of :mod:`warp_ccd._src.pipeline.stages`): the members, and calls of the protocol's signature
+    (every parameter of the protocol's method, of the same kind and default); the pipeline holds such stages."""
+    import inspect
+
+    from warp_ccd import stages
+
+    scene = wc.Scene.random(6, seed=0)
+    built = _kinds_built(scene)
     classes = {type(stage) for kind in built.values() for stage in kind}
     assert classes == {stages.ObjectBounds, stages.SceneBVH, stages.BroadPhaseSAP, stages.BroadPhaseAllPairs,
-                       stages.MidPhaseBVH, stages.MidPhaseAllPairs, stages.NarrowPhase}
+                       stages.MidPhaseBVH, stages.MidPhaseAllPairs, stages.NarrowPhase, stages.ContinuousNarrowPhase,
+                       stages.ClearancePhase, stages.SelfIntersection}
     for kind, made in built.items():
+        calls = [name for name in ("launch", "refit") if name in vars(kind)]
+        assert calls, kind
         for stage in made:
             assert isinstance(stage, kind), (type(stage).__name__, kind.__name__)
+            for name in calls:
+                want = list(inspect.signature(getattr(kind, name)).parameters.values())[1:]
+                got = inspect.signature(getattr(stage, name)).parameters
+                for p in want:
+                    assert p.name in got, (type(stage).__name__, name, p.name)
+                    q = got[p.name]
+                    assert (q.kind, q.default) == (p.kind, p.default), (type(stage).__name__, name, p.name)
+                extra = [q for q in got.values() if q.name not in {p.name for p in want}]
+                assert all(q.default is not inspect.Parameter.empty for q in extra), (type(stage).__name__, extra)
     assert not isinstance(stages.make_broad_phase("sap"), stages.MidPhaseStage)  # no candidates
     pipe = wc.CollisionPipeline(scene)
     for stage, kind in ((pipe.boxes, stages.BoundsStage), (pipe.broad, stages.BroadPhaseStage),
@@ -170,29 +197,85 @@ def test_stages_keep_their_contracts():
         assert isinstance(stage, kind)
 
 
+def test_the_frame_branches_on_no_stage_class():
+    """The frame calls its stages through their protocols: no ``isinstance`` on a concrete stage."""
+    import inspect
+
+    from warp_ccd._src.pipeline import pipeline
+
+    source = inspect.getsource(pipeline.CollisionPipeline)
+    for name in ("SceneBVH", "ObjectBounds", "NarrowPhase", "ContinuousNarrowPhase", "MidPhaseBVH", "BroadPhaseSAP"):
+        assert f"isinstance(self.boxes, {name})" not in source and f", {name})" not in source, name
+
+
 def test_factories_name_the_methods():
-    """An unknown method's error lists the known ones; each factory checks its own options."""
+    """An unknown method's error lists the known ones; every option is checked by its one rule."""
     from warp_ccd import stages
 
     scene = wc.Scene.random(4, seed=0)
-    with pytest.raises(ValueError, match=r"^mid_phase must be 'bvh' or 'all_pairs', got 'octree'$"):
-        stages.make_mid_phase("octree", scene)
+    with pytest.raises(ValueError, match=r"^mid_phase must be one of \['all_pairs', 'bvh'\], got 'octree'$"):
+        stages.make_mid_phase(scene, mid_phase="octree")
     with pytest.raises(ValueError, match=r"^narrow_phase must be one of \['edge_face', 'moller'\], got 'gjk'$"):
-        stages.make_narrow_phase("gjk", 4)
-    with pytest.raises(ValueError, match=r"^broad phase method must be 'sap' or 'all_pairs' \(or 'nxn', an alias\)"):
+        stages.make_narrow_phase(4, narrow_phase="gjk")
+    with pytest.raises(ValueError, match=r"^broad_phase must be one of \['all_pairs', 'nxn', 'sap'\]"):
         stages.make_broad_phase(["sap"])
-    with pytest.raises(ValueError, match=r"^leaf_size must be an integer in \[1, 256\], got 0$"):
-        stages.make_mid_phase("all_pairs", scene, leaf_size=0)  # checked with either method
+    with pytest.raises(ValueError, match=r"^leaf_size must be an integer in \[1, 256\] or None, got 0$"):
+        stages.make_mid_phase(scene, mid_phase="all_pairs", leaf_size=0)  # checked with either method
     with pytest.raises(ValueError, match=r"^front_capacity must be an integer >= 1 or None, got 0$"):
-        stages.make_mid_phase("bvh", scene, front_capacity=0)
+        stages.make_mid_phase(scene, front_capacity=0)
     with pytest.raises(ValueError, match=r"^tolerance must be a finite number in \[0, 0.1\), got 0.1$"):
-        stages.make_narrow_phase("moller", 4, tolerance=0.1)
+        stages.make_narrow_phase(4, tolerance=0.1)
     with pytest.raises(ValueError, match=r"^hit_capacity must be an integer >= 1 or None, got 2.0$"):
-        stages.make_narrow_phase("moller", 4, hit_capacity=2.0)
+        stages.make_narrow_phase(4, hit_capacity=2.0)
     with pytest.raises(ValueError, match=r"^rebuild_every must be 0 with the all_pairs mid phase \(no trees\), got 2$"):
         wc.CollisionPipeline(scene, mid_phase="all_pairs", rebuild_every=2)
     with pytest.raises(ValueError, match=r"^separating_axes must be an integer in \{3, 6\}, got 6.0$"):
         wc.CollisionPipeline(scene, separating_axes=6.0)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'tolerence'"):
+        wc.CollisionPipeline(scene, tolerence=0.01)
+
+
+def test_pipeline_options_are_one_checked_object():
+    """The pipeline's options are one object, checked when made and passed down: keywords and an object
+    give the same pipeline; an object is immutable and a changed copy is checked again."""
+    scene = wc.Scene.random(20, seed=3)
+    options = wc.PipelineOptions(clearance=0.05, segments=True)
+    by_object = wc.CollisionPipeline(scene, options)
+    by_keywords = wc.CollisionPipeline(scene, clearance=0.05, segments=True)
+    assert by_object.options == by_keywords.options
+    assert by_object.options.leaf_size == 1  # chosen for the scene where None was given
+    np.testing.assert_array_equal(by_object.detect().triangle_pairs, by_keywords.detect().triangle_pairs)
+    with pytest.raises(AttributeError):
+        options.clearance = 0.1
+    with pytest.raises(ValueError, match="clearance must be a finite number in"):
+        options.replace(clearance=-1.0)
+    assert wc.CollisionPipeline(scene, options, segments=False).options.segments is False
+    with pytest.raises(TypeError, match="options must be a PipelineOptions"):
+        wc.CollisionPipeline(scene, {"clearance": 0.05})
+    for flag in ("segments", "containment", "continuous", "self_intersections", "timings"):
+        with pytest.raises(ValueError, match=rf"^{flag} must be True or False, got 'yes'$"):
+            wc.PipelineOptions(**{flag: "yes"})
+
+
+def test_an_option_has_one_rule():
+    """Every field of the options objects has its rule in the one table, and the stage classes that take an
+    option check it by that rule: the same bounds and message wherever it enters."""
+    import dataclasses
+
+    from warp_ccd._src.runtime.options import OPTIONS
+    from warp_ccd.stages import ClearancePhase, NarrowPhase, TreeDistance
+
+    assert {f.name for f in dataclasses.fields(wc.PipelineOptions)} <= set(OPTIONS)
+    scene = wc.Scene.random(4, seed=0)
+    message = r"^tolerance must be a finite number in \[0, 0.1\), got 0.5$"
+    for make in (lambda: wc.PipelineOptions(tolerance=0.5), lambda: NarrowPhase(4, tolerance=0.5),
+                 lambda: ClearancePhase(4, 0.1, tolerance=0.5),
+                 lambda: TreeDistance(wc.stages.SceneBVH(scene), tolerance=0.5)):
+        with pytest.raises(ValueError, match=message):
+            make()
+    for make in (lambda: wc.PipelineOptions(clearance=2e37), lambda: ClearancePhase(4, 2e37)):
+        with pytest.raises(ValueError, match=r"^clearance must be a finite number in \[0, 1e\+37\], got 2e\+37$"):
+            make()
 
 
 def test_mid_phases_share_whole_pair_options():
@@ -460,7 +543,7 @@ def test_bad_transforms():
 
 def test_bad_options():
     scene = wc.Scene.random(3)
-    with pytest.raises(ValueError, match="broad phase"):
+    with pytest.raises(ValueError, match="broad_phase"):
         wc.CollisionPipeline(scene, broad_phase="octree")
     with pytest.raises(ValueError, match="narrow_phase"):
         wc.CollisionPipeline(scene, narrow_phase="gjk")

@@ -31,6 +31,7 @@ from ._src.check.check import check_usd
 from ._src.check.report import CheckReport
 from ._src.geometry.precision import PrecisionWarning
 from ._src.geometry.triangle import TOLERANCE
+from ._src.pipeline.options import PipelineOptions
 from ._src.pipeline.pipeline import CollisionPipeline, collide
 from ._src.pipeline.result import CollisionResult
 from ._src.queries.ccd import ccd_queries
@@ -45,6 +46,7 @@ __all__ = [
     "CollisionPipeline",
     "CollisionResult",
     "DistanceQuery",
+    "PipelineOptions",
     "PrecisionWarning",
     "Scene",
     "broad_phase_pairs",

@@ -1,39 +1,42 @@
-"""The stages of a frame, in data-flow order, each a thin class over the kernels of its module:
+"""The stages of a frame, for your own pipelines: each a thin class that owns its buffers and launches its
+kernels, in data-flow order:
 
-1. Bounds (:mod:`~warp_ccd._src.trees.bounds`, :mod:`~warp_ccd._src.trees.bvh`, trees built by
-   :mod:`~warp_ccd._src.trees.build`): :class:`ObjectBounds` (object boxes from world vertices)
-   or :class:`SceneBVH` (a tree per shape, deforming objects' trees refit; object boxes).
-2. Broad phase (:mod:`~warp_ccd._src.broadphase.sap`): object pairs whose boxes overlap,
-   :class:`BroadPhaseSAP` (sweep and prune on a grid) or :class:`BroadPhaseAllPairs` (the reference).
-3. Mid phase (:mod:`~warp_ccd._src.midphase.bvh`): candidate triangle pairs, :class:`MidPhaseBVH`
-   (tree against tree, with :class:`SceneBVH`) or :class:`MidPhaseAllPairs` (the reference, with
-   :class:`ObjectBounds`).
-4. Narrow phase (:mod:`~warp_ccd._src.narrowphase.discrete`): :class:`NarrowPhase`, the exact triangle test.
-5. With a clearance (:mod:`~warp_ccd._src.narrowphase.clearance`): :class:`ClearancePhase`, the object pairs
-   within it, their least distances, closest points and directions.
+1. Bounds: :class:`ObjectBounds` (object boxes from world vertices) or :class:`SceneBVH` (a tree per shape,
+   deforming objects' trees refit; object boxes).
+2. Broad phase: object pairs whose boxes overlap, :class:`BroadPhaseSAP` (sweep and prune on a grid) or
+   :class:`BroadPhaseAllPairs` (the reference).
+3. Mid phase: candidate triangle pairs, :class:`MidPhaseBVH` (tree against tree, with :class:`SceneBVH`) or
+   :class:`MidPhaseAllPairs` (the reference, with :class:`ObjectBounds`).
+4. Narrow phase: :class:`NarrowPhase` (the exact triangle test) or :class:`ContinuousNarrowPhase` (times of
+   impact over a linear motion).
+5. With a clearance: :class:`ClearancePhase`, the object pairs within it, their least distances, closest
+   points and directions; with self-intersections, :class:`SelfIntersection`.
 
-Apart from the frame, :class:`TreeDistance` (:mod:`~warp_ccd._src.queries.tree_distance`) measures the
-least distance of chosen object pairs however far apart (branch and bound over their trees).
+Apart from the frame, :class:`TreeDistance` measures the least distance of chosen object pairs however far
+apart (branch and bound over their trees).
 
-What the frame relies on of each kind is a protocol (:class:`BoundsStage`, :class:`BroadPhaseStage`,
-:class:`MidPhaseStage`, :class:`NarrowPhaseStage`, in :mod:`~warp_ccd._src.pipeline.stages`), and a factory
-makes each kind from a method name: :func:`make_broad_phase`, :func:`make_mid_phase` (the mid phase
-with its bounds stage), :func:`make_narrow_phase`. Beside them: :func:`broad_phase_pairs`, the
-broad phase of boxes given as numpy arrays, and :func:`build_tree`, one shape's tree on the host.
-The device buffers (:mod:`~warp_ccd._src.runtime.buffers`) and the frame that runs the stages with one
-counter read (:mod:`~warp_ccd._src.runtime.frame`) are shared by all.
+What the frame calls of each kind is a protocol (:class:`BoundsStage`, :class:`BroadPhaseStage`,
+:class:`MidPhaseStage`, :class:`NarrowPhaseStage`, :class:`ClearanceStage`, :class:`SelfStage`); the
+factories make the stages of a :class:`~warp_ccd.PipelineOptions`: :func:`make_broad_phase`,
+:func:`make_mid_phase` (the mid phase with its bounds stage), :func:`make_narrow_phase`. Beside them:
+:func:`broad_phase_pairs`, the broad phase of boxes given as numpy arrays, and :func:`build_tree`, one shape's
+tree on the host.
 """
 
 from ._src.broadphase.sap import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, make_broad_phase
 from ._src.midphase.all_pairs import MidPhaseAllPairs
 from ._src.midphase.bvh import MidPhaseBVH
 from ._src.narrowphase.clearance import ClearancePhase
+from ._src.narrowphase.continuous import ContinuousNarrowPhase
 from ._src.narrowphase.discrete import NarrowPhase
+from ._src.narrowphase.self_intersection import SelfIntersection
 from ._src.pipeline.stages import (
     BoundsStage,
     BroadPhaseStage,
+    ClearanceStage,
     MidPhaseStage,
     NarrowPhaseStage,
+    SelfStage,
     make_mid_phase,
     make_narrow_phase,
 )
@@ -48,6 +51,8 @@ __all__ = [
     "BroadPhaseSAP",
     "BroadPhaseStage",
     "ClearancePhase",
+    "ClearanceStage",
+    "ContinuousNarrowPhase",
     "MidPhaseAllPairs",
     "MidPhaseBVH",
     "MidPhaseStage",
@@ -55,6 +60,8 @@ __all__ = [
     "NarrowPhaseStage",
     "ObjectBounds",
     "SceneBVH",
+    "SelfIntersection",
+    "SelfStage",
     "TreeDistance",
     "broad_phase_pairs",
     "build_tree",

@@ -62,7 +62,6 @@ from ..geometry.box import BOX_EMPTY, boxes_overlap
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.arrays import host_array
 from ..runtime.buffers import (
-    COUNT_LIMIT,
     ITEM_LIST_SIZE,
     CounterRead,
     GrowableBuffer,
@@ -74,6 +73,7 @@ from ..runtime.buffers import (
 )
 from ..runtime.checks import integer_option
 from ..runtime.frame import CountedFrame, FrameCache, frame_mode
+from ..runtime.options import check_option
 from ..scene.filter import CollisionFilter, PairFilter, inactive_filter, pair_allowed
 from .grid import (
     STATS_BLOCK,
@@ -457,8 +457,8 @@ class BroadPhaseSAP(BroadPhase):
         self._scratch_boxes = -1  # boxes the per-box scratch holds
         self._entry_box = None
         # Every slot is sorted each frame: the capacity follows the entries (an eighth above them).
-        self.entry = GrowableBuffer(wp.int32, _entry_capacity(entry_capacity) or 1024, d, "sap grid entries",
-                                    factor=2, doubling=False)
+        capacity = check_option("entry_capacity", entry_capacity) or 1024
+        self.entry = GrowableBuffer(wp.int32, capacity, d, "sap grid entries", factor=2, doubling=False)
 
     def _resize(self, n: int) -> None:
         """Scratch for ``n`` boxes. It only grows: a captured frame holds its pointers, so a frame of
@@ -541,12 +541,6 @@ BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": B
 ``"all_pairs"``, kept as an alias."""
 
 
-def _entry_capacity(value: int | None) -> int | None:
-    """``entry_capacity`` checked (an integer >= 1, or None): stored twice over (the sort's halves),
-    so at most half the count limit."""
-    return integer_option("entry_capacity", value, low=1, high=COUNT_LIMIT // 2 - 1, allow_none=True)
-
-
 def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None,
                      entry_capacity: int | None = None) -> BroadPhase:
     """The broad phase of a method name.
@@ -562,11 +556,10 @@ def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | No
     Raises:
         ValueError: an unknown method (the message lists the known ones).
     """
-    if not isinstance(method, str) or method not in BROAD_METHODS:
-        raise ValueError(f"broad phase method must be 'sap' or 'all_pairs' (or 'nxn', an alias), got {method!r}")
+    method = check_option("broad_phase", method)
     if BROAD_METHODS[method] is BroadPhaseSAP:
         return BroadPhaseSAP(device=device, graph=graph, entry_capacity=entry_capacity)
-    _entry_capacity(entry_capacity)  # checked though the all-pairs reference has no grid
+    check_option("entry_capacity", entry_capacity)  # checked though the all-pairs reference has no grid
     return BROAD_METHODS[method](device=device, graph=graph)
 
 

@@ -68,11 +68,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..geometry.precision import precision_types
 from ..geometry.triangle import TOLERANCE
-from ..narrowphase.clearance import CLEARANCE_MAX
 from ..runtime.aliases import DeviceLike, PathLike
-from ..runtime.checks import integer_option, number_option
+from ..runtime.options import check_option
 from ..usd.filters import PairFilters
 from .clearance import soft_clashes
 from .crossing import CrossingClassifier
@@ -156,14 +154,13 @@ def checked_options(*, min_depth: float = 0.0, min_distance: float = 0.0, cleara
             :data:`~warp_ccd._src.narrowphase.clearance.CLEARANCE_MAX`, ``min_distance`` without ``continuous``, an
             unknown precision, a negative number of readers.
     """
-    number_option("min_depth", min_depth, low=0.0)
-    if read_workers is not None:
-        integer_option("read_workers", read_workers, low=0)
-    number_option("min_distance", min_distance, low=0.0)
-    clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
+    check_option("min_depth", min_depth)
+    check_option("read_workers", read_workers)
+    check_option("min_distance", min_distance)
+    clearance = check_option("clearance", clearance)
     if min_distance > 0.0 and not continuous:
         raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
-    precision_types(precision)
+    check_option("precision", precision)
     return clearance
 
 

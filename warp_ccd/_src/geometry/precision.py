@@ -19,6 +19,8 @@ touching and crossing on rounding, not on the geometry. Coordinates beyond float
 import numpy as np
 import warp as wp
 
+from ..runtime.options import PRECISIONS, check_option
+
 __all__ = ["PRECISIONS", "RESOLUTION", "PrecisionWarning", "coordinate_message", "needed_precision",
            "precision_overloads", "precision_types", "shape_radius", "triangle_size"]
 
@@ -37,7 +39,6 @@ class PrecisionWarning(UserWarning):
     """A scene's coordinates are too far from the origin for float32 at its triangles' size, and it
     is checked in float64 instead."""
 
-PRECISIONS = ("float32", "float64")
 """Scene precisions: the type of shape vertices, poses and world vertices (boxes stay float32)."""
 
 
@@ -47,11 +48,9 @@ def precision_types(precision: str) -> tuple:
     Raises:
         ValueError: ``precision`` is not ``"float32"`` or ``"float64"``.
     """
-    if precision == "float64":
+    if check_option("precision", precision) == "float64":
         return wp.float64, wp.vec3d, wp.quatd, wp.transformd
-    if precision == "float32":
-        return wp.float32, wp.vec3, wp.quat, wp.transform
-    raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
+    return wp.float32, wp.vec3, wp.quat, wp.transform
 
 
 def precision_overloads(kernel, arg_types) -> dict:

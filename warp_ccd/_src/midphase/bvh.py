@@ -45,7 +45,8 @@ from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, block_reserve, used_count
-from ..runtime.checks import integer_option, number_option
+from ..runtime.checks import integer_option
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene
 from ..trees.bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, leaf_box_at, swept_arg_types
 from ..trees.traversal import CHILD_LEAF, PAIR_KERNELS, FrontWalk, TreePair, front_kernel, node_pair_overlap
@@ -53,9 +54,6 @@ from ..trees.traversal import CHILD_LEAF, PAIR_KERNELS, FrontWalk, TreePair, fro
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
 __all__ = ["MidPhase", "MidPhaseBVH"]
-
-SEPARATING_AXES = (3, 6)
-"""Axes of the box test (:class:`MidPhaseBVH`): 3, ``a``'s; 6, both objects'."""
 
 WHOLE_TRIANGLES_MAX = 64
 """Default :attr:`MidPhaseBVH.whole_triangles_max`: a pair of objects of at most this many triangles
@@ -357,8 +355,8 @@ class MidPhaseBVH(MidPhase):
                  device: DeviceLike = None) -> None:
         super().__init__(capacity=capacity, device=device)
         self.bvh = bvh
-        self.clearance = number_option("clearance", clearance, low=0.0)
-        self.separating_axes = integer_option("separating_axes", separating_axes, choices=SEPARATING_AXES)
+        self.clearance = check_option("clearance", clearance)
+        self.separating_axes = check_option("separating_axes", separating_axes)
         self.walk = FrontWalk(bvh.num_levels, front_capacity or max(256, 4 * bvh.lower.shape[0]), "tree-pair front",
                               self.device)
         self.front = self.walk.front

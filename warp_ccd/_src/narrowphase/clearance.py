@@ -69,16 +69,14 @@ from ..geometry.primitives import _max_edge, _unit_normal
 from ..geometry.triangle import CONTACT_SEGMENT, TOLERANCE, tri_tri_segment
 from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, reserve_slot, used_count
-from ..runtime.checks import number_option
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 
 # Forward kernels only; no FMA contraction, so that CPU and CUDA round every step alike.
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["CLEARANCE_MAX", "ClearancePhase", "DIRECTION_CANCELLED", "bound_slacks"]
+__all__ = ["ClearancePhase", "DIRECTION_CANCELLED", "bound_slacks"]
 
-CLEARANCE_MAX = 1.0e37
-"""The largest clearance (scene units): object boxes, float32, are padded by half of it."""
 
 KEY_NONE = wp.constant(wp.int64(0x7FFFFFFFFFFFFFFF))
 """A pair's triangle key before any triangle pair lowered it."""
@@ -413,8 +411,10 @@ class ClearancePhase:
 
     def __init__(self, num_objects: int, clearance: float, *, tolerance: float = TOLERANCE, capacity: int = 256,
                  device: DeviceLike = None) -> None:
-        self.clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX, low_open=True)
-        self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
+        self.clearance = check_option("clearance", clearance)
+        if self.clearance == 0.0:
+            raise ValueError("clearance: a clearance phase reports the pairs within a clearance > 0, got 0")
+        self.tolerance = check_option("tolerance", tolerance)
         self.device = wp.get_device(device)
         self.near = GrowableBuffer(wp.vec2i, capacity, self.device, "object pairs within the clearance")
         self.object_near = wp.zeros(num_objects, dtype=wp.int32, device=self.device)

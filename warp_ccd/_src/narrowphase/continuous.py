@@ -53,14 +53,15 @@ from ..geometry.ccd import (
     query_excluded,
 )
 from ..geometry.precision import precision_overloads
+from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, block_dim_for, block_reserve, reserve_slot, used_count
-from ..runtime.checks import integer_option, number_option
-from ..scene.scene import MeshTopology
+from ..runtime.options import check_option
+from ..scene.scene import MeshTopology, Scene
 from .pairs import PairList, append_hit, pair_count, pair_list, pair_triangles
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
-__all__ = ["ContinuousNarrowPhase", "continuous_options"]
+__all__ = ["ContinuousNarrowPhase"]
 
 MAX_REGISTERS = 128
 """Most registers a thread of the first, filter, last and undecided passes on CUDA (as the discrete
@@ -336,18 +337,6 @@ _LAST = precision_overloads(_last_pass_kernel, lambda s, v, q, t: {"world_vertex
 _UNDECIDED = precision_overloads(_undecided_pass_kernel, _SWEPT)
 
 
-def continuous_options(min_distance, tolerance, max_iterations) -> tuple[float, float, int]:
-    """The options of a continuous test, checked: ``(min_distance, tolerance, max_iterations)``.
-
-    Raises:
-        ValueError: naming the option (``min_distance`` >= 0, ``ccd_tolerance`` > 0,
-            ``ccd_max_iterations`` in ``[1, 2**31 - 1]``).
-    """
-    return (number_option("min_distance", min_distance, low=0.0),
-            number_option("ccd_tolerance", tolerance, low=0.0, low_open=True),
-            integer_option("ccd_max_iterations", max_iterations, low=1, high=2**31 - 1))
-
-
 class ContinuousNarrowPhase:
     """Times of impact of candidate triangle pairs over a linear motion; owns what it writes.
 
@@ -376,9 +365,10 @@ class ContinuousNarrowPhase:
     """
 
     def __init__(self, num_objects: int, *, min_distance: float = 0.0, tolerance: float = CCD_TOLERANCE,
-                 max_iterations: int = CCD_MAX_ITERATIONS, capacity: int = 1024, device=None):
-        self.min_distance, self.tolerance, self.max_iterations = continuous_options(min_distance, tolerance,
-                                                                                    max_iterations)
+                 max_iterations: int = CCD_MAX_ITERATIONS, capacity: int = 1024, device: DeviceLike = None) -> None:
+        self.min_distance = check_option("min_distance", min_distance)
+        self.tolerance = check_option("ccd_tolerance", tolerance)
+        self.max_iterations = check_option("ccd_max_iterations", max_iterations)
         self.device = wp.get_device(device)
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
         self.deferred = GrowableBuffer(wp.vec2i, max(64, capacity // 4), self.device, "deferred candidates")
@@ -405,21 +395,27 @@ class ContinuousNarrowPhase:
         their queries, the queries searched and the rows the discrete test's common path left)."""
         return [self.hits, self.deferred, self.queries, self.searches, self.undecided]
 
-    def launch(self, scene, world_vertex_start: wp.array, candidates: GrowableBuffer, *,
-               reset_counters: bool = True) -> None:
+    def launch(self, scene: Scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
+               object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
+               world_vertex_start: wp.array | None = None, reset_counters: bool = True) -> None:
         """Tests the ``candidates`` over the motion from ``world_vertex_start`` to ``scene.world_vertex``:
         resets and writes :attr:`hits`, :attr:`toi` and :attr:`object_colliding` (host reads nothing).
 
         Args:
             scene: the :class:`~warp_ccd._src.scene.scene.Scene` (its world vertices at ``t = 1``).
-            world_vertex_start: ``(V,)`` world vertices at ``t = 0`` (the scene's vector type).
             candidates: ``wp.vec4i`` candidate triangle pairs (the mid phase's, from swept boxes).
+            object_pairs: the broad phase's object pairs (unused: the narrow phases take the same arguments).
+            object_lower: the lower corners of its object boxes (unused).
+            object_upper: the upper corners of its object boxes (unused).
+            world_vertex_start: ``(V,)`` world vertices at ``t = 0`` (the scene's vector type; required).
             reset_counters: zero the hits' counter first; False when the caller has.
 
         A buffer of :attr:`counters` that overflows leaves this launch's hits incomplete (rows may
         be appended with a later toi than their full answer): the caller reads the counters and
         runs again after they grow, as :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` does.
         """
+        if world_vertex_start is None:
+            raise ValueError("world_vertex_start: a continuous narrow phase tests a motion: give its start")
         d = self.device
         hits = self.hits
         if reset_counters:

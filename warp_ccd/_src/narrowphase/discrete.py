@@ -60,7 +60,7 @@ from ..geometry.triangle import (
 )
 from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, reserve_slot, used_count
-from ..runtime.checks import number_option
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from .pairs import PairList, append_hit, append_pair, pair_count, pair_list, pair_triangles
 
@@ -333,12 +333,10 @@ class NarrowPhase:
     def __init__(self, num_objects: int, *, method: str = "moller", tolerance: float = TOLERANCE,
                  capacity: int = 1024, segments: bool = False, containment: bool = False,
                  device: DeviceLike = None) -> None:
-        if method not in NARROW_METHODS:
-            raise ValueError(f"narrow_phase must be one of {sorted(NARROW_METHODS)}, got {method!r}")
-        number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
+        self.method = check_option("narrow_phase", method)
+        self.tolerance = check_option("tolerance", tolerance)
+        self.segments = check_option("segments", segments)
         self.device = wp.get_device(device)
-        self.method = method
-        self.tolerance = float(tolerance)
         self.hits = GrowableBuffer(wp.vec4i, capacity, self.device, "triangle pairs")
         self.touch = (GrowableBuffer(wp.vec4i, capacity, self.device, "candidates that may touch")
                       if method == "moller" else None)
@@ -346,10 +344,10 @@ class NarrowPhase:
                      if method == "moller" else None)
         self.touch_flag = None
         self.object_colliding = wp.zeros(num_objects, dtype=wp.int32, device=self.device)
-        self.segments = bool(segments)
         self.segment = None
         self.contained = (GrowableBuffer(wp.vec2i, max(16, num_objects // 8), self.device, "contained pairs")
-                          if containment else None)
+                          if check_option("containment", containment) else None)
+        self.toi = None  # a discrete test has no times of impact (ContinuousNarrowPhase has)
 
     @property
     def counters(self) -> list[GrowableBuffer]:
@@ -359,7 +357,7 @@ class NarrowPhase:
 
     def launch(self, scene: Scene, candidates: GrowableBuffer, object_pairs: GrowableBuffer | None = None,
                object_lower: wp.array | None = None, object_upper: wp.array | None = None, *,
-               reset_counters: bool = True) -> None:
+               world_vertex_start: wp.array | None = None, reset_counters: bool = True) -> None:
         """Tests the candidates of ``scene``: resets and writes the hits and the flags, and the
         segments and the containment pairs when asked for (host reads nothing).
 
@@ -369,9 +367,14 @@ class NarrowPhase:
             object_pairs: the broad phase's object pairs (needed with ``containment``).
             object_lower: the ``(N,)`` lower corners of the object boxes it saw (needed with ``containment``).
             object_upper: the ``(N,)`` upper corners of those boxes (needed with ``containment``).
+            world_vertex_start: None (the discrete tests see one moment; the narrow phases take the same
+                arguments).
             reset_counters: zero the counters of :attr:`counters` first; False when the caller
                 has zeroed them already (a frame zeroes all its counters with one memset).
         """
+        if world_vertex_start is not None:
+            raise ValueError("world_vertex_start: the discrete narrow phase tests one moment (continuous=True "
+                             "tests a motion)")
         if self.contained is not None and (object_pairs is None or object_lower is None or object_upper is None):
             raise ValueError("containment: launch needs the object pairs and the object boxes")
         d = self.device

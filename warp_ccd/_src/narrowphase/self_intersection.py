@@ -34,6 +34,7 @@ from ..geometry.adjacent import tri_tri_self
 from ..geometry.box import boxes_overlap
 from ..geometry.precision import precision_overloads
 from ..geometry.triangle import TOLERANCE, crossing_depth
+from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import (
     CounterRead,
     GrowableBuffer,
@@ -41,9 +42,9 @@ from ..runtime.buffers import (
     reserve_slot,
     used_count,
 )
-from ..runtime.checks import number_option
 from ..runtime.frame import FrameCache
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..runtime.options import check_option
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from ..trees.traversal import CHILD_LEAF, CHILD_SELF_LEAF, FrontWalk, front_kernel
 
@@ -298,7 +299,7 @@ class SelfTraversal:
     def __init__(self, num_levels: int, *, tolerance: float = TOLERANCE, capacity: int = 4096,
                  front_capacity: int = 1024, hit_capacity: int = 256, device=None):
         self.device = d = wp.get_device(device)
-        self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
+        self.tolerance = check_option("tolerance", tolerance)
         self.walk = FrontWalk(num_levels, front_capacity, "self-traversal front", d)
         self.num_levels = self.walk.num_levels
         self.front = self.walk.front
@@ -353,11 +354,11 @@ class SelfIntersection:
         object_flag: ``(N,)`` int32 device flags: the object intersects itself.
     """
 
-    def __init__(self, scene, bvh: SceneBVH, *, tolerance: float = TOLERANCE, hit_capacity: int | None = None,
-                 device=None):
+    def __init__(self, scene: Scene, bvh: SceneBVH, *, tolerance: float = TOLERANCE, hit_capacity: int | None = None,
+                 device: DeviceLike = None) -> None:
         self.device = d = wp.get_device(device or scene.device)
         n = scene.num_objects
-        self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
+        self.tolerance = check_option("tolerance", tolerance)
         self.weld = wp.array(weld_vertices(scene.shape_vertex.numpy(), scene.shape_vertex_start_np), dtype=wp.int32,
                              device=d)
         self.shape_vertex_start = scene.shape_vertex_start
@@ -413,7 +414,7 @@ class SelfIntersection:
         """The deforming traversal's front, candidates and hits (rigid objects' rows are hits too)."""
         return self.traversal.counters
 
-    def depth(self, scene, rows: np.ndarray) -> np.ndarray:
+    def depth(self, scene: Scene, rows: np.ndarray) -> np.ndarray:
         """``(M,)`` float64 crossing depths (scene units) of rows ``(object, tri_a, tri_b)`` on the scene's
         world vertices now (:func:`~warp_ccd._src.geometry.triangle.crossing_depth`; 0 for a fold flat onto
         itself). Waits for the device."""
@@ -427,7 +428,7 @@ class SelfIntersection:
                   outputs=[out], device=self.device)
         return out.numpy()
 
-    def launch(self, scene) -> None:
+    def launch(self, scene: Scene) -> None:
         """Enqueues the frame's rows: the rigid objects' (their shapes'), then the deforming objects'
         traversal on ``scene.world_vertex`` (their trees refit for this frame). The counters are the
         caller's to reset."""

@@ -30,227 +30,110 @@ import numpy as np
 import warp as wp
 
 from ..broadphase.sap import make_broad_phase
-from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE
 from ..geometry.triangle import TOLERANCE
-from ..narrowphase.clearance import CLEARANCE_MAX, ClearancePhase
-from ..narrowphase.continuous import ContinuousNarrowPhase, continuous_options
+from ..narrowphase.clearance import ClearancePhase
 from ..narrowphase.self_intersection import SelfIntersection
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.arrays import host_array
 from ..runtime.buffers import CounterRead, GrowableBuffer
-from ..runtime.checks import integer_option, number_option
 from ..runtime.frame import CountedFrame, FrameCache, frame_mode
+from ..runtime.options import check_option
 from ..scene.scene import Scene, quat_to_matrix, transforms_to_poses
-from ..trees.bvh import SceneBVH
+from .options import PipelineOptions, pipeline_options
 from .result import NEAR_ROWS, CollisionResult
 from .stages import make_mid_phase, make_narrow_phase
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]  # CollisionResult: from .result
 
 RIGID_LEAF_SIZE = 1
-"""Default triangles per leaf in a scene of rigid objects: on the H100 the frame took 4.3 / 1.65 /
-1.03 / 0.44 ms at 10^6 polyhedra / 10^5 80-triangle / 10^4 1,280-triangle / 10^3 mixed objects
-with leaves of 1, against 5.5 / 2.3 / 1.39 / 0.48 with leaves of 2 and 7.7 / 3.4 / 1.93 / 0.57
-with 4 (``warp_ccd/bench/box_tests.py``, ``bench/results/box_tests_sweep_cuda0.json``): the level by
-level descent tests node pairs at memory speed, and a leaf pair's boxes are its triangles' boxes,
-so that fewer pairs reach the exact test (half as many as with leaves of 2)."""
+"""Default triangles per leaf in a scene of rigid objects: the level by level descent tests node pairs at
+memory speed, and a leaf pair's boxes are its triangles' boxes, so that fewer pairs reach the exact test
+(half as many as with leaves of 2); measured fastest at every scale of the scaling benchmark (see the docs'
+performance page)."""
 
 DEFORMING_LEAF_SIZE = 4
-"""Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame:
-a quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair
-(``warp_ccd/bench/deforming.py``). Not in a continuous frame: its leaf pairs' triangle pairs each
-cost a continuous test, dearer than a refit (leaves of one triangle: 18,088 candidates of 3,000
-polyhedra over a step against 66,796 with leaves of 4)."""
+"""Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame: a
+quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair. Not in a
+continuous frame (its leaf pairs' triangle pairs each cost a continuous test, dearer than a refit), nor with
+self-intersections (a leaf's pairs are candidates of the adjacency-aware test, the self frame's costliest
+kernel)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
 with the all-pairs mid phase); a pipeline with a clearance times ``clearance`` too."""
+
 
 class CollisionPipeline:
     """Persistent collision detection for one :class:`Scene`, every frame on its device.
 
     Args:
         scene: the scene; its world vertices are read at each :meth:`detect`.
-        broad_phase: ``"sap"`` (default) or ``"all_pairs"`` (reference; ``"nxn"`` is an alias).
-        mid_phase: ``"bvh"`` (default: tree-vs-tree traversal) or ``"all_pairs"`` (reference:
-            every triangle pair of each object pair).
-        narrow_phase: ``"moller"`` (default) or ``"edge_face"``.
-        tolerance: relative tolerance of touching contacts (see :mod:`warp_ccd._src.geometry.triangle`).
-        timings: when True, synchronise after each stage and report ms per stage (frames are then
-            launched eagerly).
-        graph: replay each frame as a captured CUDA graph (default: on CUDA, unless ``timings``);
-            False launches every kernel from Python (the CPU always does). Both give the same results.
-        leaf_size: triangles per tree leaf (``bvh`` mid phase; default :data:`RIGID_LEAF_SIZE`, or
-            :data:`DEFORMING_LEAF_SIZE` in a discrete pipeline of a scene with deforming objects that
-            does not seek self-intersections: a leaf's pairs are candidates of the adjacency-aware test,
-            the self frame's costliest kernel, and on the H100 a frame of 100 folded 10k-triangle sheets
-            took 6.9 ms with leaves of 1 against 18.7 with leaves of 4, the pairwise part alike,
-            ``bench/results/self_intersection_leaves_cuda0.json``).
-        cut_depth: least level of the tree cut whose boxes make a big rigid object's box for the
-            broad phase (``bvh`` mid phase; ``object_bounds``, :class:`~warp_ccd._src.trees.bvh.SceneBVH`).
-        separating_axes: the traversal's box test (``bvh`` mid phase): 6 (default), the box around
-            one object's box in the other's space, both ways round; 3, one way (see
-            :mod:`warp_ccd._src.midphase.bvh`).
-        object_bounds: a rigid object's box for the broad phase (``bvh`` mid phase): ``"auto"``
-            (default), ``"vertices"``, ``"tree"``, or the most vertices of an object whose box comes
-            from its vertices (see :class:`~warp_ccd._src.trees.bvh.SceneBVH`).
-        segments: also compute the intersection segment of each triangle pair
-            (:attr:`CollisionResult.segments`).
-        containment: also report objects wholly inside another (winding number of one vertex,
-            for object pairs where one object's box holds the other's vertex), in
-            :attr:`CollisionResult.containment_pairs`.
-        pair_capacity: initial capacity of the broad phase's object pairs (it grows).
-        entry_capacity: initial capacity of the ``sap`` broad phase's grid entries (it grows;
-            default: see :class:`~warp_ccd._src.broadphase.sap.BroadPhaseSAP`).
-        candidate_capacity: initial capacity of the mid phase's candidate triangle pairs (it grows).
-        hit_capacity: initial capacity of the narrow phase's intersecting triangle pairs (it grows).
-        near_capacity: initial capacity of the object pairs within the clearance (it grows).
-        front_capacity: initial capacity of the traversal's front of node pairs (``bvh`` mid phase;
-            it grows; default four per object).
-        rebuild_every: with the ``bvh`` mid phase, rebuild the trees' triangle order from the world
-            vertices before every ``k``-th :meth:`detect` (:meth:`SceneBVH.rebuild
-            <warp_ccd._src.trees.bvh.SceneBVH.rebuild>`: for deforming meshes whose refit trees have loosened;
-            the results are the same, the traversal faster); 0 (default) never.
-        continuous: report what collides over the linear motion of every world vertex since the
-            previous :meth:`detect` (at the first, since construction): triangle pairs that meet at
-            some time ``t`` in ``[0, 1]`` of it, with their times of impact
-            (:attr:`CollisionResult.triangle_toi`; see :mod:`warp_ccd._src.narrowphase.continuous`). Every
-            tree is then refit each frame from swept boxes (``leaf_size`` defaults to
-            :data:`RIGID_LEAF_SIZE`). Not with ``segments``, ``containment`` or another
-            ``narrow_phase`` than the default.
-        min_distance: with ``continuous``, pairs that come within this distance (scene units,
-            infinity norm, >= 0) collide too.
-        ccd_tolerance: with ``continuous``, the test's distance tolerance (> 0, scene units: a false
-            positive comes within about it of a contact; default
-            :data:`~warp_ccd._src.geometry.ccd.CCD_TOLERANCE`).
-        ccd_max_iterations: with ``continuous``, the most boxes one primitive query examines
-            (default :data:`~warp_ccd._src.geometry.ccd.CCD_MAX_ITERATIONS`; past it the answer is a
-            conservative collision).
-        clearance: also report every object pair whose surfaces come within this distance (scene
-            units, in ``[0, 1e37]``), with its least distance, closest points, direction and closest triangle
-            pair (:attr:`CollisionResult.object_pairs` are then those pairs; see
-            :mod:`warp_ccd._src.narrowphase.clearance`); 0 (default) adds nothing. Not with ``continuous``
-            (whose ``min_distance`` is the clearance over a motion).
-        self_intersections: also report the triangles of each object that meet each other beyond the
-            vertices they share (:attr:`CollisionResult.self_pairs`, :attr:`CollisionResult.self_colliding`;
-            see :mod:`warp_ccd._src.narrowphase.self_intersection`): a rigid object's from its shape, computed once
-            at construction, a deforming object's every frame. With the ``bvh`` mid phase, not with
-            ``continuous``.
-        self_capacity: initial capacity of the self-intersecting triangle pairs (it grows).
+        options: a :class:`~warp_ccd._src.pipeline.options.PipelineOptions` (every option, checked when it was
+            made); None: the defaults.
+        **kwargs: options by name (fields of :class:`~warp_ccd._src.pipeline.options.PipelineOptions`, over
+            ``options``): ``CollisionPipeline(scene, clearance=0.01)``.
 
     Attributes:
+        options: the :class:`~warp_ccd._src.pipeline.options.PipelineOptions` the pipeline runs with (its
+            ``leaf_size`` chosen for the scene where it was None).
         boxes: the refit stage, object boxes (``lower``, ``upper``) recomputed each frame: the
-            scene's :class:`~warp_ccd._src.trees.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh`` mid
-            phase,
-            else an :class:`~warp_ccd._src.trees.bounds.ObjectBounds`.
-        broad, mid, narrow: the other stages; ``pairs``: the object pairs the broad phase writes.
+            scene's :class:`~warp_ccd._src.trees.bvh.SceneBVH` (deforming objects' trees refit) with the ``bvh``
+            mid phase, else an :class:`~warp_ccd._src.trees.bounds.ObjectBounds` (a
+            :class:`~warp_ccd._src.pipeline.stages.BoundsStage` either way).
+        broad, mid, narrow: the other stages (:class:`~warp_ccd._src.pipeline.stages.BroadPhaseStage`,
+            :class:`~warp_ccd._src.pipeline.stages.MidPhaseStage`,
+            :class:`~warp_ccd._src.pipeline.stages.NarrowPhaseStage`); ``pairs``: the object pairs the broad
+            phase writes.
         near_phase: with a clearance, the :class:`~warp_ccd._src.narrowphase.clearance.ClearancePhase`, else None.
         self_phase: with ``self_intersections``, the
             :class:`~warp_ccd._src.narrowphase.self_intersection.SelfIntersection`, else None.
-        clearance: as above.
+        clearance, continuous, timings, rebuild_every: the options of those names.
         counter_read: the :class:`~warp_ccd._src.runtime.buffers.CounterRead` of every buffer with a counter the
             frame writes (``pairs`` and each stage's ``counters``).
         graph: whether frames are replayed as CUDA graphs.
         rebuilds: tree rebuilds so far (``rebuild_every``).
-        continuous: as above.
     """
 
-    def __init__(
-        self,
-        scene: Scene,
-        *,
-        broad_phase: str = "sap",
-        mid_phase: str = "bvh",
-        narrow_phase: str = "moller",
-        tolerance: float = TOLERANCE,
-        timings: bool = False,
-        graph: bool | None = None,
-        leaf_size: int | None = None,
-        cut_depth: int = 3,
-        separating_axes: int = 6,
-        object_bounds: str | int = "auto",
-        segments: bool = False,
-        containment: bool = False,
-        pair_capacity: int | None = None,
-        entry_capacity: int | None = None,
-        candidate_capacity: int | None = None,
-        hit_capacity: int | None = None,
-        front_capacity: int | None = None,
-        rebuild_every: int = 0,
-        continuous: bool = False,
-        min_distance: float = 0.0,
-        ccd_tolerance: float = CCD_TOLERANCE,
-        ccd_max_iterations: int = CCD_MAX_ITERATIONS,
-        clearance: float = 0.0,
-        near_capacity: int | None = None,
-        self_intersections: bool = False,
-        self_capacity: int | None = None,
-    ) -> None:
+    def __init__(self, scene: Scene, options: PipelineOptions | None = None, **kwargs: Any) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
-        ccd = _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase,
-                                segments, containment)
-        self.clearance = number_option("clearance", clearance, low=0.0, high=CLEARANCE_MAX)
-        if self.clearance > 0.0 and ccd is not None:
-            raise ValueError("clearance: a continuous pipeline's least distance is its min_distance "
-                             f"(continuous=True), got clearance={clearance!r}")
-        mode = frame_mode(scene.device, False if graph is None and timings else graph)
-        if graph and timings:
-            raise ValueError("graph: a frame timed stage by stage (timings=True) cannot be one graph")
-        self.rebuild_every = integer_option("rebuild_every", rebuild_every, low=0)
-        if self.rebuild_every and mid_phase == "all_pairs":
-            raise ValueError(f"rebuild_every must be 0 with the all_pairs mid phase (no trees), got {rebuild_every!r}")
-        pair_capacity = integer_option("pair_capacity", pair_capacity, low=1, allow_none=True)
-        if leaf_size is None:
-            deforming_leaves = scene.deforming and not continuous and not self_intersections
-            leaf_size = DEFORMING_LEAF_SIZE if deforming_leaves else RIGID_LEAF_SIZE
+        o = pipeline_options(options, kwargs, "CollisionPipeline")
+        mode = frame_mode(scene.device, False if o.graph is None and o.timings else o.graph)
+        if o.leaf_size is None:
+            deforming_leaves = scene.deforming and not o.continuous and not o.self_intersections
+            o = o.replace(leaf_size=DEFORMING_LEAF_SIZE if deforming_leaves else RIGID_LEAF_SIZE)
+        self.options = o
         self.scene = scene
         self.device = d = scene.device
         n = scene.num_objects
-        self.timings = bool(timings)
+        self.clearance = o.clearance
+        self.continuous = o.continuous
+        self.timings = o.timings
+        self.rebuild_every = o.rebuild_every
         self.graph = mode == "graph"
-        self.broad = make_broad_phase(broad_phase, device=d, entry_capacity=entry_capacity)
-        self.continuous = ccd is not None
+        self.broad = make_broad_phase(o.broad_phase, device=d, entry_capacity=o.entry_capacity)
+        self.narrow = make_narrow_phase(n, o, device=d)
         if self.continuous:
-            hit_capacity = integer_option("hit_capacity", hit_capacity, low=1, allow_none=True)
-            self.narrow = ContinuousNarrowPhase(n, min_distance=ccd[0], tolerance=ccd[1], max_iterations=ccd[2],
-                                                capacity=hit_capacity or max(256, 4 * n), device=d)
             # Leaf boxes padded by the discrete tolerance (at least the one of the test at t = 0 of
             # triangle_pair_toi), the least distance and the continuous tolerance.
-            margin_rel = max(number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True), TOLERANCE)
-            pad_abs = self.narrow.pad_abs
+            margin_rel, pad_abs = max(o.tolerance, TOLERANCE), self.narrow.pad_abs
         else:
-            self.narrow = make_narrow_phase(narrow_phase, n, tolerance=tolerance, hit_capacity=hit_capacity,
-                                            segments=segments, containment=containment, device=d)
             margin_rel, pad_abs = self.narrow.tolerance, 0.0
-        self.boxes, self.mid = make_mid_phase(
-            mid_phase, scene, leaf_size=leaf_size, margin_rel=margin_rel, cut_depth=cut_depth,
-            separating_axes=separating_axes, object_bounds=object_bounds, candidate_capacity=candidate_capacity,
-            front_capacity=front_capacity, world_trees=self.continuous, pad_abs=pad_abs, clearance=self.clearance,
-            device=d)
-        near_capacity = integer_option("near_capacity", near_capacity, low=1, allow_none=True)
+        self.boxes, self.mid = make_mid_phase(scene, o, margin_rel=margin_rel, world_trees=self.continuous,
+                                              pad_abs=pad_abs, device=d)
         self.near_phase = (ClearancePhase(n, self.clearance, tolerance=self.narrow.tolerance,
-                                          capacity=near_capacity or max(64, n), device=d)
+                                          capacity=o.near_capacity or max(64, n), device=d)
                            if self.clearance > 0.0 else None)
-        if not isinstance(self_intersections, (bool, np.bool_)):
-            raise ValueError(f"self_intersections must be True or False, got {self_intersections!r}")
         self.self_phase = None
-        if self_intersections:
-            if self.continuous:
-                raise ValueError("self_intersections: a continuous pipeline does not report self-intersections "
-                                 "(continuous=True)")
-            if not isinstance(self.boxes, SceneBVH):
-                raise ValueError(f"self_intersections: needs the trees of the bvh mid phase, "
-                                 f"got mid_phase={mid_phase!r}")
-            self.self_phase = SelfIntersection(
-                scene, self.boxes, tolerance=self.narrow.tolerance, device=d,
-                hit_capacity=integer_option("self_capacity", self_capacity, low=1, allow_none=True))
+        if o.self_intersections:  # the bvh mid phase's trees (PipelineOptions asks for them)
+            self.self_phase = SelfIntersection(scene, self.boxes, tolerance=self.narrow.tolerance, device=d,
+                                               hit_capacity=o.self_capacity)
         # The motion's start, two arrays: a frame reads one and writes the other (module docs).
         self._starts = [wp.clone(scene.world_vertex), wp.empty_like(scene.world_vertex)] if self.continuous else None
         self._parity = 0
         # One pair slot an object to start with (the scaling scenes hold 0.01-0.13 pairs an object; a
         # crowded frame grows it once): the mid phase keeps a TreePair of 136 bytes a slot beside it.
-        self.pairs = GrowableBuffer(wp.vec2i, pair_capacity or max(64, n), d, "broad-phase pairs")
+        self.pairs = GrowableBuffer(wp.vec2i, o.pair_capacity or max(64, n), d, "broad-phase pairs")
         stages = (self.boxes, self.broad, self.mid, self.narrow) + ((self.near_phase,) if self.near_phase else ())
         buffers = [self.pairs, *(b for stage in stages for b in stage.counters)]
         # Data-flow order of the counters: the broad phase's own (grid entries) 0, its pairs 1, the
@@ -282,7 +165,6 @@ class CollisionPipeline:
         next frame's)."""
         scene = self.scene
         start = self._starts[parity] if self.continuous else None
-        sweep = {} if start is None else {"world_vertex_start": start}
         times = {} if self.timings else None
 
         def mark(stage: str, start: float) -> float:
@@ -296,7 +178,7 @@ class CollisionPipeline:
         if times is not None:
             wp.synchronize_device(self.device)
         t = time.perf_counter()
-        self.boxes.refit(scene, **sweep)
+        self.boxes.refit(scene, start)
         t = mark("refit", t)
         if scene.num_objects < 2:  # one object: its self-intersections alone (detect() asks only then)
             self.self_phase.launch(scene)
@@ -308,18 +190,12 @@ class CollisionPipeline:
                 times["total"] = sum(times.values())
             self._times = times
             return
-        if scene.collision_filter is None:
-            self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs)
-        else:
-            self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs, scene.collision_filter)
+        self.broad.launch(self.boxes.lower, self.boxes.upper, self.pairs, scene.collision_filter)
         t = mark("broad", t)
-        self.mid.launch(scene, self.pairs, reset_counters=False, **sweep)
+        self.mid.launch(scene, self.pairs, reset_counters=False, world_vertex_start=start)
         t = mark("mid", t)
-        if start is None:
-            self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
-                               reset_counters=False)
-        else:
-            self.narrow.launch(scene, start, self.mid.candidates, reset_counters=False)
+        self.narrow.launch(scene, self.mid.candidates, self.pairs, self.boxes.lower, self.boxes.upper,
+                           world_vertex_start=start, reset_counters=False)
         t = mark("narrow", t)
         if self.near_phase is not None:
             self.near_phase.launch(scene, self.pairs, self.mid.candidates, self.narrow.hits, self.boxes.lower,
@@ -456,40 +332,11 @@ class CollisionPipeline:
                                clearance=self.clearance, near=near, self_rows=no_self)
 
 
-def _continuous_check(continuous, min_distance, ccd_tolerance, ccd_max_iterations, narrow_phase: str,
-                      segments: bool, containment: bool) -> tuple | None:
-    """The continuous options checked: ``(min_distance, tolerance, max_iterations)``, or None for a
-    discrete pipeline (whose continuous options must keep their defaults).
-
-    Raises:
-        ValueError: naming the option: a bad value, a continuous option without ``continuous=True``,
-            or an option a continuous pipeline does not have (``segments``, ``containment``, another
-            ``narrow_phase``).
-    """
-    if not isinstance(continuous, (bool, np.bool_)):
-        raise ValueError(f"continuous must be True or False, got {continuous!r}")
-    options = continuous_options(min_distance, ccd_tolerance, ccd_max_iterations)
-    if not continuous:
-        for name, value, default in zip(("min_distance", "ccd_tolerance", "ccd_max_iterations"), options,
-                                        (0.0, CCD_TOLERANCE, CCD_MAX_ITERATIONS)):
-            if value != default:
-                raise ValueError(f"{name} is an option of continuous detection (continuous=True), got {value!r}")
-        return None
-    if segments:
-        raise ValueError("segments: a continuous pipeline has no intersection segments (continuous=True)")
-    if containment:
-        raise ValueError("containment: a continuous pipeline does not report containment (continuous=True)")
-    if narrow_phase != "moller":
-        raise ValueError(f"narrow_phase: a continuous pipeline's narrow phase is its own (continuous=True), "
-                         f"got {narrow_phase!r}")
-    return options
-
-
 def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: DeviceLike = None,
             precision: str = "float32", *, transforms_end: ArrayLike | None = None,
             vertices_end: Sequence | None = None, min_distance: float = 0.0, world: ArrayLike | None = None,
             group: ArrayLike | None = None, mask: ArrayLike | None = None, exclude_pairs: ArrayLike | None = None,
-            **options: Any) -> CollisionResult:
+            options: PipelineOptions | None = None, **kwargs: Any) -> CollisionResult:
     """One-shot collision detection among meshes (like trimesh's ``CollisionManager``), at one
     moment or over a motion.
 
@@ -516,11 +363,12 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
             ``group[a] & mask[b]`` and ``group[b] & mask[a]`` are non-zero.
         mask: ``(N,)`` 32-bit collision mask of each object (the groups it collides with; see ``group``).
         exclude_pairs: ``(E, 2)`` object indices of pairs that never collide.
-        **options: passed to :class:`CollisionPipeline` (``broad_phase``, ``mid_phase``,
-            ``narrow_phase``, ``tolerance``, ``timings``, ``graph``, ``leaf_size``, ``segments``,
-            ``containment``, ``clearance``, ``ccd_tolerance``, ``ccd_max_iterations``, capacities).
-            ``clearance=d`` reports every pair of objects whose surfaces come within ``d`` too, with
-            ``object_distance``, ``closest_points``, ``object_normal``, ``closest_triangles``.
+        options: the pipeline's :class:`~warp_ccd._src.pipeline.options.PipelineOptions` (checked before anything
+            is built); None: the defaults.
+        **kwargs: options by name, over ``options`` (``tolerance``, ``segments``, ``containment``,
+            ``clearance``, ``ccd_tolerance``, capacities, ...). ``clearance=d`` reports every pair of objects
+            whose surfaces come within ``d`` too, with ``object_distance``, ``closest_points``,
+            ``object_normal``, ``closest_triangles``.
 
     Returns:
         :class:`CollisionResult` with ``object_pairs``, ``triangle_pairs`` and ``colliding``; a
@@ -533,12 +381,11 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
             triangles' size (float32: beyond about ``8.4e3`` times the typical triangle, use
             ``precision="float64"``; see :meth:`Scene.from_meshes <warp_ccd._src.scene.scene.Scene.from_meshes>`).
     """
-    min_distance = number_option("min_distance", min_distance, low=0.0)
+    o = pipeline_options(options, kwargs, "collide")
+    min_distance = check_option("min_distance", min_distance)
     filters = {"world": world, "group": group, "mask": mask, "exclude_pairs": exclude_pairs}
-    continuous = transforms_end is not None or vertices_end is not None or min_distance > 0.0
-    if continuous:
-        options["continuous"] = True
-        options["min_distance"] = min_distance
+    if transforms_end is not None or vertices_end is not None or min_distance > 0.0:
+        o = o.replace(continuous=True, min_distance=min_distance)
     end_poses = None if transforms_end is None else _checked_poses(transforms_end, len(meshes), "transforms_end")
     if vertices_end is not None:  # deforming: world vertices at both ends, computed here
         ends = _vertices_end(meshes, vertices_end)
@@ -560,13 +407,11 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
     # front (24 bytes) and a quarter of a hit and of a touching candidate (8 bytes): about 64 bytes a
     # triangle, for this call only.
     n, tris = scene.num_objects, scene.num_triangles
-    leaf = options.get("leaf_size") or RIGID_LEAF_SIZE
-    options.setdefault("pair_capacity", max(64, min(n * (n - 1) // 2, 32 * n)))
-    options.setdefault("entry_capacity", max(1024, 4 * n))
-    options.setdefault("candidate_capacity", max(1024, 16 * n, 2 * leaf * tris))
-    options.setdefault("hit_capacity", max(256, 4 * n, tris // 4))
-    options.setdefault("front_capacity", max(1024, 4 * n, tris))
-    pipeline = CollisionPipeline(scene, **options)
+    leaf = o.leaf_size or RIGID_LEAF_SIZE
+    one_shot = {"pair_capacity": max(64, min(n * (n - 1) // 2, 32 * n)), "entry_capacity": max(1024, 4 * n),
+                "candidate_capacity": max(1024, 16 * n, 2 * leaf * tris), "hit_capacity": max(256, 4 * n, tris // 4),
+                "front_capacity": max(1024, 4 * n, tris)}
+    pipeline = CollisionPipeline(scene, o.replace(**{k: v for k, v in one_shot.items() if getattr(o, k) is None}))
     if vertices_end is not None:
         scene.set_world_vertices(np.concatenate(end) if end else np.zeros((0, 3)))
     elif transforms_end is not None:

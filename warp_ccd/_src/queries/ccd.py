@@ -16,7 +16,7 @@ import warp as wp
 
 from ..geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, NO_HIT, _points, primitive_toi, query_excluded
 from ..runtime.aliases import ArrayLike, DeviceLike
-from ..runtime.checks import integer_option, number_option
+from ..runtime.options import check_option
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -156,9 +156,9 @@ def ccd_queries(kind: str, x0: ArrayLike, x1: ArrayLike, *, min_distance: float 
     """
     if not isinstance(kind, str) or kind not in CCD_KINDS:
         raise ValueError(f"kind must be one of {tuple(CCD_KINDS)}, got {kind!r}")
-    min_distance = number_option("min_distance", min_distance, low=0.0)
-    tolerance = number_option("tolerance", tolerance, low=0.0, low_open=True)
-    max_iterations = integer_option("max_iterations", max_iterations, low=1, high=2**31 - 1)
+    min_distance = check_option("min_distance", min_distance)
+    tolerance = check_option("ccd_tolerance", tolerance, given_as="tolerance")
+    max_iterations = check_option("ccd_max_iterations", max_iterations, given_as="max_iterations")
     device = wp.get_device(device)
     a0 = _query_points("x0", x0, device)
     a1 = _query_points("x1", x1, device)

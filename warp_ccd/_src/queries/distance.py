@@ -21,8 +21,8 @@ from ..geometry.triangle import TOLERANCE
 from ..narrowphase.self_intersection import SelfIntersection
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.buffers import CounterRead, GrowableBuffer
-from ..runtime.checks import integer_option
 from ..runtime.frame import FrameCache, frame_mode
+from ..runtime.options import check_option
 from ..scene.scene import Scene
 from ..scene.shapes import validate_meshes
 from ..trees.bvh import SceneBVH
@@ -86,7 +86,7 @@ class DistanceQuery:
         self.scene = scene
         self.device = d = scene.device
         mode = frame_mode(d, graph)
-        self.bvh = SceneBVH(scene, leaf_size=integer_option("leaf_size", leaf_size, low=1, high=256),
+        self.bvh = SceneBVH(scene, leaf_size=check_option("leaf_size", leaf_size),
                             margin_rel=tolerance)
         count = len(self.pair_ids)
         # First capacities: 64 node pairs a queried pair plus two per triangle of the queried objects
@@ -95,9 +95,9 @@ class DistanceQuery:
         facing = int(tris[np.unique(self.pair_ids)].sum()) if count else 0
         self.stage = TreeDistance(
             self.bvh, tolerance=tolerance, device=d,
-            front_capacity=integer_option("front_capacity", front_capacity, low=1, allow_none=True)
+            front_capacity=check_option("front_capacity", front_capacity)
             or max(1024, 64 * count + 2 * facing),
-            listed_capacity=integer_option("listed_capacity", listed_capacity, low=1, allow_none=True)
+            listed_capacity=check_option("listed_capacity", listed_capacity)
             or max(1024, 16 * count))
         self.pairs = GrowableBuffer(wp.vec2i, max(1, count), d, "queried pairs")
         if count:
@@ -225,7 +225,7 @@ def self_intersections(vertices: ArrayLike, triangles: ArrayLike, *, device: Dev
         ValueError / TypeError: naming the problem with the mesh.
     """
     scene = Scene.from_meshes([(vertices, triangles)], device=device, precision=precision)
-    bvh = SceneBVH(scene, leaf_size=integer_option("leaf_size", leaf_size, low=1, high=256), margin_rel=tolerance)
+    bvh = SceneBVH(scene, leaf_size=check_option("leaf_size", leaf_size), margin_rel=tolerance)
     stage = SelfIntersection(scene, bvh, tolerance=tolerance)
     return np.ascontiguousarray(stage.shape_rows[:, 1:])
 

@@ -43,7 +43,7 @@ from ..geometry.primitives import _unit_normal
 from ..geometry.triangle import TOLERANCE
 from ..runtime.aliases import DeviceLike
 from ..runtime.buffers import GrowableBuffer, reserve_slot, used_count
-from ..runtime.checks import number_option
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import WORLD_ERROR_ULPS, SceneBVH, TreeView, abs_matrix
 from ..trees.traversal import CHILD_LEAF, PAIR_KERNELS, FrontWalk, TreePair, front_kernel
@@ -416,7 +416,7 @@ class TreeDistance:
                  listed_capacity: int = 1024, device: DeviceLike = None) -> None:
         self.bvh = bvh
         self.device = wp.get_device(device)
-        self.tolerance = number_option("tolerance", tolerance, low=0.0, high=0.1, high_open=True)
+        self.tolerance = check_option("tolerance", tolerance)
         self.walk = FrontWalk(bvh.num_levels, front_capacity, "distance front", self.device)
         self.front = self.walk.front
         self.listed = GrowableBuffer(wp.vec4i, listed_capacity, self.device, "measured triangle pairs")

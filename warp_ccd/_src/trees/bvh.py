@@ -57,7 +57,7 @@ from ..geometry.box import BOX_EMPTY, box_lower32, box_upper32, vertex_bounds
 from ..geometry.precision import precision_overloads
 from ..runtime.arrays import packed_upload
 from ..runtime.buffers import upper_bound
-from ..runtime.checks import integer_option, is_integer
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene
 from .bounds import pad_boxes
 from .build import CUT_TRIANGLES, TreeBuild
@@ -65,19 +65,12 @@ from .reference import ShapeTree
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
-LEAF_SIZE_MAX = 256
-"""Most triangles per leaf: a traversal thread emits up to 4 leaf pairs of ``leaf_size**2`` rows at
-once and its block of 256 counts them in int32 (:func:`~warp_ccd._src.runtime.buffers.block_reserve`)."""
-
 OBJECT_BOUNDS = {"auto": 64, "tree": -1, "vertices": 2**31 - 1}
 """How a rigid object's box for the broad phase is found (:class:`SceneBVH`), and the most world
-vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 64. On the
-H100 (``bench/results/box_bounds_*_cuda0.json``, frames as a graph) the vertices win only for the
-smallest shapes, whose cuts are a few big boxes: 10^5 x 80 triangles (42 vertices) 1.11 against
-1.18 ms. From 162 vertices on the tree wins (10^4 x 1,280, 642 vertices: 0.67 against 0.79 ms;
-3 x 10^4 x 320: 0.86 against 0.87): one thread reading hundreds of vertices costs more than the
-looser boxes cost the traversal. 1,000 objects of real-asset sizes (62 to 6,480 vertices): 0.31 ms
-up to 64 vertices against 0.34 up to 512, 0.42 up to 1,024 and 1.13 for the vertices of all."""
+vertices of an object whose box comes from them (not from its tree): ``"auto"`` up to 64. Measured on a
+GPU (the docs' performance page), the vertices win only for the smallest shapes, whose cuts are a few big
+boxes; from about 162 vertices on the tree wins: one thread reading hundreds of vertices costs more than
+the looser boxes cost the traversal."""
 
 WORLD_ERROR_ULPS = 128.0
 """Bound on the rounding of a world vertex computed from its pose (``pose * (scale * p)``: a
@@ -85,7 +78,7 @@ quaternion rotation and a translation) and of a box put under a pose, in units i
 of ``|t| + scale * r`` (``t`` the translation, ``r`` the shape's radius): each output is a sum of
 about ten rounded terms of at most that size; 128 leaves a wide margin."""
 
-__all__ = ["LEAF_SIZE_MAX", "OBJECT_BOUNDS", "WORLD_ERROR_ULPS", "SceneBVH", "TreeView", "leaf_box_at",
+__all__ = ["OBJECT_BOUNDS", "WORLD_ERROR_ULPS", "SceneBVH", "TreeView", "leaf_box_at",
            "swept_triangle_box_at"]
 
 
@@ -567,15 +560,10 @@ class SceneBVH:
                  cut_depth: int = 3, cut_triangles: int = CUT_TRIANGLES, object_bounds: str | int = "auto",
                  small_subtree: int | None = None, world_trees: bool = False, pad_abs: float = 0.0,
                  box_pad: float = 0.0) -> None:
-        integer_option("leaf_size", leaf_size, low=1, high=LEAF_SIZE_MAX)
-        integer_option("cut_depth", cut_depth, low=0, high=16)
-        if isinstance(object_bounds, str) and object_bounds in OBJECT_BOUNDS:
-            vertices_max = OBJECT_BOUNDS[object_bounds]
-        elif is_integer(object_bounds) and 0 <= object_bounds < 2**31:
-            vertices_max = int(object_bounds)
-        else:
-            raise ValueError(f"object_bounds must be one of {tuple(OBJECT_BOUNDS)} or a vertex count in "
-                             f"[0, 2**31), got {object_bounds!r}")
+        leaf_size = check_option("leaf_size", leaf_size) or 1
+        cut_depth = check_option("cut_depth", cut_depth)
+        object_bounds = check_option("object_bounds", object_bounds)
+        vertices_max = OBJECT_BOUNDS.get(object_bounds, object_bounds)
         self.device = scene.device
         self.margin_rel = float(margin_rel)
         self.world_trees = bool(world_trees)
