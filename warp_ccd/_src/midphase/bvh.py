@@ -62,17 +62,15 @@ of the smaller, all in one launch (:func:`_whole_pair_kernel`). At most :data:`W
 
 WHOLE_OBJECTS_MAX = 30_000
 """Scenes of at most this many objects use whole-object pairs by default (:data:`WHOLE_TRIANGLES_MAX`),
-larger ones walk trees for every pair. On the H100 (frames as graphs, motion included,
-``bench/results/frame_stages*_cuda0.json``) whole-object pairs took 0.081 / 0.147 ms at 10^3 /
-10^4 polyhedra against 0.128 / 0.194 with trees, but 0.434 / 3.22 ms at 10^5 / 10^6 against
-0.417 / 2.77: past a few 10^4 objects the latency of a launch a level no longer counts, and the
-trees' tighter boxes do."""
+larger ones walk trees for every pair: measured on a GPU (docs: architecture, mid phase), whole-object
+pairs win up to 10^4 polyhedra and trees from 10^5: past a few 10^4 objects the latency of a launch a
+level no longer counts, and the trees' tighter boxes do."""
 
 WHOLE_LANES = 64
 """Default :attr:`MidPhaseBVH.whole_lanes`, threads per whole-object pair (:func:`_whole_pair_kernel`;
 fewer when a block has fewer): a thread takes a triangle of the larger object, four pairs a block
-of 256. On the H100 32 lanes (two triangles a thread for a dodecahedron) took 0.032 ms against
-0.016 at 1,000 polyhedra, 2.41 against 2.26 ms at 10^6 (``bench/results/frame_stages*_cuda0.json``)."""
+of 256; 32 lanes (two triangles a thread for a dodecahedron) measured slower at every scale (docs:
+architecture, mid phase)."""
 
 WHOLE_TRIANGLES_LIMIT = 64
 """Most triangles of an object in a whole-object pair: a thread's hits are the bits of an int64."""

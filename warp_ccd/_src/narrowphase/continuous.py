@@ -65,10 +65,9 @@ __all__ = ["ContinuousNarrowPhase"]
 
 MAX_REGISTERS = 128
 """Most registers a thread of the first, filter, last and undecided passes on CUDA (as the discrete
-narrow phase's kernels): two blocks of 256 a multiprocessor, for a few spilled bytes. On the H100 a
-10^5-polyhedra continuous frame took 1.44-1.49 ms with it against 1.59 ms without
-(``bench/results/continuous_cuda0.json`` is measured with it); the search pass keeps its registers
-(a cap of 168 or 192 gave nothing)."""
+narrow phase's kernels): two blocks of 256 a multiprocessor, for a few spilled bytes, measured faster
+on a GPU than without the cap (docs: architecture, continuous collision); the search pass keeps its
+registers (a cap of 168 or 192 gave nothing)."""
 
 START_UNDECIDED = wp.constant(1 << PAIR_QUERIES)
 """Bit of a deferred row's mask (above its queries' bits): the discrete test at ``t = 0`` left it to

@@ -12,7 +12,7 @@ edge-against-face tests) runs in a second kernel, two threads a pair (the edges 
 against the other's face each; six threads, one test each, recomputed the pair's set-up six
 times). A warp of the first kernel then no longer waits for its slowest lane's six tests, the
 longest of the test's paths (at 1,000 polyhedra, 874 of 4,917 candidates reach step 4, in nearly
-every warp; steps 1 to 3 alone take 0.006 ms on an H100 where the whole test took 0.014 ms). The
+every warp; steps 1 to 3 alone take less than half the whole test's time). The
 rare pairs, with a degenerate triangle or coplanar, go from the first kernel to a rare list that
 the second kernel's threads past the touch rows take, one a row, with the whole test
 (:func:`tri_tri_moller`), so that the first holds only the common path in its registers (capped
@@ -20,11 +20,9 @@ at :data:`MAX_REGISTERS` on CUDA, as the second's). The rare list was a third la
 (one graph node more); in the second kernel its branch is one no touch thread takes. Compiled
 for sm_90 by ptxas 13.0 (float32), the touch kernel alone spilled 764 bytes and the rare kernel,
 capped alike, 1,504; the two in one kernel spill 2,372, about their sum: the rare branch brings
-its own spills. Measured on an H200 (``bench/results/kernel_resources_cuda0.json``,
-``frame_stages_fold_cuda0.json`` against ``frame_stages_nofold_cuda0.json``): 2,368 bytes of local
-memory a thread against 760, and the narrow phase 6% faster at 1,000 polyhedra (0.0222 against
-0.0236 ms: a graph node fewer) and 1.3% slower at 10^6 (1.000 against 0.987 ms). The verdicts are
-those of :func:`tri_tri_moller`, bit for bit.
+its own spills: a graph node fewer for small frames, a little more local memory for big ones (the
+trade is measured in the docs: architecture, narrow phase). The verdicts are those of
+:func:`tri_tri_moller`, bit for bit.
 
 Every device gives the same verdict: the module is compiled without floating-point contraction
 (``fuse_fp=False``, as the tests ask of the modules that call them). The winding number of the
@@ -72,10 +70,9 @@ __all__ = ["MAX_REGISTERS", "NARROW_METHODS", "NarrowPhase", "winding_number"]
 
 MAX_REGISTERS = 128
 """Most registers a thread of the two kernels of Möller's test on CUDA: as compiled freely they take
-255 (with spills) and 164, so that an H100 multiprocessor holds 256 of their threads; at 128 it
-holds 512 and the frame at 10^6 polyhedra / 10^5 80-triangle objects took 3.33 / 1.32 ms against
-4.36 / 1.66 (at 64, 4.22 / 1.79: spills; ``warp_ccd/bench/box_tests.py --max-registers``,
-``bench/results/box_tests_registers_cuda0.json``, ``warp_ccd/bench/kernel_resources.py``)."""
+255 (with spills) and 164, so that a multiprocessor holds 256 of their threads; at 128 it holds 512,
+and the big frames are faster (at 64, slower again: spills; docs: architecture, narrow phase;
+``bench/box_tests.py --max-registers``, ``bench/kernel_resources.py``)."""
 
 NARROW_METHODS = {"moller": METHOD_MOLLER, "edge_face": METHOD_EDGE_FACE}
 """The ``narrow_phase`` option's names of the two tests, and their ``method`` ids."""

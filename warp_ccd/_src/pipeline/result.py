@@ -83,7 +83,7 @@ class CollisionResult:
         frame): ``rows`` maps each of ``device_triangle_pairs`` (required), ``device_contained``
         ``device_segments``, ``device_toi``, :data:`NEAR_ROWS`, ``device_self_pairs`` and
         ``device_self_colliding`` to ``(buffer array, count)``, sliced on first access (a view costs
-        Python some 10 us; a name left out is None; ``device_toi`` makes it continuous,
+        Python time every frame; a name left out is None; ``device_toi`` makes it continuous,
         ``device_near_pairs`` one with a ``clearance``)."""
         result = cls.__new__(cls)
         result._hold(num_objects, device_colliding, timings, num_candidates, num_broad_pairs,

@@ -64,9 +64,8 @@ SMALL_SUBTREE = 8
 """Largest subtree (in triangles) that one thread finishes alone (:func:`_finish_kernel`) on CUDA;
 bigger nodes are split level by level over all shapes. At least ``2 * leaf_size`` is used. On the
 CPU, where Warp runs a kernel on one thread, each shape is finished whole (its lists presorted).
-A thread's work on its own block of the lists is uncoalesced: on an H100, 10^5 shapes of 80
-triangles built in 12.9 ms from subtrees of 8, 15.1 ms of 16, 26 ms of 32, 34 ms from whole shapes
-sorted by insertion."""
+A thread's work on its own block of the lists is uncoalesced: the smallest subtrees built fastest
+on a GPU, whole shapes sorted by insertion slowest (docs: architecture, trees)."""
 
 CUT_TRIANGLES = 64
 """A tree's cut (whose boxes under the pose make a big rigid object's box for the broad phase) lies

@@ -25,10 +25,10 @@ triangles builds from its centroid keys in one launch (no radix sort, no level k
 bigger shape needs ``log2(m / small)`` levels fewer than with subtrees finished by one thread.
 Work per thread is ``O(c)`` reads that the whole node shares (broadcasts, no bank conflicts), not
 the uncoalesced per-thread passes over global memory of
-:func:`~warp_ccd._src.trees.build._finish_kernel`. Tried on an H200 at 10^5 shapes of 80 triangles
-(this kernel: 2.3 ms): the three lists sorted once by counting, then each level a stable partition
-by a block scan of the sides (``wp.tile_scan_exclusive``), 4.8 ms; each node's first member finding
-the node's axis alone for the others to count along it only (a second barrier a level), 3.1 ms.
+:func:`~warp_ccd._src.trees.build._finish_kernel`. Tried and measured slower on a GPU (docs:
+architecture, trees): the three lists sorted once by counting, then each level a stable partition
+by a block scan of the sides (``wp.tile_scan_exclusive``); each node's first member finding the
+node's axis alone for the others to count along it only (a second barrier a level).
 
 The trees are those of the numpy reference, bit for bit (the same keys, the same comparisons, the
 same float32 extents). On the CPU Warp runs a block as one lane unless
