@@ -12,6 +12,10 @@ wp.init()
 
 ALL_DEVICES = [str(d) for d in wp.get_devices()]
 """Every Warp device present (tests that compare devices use these)."""
+HOST_DEVICES = [d for d in ALL_DEVICES if not wp.get_device(d).is_cuda]
+"""The host devices Warp compiles for: none where Warp has no CPU compiler (a CUDA machine's Warp may not)."""
+CUDA_DEVICES = [d for d in ALL_DEVICES if wp.get_device(d).is_cuda]
+"""Every CUDA device present."""
 
 _WANTED = [w for w in os.environ.get("WARP_CCD_TEST_DEVICES", "").split(",") if w]
 DEVICES = [d for d in ALL_DEVICES if not _WANTED or d in _WANTED or d.split(":")[0] in _WANTED]

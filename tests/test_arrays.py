@@ -47,19 +47,29 @@ def _poses(n, rng):
     return np.concatenate([p, q], axis=1)
 
 
-def test_torch_tensors_are_read_in_place():
-    t = torch.arange(21, dtype=torch.float32).reshape(3, 7)
-    view = device_view(t, "poses", "cpu")
+def _on(t, device: str):
+    """Torch tensor ``t`` (made on the host) on the torch device of Warp's ``device`` (skipped where this
+    torch has no CUDA)."""
+    if not wp.get_device(device).is_cuda:
+        return t
+    if not torch.cuda.is_available():
+        pytest.skip("this torch has no CUDA")
+    return t.to(f"cuda:{wp.get_device(device).ordinal}")
+
+
+def test_torch_tensors_are_read_in_place(device):
+    t = _on(torch.arange(21, dtype=torch.float32).reshape(3, 7), device)
+    view = device_view(t, "poses", device)
     assert view.ptr == t.data_ptr() and view.shape == (3, 7)
-    strided = torch.zeros(3, 14)[:, ::2]
-    view = device_view(strided, "poses", "cpu")
+    strided = _on(torch.zeros(3, 14), device)[:, ::2]
+    view = device_view(strided, "poses", device)
     assert view.ptr == strided.data_ptr() and view.strides == (56, 8)
     assert is_device_array(t) and not is_device_array(np.zeros(3))
-    assert np.array_equal(host_array(t, "x"), t.numpy())
-    vec = wp.array(np.ones((5, 3), np.float32), dtype=wp.vec3, device="cpu")
-    assert device_view(vec, "v", "cpu").shape == (5, 3)
-    assert device_view(np.zeros((2, 7), np.int32), "p", "cpu").dtype == wp.float64  # converted, a copy
-    assert device_view(np.zeros((2, 7), np.float32), "p", "cpu").dtype == wp.float32  # uploaded as it is
+    assert np.array_equal(host_array(t, "x"), t.cpu().numpy())
+    vec = wp.array(np.ones((5, 3), np.float32), dtype=wp.vec3, device=device)
+    assert device_view(vec, "v", device).shape == (5, 3)
+    assert device_view(np.zeros((2, 7), np.int32), "p", device).dtype == wp.float64  # converted, a copy
+    assert device_view(np.zeros((2, 7), np.float32), "p", device).dtype == wp.float32  # uploaded as it is
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])

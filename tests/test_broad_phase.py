@@ -220,18 +220,17 @@ def test_bad_input(lower, upper, match):
 
 
 @pytest.mark.parametrize("value", [-1, ALL_PAIRS_LIMIT + 1, 2.5, True, "all"])
-def test_bad_all_pairs_max(value):
+def test_bad_all_pairs_max(value, device):
     with pytest.raises(ValueError, match="all_pairs_max"):
-        wc.stages.BroadPhaseSAP(device="cpu", all_pairs_max=value)
+        wc.stages.BroadPhaseSAP(device=device, all_pairs_max=value)
 
 
 def test_sap_all_pairs_below_the_limit(device):
     """Up to ``all_pairs_max`` boxes the SAP tests every pair in one launch (no grid entries), above
     it sweeps; frame after frame with one broad phase, sizes either side of the limit, the pairs are
     the numpy truth; CUDA's default limit is :data:`ALL_PAIRS_MAX`, the CPU's 0."""
-    assert wc.stages.BroadPhaseSAP(device="cpu").all_pairs_max == 0
-    if wp.get_device(device).is_cuda:
-        assert wc.stages.BroadPhaseSAP(device=device).all_pairs_max == ALL_PAIRS_MAX
+    default = ALL_PAIRS_MAX if wp.get_device(device).is_cuda else 0
+    assert wc.stages.BroadPhaseSAP(device=device).all_pairs_max == default
     rng = np.random.default_rng(17)
     bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=400)
     for n in (400, 401, 2, 400):

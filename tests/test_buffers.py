@@ -105,17 +105,17 @@ def test_held_refuses_a_buffer_that_grew_at_its_read(device):
         items.held()
 
 
-def test_counter_read_generation():
+def test_counter_read_generation(device):
     """A reader's generation moves when one of its buffers gets new storage, or when a later reader
     adopts a counter: a graph of its frames is then stale. A buffer adopted away still moves the
     generation of both readers when it grows."""
-    a = GrowableBuffer(wp.int32, 4, "cpu", "a")
-    b = GrowableBuffer(wp.int32, 4, "cpu", "b")
-    first = CounterRead([a, b], "cpu")
+    a = GrowableBuffer(wp.int32, 4, device, "a")
+    b = GrowableBuffer(wp.int32, 4, device, "b")
+    first = CounterRead([a, b], device)
     g = first.generation
     assert not a.ensure(4) and first.generation == g  # fits: same storage
     assert a.ensure(5) and first.generation == g + 1
-    second = CounterRead([b], "cpu")
+    second = CounterRead([b], device)
     assert first.generation == g + 2 and second.generation == 0
     assert b.ensure(100)
     assert first.generation == g + 3 and second.generation == 1

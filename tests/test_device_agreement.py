@@ -20,7 +20,7 @@ from warp_ccd._src.geometry.triangle import TOLERANCE
 
 import awkward_pairs
 import scene_results
-from conftest import ALL_DEVICES
+from conftest import ALL_DEVICES, HOST_DEVICES
 from oracles import touching_band
 
 CUDA = [d for d in ALL_DEVICES if d.startswith("cuda")]
@@ -68,10 +68,10 @@ def test_verdicts_match_the_recorded_ones(device, precision, reference):
         assert np.array_equal(swapped[method], got[method]), f"{method} {precision}: not symmetric on {device}"
 
 
-@pytest.mark.skipif(not (CUDA and "cpu" in ALL_DEVICES), reason="needs the CPU and a CUDA device")
+@pytest.mark.skipif(not (CUDA and HOST_DEVICES), reason="needs the CPU and a CUDA device")
 @pytest.mark.parametrize("precision", awkward_pairs.PRECISIONS)
 def test_cpu_and_cuda_agree_live(precision):
-    cpu = awkward_pairs.verdicts(precision, "cpu")
+    cpu = awkward_pairs.verdicts(precision, HOST_DEVICES[0])
     for device in CUDA:
         gpu = awkward_pairs.verdicts(precision, device)
         for method in awkward_pairs.METHODS:
@@ -79,7 +79,7 @@ def test_cpu_and_cuda_agree_live(precision):
         assert cpu["segment_sha256"] == gpu["segment_sha256"]
 
 
-@pytest.mark.skipif(not (CUDA and "cpu" in ALL_DEVICES), reason="needs the CPU and a CUDA device")
+@pytest.mark.skipif(not (CUDA and HOST_DEVICES), reason="needs the CPU and a CUDA device")
 def test_scene_from_poses_agrees_across_devices():
     """World vertices from the same poses are the same bits, so a crowded scene's pairs are too."""
     from test_robustness import crowded_cubes
@@ -87,7 +87,7 @@ def test_scene_from_poses_agrees_across_devices():
     meshes, transforms = crowded_cubes(n=200, seed=4)
     transforms[:, :3, 3] *= 20.0
     results = []
-    for device in ["cpu", *CUDA]:
+    for device in [HOST_DEVICES[0], *CUDA]:
         scene = wc.Scene.from_meshes(meshes, transforms, device=device)
         results.append((scene.world_vertex.numpy(), wc.CollisionPipeline(scene).detect().triangle_pairs))
     for vertices, pairs in results[1:]:

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 import warp_ccd as wc
 
+from conftest import CUDA_DEVICES, HOST_DEVICES
 from oracles import intersect_tri_tri_f64
 from test_narrow_phase import run_test
 
@@ -98,20 +99,19 @@ def test_containment_excludes_surface_contacts(device):
 def test_arrays_on_another_device_are_copied_there():
     """Arrays on another device than the scene's are copied to it once (as numpy arrays are), then read
     and checked there like the scene's own."""
-    devices = [str(d) for d in wp.get_devices()]
-    cuda = [d for d in devices if d.startswith("cuda")]
-    if not cuda or "cpu" not in devices:
+    cuda, host = CUDA_DEVICES, HOST_DEVICES
+    if not cuda or not host:
         pytest.skip("needs a CUDA device beside the host")
     scene = wc.Scene.random(5, seed=0, device=cuda[0])
     deforming = wc.Scene.from_meshes(scene.world_meshes(), deforming=True, device=cuda[0])
     vertices = scene.world_vertex.numpy() + 1.0
-    deforming.set_world_vertices(wp.array(vertices, dtype=wp.vec3, device="cpu"))
+    deforming.set_world_vertices(wp.array(vertices, dtype=wp.vec3, device=host[0]))
     assert np.array_equal(deforming.world_vertex.numpy(), vertices)
     poses = np.tile(np.array([1, 2, 3, 0, 0, 0, 1], np.float32), (5, 1))
-    scene.set_poses(wp.array(poses, dtype=wp.transform, device="cpu"))
+    scene.set_poses(wp.array(poses, dtype=wp.transform, device=host[0]))
     scene.check_inputs()
     assert np.array_equal(scene.object_pose.numpy(), poses)
-    scene.set_poses(wp.zeros(scene.num_objects, dtype=wp.transform, device="cpu"))
+    scene.set_poses(wp.zeros(scene.num_objects, dtype=wp.transform, device=host[0]))
     with pytest.raises(ValueError, match="set_poses: row 0 has a quaternion that is not unit"):
         scene.check_inputs()
 
