@@ -138,10 +138,14 @@ OPTIONS: dict[str, Rule] = {
     "listed_capacity": CAPACITY,
     # What a USD check reads.
     "include_invisible": FLAG,
+    "include_purposes": Rule("choice", choices=("guide", "proxy", "render", "default")),  # each of them
     "allow_missing": FLAG,
     "usd_filters": FLAG,
     "read_workers": Rule("integer", low=0, allow_none=True),
     "progress": FLAG,
+    # How a check of many files runs.
+    "workers": Rule("integer", low=1, allow_none=True),
+    "frames_per_task": Rule("integer", low=1, allow_none=True),
 }
 """Every option by name, and its rule."""
 
