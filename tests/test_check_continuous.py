@@ -151,7 +151,7 @@ def test_command_line(stages, device, tmp_path, capsys):
 def test_min_distance_needs_continuous(stages, capsys):
     rc = cli.main(["check", str(stages["through"]), "--min-distance", "0.1"])
     err = capsys.readouterr().err
-    assert rc == 2 and "--min-distance is an option of --continuous" in err
+    assert rc == 2 and "--min-distance is an option of the continuous check (--continuous), got 0.1" in err
 
 
 def test_the_input_is_never_the_overlay(stages, device, capsys):

@@ -200,8 +200,9 @@ def test_missing_prims_with_allow_missing_are_notes(stages, tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--ignore-pairs", "{missing}"], "cannot read the ignore-pairs file {missing}: no such file"),
     (["--ignore-pairs", "{folder}"], "it is a folder"),
-    (["--set-a", "/World/A"], "--set-a needs --set-b"),
-    (["--set-b", "/World/A"], "--set-b needs --set-a"),
+    (["--set-a", "/World/A"], "set_a and set_b go together (--set-a and --set-b): pairs of one prim of each are "
+                              "checked; only set_a given"),
+    (["--set-b", "/World/A"], "only set_b given"),
     (["--set-a", "/World/A", "--set-b", "/World/Nowhere"], "set_b: /World/Nowhere matches no mesh that is checked"),
     (["--worlds", "/World/envs/*"], "worlds: /World/envs/* matches no mesh that is checked"),
 ])
@@ -217,7 +218,7 @@ def test_filters_pass_before_the_stage_is_read(tmp_path, capsys):
     """A bad ignore-pairs file or a lone set is reported even when the stage is missing too: the
     arguments first."""
     rc, _, err = run(capsys, tmp_path / "none.usda", "--set-a", "/World/A")
-    assert rc == 2 and "--set-a needs --set-b" in err
+    assert rc == 2 and "(--set-a and --set-b)" in err
 
 
 def test_the_root_names_every_mesh(stages):

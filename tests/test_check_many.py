@@ -23,6 +23,7 @@ from warp_ccd._src.check.cluster import FAULT_ENV
 from warp_ccd._src.check.overlay import write_overlay
 from warp_ccd._src.check.tasks import EXIT_BAD_INPUT, EXIT_CLEAN, EXIT_FINDINGS, EXIT_INTERNAL, run_task
 from warp_ccd._src.geometry.precision import PrecisionWarning
+from warp_ccd.usd import CheckOptions
 
 from conftest import DEFAULT_DEVICE
 
@@ -263,10 +264,10 @@ def test_exit_status_is_the_worst(files, device):
 def test_an_internal_error_is_reported_and_the_others_go_on(files, device, monkeypatch):
     import warp_ccd._src.check.check as check_module
 
-    def failing(path, **options):
+    def failing(path, *args, **kwargs):
         if str(path).endswith("abc.usda"):
             raise RuntimeError("out of cheese")
-        return check_usd(path, **options)
+        return check_usd(path, *args, **kwargs)
 
     monkeypatch.setattr(check_module, "check_usd", failing)
     batch = check_many([files["abc"], files["clean"]], device=device)
@@ -299,13 +300,24 @@ def test_expand_paths(tmp_path, files):
     assert [f.exit_status for f in batch.files] == [EXIT_FINDINGS, EXIT_CLEAN]
 
 
-@pytest.mark.parametrize("bad", [
-    {"frames_per_task": 0}, {"frames_per_task": 2.5}, {"workers": 0}, {"stage_or_path": "x"},
-    {"min_depth": -1.0}, {"precision": "float16"}, {"clearence": 0.1},
-], ids=lambda bad: "{}={!r}".format(*next(iter(bad.items()))))
-def test_bad_options_raise(files, bad):
-    with pytest.raises(ValueError):
-        check_many([files["clean"], files["abc"]], **bad)
+@pytest.mark.parametrize("bad, message", [
+    ({"frames_per_task": 0}, "frames_per_task must be an integer >= 1 or None, got 0"),
+    ({"frames_per_task": 2.5}, "frames_per_task must be an integer >= 1 or None, got 2.5"),
+    ({"workers": 0}, "workers must be an integer >= 1 or None, got 0"),
+    ({"min_depth": -1.0}, "min_depth must be a finite number >= 0, got -1.0"),
+    ({"precision": "float16"}, "precision must be one of ['float32', 'float64'], got 'float16'"),
+], ids=lambda bad: "{}={!r}".format(*next(iter(bad.items()))) if isinstance(bad, dict) else "")
+def test_bad_options_raise(files, bad, message):
+    """Before any file is read: the missing one would be an error of its own."""
+    with pytest.raises(ValueError) as info:
+        check_many([files["clean"], "/nonexistent/*.usda"], **bad)
+    assert str(info.value) == message
+
+
+@pytest.mark.parametrize("bad", [{"clearence": 0.1}, {"stage_or_path": "x"}, {"options": {"clearance": 0.1}}])
+def test_unknown_options_are_type_errors(files, bad):
+    with pytest.raises(TypeError, match="check_many"):
+        check_many([files["clean"]], **bad)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -319,8 +331,8 @@ def test_late_frames_needing_float64_make_every_part_float64(files, device):
     assert want.penetrating and len(want.frames[-1].triangle_pairs) > 0  # far away, B and C still penetrate
     tasks, errors = plan_tasks([path], frames_per_task=4, continuous=True)
     assert not errors and [t.times[0] for t in sorted(tasks, key=lambda t: t.part)] == [0.0, 3.0, 7.0]
-    options = {"device": device, "continuous": True, "segments": True}
-    alone = {t.part: run_task(t, options).report for t in tasks}
+    options = CheckOptions(continuous=True, segments=True)
+    alone = {t.part: run_task(t, options, device=device).report for t in tasks}
     assert [alone[k].precision for k in range(3)] == ["float32", "float32", "float64"]  # early parts alone
     batch = check_many(path, frames_per_task=4, device=device, continuous=True, segments=True)
     merged = batch.files[0].report
@@ -371,10 +383,10 @@ def test_plan_shares_files_among_workers(files):
 
 
 def test_merge_of_run_parts_is_the_serial_report(files, device):
-    options = {"device": device, "continuous": True, "clearance": 0.2}
+    options = CheckOptions(continuous=True, clearance=0.2)
     tasks, _ = plan_tasks([files["mixed"]], frames_per_task=7, continuous=True)
     parts = sorted(tasks, key=lambda t: t.part)
-    reports = [run_task(t, options).report for t in parts]
+    reports = [run_task(t, options, device=device).report for t in parts]
     merged = merge_reports(reports, [t.skip for t in parts])
     assert_same(merged, serial(files["mixed"], device, continuous=True, clearance=0.2))
     assert merged.seconds == {k: round(sum(r.seconds[k] for r in reports), 4) for k in reports[0].seconds}
@@ -382,12 +394,12 @@ def test_merge_of_run_parts_is_the_serial_report(files, device):
 
 
 def test_merge_refuses_parts_that_do_not_belong_together(files, device):
-    mine = run_task(plan_tasks([files["abc"]], frames_per_task=1)[0][0], {"device": device}).report
-    other = run_task(plan_tasks([files["envs"]], frames_per_task=1)[0][0], {"device": device}).report
+    mine = run_task(plan_tasks([files["abc"]], frames_per_task=1)[0][0], CheckOptions(), device=device).report
+    other = run_task(plan_tasks([files["envs"]], frames_per_task=1)[0][0], CheckOptions(), device=device).report
     with pytest.raises(ValueError, match="disagree"):
         merge_reports([mine, other])
-    wide = run_task(plan_tasks([files["abc"]], frames_per_task=1)[0][1], {"device": device,
-                                                                           "precision": "float64"}).report
+    wide = run_task(plan_tasks([files["abc"]], frames_per_task=1)[0][1], CheckOptions(precision="float64"),
+                    device=device).report
     with pytest.raises(ValueError, match="disagree"):
         merge_reports([mine, wide])
     with pytest.raises(ValueError, match="no parts"):
@@ -396,7 +408,7 @@ def test_merge_refuses_parts_that_do_not_belong_together(files, device):
 
 def test_run_task_reports_bad_input_as_an_outcome(tmp_path):
     (task,), _ = plan_tasks([str(tmp_path / "missing.usda")])
-    outcome = run_task(task, {})
+    outcome = run_task(task, CheckOptions())
     assert outcome.report is None and outcome.status == EXIT_BAD_INPUT and "missing.usda" in outcome.error
 
 

@@ -6,7 +6,9 @@ returns a :class:`BatchReport`: one :class:`FileResult` per file, its merged
 or the error that stopped it. The work is cut into :class:`~warp_ccd._src.check.tasks.CheckTask` s (:func:`plan_tasks`):
 a whole file, or a (file, range of time codes) where there are fewer files than workers or ``frames_per_task``
 asks for it; a continuous check's range starts one time code early, so that the interval across the cut is
-checked, and that time code's frame is dropped when the parts are merged (:func:`merge_reports`).
+checked, and that time code's frame is dropped when the parts are merged (:func:`merge_reports`). Every task gets the
+one :class:`~warp_ccd._src.check.options.CheckOptions` checked when :func:`check_many` was called (it pickles for
+Ray, with the ignore-pairs files it read here: the workers read no option again).
 
 The tasks run in this process one after the other, or on a Ray cluster (:mod:`~warp_ccd._src.check.cluster`: one actor
 per GPU, kernels and stages kept warm across tasks). Either way the result is the serial one: each part is a
@@ -25,21 +27,22 @@ error ("check it in float64") while the parts run in float64 and report.
 
 from __future__ import annotations
 
+import functools
 import glob
 import math
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..output import PendingFile, prepare_text
-from ..runtime.aliases import PathLike
-from .check import check_usd as _CHECK_USD  # its signature: the options check_many passes on
-from .check import checked_options
+from ..runtime.aliases import DeviceLike, PathLike
+from ..runtime.options import check_option
+from .options import CheckOptions, check_options
 from .report import SCHEMA_VERSION, CheckReport
 from .tasks import EXIT_BAD_INPUT, EXIT_CLEAN, EXIT_FINDINGS, EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
@@ -266,20 +269,22 @@ def _file_results(paths: Sequence[str], outcomes: Sequence[TaskOutcome], errors:
     return results
 
 
-def _one_precision(outcomes: list[TaskOutcome], options: dict,
-                   run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
+Run = Callable[[list[CheckTask], CheckOptions], list[TaskOutcome]]
+"""Runs tasks with options (on the batch's engine, over its time codes and prims)."""
+
+
+def _one_precision(outcomes: list[TaskOutcome], options: CheckOptions, run: Run) -> list[TaskOutcome]:
     """Runs again in float64 the float32 parts of a file whose other parts needed float64 (as one run would)."""
     reported = [[o for o in parts if o.report is not None] for parts in _by_file(outcomes).values()]
     again = [o for parts in reported if len({o.report.precision for o in parts}) > 1
              for o in parts if o.report.precision == "float32"]
     if not again:
         return outcomes
-    redone = {id(o.task): r for o, r in zip(again, run([o.task for o in again], dict(options, precision="float64")))}
+    redone = {id(o.task): r for o, r in zip(again, run([o.task for o in again], options.replace(precision="float64")))}
     return [redone.get(id(o.task), o) for o in outcomes]
 
 
-def _whole_files(outcomes: list[TaskOutcome], options: dict,
-                 run: Callable[[list[CheckTask], dict], list[TaskOutcome]]) -> list[TaskOutcome]:
+def _whole_files(outcomes: list[TaskOutcome], options: CheckOptions, run: Run) -> list[TaskOutcome]:
     """Checks whole, as one task, the files whose parts found different objects, or where a part found bad input (a
     prim visible, or an instance present, from a later time code on: the import reads them at its first time code,
     as one run does, so a pattern or set may match nothing in a part): the one-run result or error."""
@@ -294,14 +299,18 @@ def _whole_files(outcomes: list[TaskOutcome], options: dict,
 
 
 class _InProcess:
-    """The engine of a check without Ray: the tasks run here, one after the other."""
+    """The engine of a check without Ray: the tasks run here, one after the other, on ``device``."""
 
-    def run(self, tasks: Sequence[CheckTask], options: dict,
-            done: Callable[[TaskOutcome], None] | None = None) -> list[TaskOutcome]:
-        """Runs ``tasks`` in order; ``done`` is called as each ends."""
+    def __init__(self, device: DeviceLike = None) -> None:
+        self.device = device
+
+    def run(self, tasks: Sequence[CheckTask], options: CheckOptions, done: Callable[[TaskOutcome], None] | None = None,
+            *, frames: Any = None, prims: Any = None) -> list[TaskOutcome]:
+        """Runs ``tasks`` in order (``frames``, ``prims``: as :func:`~warp_ccd._src.check.tasks.run_task` takes
+        them); ``done`` is called as each ends."""
         out = []
         for t in tasks:
-            out.append(run_task(t, options))
+            out.append(run_task(t, options, frames=frames, prims=prims, device=self.device))
             if done is not None:
                 done(out[-1])
         return out
@@ -310,23 +319,10 @@ class _InProcess:
         """Nothing to end."""
 
 
-def _check_options(options: dict) -> None:
-    """Raises ValueError for an option :func:`~warp_ccd._src.check.check.check_usd` does not take, or a bad value of
-    its numbers and precision (:func:`~warp_ccd._src.check.check.checked_options`: before any file is read, rather than
-    as every file's error)."""
-    import inspect
-
-    known = set(inspect.signature(_CHECK_USD).parameters) - {"stage_or_path"}
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(f"check_many: unknown option {unknown[0]!r} (check_usd's keyword arguments)")
-    names = set(inspect.signature(checked_options).parameters) - {"read_workers"}
-    checked_options(**{k: v for k, v in options.items() if k in names})
-
-
-def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray: bool = False,
+def check_many(paths: PathLike | Sequence[PathLike], options: CheckOptions | None = None, *, frames: Any = None,
+               prims: str | Sequence[str] | None = None, device: DeviceLike = None, ray: bool = False,
                ray_address: str | None = None, workers: int | None = None, frames_per_task: int | None = None,
-               read_workers: int | None = None, progress: bool = False, **options: Any) -> BatchReport:
+               given_as: Mapping[str, str] | None = None, **kwargs: Any) -> BatchReport:
     """Checks many USD files (or long animations in parts), in this process or on a Ray cluster.
 
     Example::
@@ -337,70 +333,64 @@ def check_many(paths: PathLike | Sequence[PathLike], *, frames: Any = None, ray:
 
     Args:
         paths: USD files or glob patterns (:func:`expand_paths`).
+        options: the :class:`~warp_ccd._src.check.options.CheckOptions` of every file's check (checked when it was
+            made; passed to the tasks as it is), or None: the defaults. Its ``progress`` is one bar on stderr over
+            the time codes of all tasks; its ``read_workers`` count in this process only (Ray workers choose their
+            own).
         frames: the time codes of every file (as :func:`~warp_ccd._src.check.check.check_usd` takes them).
+        prims: the prims to check in every file (as :func:`~warp_ccd._src.check.check.check_usd` takes them).
+        device: the Warp device of a check in this process (Ray actors use their GPU, or the CPU).
         ray: run the tasks on a Ray cluster (:mod:`~warp_ccd._src.check.cluster`): a local one unless ``ray_address``
             names one (``"auto"``, ``"host:port"``, ``"ray://host:port"``), or the one this process is connected
             to already. Needs ``pip install 'warp-ccd[distributed]'``.
         ray_address: the cluster to connect to (implies ``ray``).
-        workers: Ray actors (default: one per GPU of the cluster, else one per CPU); in this process: the parts
-            a lone file is cut into (default 1: whole files).
-        frames_per_task: cut every file into ranges of this many time codes (default: see :func:`plan_tasks`).
-        read_workers: processes that read transforms, in this process's check only (see
-            :class:`~warp_ccd._src.usd.importer.UsdMeshImport`'s ``workers``; Ray tasks read in their own process).
-        progress: a progress bar on stderr over the time codes of all tasks.
-        **options: :func:`~warp_ccd._src.check.check.check_usd`'s other keyword arguments (``device`` for this process;
-            Ray actors use their GPU, or the CPU).
+        workers: Ray actors (>= 1; default: one per GPU of the cluster, else one per CPU); in this process: the
+            parts a lone file is cut into (default 1: whole files).
+        frames_per_task: cut every file into ranges of this many time codes (>= 1; default: see :func:`plan_tasks`).
+        given_as: the names ``workers`` and ``frames_per_task`` were given as, for their messages (the command
+            line: its flags).
+        **kwargs: options by name (fields of :class:`~warp_ccd._src.check.options.CheckOptions`, over
+            ``options``).
 
     Returns:
         The :class:`BatchReport`; a file that fails is reported there (``error``, ``exit_status`` 2 or 3) and the
         others go on.
 
     Raises:
-        ValueError: no files, a pattern matching nothing, a bad option, Ray asked for but not installed or not
-            reachable.
+        TypeError: a keyword that is no option.
+        ValueError: a bad option (before any file is read), no files, a pattern matching nothing, Ray asked for but
+            not installed or not reachable.
     """
     from tqdm import tqdm
 
-    from ..runtime.checks import integer_option
-
     start = time.perf_counter()
+    options = check_options(options, kwargs, "check_many")
+    names = dict(given_as or {})
+    workers = check_option("workers", workers, names.get("workers"))
+    frames_per_task = check_option("frames_per_task", frames_per_task, names.get("frames_per_task"))
     files = expand_paths(paths)
-    if "stage_or_path" in options or "progress" in options:
-        raise ValueError("check_many: give the files as paths and progress as progress=")
-    if frames_per_task is not None:
-        integer_option("frames_per_task", frames_per_task, low=1)
-    if workers is not None:
-        integer_option("workers", workers, low=1)
-    _check_options(options)
-    pairs = options.get("ignore_pairs")
-    if isinstance(pairs, (str, bytes, os.PathLike)):  # files read by workers elsewhere: absolute paths
-        options["ignore_pairs"] = os.path.abspath(os.fsdecode(pairs))
-    elif isinstance(pairs, (list, tuple)):
-        options["ignore_pairs"] = [os.path.abspath(os.fsdecode(p)) if isinstance(p, (str, bytes, os.PathLike)) else p
-                                   for p in pairs]
+    tasks_options = options.replace(progress=False) if options.progress else options  # one bar: the batch's
     use_ray = bool(ray) or ray_address is not None
-    options = dict(options, frames=frames)
-    continuous = bool(options.get("continuous", False))
     if use_ray:
         from .cluster import RayEngine
 
         engine = RayEngine(ray_address, workers)
         count = engine.workers
     else:
-        engine, count = _InProcess(), workers or 1
-        options["read_workers"] = read_workers
+        engine, count = _InProcess(device), workers or 1
+    run = functools.partial(engine.run, frames=frames, prims=prims)
     bar = None
     try:
         tasks, errors = plan_tasks(files, frames=frames, workers=count, frames_per_task=frames_per_task,
-                                   continuous=continuous)
+                                   continuous=options.continuous)
         bar = tqdm(total=sum(t.frames or 1 for t in tasks), desc="checking", unit="frame", leave=False,
-                   disable=not progress or None, file=sys.stderr)
+                   disable=not options.progress or None, file=sys.stderr)
 
         def done(outcome: TaskOutcome) -> None:
             bar.update(outcome.task.frames or 1)
 
-        outcomes = engine.run(tasks, options, done)
-        outcomes = _one_precision(_whole_files(outcomes, options, engine.run), options, engine.run)
+        outcomes = run(tasks, tasks_options, done)
+        outcomes = _one_precision(_whole_files(outcomes, tasks_options, run), tasks_options, run)
     finally:
         if bar is not None:
             bar.close()

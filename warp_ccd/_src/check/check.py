@@ -2,7 +2,8 @@
 
 :func:`check_usd` reads a stage once (:class:`~warp_ccd._src.usd.importer.UsdMeshImport`), runs the
 collision pipeline at every time code asked for, and returns a :class:`CheckReport`: per frame,
-the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross.
+the prim pairs whose surfaces cross, with their USD face pairs and how deep they cross. Its options are one
+:class:`~warp_ccd._src.check.options.CheckOptions`, made (and checked) before the stage is read.
 
 **Touching is not penetrating.** Objects resting on each other touch every frame, and the exact
 test reports their triangle pairs (triangles are closed sets). Each reported pair is classified
@@ -68,13 +69,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..geometry.triangle import TOLERANCE
 from ..runtime.aliases import DeviceLike, PathLike
-from ..runtime.options import check_option
-from ..usd.filters import PairFilters
 from .clearance import soft_clashes
 from .crossing import CrossingClassifier
 from .duplicates import duplicate_pairs
+from .options import CheckOptions, check_options
 from .overlay import COLOR_CLEAR, COLOR_PENETRATING, prepare_overlay, write_overlay
 from .report import REPORT_SCHEMA_PATH, SCHEMA_VERSION, CheckReport, FrameContacts, report_schema
 from .self_intersection import self_intersections as find_self_intersections
@@ -84,7 +83,7 @@ if TYPE_CHECKING:
     from pxr import Usd
 
 __all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts",
-           "check_usd", "checked_options", "prepare_overlay", "report_schema", "write_overlay"]
+           "check_usd", "prepare_overlay", "report_schema", "write_overlay"]
 
 
 def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
@@ -142,97 +141,36 @@ def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: in
     return faces[order][starts], np.maximum.reduceat(depth[order], starts)
 
 
-def checked_options(*, min_depth: float = 0.0, min_distance: float = 0.0, clearance: float = 0.0,
-                    continuous: bool = False, precision: str = "float32", read_workers: int | None = None) -> float:
-    """Checks :func:`check_usd`'s numbers and precision before anything is read.
-
-    Returns:
-        ``clearance`` as a float.
-
-    Raises:
-        ValueError: a negative depth or distance, a clearance beyond
-            :data:`~warp_ccd._src.narrowphase.clearance.CLEARANCE_MAX`, ``min_distance`` without ``continuous``, an
-            unknown precision, a negative number of readers.
-    """
-    check_option("min_depth", min_depth)
-    check_option("read_workers", read_workers)
-    check_option("min_distance", min_distance)
-    clearance = check_option("clearance", clearance)
-    if min_distance > 0.0 and not continuous:
-        raise ValueError(f"min_distance is an option of the continuous check (continuous=True), got {min_distance!r}")
-    check_option("precision", precision)
-    return clearance
-
-
-def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[float] | None = None,
-              prims: str | Sequence[str] | None = None, device: DeviceLike = None, precision: str = "float32",
-              min_depth: float = 0.0, count_touching: bool = False, segments: bool = False,
-              include_invisible: bool = False, include_purposes: Sequence[str] = (), tolerance: float = TOLERANCE,
-              progress: bool = False, allow_missing: bool = False, continuous: bool = False,
-              min_distance: float = 0.0, clearance: float = 0.0, self_intersections: bool = False,
-              duplicates: bool = False, worlds: str | Sequence[str] | None = None,
-              ignore_pairs: PathLike | Sequence[Any] | None = None, usd_filters: bool = True,
-              set_a: str | Sequence[str] | None = None, set_b: str | Sequence[str] | None = None,
-              read_workers: int | None = None) -> CheckReport:
+def check_usd(stage_or_path: Usd.Stage | PathLike, options: CheckOptions | None = None, *,
+              frames: slice | Sequence[float] | None = None, prims: str | Sequence[str] | None = None,
+              device: DeviceLike = None, **kwargs: Any) -> CheckReport:
     """Finds, frame by frame, the meshes of a USD stage whose surfaces pass through each other.
+
+    Example::
+
+        report = check_usd("anim.usd", frames=slice(0, 100), clearance=0.01)
+        report = check_usd("anim.usd", CheckOptions(continuous=True, min_distance=0.001), device="cuda:0")
 
     Args:
         stage_or_path: a ``Usd.Stage`` or a USD file path.
+        options: a :class:`~warp_ccd._src.check.options.CheckOptions` (every option, checked when it was made), or
+            None: the defaults.
         frames: time codes (see :func:`~warp_ccd._src.usd.stage.stage_time_codes`; default: every
             integer time code of the stage's range).
         prims: prim paths or patterns to check (default: the whole stage).
         device: Warp device (default: Warp's preferred device).
-        precision: ``"float32"`` or ``"float64"``; float32 becomes float64, with a
-            :class:`~warp_ccd._src.geometry.precision.PrecisionWarning` (``report.source.precision_note``), where
-            the coordinates are too far from the origin for it at the triangles' size
-            (:func:`~warp_ccd._src.geometry.precision.needed_precision`).
-        min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0).
-        count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
-        segments: keep the intersection segments (for the report and the overlay).
-        include_invisible: also check invisible prims.
-        include_purposes: also check prims of these purposes (``"guide"``, ``"proxy"``).
-        tolerance: relative tolerance of the triangle test.
-        progress: show progress bars on stderr (reading the transforms of every time code, then
-            the frames).
-        allow_missing: check a stage whose sublayers, references or payloads cannot all be
-            opened (without them; :attr:`CheckReport.missing` lists them) instead of raising; likewise
-            an ``ignore_pairs`` pair naming no prim, a ``worlds``, ``set_a`` or ``set_b`` pattern matching no
-            checked mesh: a note in the report (``filters.notes``) instead of a ValueError.
-        continuous: also report, per interval between consecutive time codes, the prim pairs that
-            touch at some time in it (every vertex moving linearly between its positions at the
-            two time codes), and which of them tunnel (:attr:`CheckReport.intervals`).
-        min_distance: with ``continuous``, pairs that come within this distance (scene units,
-            >= 0) count as touching.
-        clearance: also report, per frame, the prim pairs within this distance (scene units, >= 0)
-            that the frame does not report as collisions: soft clashes (:attr:`FrameContacts.soft_clashes`).
-        self_intersections: also report, per frame, the prims that pass through themselves, as pairs of
-            their USD faces with a depth (:attr:`FrameContacts.self_intersections`).
-        duplicates: report, per frame, the pairs whose meshes coincide (the same triangles at the same
-            place, :mod:`~warp_ccd._src.check.duplicates`) as duplicates (:attr:`FrameContacts.duplicates`) instead
-            of as collisions.
-        worlds: prim paths or ``fnmatch`` patterns, every prim they match rooting a world: pairs of two
-            worlds are never checked (meshes under no root pair with every world; see
-            :class:`~warp_ccd._src.usd.importer.UsdMeshImport`).
-        ignore_pairs: prim pairs never checked: an ignore-pairs file (text: two prim paths or patterns a
-            line, separated by whitespace or a comma, ``#`` comments; ``.json``: a list of ``[a, b]``), or
-            a sequence of such files and ``(a, b)`` pairs. Every mesh at or under ``a`` is excluded against
-            every mesh at or under ``b`` (:mod:`~warp_ccd._src.usd.filters`).
-        usd_filters: also exclude the pairs the stage's ``UsdPhysics.FilteredPairsAPI`` and
-            ``UsdPhysics.CollisionGroup`` prims filter out.
-        set_a: prim paths or patterns (a string may hold several, comma-separated): with ``set_b``, only
-            pairs of one mesh of set A and one of set B are checked (a mesh may be in both).
-        set_b: the other set, given with ``set_a``.
-        read_workers: processes that read the transforms (:class:`~warp_ccd._src.usd.importer.UsdMeshImport`'s
-            ``workers``; default: chosen by the stage's size; 0: read in this process).
+        **kwargs: options by name (fields of :class:`~warp_ccd._src.check.options.CheckOptions`, over
+            ``options``): ``check_usd(path, min_depth=0.01, continuous=True)``; checked before anything is read.
 
     Returns:
         The :class:`CheckReport`.
 
     Raises:
-        ValueError: naming the file or prim: see :class:`~warp_ccd._src.usd.importer.UsdMeshImport`; or
-            a sublayer, reference or payload cannot be opened (unless ``allow_missing``); a bad
-            ``ignore_pairs`` file (naming it and the line), a pair naming no prim, a pattern matching
-            no checked mesh (unless ``allow_missing``), ``set_a`` without ``set_b``.
+        TypeError: a keyword that is no option.
+        ValueError: a bad option (see :class:`~warp_ccd._src.check.options.CheckOptions`); naming the file or prim:
+            see :class:`~warp_ccd._src.usd.importer.UsdMeshImport`; or a sublayer, reference or payload cannot be
+            opened (unless ``allow_missing``), a pair naming no prim, a pattern matching no checked mesh (unless
+            ``allow_missing``).
     """
     import warp as wp
     from tqdm import tqdm
@@ -241,43 +179,38 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
     from ..usd.importer import UsdMeshImport
     from ..usd.stage import open_stage, require_layers, stage_time_codes
 
-    clearance = checked_options(min_depth=min_depth, min_distance=min_distance, clearance=clearance,
-                                continuous=continuous, precision=precision, read_workers=read_workers)
-    filters = PairFilters(ignore_pairs=ignore_pairs, usd_filters=usd_filters, set_a=set_a, set_b=set_b,
-                          allow_missing=allow_missing)
+    o = check_options(options, kwargs, "check_usd")
     t = time.perf_counter()
     stage = open_stage(stage_or_path)
-    missing = require_layers(stage, allow_missing)
+    missing = require_layers(stage, o.allow_missing)
     times = stage_time_codes(stage, frames)
     opened = time.perf_counter() - t
-    imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=include_invisible,
-                        include_purposes=include_purposes, device=device, precision=precision, progress=progress,
-                        worlds=worlds, filters=filters, workers=read_workers)
+    imp = UsdMeshImport(stage, prims=prims, times=times, include_invisible=o.include_invisible,
+                        include_purposes=o.include_purposes, device=device, precision=o.precision,
+                        progress=o.progress, worlds=o.worlds, filters=o.pair_filters, workers=o.read_workers)
     seconds = dict(imp.seconds)
     seconds["read"] += opened  # the import got the stage open
     t = time.perf_counter()
     scene = imp.scene
-    pipe = CollisionPipeline(scene, segments=segments, tolerance=tolerance, clearance=clearance,
-                             self_intersections=bool(self_intersections))
-    classify = CrossingClassifier(scene, tolerance=tolerance, trees=pipe.boxes)
+    pipe = CollisionPipeline(scene, o.pipeline_options())
+    classify = CrossingClassifier(scene, tolerance=o.tolerance, trees=pipe.boxes)
     # One continuous pipeline for the whole animation: each detect covers the motion since the last.
-    sweep = CollisionPipeline(scene, continuous=True, min_distance=min_distance) if continuous else None
+    sweep = CollisionPipeline(scene, o.sweep_options()) if o.continuous else None
     seconds["build"] += time.perf_counter() - t
     seconds["set"] = seconds["detect"] = seconds["classify"] = 0.0
-    if continuous:
+    if o.continuous:
         seconds["continuous"] = 0.0
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
-    report = CheckReport(name, list(imp.object_path), min_depth=float(min_depth),
-                         count_touching=bool(count_touching), device=str(scene.device), skipped=list(imp.skipped),
-                         clearance=clearance, self_checked=bool(self_intersections),
-                         duplicates_checked=bool(duplicates), filters=imp.filters)
-    if continuous:
+    report = CheckReport(name, list(imp.object_path), min_depth=o.min_depth, count_touching=o.count_touching,
+                         device=str(scene.device), skipped=list(imp.skipped), clearance=o.clearance,
+                         self_checked=o.self_intersections, duplicates_checked=o.duplicates, filters=imp.filters)
+    if o.continuous:
         report.intervals = []
-        report.min_distance = float(min_distance)
+        report.min_distance = o.min_distance
         report.ccd_tolerance = float(sweep.narrow.tolerance)
     intersecting = None  # the object pairs of the previous time code (touching included)
     num_faces = int(imp.triangle_face.max(initial=-1)) + 1
-    bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not progress or None, leave=False)
+    bar = tqdm(range(len(times)), desc="frames", unit="frame", disable=not o.progress or None, leave=False)
     for k in bar:
         t = time.perf_counter()
         imp.set_frame(k)
@@ -286,21 +219,21 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, *, frames: slice | Sequence[f
         t_detect = time.perf_counter()
         pairs = res.device_triangle_pairs
         _, depth = classify(pairs)  # 0 where the surfaces only touch
-        contacts = _frame_contacts(imp, res, depth, float(min_depth), count_touching, segments, times[k],
-                                   bool(duplicates), num_faces)
-        if clearance > 0.0:
+        contacts = _frame_contacts(imp, res, depth, o.min_depth, o.count_touching, o.segments, times[k],
+                                   o.duplicates, num_faces)
+        if o.clearance > 0.0:
             reported = contacts.object_pairs
             if contacts.duplicates is not None and len(contacts.duplicates):  # a duplicate is no soft clash
                 reported = np.unique(np.concatenate([reported, contacts.duplicates]), axis=0)
             contacts.soft_clashes = soft_clashes(imp, res, reported)
-        if self_intersections:
+        if o.self_intersections:
             contacts.self_intersections = find_self_intersections(imp, res, pipe.self_phase)
         t2 = time.perf_counter()
         seconds["set"] += t1 - t
         seconds["detect"] += t_detect - t1
         seconds["classify"] += t2 - t_detect
         report.frames.append(contacts)
-        if continuous:
+        if o.continuous:
             t3 = time.perf_counter()
             now = res.intersecting_pairs  # the discrete result's, read before it can change
             if k == 0:

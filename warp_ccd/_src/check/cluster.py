@@ -23,6 +23,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from .options import CheckOptions
 from .tasks import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
 __all__ = ["FAULT_ENV", "MAX_RETRIES", "START_TIMEOUT", "CheckWorker", "RayEngine"]
@@ -60,16 +61,16 @@ class CheckWorker:
 
             workers.POOL, workers.POOL_WORKERS = _ray_pool, read_tasks
 
-    def run(self, task: CheckTask, options: dict) -> TaskOutcome:
-        """Runs ``task`` on this actor's device; a big animation's transforms read as cluster tasks (GPU actors),
-        or in this process (CPU actors: ``read_workers=0``)."""
+    def run(self, task: CheckTask, options: CheckOptions, frames: Any = None, prims: Any = None) -> TaskOutcome:
+        """Runs ``task`` with ``options`` (made for these workers by :meth:`RayEngine.run`) on this actor's
+        device; ``frames`` (the time codes of a whole file) and ``prims`` as
+        :func:`~warp_ccd._src.check.tasks.run_task` takes them."""
         marker = os.environ.get(FAULT_ENV)
         if marker and not os.path.exists(marker):
             with open(marker, "w") as fh:
                 fh.write(str(os.getpid()))
             os._exit(1)
-        opts = dict(options, device=self.device, read_workers=None if self.read_tasks > 1 else 0, progress=False)
-        return run_task(task, opts, self._stage(task.path))
+        return run_task(task, options, frames=frames, prims=prims, device=self.device, stage=self._stage(task.path))
 
     def _stage(self, path: str) -> Any:
         """The file's stage, opened once per actor (None where it cannot be opened: the task names the error)."""
@@ -178,16 +179,21 @@ class RayEngine:
                              f"{'GPUs' if self.gpus else 'CPUs'} taken?)")
         return alive
 
-    def run(self, tasks: Sequence[CheckTask], options: dict,
-            done: Callable[[TaskOutcome], None] | None = None) -> list[TaskOutcome]:
+    def run(self, tasks: Sequence[CheckTask], options: CheckOptions, done: Callable[[TaskOutcome], None] | None = None,
+            *, frames: Any = None, prims: Any = None) -> list[TaskOutcome]:
         """Runs ``tasks`` (in the order given, each on the next free actor); ``done`` is called as each ends.
+
+        The actors get ``options`` without progress bars and with their own readers: a big animation's transforms
+        read as cluster tasks (GPU actors: ``read_workers=None``) or in the actor's process (CPU actors: 0).
+        ``frames`` (the time codes of a whole file) and ``prims``: as :func:`~warp_ccd._src.check.tasks.run_task`
+        takes them.
 
         Returns:
             The outcomes, in the order of ``tasks``. A task whose worker died more than :data:`MAX_RETRIES` times
             under it is an internal error of its file.
         """
         ray = self._ray
-        options = {k: v for k, v in options.items() if k not in ("device", "read_workers")}  # the actor's own
+        options = options.replace(read_workers=None if self.read_tasks > 1 else 0, progress=False)
         pending = list(enumerate(tasks))[::-1]
         running: dict[Any, tuple[int, Any]] = {}
         out: list[TaskOutcome | None] = [None] * len(tasks)
@@ -198,7 +204,7 @@ class RayEngine:
                 i, task = pending.pop()
                 actor = free.pop()
                 tries[i] += 1
-                running[actor.run.remote(task, options)] = (i, actor)
+                running[actor.run.remote(task, options, frames, prims)] = (i, actor)
             ready, _ = ray.wait(list(running), num_returns=1)
             for ref in ready:
                 i, actor = running.pop(ref)

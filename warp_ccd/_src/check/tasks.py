@@ -6,11 +6,14 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..runtime.aliases import DeviceLike
+from .options import CheckOptions
 from .report import CheckReport
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_CLEAN", "EXIT_FINDINGS", "EXIT_INTERNAL", "CheckTask", "TaskOutcome", "run_task"]
@@ -54,30 +57,31 @@ class TaskOutcome:
     status: int = EXIT_CLEAN
 
 
-def run_task(task: CheckTask, options: dict, stage: Any = None) -> TaskOutcome:
-    """Runs one task with :func:`~warp_ccd._src.check.check.check_usd` (``options`` are its keyword arguments; the
-    task's ``times``, where it has them, replace ``frames``); a bad input or an internal error becomes the
+def run_task(task: CheckTask, options: CheckOptions, *, frames: Any = None, prims: str | Sequence[str] | None = None,
+             device: DeviceLike = None, stage: Any = None) -> TaskOutcome:
+    """Runs one task with :func:`~warp_ccd._src.check.check.check_usd`; a bad input or an internal error becomes the
     outcome's error, not an exception.
 
     Args:
         task: the task.
-        options: :func:`~warp_ccd._src.check.check.check_usd`'s keyword arguments.
+        options: the batch's :class:`~warp_ccd._src.check.options.CheckOptions` (checked already).
+        frames: the time codes of a whole file (as :func:`~warp_ccd._src.check.check.check_usd` takes them); a
+            part's own ``times`` replace them.
+        prims: the prims to check (as :func:`~warp_ccd._src.check.check.check_usd` takes them).
+        device: the Warp device to check on.
         stage: the file's ``Usd.Stage`` when it is already open (a worker keeps them), else None.
     """
     from ..geometry.precision import PrecisionWarning
     from .check import check_usd
 
-    opts = dict(options)
-    if task.times is not None:
-        opts["frames"] = task.times
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PrecisionWarning)  # the report carries it (precision_note)
-            report = check_usd(task.path if stage is None else stage, **opts)
+            report = check_usd(task.path if stage is None else stage, options,
+                               frames=frames if task.times is None else task.times, prims=prims, device=device)
     except ValueError as exc:
         return TaskOutcome(task, error=str(exc), status=EXIT_BAD_INPUT)
     except Exception as exc:  # noqa: BLE001 (a file's failure is reported; the others go on)
         return TaskOutcome(task, error=f"internal error: {type(exc).__name__}: {exc}", status=EXIT_INTERNAL)
     report.source = None  # plain data, as it would come back from another process
     return TaskOutcome(task, report)
-

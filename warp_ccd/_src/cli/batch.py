@@ -18,8 +18,8 @@ from collections.abc import Callable
 from .common import (
     REPORT_STDOUT,
     CliError,
-    check_arguments,
-    check_options,
+    check_options_from,
+    flat_values,
     init_warp,
     pending_outputs,
     quiet_warp,
@@ -83,23 +83,22 @@ def check_batch(args, files: list[str], frames, fail: Callable[[str], CliError])
 
                 validate_stage_path(args.usd_out)
                 overlays = [args.usd_out]
-        check_arguments(args)
+        options = check_options_from(args)
     except ValueError as exc:
         raise fail(str(exc)) from None
     require_usd(fail)
     quiet_warp()
-    options = check_options(args)
+    device = None
     if args.ray is None:
         init_warp()
         try:
-            options["device"] = resolve_device(args.device)
+            device = resolve_device(args.device)
         except ValueError as exc:
             raise fail(str(exc)) from None
     try:
-        batch = check_many(files, frames=frames, ray=args.ray is not None,
-                           ray_address=None if args.ray in (None, "local") else args.ray, workers=args.workers,
-                           frames_per_task=args.frames_per_task, read_workers=args.read_workers, progress=True,
-                           **options)
+        batch = check_many(files, options, frames=frames, prims=flat_values(args.prims), device=device,
+                           ray=args.ray is not None, ray_address=None if args.ray in (None, "local") else args.ray,
+                           workers=args.workers, frames_per_task=args.frames_per_task, given_as=args.given_as)
     except ValueError as exc:
         raise fail(str(exc)) from None
     if not several and batch.files[0].report is None:

@@ -50,8 +50,8 @@ from .common import (
     REPORT_STDOUT,
     CliError,
     OneLineParser,
-    check_arguments,
-    check_options,
+    check_options_from,
+    flat_values,
     init_warp,
     pending_outputs,
     quiet_warp,
@@ -94,14 +94,20 @@ def _count(minimum: int):
     return parse
 
 
-def _depth(text: str) -> float:
+def _number(text: str) -> float:
+    """A number's text as a float (its bounds are the option's rule, checked with the others)."""
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not value >= 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
+
+
+def _integer(text: str) -> int:
+    """An integer's text as an int (its bounds are the option's rule, checked with the others)."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
 def _frames(text: str | None):
@@ -175,12 +181,12 @@ def _build_parser() -> OneLineParser:
                        help="run on a Ray cluster: one worker per GPU (else per CPU), long animations cut into ranges "
                        "of time codes; the results are those of one process. ADDRESS: 'auto', HOST:PORT or "
                        "ray://HOST:PORT (default: a local cluster). Needs pip install 'warp-ccd[distributed]'")
-    check.add_argument("--workers", type=_count(1), default=None, metavar="N",
+    check.add_argument("--workers", type=_integer, default=None, metavar="N",
                        help="with --ray: workers to start (default: one per GPU of the cluster, else one per CPU)")
-    check.add_argument("--frames-per-task", type=_count(1), default=None, metavar="N",
+    check.add_argument("--frames-per-task", type=_integer, default=None, metavar="N",
                        help="cut every file into ranges of N time codes, one task each (default: whole files, cut "
                        "only where there are fewer files than workers)")
-    check.add_argument("--read-workers", type=_count(0), default=None, metavar="N",
+    check.add_argument("--read-workers", type=_integer, default=None, metavar="N",
                        help="processes that read the transforms of a big animation, in this process's check "
                        "(default: chosen by its size; 0: none; Ray workers read in their own process)")
     check.add_argument("--frames", default=None, metavar="START:END[:STEP]",
@@ -189,9 +195,9 @@ def _build_parser() -> OneLineParser:
                        help="prim paths or fnmatch patterns to check ('/World/Robot', '/World/*/Wheel*'); several "
                        "separated by commas or by repeating --prims (default: all)")
     check.add_argument("--device", default=None, help="Warp device (default: cuda:0 if available, else cpu)")
-    check.add_argument("--precision", choices=("float32", "float64"), default="float32",
+    check.add_argument("--precision", default="float32", metavar="{float32,float64}",
                        help="vertices, poses and the exact test (default: %(default)s)")
-    check.add_argument("--min-depth", type=_depth, default=0.0, metavar="D",
+    check.add_argument("--min-depth", type=_number, default=0.0, metavar="D",
                        help="a triangle pair penetrates when it crosses deeper than D scene units; resting "
                        "contact has depth 0 (default: %(default)s)")
     check.add_argument("--count-touching", action="store_true",
@@ -200,10 +206,10 @@ def _build_parser() -> OneLineParser:
                        help="also report the prim pairs that touch between consecutive time codes (each vertex "
                        "moving linearly), with the time of first contact; a pair that neither end frame shows "
                        "intersecting is tunnelling, a finding like a penetration")
-    check.add_argument("--min-distance", type=_depth, default=0.0, metavar="D",
+    check.add_argument("--min-distance", type=_number, default=0.0, metavar="D",
                        help="with --continuous, surfaces that come within D scene units count as touching "
                        "(default: %(default)s)")
-    check.add_argument("--clearance", type=_depth, default=0.0, metavar="D",
+    check.add_argument("--clearance", type=_number, default=0.0, metavar="D",
                        help="also report the prim pairs whose surfaces come within D scene units and are not "
                        "colliding (soft clashes), with their least distance and closest points; a finding like a "
                        "penetration (default: %(default)s, none)")
@@ -224,8 +230,8 @@ def _build_parser() -> OneLineParser:
                        help="keep the intersection segments: in the report, and as curves in the overlay")
     check.add_argument("--preview", default=None, metavar="PICTURE.png", help="a picture of the worst frame (.png)")
     check.add_argument("--include-invisible", action="store_true", help="also check invisible prims")
-    check.add_argument("--include-purpose", action="append", choices=("guide", "proxy"), default=[],
-                       help="also check prims of this purpose (repeatable)")
+    check.add_argument("--include-purpose", dest="include_purposes", action="append", default=[],
+                       metavar="{guide,proxy}", help="also check prims of this purpose (repeatable)")
     check.add_argument("--top", type=_count(1), default=10, help="prim pairs in the summary table (default: 10)")
     check.add_argument("--worlds", action="append", default=None, metavar="PATTERN",
                        help="prim path or fnmatch pattern ('/World/envs/*'): every prim it matches roots a world, "
@@ -251,6 +257,8 @@ def _build_parser() -> OneLineParser:
     for command in (demo, check):
         command.add_argument("--debug", action="store_true",
                              help="on an internal error, print the traceback (default: one line)")
+    # The flag each option of the check is given as (dest: the option's name), for the messages of its rules.
+    check.set_defaults(given_as=check.flags())
     sub.add_parser("bench", help="the scaling benchmark against peers (arguments after 'bench' go to "
                    "warp_ccd.bench)", add_help=False)
     return parser
@@ -470,7 +478,7 @@ def _check(args) -> tuple[int, str | None]:
             if validate_preview_path(args.preview)[1] != ".png":
                 raise ValueError(f"cannot write {args.preview}: the preview of a check is one picture (use .png)")
         frames = _frames(args.frames)
-        check_arguments(args)
+        options = check_options_from(args)
     except ValueError as exc:
         raise fail(str(exc)) from None
     require_usd(fail)
@@ -487,15 +495,15 @@ def _check(args) -> tuple[int, str | None]:
         # A layer the stage uses (or one it names but cannot open) is an input too.
         refuse_overwriting([(f"a layer of {args.stage}", p) for p in layer_files(stage)]
                             + [(f"an asset {args.stage} uses", p) for p in missing], outputs)
-        require_layers(stage, args.allow_missing, missing)
+        require_layers(stage, options.allow_missing, missing)
         device = resolve_device(args.device)
     except ValueError as exc:
         raise fail(str(exc)) from None
     opened = time.perf_counter() - t
 
-    modules = (CHECK_KERNEL_MODULES + (CONTINUOUS_KERNEL_MODULES if args.continuous else ())
-               + (CLEARANCE_KERNEL_MODULES if args.clearance > 0.0 else ())
-               + (SELF_KERNEL_MODULES if args.self_intersections else ())
+    modules = (CHECK_KERNEL_MODULES + (CONTINUOUS_KERNEL_MODULES if options.continuous else ())
+               + (CLEARANCE_KERNEL_MODULES if options.clearance > 0.0 else ())
+               + (SELF_KERNEL_MODULES if options.self_intersections else ())
                + (("warp_ccd.preview",) if args.preview is not None else ()))
     for name in modules:
         importlib.import_module(name)
@@ -507,8 +515,7 @@ def _check(args) -> tuple[int, str | None]:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", PrecisionWarning)
-            report = check_usd(stage, frames=frames, device=device, progress=True, read_workers=args.read_workers,
-                               **check_options(args))
+            report = check_usd(stage, options, frames=frames, prims=flat_values(args.prims), device=device)
     except ValueError as exc:
         raise fail(str(exc)) from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)

@@ -12,9 +12,14 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
+from dataclasses import fields
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..check.options import CheckOptions
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "REPORT_STDOUT",
-           "CliError", "OneLineParser", "check_arguments", "check_options", "flat_values", "init_warp",
+           "CliError", "OneLineParser", "check_options_from", "flat_values", "init_warp",
            "pending_outputs", "quiet_warp", "refuse_overwriting", "require_usd", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
@@ -44,6 +49,10 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str):
         raise CliError(f"{self.prog}: error: {message} (see --help)", EXIT_USAGE)
+
+    def flags(self) -> dict[str, str]:
+        """The flag each option is given as, by the name it is stored under (``{"min_depth": "--min-depth"}``)."""
+        return {a.dest: a.option_strings[0] for a in self._actions if a.option_strings}
 
 
 def quiet_warp() -> None:
@@ -179,16 +188,18 @@ def pending_outputs(fail: Callable[[str], CliError]) -> Iterator[tuple[list, lis
         print(line.format(path))
 
 
-def check_options(args: argparse.Namespace) -> dict:
-    """``check``'s arguments as :func:`~warp_ccd._src.check.check.check_usd`'s keyword arguments (all but the stage, the
-    frames, the device, progress and the readers)."""
-    return dict(prims=flat_values(args.prims), precision=args.precision, min_depth=args.min_depth,
-                count_touching=args.count_touching, segments=args.segments, include_invisible=args.include_invisible,
-                include_purposes=tuple(args.include_purpose), allow_missing=args.allow_missing,
-                continuous=args.continuous, min_distance=args.min_distance, clearance=args.clearance,
-                self_intersections=args.self_intersections, duplicates=args.duplicates, worlds=args.worlds,
-                ignore_pairs=args.ignore_pairs, usd_filters=args.usd_filters, set_a=flat_values(args.set_a),
-                set_b=flat_values(args.set_b))
+def check_options_from(args: argparse.Namespace) -> CheckOptions:
+    """``check``'s arguments as its one :class:`~warp_ccd._src.check.options.CheckOptions`: every option with a flag
+    (stored under its name), with progress bars. The ignore-pairs files are read here, before any stage.
+
+    Raises:
+        ValueError: a bad option, named by the flag the user typed (``--min-depth must be ...``).
+    """
+    from ..check.options import CheckOptions
+
+    values = {f.name: getattr(args, f.name) for f in fields(CheckOptions) if f.name in args.given_as}
+    values.update(set_a=flat_values(args.set_a), set_b=flat_values(args.set_b), progress=True)
+    return CheckOptions(**values, given_as=args.given_as)
 
 
 def require_usd(fail: Callable[[str], CliError]) -> None:
@@ -217,17 +228,3 @@ def refuse_overwriting(inputs: list[tuple[str, str]], outputs: list[tuple[str, s
             if same_file(out, path):
                 where = "" if os.path.realpath(path) == os.path.abspath(out) else f" ({os.path.realpath(path)})"
                 raise ValueError(f"{flag} {out} is {what}{where}: it would be written over")
-
-
-def check_arguments(args: argparse.Namespace) -> None:
-    """Raises ValueError for ``check`` options that do not go together, or an ``--ignore-pairs`` file that cannot
-    be read (read again by the check: here, its errors come before any stage is read)."""
-    if args.min_distance > 0.0 and not args.continuous:
-        raise ValueError("--min-distance is an option of --continuous")
-    if (args.set_a is None) != (args.set_b is None):
-        given, other = ("--set-a", "--set-b") if args.set_b is None else ("--set-b", "--set-a")
-        raise ValueError(f"{given} needs {other}: only pairs of one prim of each set are checked")
-    from ..usd.filters import read_pair_file
-
-    for path in args.ignore_pairs or ():
-        read_pair_file(path)
