@@ -63,8 +63,7 @@ class FileResult:
         report: its :class:`~warp_ccd._src.check.report.CheckReport` (merged from its parts), or None when it failed.
         error: why it failed (one line naming the file or prim), or None.
         exit_status: 0 nothing found, 1 findings (:attr:`~warp_ccd._src.check.report.CheckReport.findings`), 2 bad
-        input,
-            3 an internal error.
+            input, 3 an internal error.
         tasks: how many tasks checked it.
     """
 
