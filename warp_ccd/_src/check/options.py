@@ -25,7 +25,7 @@ from typing import Any
 from ..geometry.triangle import TOLERANCE
 from ..pipeline.options import PipelineOptions
 from ..runtime.aliases import PathLike
-from ..runtime.options import check_option
+from ..runtime.options import check_option, merged_options
 from ..usd.filters import PairFilters
 
 __all__ = ["CheckOptions", "check_options"]
@@ -181,17 +181,7 @@ class CheckOptions:
 
 
 def check_options(options: CheckOptions | None, changes: dict[str, Any], where: str) -> CheckOptions:
-    """What a check is called with (``options`` or the defaults, ``changes`` over them) as one checked object.
-
-    ``where`` names the call (``"check_usd"``, ``"check_many"``) in the TypeError of an object that is no
-    :class:`CheckOptions` or of a keyword that is no field of it; a bad value is the ValueError of
-    :class:`CheckOptions`. An object given without ``changes`` is taken as it is (it was checked when made).
-    """
-    if not isinstance(options, (CheckOptions, type(None))):
-        raise TypeError(f"{where}: options must be a CheckOptions, got {type(options).__name__}")
-    unknown = sorted(changes.keys() - {f.name for f in fields(CheckOptions)})
-    if unknown:
-        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
-    if options is None:
-        return CheckOptions(**changes)
-    return options.replace(**changes) if changes else options
+    """What a check is called with: ``options`` (or the defaults) with the keyword ``changes`` over it, as one
+    checked object (:func:`~warp_ccd._src.runtime.options.merged_options`; ``where`` names the call,
+    ``"check_usd"`` or ``"check_many"``, in a TypeError)."""
+    return merged_options(CheckOptions, options, changes, where)

@@ -15,7 +15,7 @@ from typing import Any
 
 from ..geometry.ccd import CCD_MAX_ITERATIONS, CCD_TOLERANCE
 from ..geometry.triangle import TOLERANCE
-from ..runtime.options import check_option
+from ..runtime.options import check_option, merged_options
 
 __all__ = ["PipelineOptions", "pipeline_options"]
 
@@ -139,21 +139,6 @@ class PipelineOptions:
 
 
 def pipeline_options(options: PipelineOptions | None, changes: dict[str, Any], where: str) -> PipelineOptions:
-    """The options an API call gets: ``options`` (or the defaults) with the keyword ``changes``.
-
-    Args:
-        options: a :class:`PipelineOptions`, or None.
-        changes: keyword options given besides (fields of :class:`PipelineOptions`).
-        where: the call, for the message of an unknown keyword (``"CollisionPipeline"``).
-
-    Raises:
-        TypeError: ``options`` is no :class:`PipelineOptions`, or a keyword is no option.
-        ValueError: a bad option (naming it).
-    """
-    if options is not None and not isinstance(options, PipelineOptions):
-        raise TypeError(f"{where}: options must be a PipelineOptions, got {type(options).__name__}")
-    unknown = sorted(set(changes) - {f.name for f in fields(PipelineOptions)})
-    if unknown:
-        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
-    base = options or PipelineOptions()
-    return base.replace(**changes) if changes else base
+    """The pipeline options an API call gets: ``options`` (or the defaults) with the keyword ``changes`` over it
+    (:func:`~warp_ccd._src.runtime.options.merged_options`; ``where`` names the call in a TypeError)."""
+    return merged_options(PipelineOptions, options, changes, where)

@@ -17,6 +17,7 @@ Adding an option: its row here, its field in the options object that takes it, a
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +25,8 @@ import numpy as np
 
 from .checks import integer_option, is_integer, number_option
 
-__all__ = ["CLEARANCE_MAX", "LEAF_SIZE_MAX", "OPTIONS", "PRECISIONS", "SEPARATING_AXES", "Rule", "check_option"]
+__all__ = ["CLEARANCE_MAX", "LEAF_SIZE_MAX", "OPTIONS", "PRECISIONS", "SEPARATING_AXES", "Rule", "check_option",
+           "merged_options"]
 
 PRECISIONS = ("float32", "float64")
 """Vertex, pose and test precisions."""
@@ -148,6 +150,30 @@ OPTIONS: dict[str, Rule] = {
     "frames_per_task": Rule("integer", low=1, allow_none=True),
 }
 """Every option by name, and its rule."""
+
+
+def merged_options(kind: type, options: Any, changes: dict[str, Any], where: str) -> Any:
+    """The options object an API call gets: ``options`` (an instance of the options dataclass ``kind``, or None
+    for its defaults) with the keyword ``changes`` over it, checked as a new object is.
+
+    Args:
+        kind: the options class (``PipelineOptions``, ``CheckOptions``).
+        options: an instance of it, or None.
+        changes: the keyword options given besides (fields of ``kind``).
+        where: the call, for the message of a wrong object or an unknown keyword (``"CollisionPipeline"``).
+
+    Raises:
+        TypeError: ``options`` is no ``kind``, or a keyword is no field of it.
+        ValueError: a bad option (naming it).
+    """
+    if options is not None and not isinstance(options, kind):
+        raise TypeError(f"{where}: options must be a {kind.__name__}, got {type(options).__name__}")
+    unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(kind)})
+    if unknown:
+        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
+    if options is None:
+        return kind(**changes)
+    return dataclasses.replace(options, **changes) if changes else options
 
 
 def check_option(name: str, value: Any, given_as: str | None = None) -> Any:

@@ -73,6 +73,7 @@ import numpy as np
 from ..geometry.precision import PrecisionWarning, coordinate_message, needed_precision, shape_radius, triangle_size
 from ..runtime.aliases import DeviceLike, PathLike
 from ..runtime.checks import integer_option
+from ..runtime.options import check_option
 from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
 from .filters import FilterSummary, PairFilters, PrimIndex, world_ids
@@ -212,10 +213,7 @@ class UsdMeshImport:
             raise ValueError(f"times: {self.times.size} time codes, more than {MAX_FRAMES} at once")
         self._progress = bool(progress)
         self._codes = [Usd.TimeCode(float(t)) for t in self.times]
-        purposes = {"default", "render"} | set(include_purposes)
-        bad = set(include_purposes) - {"guide", "proxy", "render", "default"}
-        if bad:
-            raise ValueError(f"include_purposes: unknown purpose {sorted(bad)[0]!r} (use 'guide', 'proxy')")
+        purposes = {"default", "render"} | {check_option("include_purposes", p) for p in include_purposes}
         self.skipped: list[tuple[str, str]] = []
         self._meshes: list[MeshData] = []
         self._mesh_by_source: dict[str, int] = {}
