@@ -100,7 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(args.rounds):
         for side in (("before", "after") if r % 2 == 0 else ("after", "before")):
             # The script by its path, from a folder of no warp_ccd: the tree's is the only one on the path.
-            env = dict(os.environ, PYTHONPATH=trees[side])
+            others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
+                      if p and not os.path.isdir(os.path.join(p, "warp_ccd"))]  # Warp's, not a warp_ccd
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join([trees[side], *others]))
             proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--before", "-", "--after", "-",
                                    "--worker", json.dumps(scenes), meshes_file, args.device],
                                   capture_output=True, text=True, env=env, cwd=tmp)

@@ -447,10 +447,15 @@ def ray_cluster(tmp_path_factory):
     ray.shutdown()
 
 
+def ray_workers(ray) -> int:
+    """The actors of :func:`ray_check`: 2, or as many as there are GPUs, 2 at most, where there are GPUs (an actor
+    holds one)."""
+    return min(2, int(ray.cluster_resources().get("GPU", 0))) or 2
+
+
 def ray_check(ray, paths, **options):
-    """check_many on the fixture's cluster with 2 actors (as many as there are GPUs, 2 at most, where there are
-    GPUs: an actor holds one); the cluster is left running."""
-    workers = min(2, int(ray.cluster_resources().get("GPU", 0))) or 2
+    """check_many on the fixture's cluster with :func:`ray_workers` actors; the cluster is left running."""
+    workers = ray_workers(ray)
     batch = check_many(paths, ray=True, workers=workers, **options)
     assert (batch.engine, batch.workers) == ("ray", workers)
     assert ray.is_initialized()
@@ -469,9 +474,12 @@ def test_ray_parts_merge_to_the_serial_reports(ray_cluster, files):
 
 
 def test_ray_lone_file_split_across_workers(ray_cluster, files):
+    """A lone file is cut into a part per actor (on a cluster of one GPU, whose one actor holds it, into two parts
+    by ``frames_per_task``), continuous across the cut, and the parts merge to the serial report."""
     ray, _ = ray_cluster
     frames = slice(0, NUM_FRAMES - 1, 0.5)  # 47 time codes: 2 parts, continuous across the cut
-    batch = ray_check(ray, files["mixed"], frames=frames, continuous=True, segments=True)
+    split = {} if ray_workers(ray) >= 2 else {"frames_per_task": 24}
+    batch = ray_check(ray, files["mixed"], frames=frames, continuous=True, segments=True, **split)
     assert batch.files[0].tasks == 2
     assert_same(batch.files[0].report, serial(files["mixed"], DEFAULT_DEVICE, frames=frames, continuous=True,
                                               segments=True))

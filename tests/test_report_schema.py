@@ -18,6 +18,7 @@ pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom, Vt  # noqa: E402
 from usd_stages import define_mesh, duplicate_stage, grid, mixed_stage  # noqa: E402
 
+from conftest import DEFAULT_DEVICE  # noqa: E402
 from test_check_continuous import bullet_stage  # noqa: E402
 
 
@@ -123,7 +124,7 @@ def test_reports_follow_the_schema(stages, device, case):
 
 @pytest.fixture(scope="module")
 def everything(stages):
-    return check_usd(stages["twins"], device="cpu", continuous=True, clearance=0.1, self_intersections=True,
+    return check_usd(stages["twins"], device=DEFAULT_DEVICE, continuous=True, clearance=0.1, self_intersections=True,
                      segments=True, duplicates=True).to_json()
 
 

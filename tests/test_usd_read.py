@@ -12,6 +12,8 @@ fall back), a seeded random stage of random op stacks; and checks which prims th
 gives what the one-by-one read gives.
 """
 
+import os
+
 import numpy as np
 import pytest
 
@@ -446,3 +448,18 @@ def test_workers_read_here_a_stage_not_opened_as_by_default(tmp_path, setting):
     assert np.array_equal(alone._anim_poses, shared._anim_poses)
     if setting == "held":
         assert (alone._anim_poses[1, :, 0] == 0.0).all()  # held at the sample of time 0
+
+
+def test_worker_processes_register_the_packages_of_their_folders():
+    """A reading worker (``python -c``) registers ``warp_ccd`` and the packages down to the workers' module as
+    bare packages of their folders: each must be the folder of that package, or a worker on a machine where the
+    package is not installed (only on ``PYTHONPATH``) cannot import its module."""
+    import importlib
+
+    from warp_ccd._src.usd import workers
+
+    packages = workers.boot_packages()
+    assert [name for name, _ in packages] == ["warp_ccd", "warp_ccd._src", "warp_ccd._src.usd"]
+    for name, folder in packages:
+        assert os.path.samefile(folder, os.path.dirname(importlib.import_module(name).__file__)), name
+    assert "warp_ccd._src.usd.workers import main" in workers.BOOTSTRAP

@@ -1,7 +1,7 @@
 """What the ``warp-ccd`` subcommands share: one-line argument errors, exit codes, device names.
 
-:mod:`warp_ccd._src.cli.commands` (``demo``) and :mod:`warp_ccd.bench` (``bench``) both import from here, and
-neither imports the other at module level.
+:mod:`warp_ccd._src.cli.commands` (``demo``, ``check``) and the scaling benchmark (:mod:`warp_ccd._src.bench`,
+``bench``) both import from here, and neither imports the other at module level.
 """
 
 from __future__ import annotations

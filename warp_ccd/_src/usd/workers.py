@@ -32,7 +32,8 @@ from . import xforms
 if TYPE_CHECKING:
     from pxr import Usd
 
-__all__ = ["BOOTSTRAP", "POOL", "POOL_WORKERS", "auto_workers", "read_poses", "read_shared", "run_pose_workers"]
+__all__ = ["BOOTSTRAP", "POOL", "POOL_WORKERS", "auto_workers", "boot_packages", "read_poses", "read_shared",
+           "run_pose_workers"]
 
 BOOTSTRAP = """import sys, types
 for _name, _path in {packages!r}:
@@ -42,8 +43,9 @@ for _name, _path in {packages!r}:
 from warp_ccd._src.usd.workers import main
 main(sys.argv[1], sys.argv[2])
 """
-"""The worker's command (``python -c``): ``warp_ccd`` and ``warp_ccd.usd`` registered as bare packages of
-their folders, then :func:`main` on the task and result files."""
+"""The worker's command (``python -c``): ``warp_ccd``, ``warp_ccd._src`` and ``warp_ccd._src.usd`` registered as
+bare packages of their folders (the worker imports no more than this folder's modules), then :func:`main` on the
+task and result files."""
 
 
 POOL: Callable[[Callable, list], Callable[[], list]] | None = None
@@ -60,6 +62,14 @@ def auto_workers() -> int:
     """The readers of a big animation when none were asked for: :data:`POOL_WORKERS` with a :data:`POOL`, else one
     process per CPU (at most 16)."""
     return POOL_WORKERS if POOL is not None else min(os.cpu_count() or 1, 16)
+
+
+def boot_packages() -> tuple[tuple[str, str], ...]:
+    """``(package, folder)`` of ``warp_ccd`` and the packages down to this module's: what a worker registers
+    (:data:`BOOTSTRAP`) to import this module and no other of the package."""
+    usd = os.path.dirname(os.path.abspath(__file__))
+    src = os.path.dirname(usd)
+    return ("warp_ccd", os.path.dirname(src)), ("warp_ccd._src", src), ("warp_ccd._src.usd", usd)
 
 
 def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], Any] | None = None) -> tuple[list, Any]:
@@ -83,8 +93,7 @@ def run_pose_workers(tasks: list, progress: bool = False, local: Callable[[], An
         return collect(), mine
     from tqdm import tqdm  # here: importing warp_ccd needs no progress bars
 
-    usd = os.path.dirname(os.path.abspath(__file__))
-    boot = BOOTSTRAP.format(packages=(("warp_ccd", os.path.dirname(usd)), ("warp_ccd.usd", usd)))
+    boot = BOOTSTRAP.format(packages=boot_packages())
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     with tempfile.TemporaryDirectory(prefix="warp_ccd-read-") as folder:
         procs = []
