@@ -70,7 +70,7 @@ def _set_grid(pipe: CollisionPipeline, threads_per_sm: int) -> None:
     mid phase's walk (:class:`~warp_ccd._src.trees.traversal.FrontWalk`) and its own launches."""
     mid = pipe.mid
     if mid.device.is_cuda:
-        mid.num_blocks = mid.walk.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim
+        mid.num_blocks = mid.device.sm_count * threads_per_sm // mid.block_dim  # the walk's grid too
 
 
 def _heavy_kernels() -> list:

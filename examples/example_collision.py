@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 import warp_ccd as wc
-from warp_ccd._src.usd.export import UsdAnimationWriter
+from warp_ccd.usd import UsdAnimationWriter
 
 
 class Example:

@@ -164,6 +164,7 @@ def test_traversal_rounds_split_anywhere(device, num_blocks):
     ref = wc.CollisionPipeline(scene, mid_phase="all_pairs").detect()
     pipe = wc.CollisionPipeline(scene)
     pipe.mid.num_blocks = num_blocks
+    assert pipe.mid.walk.num_blocks == num_blocks  # the tree walk's grid, not only the whole-object pairs'
     got = pipe.detect()
     assert np.array_equal(got.triangle_pairs, ref.triangle_pairs)
     assert got.num_candidates == wc.CollisionPipeline(scene).detect().num_candidates

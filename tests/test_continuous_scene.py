@@ -304,3 +304,20 @@ def test_discrete_common_path_agrees_with_the_whole_test(device, precision):
         decided = c != MEETS_UNDECIDED
         np.testing.assert_array_equal(c[decided], w[decided])
         assert decided.sum() > n // 2 and (~decided).sum() > 0 and w.sum() > 0 and (w == 0).sum() > 0
+
+
+def test_collide_keeps_the_options_least_distance(device):
+    """``collide`` over a motion takes the least distance of the options object it is given (the keyword, where
+    given, wins): two cubes sliding past each other 0.03 apart come within 0.05, never touch."""
+    cube = wc.scene.shape("cube")
+    side = float(np.ptp(cube[0][:, 0]))
+    t0 = np.tile(np.eye(4), (2, 1, 1))
+    t0[1, :3, 3] = (side + 0.03, 0.0, 0.0)  # faces 0.03 apart
+    t1 = t0.copy()
+    t1[:, 1, 3] += 0.5  # both slide along y
+    near = wc.PipelineOptions(continuous=True, min_distance=0.05)
+    got = wc.collide([cube, cube], t0, device=device, transforms_end=t1, options=near)
+    assert got.object_pairs.tolist() == [[0, 1]]
+    assert wc.collide([cube, cube], t0, device=device, transforms_end=t1).object_pairs.tolist() == []
+    far = wc.collide([cube, cube], t0, device=device, transforms_end=t1, min_distance=0.01, options=near)
+    assert far.object_pairs.tolist() == []  # the keyword's 0.01 over the options' 0.05

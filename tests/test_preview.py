@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import warp_ccd as wc
-from warp_ccd.preview import PreviewRenderer, mesh_triangle_indices, render_frame, save_preview
+from warp_ccd._src.preview import mesh_triangle_indices
+from warp_ccd.preview import PreviewRenderer, render_frame, save_preview
 
 
 def reddish(img):

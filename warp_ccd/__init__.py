@@ -35,7 +35,7 @@ from ._src.pipeline.options import PipelineOptions
 from ._src.pipeline.pipeline import CollisionPipeline, collide
 from ._src.pipeline.result import CollisionResult
 from ._src.queries.ccd import ccd_queries
-from ._src.queries.distance import DistanceQuery, distance, self_intersections
+from ._src.queries.distance import DistanceQuery, DistanceResult, distance, self_intersections
 from ._src.scene.scene import Scene
 
 __version__ = "0.1.0"
@@ -46,6 +46,7 @@ __all__ = [
     "CollisionPipeline",
     "CollisionResult",
     "DistanceQuery",
+    "DistanceResult",
     "PipelineOptions",
     "PrecisionWarning",
     "Scene",

@@ -5,22 +5,6 @@ an animated GIF.
 >>> save_preview(render_frame(scene, pipe.detect()), "preview.png")
 """
 
-from ._src.preview import (
-    PREVIEW_EXTENSIONS,
-    PreviewRenderer,
-    mesh_triangle_indices,
-    prepare_preview,
-    render_frame,
-    save_preview,
-    validate_preview_path,
-)
+from ._src.preview import PREVIEW_EXTENSIONS, PreviewRenderer, render_frame, save_preview
 
-__all__ = [
-    "PREVIEW_EXTENSIONS",
-    "PreviewRenderer",
-    "mesh_triangle_indices",
-    "prepare_preview",
-    "render_frame",
-    "save_preview",
-    "validate_preview_path",
-]
+__all__ = ["PREVIEW_EXTENSIONS", "PreviewRenderer", "render_frame", "save_preview"]

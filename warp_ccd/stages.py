@@ -17,13 +17,14 @@ apart (branch and bound over their trees).
 
 What the frame calls of each kind is a protocol (:class:`BoundsStage`, :class:`BroadPhaseStage`,
 :class:`MidPhaseStage`, :class:`NarrowPhaseStage`, :class:`ClearanceStage`, :class:`SelfStage`); the
-factories make the stages of a :class:`~warp_ccd.PipelineOptions`: :func:`make_broad_phase`,
-:func:`make_mid_phase` (the mid phase with its bounds stage), :func:`make_narrow_phase`. Beside them:
-:func:`broad_phase_pairs`, the broad phase of boxes given as numpy arrays, and :func:`build_tree`, one shape's
-tree on the host.
+factories make the stages of a :class:`~warp_ccd.PipelineOptions` (:func:`make_mid_phase`, the mid phase with
+its bounds stage; :func:`make_narrow_phase`) or of a method name (:func:`make_broad_phase`). Every stage writes
+into :class:`GrowableBuffer` s (a device array with a capacity and a counter); :func:`find_pairs` runs a broad
+phase until its buffers hold every pair. Beside them: :func:`broad_phase_pairs`, the broad phase of boxes given as
+numpy arrays, and :func:`build_tree`, one shape's tree on the host.
 """
 
-from ._src.broadphase.sap import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, make_broad_phase
+from ._src.broadphase.sap import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_pairs, find_pairs, make_broad_phase
 from ._src.midphase.all_pairs import MidPhaseAllPairs
 from ._src.midphase.bvh import MidPhaseBVH
 from ._src.narrowphase.clearance import ClearancePhase
@@ -41,6 +42,7 @@ from ._src.pipeline.stages import (
     make_narrow_phase,
 )
 from ._src.queries.tree_distance import TreeDistance
+from ._src.runtime.buffers import GrowableBuffer
 from ._src.trees.bounds import ObjectBounds
 from ._src.trees.bvh import SceneBVH
 from ._src.trees.reference import build_tree
@@ -53,6 +55,7 @@ __all__ = [
     "ClearancePhase",
     "ClearanceStage",
     "ContinuousNarrowPhase",
+    "GrowableBuffer",
     "MidPhaseAllPairs",
     "MidPhaseBVH",
     "MidPhaseStage",
@@ -65,6 +68,7 @@ __all__ = [
     "TreeDistance",
     "broad_phase_pairs",
     "build_tree",
+    "find_pairs",
     "make_broad_phase",
     "make_mid_phase",
     "make_narrow_phase",

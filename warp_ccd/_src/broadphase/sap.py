@@ -5,8 +5,8 @@ Two implementations behind one interface (``launch(lower, upper, pairs)`` writes
 the buffers of its own whose counters the caller checks after it; boxes are closed, so touching
 boxes overlap):
 
-* :class:`BroadPhaseAllPairs`, the reference (method ``"all_pairs"``; ``"nxn"``, its old name, is
-  an alias): one thread per pair index ``k < N (N - 1) / 2``. O(N^2) work, exact, limited to
+* :class:`BroadPhaseAllPairs`, the reference (method ``"all_pairs"``; ``"nxn"`` names it too, as the
+  API contract does): one thread per pair index ``k < N (N - 1) / 2``. O(N^2) work, exact, limited to
   :data:`ALL_PAIRS_LIMIT` boxes.
 * :class:`BroadPhaseSAP`, the default: sort-based sweep and prune on a grid (Liu et al. 2010).
 
@@ -537,8 +537,8 @@ class BroadPhaseSAP(BroadPhase):
 
 
 BROAD_METHODS = {"sap": BroadPhaseSAP, "all_pairs": BroadPhaseAllPairs, "nxn": BroadPhaseAllPairs}
-"""Broad-phase classes by method name (:func:`make_broad_phase`); ``"nxn"`` is the old name of
-``"all_pairs"``, kept as an alias."""
+"""Broad-phase classes by method name (:func:`make_broad_phase`); ``"nxn"`` names
+``"all_pairs"`` too (the API contract's name for it)."""
 
 
 def make_broad_phase(method: str, *, device: DeviceLike = None, graph: bool | None = None,

@@ -357,14 +357,35 @@ class MidPhaseBVH(MidPhase):
         self.separating_axes = check_option("separating_axes", separating_axes)
         self.walk = FrontWalk(bvh.num_levels, front_capacity or max(256, 4 * bvh.lower.shape[0]), "tree-pair front",
                               self.device)
-        self.front = self.walk.front
-        self.num_levels = self.walk.num_levels
-        self.block_dim = self.walk.block_dim
-        self.num_blocks = self.walk.num_blocks
         if whole_triangles_max is None:
             whole_triangles_max = WHOLE_TRIANGLES_MAX if bvh.lower.shape[0] <= WHOLE_OBJECTS_MAX else 0
         self.whole_triangles_max = whole_triangles_max
         self._pairs_capacity = -1
+
+    @property
+    def front(self) -> GrowableBuffer:
+        """The walk's front of node pairs ``(pair, node a, node b)`` (its counter: the largest level's count)."""
+        return self.walk.front
+
+    @property
+    def num_levels(self) -> int:
+        """Launches of the walk a frame: the deepest tree's levels less one (at least 1)."""
+        return self.walk.num_levels
+
+    @property
+    def num_blocks(self) -> int:
+        """The largest grid of a launch, in blocks, the walk's and the whole-object pairs' (set it before a frame
+        is captured: a captured frame keeps the grid it was captured with)."""
+        return self.walk.num_blocks
+
+    @num_blocks.setter
+    def num_blocks(self, value: int) -> None:
+        self.walk.num_blocks = integer_option("num_blocks", value, low=1)
+
+    @property
+    def block_dim(self) -> int:
+        """Threads per block of the walk's and the whole-object pairs' launches."""
+        return self.walk.block_dim
 
     @property
     def counters(self) -> list[GrowableBuffer]:

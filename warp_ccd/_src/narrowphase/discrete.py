@@ -347,6 +347,12 @@ class NarrowPhase:
         self.toi = None  # a discrete test has no times of impact (ContinuousNarrowPhase has)
 
     @property
+    def pad_abs(self) -> float:
+        """Padding in scene units the boxes upstream need besides the tolerance's: none (the test sees one
+        moment)."""
+        return 0.0
+
+    @property
     def counters(self) -> list[GrowableBuffer]:
         """The buffers with counters that :meth:`launch` resets and writes; the caller reads
         their counters after it."""

@@ -53,6 +53,7 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 __all__ = ["SelfIntersection", "SelfTraversal", "weld_vertices"]
 
+
 def weld_vertices(vertices: np.ndarray, vertex_start: np.ndarray) -> np.ndarray:
     """Each vertex's id for adjacency: the least local index of the vertices of its shape at exactly
     its position (so that a mesh stored with split vertices, as STL and many exports are, shares its

@@ -113,12 +113,11 @@ class CollisionPipeline:
         self.graph = mode == "graph"
         self.broad = make_broad_phase(o.broad_phase, device=d, entry_capacity=o.entry_capacity)
         self.narrow = make_narrow_phase(n, o, device=d)
-        if self.continuous:
-            # Leaf boxes padded by the discrete tolerance (at least the one of the test at t = 0 of
-            # triangle_pair_toi), the least distance and the continuous tolerance.
-            margin_rel, pad_abs = max(o.tolerance, TOLERANCE), self.narrow.pad_abs
-        else:
-            margin_rel, pad_abs = self.narrow.tolerance, 0.0
+        # Leaf boxes padded by the discrete tolerance (a continuous frame: at least the one of the test at t = 0
+        # of triangle_pair_toi) and by what the narrow phase may report beyond it (pad_abs: a continuous test's
+        # least distance and tolerance).
+        margin_rel = max(o.tolerance, TOLERANCE) if self.continuous else self.narrow.tolerance
+        pad_abs = self.narrow.pad_abs
         self.boxes, self.mid = make_mid_phase(scene, o, margin_rel=margin_rel, world_trees=self.continuous,
                                               pad_abs=pad_abs, device=d)
         self.near_phase = (ClearancePhase(n, self.clearance, tolerance=self.narrow.tolerance,
@@ -385,7 +384,8 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
     min_distance = check_option("min_distance", min_distance)
     filters = {"world": world, "group": group, "mask": mask, "exclude_pairs": exclude_pairs}
     if transforms_end is not None or vertices_end is not None or min_distance > 0.0:
-        o = o.replace(continuous=True, min_distance=min_distance)
+        # continuous; the keyword's least distance where given, else the options' own
+        o = o.replace(continuous=True, min_distance=min_distance if min_distance > 0.0 else o.min_distance)
     end_poses = None if transforms_end is None else _checked_poses(transforms_end, len(meshes), "transforms_end")
     if vertices_end is not None:  # deforming: world vertices at both ends, computed here
         ends = _vertices_end(meshes, vertices_end)

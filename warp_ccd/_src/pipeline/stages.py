@@ -123,6 +123,8 @@ class NarrowPhaseStage(Protocol):
         segment: ``(hits.capacity, 2)`` end points, or None without ``segments``.
         contained: ``wp.vec2i`` rows ``(inner, outer)`` of objects wholly inside another, or None.
         toi: ``(hits.capacity,)`` float64 time of impact of each hit over a motion, or None (discrete).
+        pad_abs: padding in scene units of the boxes upstream besides the tolerance's (a continuous test's least
+            distance and tolerance; 0 for the discrete tests).
         counters: buffers with counters that :meth:`launch` writes (``hits`` among them).
     """
 
@@ -133,6 +135,9 @@ class NarrowPhaseStage(Protocol):
     segment: wp.array | None
     contained: GrowableBuffer | None
     toi: wp.array | None
+
+    @property
+    def pad_abs(self) -> float: ...
 
     @property
     def counters(self) -> list[GrowableBuffer]: ...

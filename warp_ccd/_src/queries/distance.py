@@ -115,7 +115,7 @@ class DistanceQuery:
         """Measures every queried pair on the scene's world vertices now.
 
         Returns:
-            A :class:`~warp_ccd._src.pipeline.result.DistanceResult` holding views of this query's device arrays,
+            A :class:`~warp_ccd._src.queries.distance.DistanceResult` holding views of this query's device arrays,
             valid until the next ``query()`` (its numpy arrays, once read, are its own).
         """
         runs = 1
@@ -158,7 +158,7 @@ def distance(meshes_a: Sequence, meshes_b: Sequence | None = None, transforms_a:
         tolerance: relative tolerance of the triangle tests (see :class:`DistanceQuery`).
 
     Returns:
-        :class:`~warp_ccd._src.pipeline.result.DistanceResult`: per row of ``pairs`` (indices into the sets as given)
+        :class:`~warp_ccd._src.queries.distance.DistanceResult`: per row of ``pairs`` (indices into the sets as given)
         the least distance, closest points, direction and closest triangles.
 
     Raises:

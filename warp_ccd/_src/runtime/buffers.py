@@ -9,9 +9,8 @@ in 64 bits, so it cannot wrap. After the frame the host reads all counters once
 Device helpers every stage shares live here too: :func:`emit_pair` (an object pair through that
 protocol), :func:`upper_bound` (which block of a scanned count a flat work item falls in),
 :func:`block_reserve` (slots for a whole block of threads with one atomic add) and
-:func:`device_fence` (for a kernel whose last block finishes the work of all); and one host helper,
-:func:`packed_upload` (many small integer arrays to the device in one copy; it lives in
-:mod:`warp_ccd._src.runtime.arrays`, beside the scene's own packed uploads, and is re-exported here).
+:func:`device_fence` (for a kernel whose last block finishes the work of all). Many small arrays go to the
+device in one copy by :func:`~warp_ccd._src.runtime.arrays.packed_upload`.
 
 Atomic adds on one counter are served one at a time when their increments differ from thread to
 thread, which measured slow on a GPU where every thread reserved its own items (the measurements:
@@ -29,7 +28,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-from .arrays import packed_upload  # re-exported: it lived here
+from .aliases import DeviceLike
 
 wp.set_module_options({"enable_backward": False})  # forward kernels only
 
@@ -44,7 +43,6 @@ __all__ = [
     "block_reserve",
     "device_fence",
     "emit_pair",
-    "packed_upload",
     "reserve_slot",
     "upper_bound",
     "used_count",
@@ -163,7 +161,8 @@ class GrowableBuffer:
             then grew: its new storage holds nothing yet).
     """
 
-    def __init__(self, dtype, capacity: int, device, name: str, factor: int = 1, doubling: bool = True):
+    def __init__(self, dtype: Any, capacity: int, device: DeviceLike, name: str, factor: int = 1,
+                 doubling: bool = True) -> None:
         self.dtype = dtype
         self.device = wp.get_device(device)
         self.name = name
