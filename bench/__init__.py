@@ -18,6 +18,8 @@ sizes, to check the scripts), results in ``bench/results/``.
   ``self_intersection``.
 * the host: ``host_breakdown``, ``host_after_wait``.
 * USD: ``usd_check``, ``usd_export``, ``distributed`` (the check on Ray).
+* before and after a change: ``frame_ab`` (the frame of two source trees, alternating rounds in one run),
+  ``kernel_times_ab`` (their kernels' GPU times a frame).
 
 Shared: ``command`` (the command-line set-up and the result document) and ``timing`` (row numbers, timed
 frames). ``narrow_phase`` takes its near-degenerate pairs from the tests (``tests/awkward_pairs.py``).
