@@ -61,6 +61,14 @@ def _worker(scenes: list, meshes_file: str, device: str) -> list[dict]:
     return out
 
 
+def tree_env(tree: str) -> dict:
+    """The environment of a process that imports ``warp_ccd`` from ``tree`` alone: the tree first on
+    ``PYTHONPATH``, then the entries that hold no ``warp_ccd`` (Warp's, where it is not installed)."""
+    others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
+              if p and not os.path.isdir(os.path.join(p, "warp_ccd"))]
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([tree, *others]))
+
+
 def _git_commit(root: str) -> str | None:
     try:
         return subprocess.run(["git", "-C", root, "rev-parse", "HEAD"], capture_output=True, text=True,
@@ -100,9 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(args.rounds):
         for side in (("before", "after") if r % 2 == 0 else ("after", "before")):
             # The script by its path, from a folder of no warp_ccd: the tree's is the only one on the path.
-            others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
-                      if p and not os.path.isdir(os.path.join(p, "warp_ccd"))]  # Warp's, not a warp_ccd
-            env = dict(os.environ, PYTHONPATH=os.pathsep.join([trees[side], *others]))
+            env = tree_env(trees[side])
             proc = subprocess.run([sys.executable, os.path.abspath(__file__), "--before", "-", "--after", "-",
                                    "--worker", json.dumps(scenes), meshes_file, args.device],
                                   capture_output=True, text=True, env=env, cwd=tmp)

@@ -51,11 +51,11 @@ if __name__ == "__main__":
         worker([int(x) for x in sys.argv[2:]])
         sys.exit(0)
     before, after = sys.argv[1], sys.argv[2]
-    others = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep)
-              if p and not os.path.isdir(os.path.join(p, "warp_ccd"))]
+    from frame_ab import tree_env  # beside this script (run by its path)
+
     counts = sys.argv[3:] or ["1000", "100000"]
     for side, tree in (("before", before), ("after", os.path.abspath(after))):
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([tree, *others]))
+        env = tree_env(tree)
         p = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", *counts], capture_output=True,
                            text=True, env=env, cwd="/tmp")
         line = [x for x in p.stdout.splitlines() if x.startswith("RESULT ")]

@@ -39,24 +39,11 @@ from ..runtime.buffers import CounterRead, GrowableBuffer
 from ..runtime.frame import CountedFrame, FrameCache, frame_mode
 from ..runtime.options import check_option
 from ..scene.scene import Scene, quat_to_matrix, transforms_to_poses
-from .options import PipelineOptions, pipeline_options
+from .options import DEFORMING_LEAF_SIZE, RIGID_LEAF_SIZE, PipelineOptions, pipeline_options
 from .result import NEAR_ROWS, CollisionResult
 from .stages import make_mid_phase, make_narrow_phase
 
 __all__ = ["CollisionPipeline", "CollisionResult", "collide"]  # CollisionResult: from .result
-
-RIGID_LEAF_SIZE = 1
-"""Default triangles per leaf in a scene of rigid objects: the level by level descent tests node pairs at
-memory speed, and a leaf pair's boxes are its triangles' boxes, so that fewer pairs reach the exact test
-(half as many as with leaves of 2); measured fastest at every scale of the scaling benchmark (see the docs'
-performance page)."""
-
-DEFORMING_LEAF_SIZE = 4
-"""Default triangles per leaf in a scene with deforming objects, whose trees are refit every frame: a
-quarter of the nodes to refit (and of the bytes it moves), for more triangle pairs per leaf pair. Not in a
-continuous frame (its leaf pairs' triangle pairs each cost a continuous test, dearer than a refit), nor with
-self-intersections (a leaf's pairs are candidates of the adjacency-aware test, the self frame's costliest
-kernel)."""
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone

@@ -47,7 +47,7 @@ from ..scene.filter import CollisionFilter
 from ..scene.scene import Scene
 from ..trees.bounds import ObjectBounds
 from ..trees.bvh import SceneBVH
-from .options import PipelineOptions, pipeline_options
+from .options import RIGID_LEAF_SIZE, PipelineOptions, pipeline_options
 
 __all__ = ["BoundsStage", "BroadPhaseStage", "ClearanceStage", "MidPhaseStage", "NarrowPhaseStage", "SelfStage",
            "make_mid_phase", "make_narrow_phase"]
@@ -207,7 +207,8 @@ def make_mid_phase(scene: Scene, options: PipelineOptions | None = None, *, marg
 
     Returns:
         ``(bounds stage, mid phase)``: with ``"bvh"``, the scene's :class:`~warp_ccd._src.trees.bvh.SceneBVH`
-        (object boxes, trees refit; leaves of ``leaf_size``, 1 when None) and
+        (object boxes, trees refit; leaves of ``leaf_size``, or of
+        :data:`~warp_ccd._src.pipeline.options.RIGID_LEAF_SIZE` when None) and
         :class:`~warp_ccd._src.midphase.bvh.MidPhaseBVH`; with ``"all_pairs"`` (the reference),
         :class:`~warp_ccd._src.trees.bounds.ObjectBounds` and
         :class:`~warp_ccd._src.midphase.all_pairs.MidPhaseAllPairs`. The clearance pads the object boxes by
@@ -216,7 +217,7 @@ def make_mid_phase(scene: Scene, options: PipelineOptions | None = None, *, marg
     o = pipeline_options(options, kwargs, "make_mid_phase")
     n = scene.num_objects
     if o.mid_phase == "bvh":
-        bvh = SceneBVH(scene, leaf_size=o.leaf_size or 1, margin_rel=margin_rel, cut_depth=o.cut_depth,
+        bvh = SceneBVH(scene, leaf_size=o.leaf_size or RIGID_LEAF_SIZE, margin_rel=margin_rel, cut_depth=o.cut_depth,
                        object_bounds=o.object_bounds, world_trees=world_trees, pad_abs=pad_abs,
                        box_pad=0.5 * o.clearance)
         return bvh, MidPhaseBVH(bvh, capacity=o.candidate_capacity or max(1024, 16 * n),
