@@ -12,7 +12,7 @@ from solids import Box, interiors_overlap, rotation, vertex_depth
 
 import warp_ccd as wc
 from warp_ccd._src.check.crossing import CrossingClassifier
-from warp_ccd._src.check.surface import surface_topology
+from warp_ccd._src.narrowphase.surface import surface_topology
 
 
 def grid(n: int, size: float = 3.0, angle: float = 0.0, offset=(0.0, 0.0), z: float = 0.0, flip: bool = False):
@@ -38,17 +38,19 @@ def box(lo, hi, diagonal: int = 0, n: int = 1):
 
 
 def classify(meshes, device, precision="float32"):
-    """``(crossing, depth, rows)`` of every intersecting triangle pair of the meshes."""
+    """The :class:`Crossings` of every intersecting triangle pair of the meshes, and the rows."""
     scene = wc.Scene.from_meshes(meshes, device=device, precision=precision)
     res = wc.CollisionPipeline(scene).detect()
-    crossing, depth = CrossingClassifier(scene)(res.device_triangle_pairs)
-    return crossing, depth, res.device_triangle_pairs.numpy().reshape(-1, 4)
+    found = CrossingClassifier(scene)(res.device_triangle_pairs)
+    return found, res.device_triangle_pairs.numpy().reshape(-1, 4)
 
 
 def verdict(meshes, device, precision="float32"):
-    """``(touch, cross, deepest)``: whether the first two meshes meet, cross, and how deep."""
-    crossing, depth, rows = classify(meshes, device, precision)
-    return len(rows) > 0, bool(crossing.any()), float(depth.max(initial=0.0))
+    """``(touch, cross, deepest)``: whether the first two meshes meet, cross, and the pairs' largest depth
+    (0 when nothing crosses; NaN where it is undefined)."""
+    found, rows = classify(meshes, device, precision)
+    depth = float(found.pair_depth.max()) if len(found.pair_depth) else 0.0
+    return len(rows) > 0, bool(found.crossing.any()), depth
 
 
 def test_surface_topology_neighbours_and_fans(device):
@@ -212,7 +214,8 @@ def test_random_boxes_against_the_exact_oracle(device, seed):
 def test_degenerate_and_empty(device):
     # No rows: nothing to classify.
     scene = wc.Scene.from_meshes([box([0, 0, 0], [1, 1, 1])], device=device)
-    crossing, depth = CrossingClassifier(scene)(wp.zeros(0, dtype=wp.vec4i, device=device))
+    found = CrossingClassifier(scene)(wp.zeros(0, dtype=wp.vec4i, device=device))
+    crossing, depth = found.crossing, found.depth
     assert crossing.shape == (0,) and depth.shape == (0,)
     # A fan-triangulated floor with slivers (collinear points on its rim, where a crate's walls
     # cross it) still crosses the crate; resting on it, the crate touches.
@@ -303,7 +306,7 @@ def test_float32_rounding_far_from_the_origin_is_not_a_crossing(device):
             scene = wc.Scene.from_meshes([grid(4), box([-0.5, -0.5, 0], [0.5, 0.5, 1])], np.array([m, m]),
                                          device=device)
             pairs = wc.CollisionPipeline(scene).detect().device_triangle_pairs
-            crossing, _ = CrossingClassifier(scene)(pairs)
+            crossing = CrossingClassifier(scene)(pairs).crossing
             assert pairs.shape[0] > 0 and not crossing.any(), offset
 
 

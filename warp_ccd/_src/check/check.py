@@ -71,7 +71,7 @@ import numpy as np
 
 from ..runtime.aliases import DeviceLike, PathLike
 from .clearance import soft_clashes
-from .crossing import CrossingClassifier
+from .crossing import CrossingClassifier, Crossings
 from .duplicates import duplicate_pairs
 from .options import CheckOptions, check_options
 from .overlay import COLOR_CLEAR, COLOR_PENETRATING, prepare_overlay, write_overlay
@@ -86,47 +86,67 @@ __all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "REPORT_SCHEMA_PATH", "SCHEMA_VER
            "check_usd", "prepare_overlay", "report_schema", "write_overlay"]
 
 
-def _frame_contacts(imp, res, depth: np.ndarray, min_depth: float, count_touching: bool, segments: bool,
-                    time_code: float, duplicates: bool, num_faces: int) -> FrameContacts:
-    """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the
-    penetrating ones kept, the others counted. With ``duplicates``, the object pairs whose meshes
-    coincide are found among the rows' pairs and their rows left out. ``num_faces``: more than the largest
-    USD face index."""
+def _frame_contacts(imp, res, found: Crossings, o: CheckOptions, time_code: float, num_faces: int,
+                    contained: np.ndarray | None) -> FrameContacts:
+    """One frame's rows in USD faces, one per (object, face) pair with its deepest crossing; the rows of
+    penetrating pairs kept (every row with ``count_touching``), the others counted. A pair penetrates when
+    its surfaces cross and its depth exceeds ``min_depth``, or its depth is undefined (neither object closed).
+    With ``duplicates``, the object pairs whose meshes coincide are found among the rows' pairs and their rows
+    left out. ``num_faces``: more than the largest USD face index; ``contained``: the frame's ``(inner,
+    outer)`` pairs (with ``containment``), whose depths ``found`` holds."""
     rows = res.device_triangle_pairs.numpy().reshape(-1, 4).astype(np.int64)
-    seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if segments else None
+    seg = res.device_segments.numpy().reshape(-1, 2, 3).astype(np.float64) if o.segments else None
+    depth = found.depth
+    pair_at = found.row_pair(rows)
+    deep = np.isnan(found.pair_depth) | (found.pair_depth > o.min_depth)
+    pen = found.crossing & (pair_at >= 0)
+    pen[pen] = deep[pair_at[pen]]
     dup = None
-    if duplicates:
+    if o.duplicates:
         dup = duplicate_pairs(imp.scene, np.unique(rows[:, [0, 2]], axis=0)) if len(rows) else np.zeros((0, 2),
                                                                                                        np.int32)
         if len(dup):
             n = imp.scene.num_objects
             gone = np.isin(rows[:, 0] * n + rows[:, 2], dup[:, 0].astype(np.int64) * n + dup[:, 1])
-            rows, depth = rows[~gone], depth[~gone]
+            rows, depth, pen, pair_at = rows[~gone], depth[~gone], pen[~gone], pair_at[~gone]
             seg = seg[~gone] if seg is not None else None
+    # The penetrating pairs, with their depths.
+    hit = np.unique(pair_at[pen])
+    pairs, pair_depth = found.pairs[hit].reshape(-1, 2), found.pair_depth[hit]
     faces = np.stack([rows[:, 0], imp.faces(rows[:, 0], rows[:, 1]), rows[:, 2],
                       imp.faces(rows[:, 2], rows[:, 3])], axis=1).astype(np.int32)
     if len(faces) and seg is None:
         # By (a, b, fa, fb), each face pair once with its deepest crossing (which of its triangle
         # pairs is deepest does not show without segments): one sort of one key where it fits in 63 bits.
-        faces, depth = _deepest_per_face_pair(faces, depth, imp.scene.num_objects, num_faces)
+        order, starts = _face_pair_groups(faces, imp.scene.num_objects, num_faces)
+        faces = faces[order][starts]
+        depth = np.maximum.reduceat(depth[order], starts)
+        pen = np.logical_or.reduceat(pen[order], starts)
     elif len(faces):
         # By (a, b, fa, fb), deepest first, then by triangles: the same row (and segment) on every
         # device, whatever order the device's hits came in.
-        order = np.lexsort((rows[:, 3], rows[:, 1], -depth, faces[:, 3], faces[:, 1], faces[:, 2], faces[:, 0]))
-        faces, depth = faces[order], depth[order]
+        order = np.lexsort((rows[:, 3], rows[:, 1], -np.nan_to_num(depth, nan=np.inf), faces[:, 3], faces[:, 1],
+                            faces[:, 2], faces[:, 0]))
+        faces, depth, pen = faces[order], depth[order], pen[order]
         first = np.ones(len(faces), bool)
         first[1:] = (faces[1:] != faces[:-1]).any(axis=1)
-        faces, depth = faces[first], depth[first]
+        group = np.cumsum(first) - 1
+        pen = np.bincount(group, pen, minlength=int(first.sum()))[group] > 0 if len(pen) else pen
+        faces, depth, pen = faces[first], depth[first], pen[first]
         seg = seg[order][first]
-    keep = np.ones(len(faces), bool) if count_touching else depth > min_depth
-    return FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
-                         seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup)
+    keep = np.ones(len(faces), bool) if o.count_touching else pen
+    out = FrameContacts(float(time_code), faces[keep].reshape(-1, 4), depth[keep],
+                        seg[keep] if seg is not None else None, int((~keep).sum()), duplicates=dup,
+                        penetrating=pen[keep], pairs=pairs.astype(np.int32), pair_depth=pair_depth)
+    if contained is not None:
+        out.contained = np.asarray(contained, np.int32).reshape(-1, 2)
+        out.contained_depth = np.asarray(found.contained_depth, np.float64)
+    return out
 
 
-def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: int,
-                           num_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(M, 4)`` rows ``(a, face_a, b, face_b)`` and their depths as unique rows sorted by ``(a, b, face_a,
-    face_b)``, each with its largest depth: one sort of a packed key (a sort of two where it does not fit)."""
+def _face_pair_groups(faces: np.ndarray, num_objects: int, num_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(M, 4)`` rows ``(a, face_a, b, face_b)`` grouped by ``(a, b, face_a, face_b)``: the order that sorts
+    them and where each group starts in it; one sort of a packed key (a sort of two where it does not fit)."""
     a, fa, b, fb = (faces[:, k].astype(np.int64) for k in range(4))
     pair, face = a * num_objects + b, fa * max(num_faces, 1) + fb
     if (max(num_objects, 1) ** 2) * (max(num_faces, 1) ** 2) < 2**63:
@@ -138,7 +158,7 @@ def _deepest_per_face_pair(faces: np.ndarray, depth: np.ndarray, num_objects: in
         order = np.lexsort((face, pair))
         p, f = pair[order], face[order]
         starts = np.flatnonzero(np.r_[True, (p[1:] != p[:-1]) | (f[1:] != f[:-1])])
-    return faces[order][starts], np.maximum.reduceat(depth[order], starts)
+    return order, starts
 
 
 def check_usd(stage_or_path: Usd.Stage | PathLike, options: CheckOptions | None = None, *,
@@ -203,7 +223,8 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, options: CheckOptions | None 
     name = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     report = CheckReport(name, list(imp.object_path), min_depth=o.min_depth, count_touching=o.count_touching,
                          device=str(scene.device), skipped=list(imp.skipped), clearance=o.clearance,
-                         self_checked=o.self_intersections, duplicates_checked=o.duplicates, filters=imp.filters)
+                         self_checked=o.self_intersections, duplicates_checked=o.duplicates,
+                         containment_checked=o.containment, filters=imp.filters)
     if o.continuous:
         report.intervals = []
         report.min_distance = o.min_distance
@@ -217,10 +238,9 @@ def check_usd(stage_or_path: Usd.Stage | PathLike, options: CheckOptions | None 
         t1 = time.perf_counter()
         res = pipe.detect()
         t_detect = time.perf_counter()
-        pairs = res.device_triangle_pairs
-        _, depth = classify(pairs)  # 0 where the surfaces only touch
-        contacts = _frame_contacts(imp, res, depth, o.min_depth, o.count_touching, o.segments, times[k],
-                                   o.duplicates, num_faces)
+        contained = res.containment_pairs if o.containment else None
+        found = classify(res.device_triangle_pairs, contained)
+        contacts = _frame_contacts(imp, res, found, o, times[k], num_faces, contained)
         if o.clearance > 0.0:
             reported = contacts.object_pairs
             if contacts.duplicates is not None and len(contacts.duplicates):  # a duplicate is no soft clash

@@ -40,24 +40,19 @@ Nothing lies behind what has no side: a degenerate triangle (a sliver, a segment
 pairs only touch, the surfaces' crossings are decided at its neighbours), a *two-sided* face (one
 listed twice, as assets draw both sides of a sheet), an open boundary, a non-manifold edge, or a
 fold whose neighbour is degenerate or two-sided. Closed shapes wound inside out are turned round
-(:func:`~warp_ccd._src.check.surface.shape_sides`); open ones are taken as wound. The surfaces' topology
+(:func:`~warp_ccd._src.narrowphase.surface.shape_sides`); open ones are taken as wound. The surfaces' topology
 (neighbours across edges, vertex fans, two-sided faces, sides) and the side of a point at its
-nearest feature come from :mod:`~warp_ccd._src.check.surface`.
+nearest feature come from :mod:`~warp_ccd._src.narrowphase.surface`.
 
-**Depth** of a crossing pair: how far a vertex of either triangle lies behind the other object's
-surface, its distance to the nearest point of all that object's triangles (found down the
-object's tree), the side taken at that point from its feature's pseudo-normal (the face's normal,
-an edge's two faces, a vertex's angle-weighted fan: Bærentzen and Aanæs); a point nearest to an
-open edge or vertex lies beyond the surface's rim, not behind it. A vertex poking ``h`` through a
-face has depth ``h`` however the face is cut; a crate sunk ``h`` into a floor, ``h``. Where the
-surfaces cross with no vertex behind the other (two sheets crossing between their vertices,
-flush faces), the depth is the pair's local crossing depth
-(:func:`~warp_ccd._src.geometry.triangle.crossing_depth`; of a scene's pairs, :func:`pair_crossing_depth`)
-capped by the object pair's deepest vertex, at least the tolerance: a crossing never has depth 0.
+**Depth** (:mod:`~warp_ccd._src.narrowphase.depth`): an object pair's is the deepest point of either surface
+inside the other object's closed solid, measured to that solid's surface; undefined (NaN) where neither
+object is closed. A crossing row's depth is the deeper of its two triangles' parts inside the other solid;
+a crossing is never 0 deep (at least its tolerance), and a touching row has depth 0.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -65,7 +60,6 @@ import warp as wp
 
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import (
-    _closest_on_triangle,
     _common_part,
     _max_abs,
     _max_edge,
@@ -75,12 +69,13 @@ from ..geometry.primitives import (
     _unit_normal,
 )
 from ..geometry.triangle import TOLERANCE, crossing_depth
+from ..narrowphase.depth import PenetrationDepth
 from ..narrowphase.pairs import pair_triangles
-from ..scene.scene import MeshTopology, mesh_triangle
-from ..trees.bvh import SceneBVH, TreeView
-from .surface import SurfaceTopology, _local_triangle, _neighbour, _side_at, surface_topology
+from ..narrowphase.surface import SurfaceTopology, _local_triangle, _neighbour, surface_topology
+from ..scene.scene import MeshTopology
+from ..trees.bvh import SceneBVH
 
-__all__ = ["CrossingClassifier", "pair_crossing_depth"]
+__all__ = ["CrossingClassifier", "Crossings", "pair_crossing_depth"]
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -292,28 +287,12 @@ def _crossing_kernel(
     # Outputs
     crossing: wp.array[wp.int32],
     eps_out: wp.array[wp.float64],
-    local_depth: wp.array[wp.float64],
-    distance: wp.array2d[wp.float64],
-    vertex: wp.array2d[wp.int32],
 ):
-    """One thread per intersecting triangle pair: the verdict (:func:`_verdict`), the tolerance, the
-    local crossing depth, and each of the six vertices' distance to the other triangle (where the
-    depth pass's tree walk starts) with its world vertex index (first ``tri_a``'s, then ``tri_b``'s)."""
+    """One thread per intersecting triangle pair: the verdict (:func:`_verdict`) and the tolerance."""
     k = wp.tid()
     c = pair[k]
     a0, a1, a2, ia, na, dega, b0, b1, b2, ib, nb, degb, o, size_a, size_b, eps = _centred_pair(
         mesh, surface, world_vertex, c, tol_rel, rounding)
-    base_a = mesh.object_vertex_start[c[0]]
-    base_b = mesh.object_vertex_start[c[2]]
-    for i in range(3):
-        p = _pick(a0, a1, a2, i)
-        q = _pick(b0, b1, b2, i)
-        closest_p, feature_p = _closest_on_triangle(p, b0, b1, b2)
-        closest_q, feature_q = _closest_on_triangle(q, a0, a1, a2)
-        distance[k, i] = wp.length(p - closest_p)
-        distance[k, 3 + i] = wp.length(q - closest_q)
-        vertex[k, i] = base_a + ia[i]
-        vertex[k, 3 + i] = base_b + ib[i]
     hit = 0
     if not dega and not degb:
         if _verdict(mesh, surface, world_vertex, c, a0, a1, a2, ia, na, b0, b1, b2, ib, nb, o, size_a, size_b, eps,
@@ -321,7 +300,6 @@ def _crossing_kernel(
             hit = 1
     crossing[k] = hit
     eps_out[k] = eps
-    local_depth[k] = crossing_depth(a0, a1, a2, b0, b1, b2, tol_rel)
 
 
 _CROSSING = precision_overloads(_crossing_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
@@ -331,151 +309,6 @@ ROUNDING_ULPS = 8.0
 """What the world vertices' precision resolves, in units in the last place of the largest
 coordinate of a pair: a crossing must go deeper than that (float32 at 1,000 units from the
 origin: 1e-3), besides the tolerance relative to the triangles (:func:`_centred_pair`)."""
-
-TREE_STACK = 64
-"""Nodes a nearest-point query keeps to visit (:func:`_depth_tree_kernel`): a balanced tree's depth
-plus one suffices (24 levels hold 16M leaves)."""
-
-_NodeStack = wp.types.vector(length=TREE_STACK, dtype=wp.int32)
-
-BOX_SLACK = 2.0**-15
-"""Relative slack of a node box's distance in a nearest-point query, in units of ``|t| + |p - t|``
-(pose translation ``t``, query point ``p``): covers the rounding of world vertices computed from
-poses (the mid phase's :data:`~warp_ccd._src.trees.bvh.WORLD_ERROR_ULPS` in float32) and of the query point
-taken to the box space."""
-
-
-@wp.func
-def _nearer(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, p: wp.vec3d, best: wp.float64,
-            best_tri: int):
-    """``(best, best_tri)`` with local triangle ``tri`` of ``obj`` taken in when it is no farther from ``p``."""
-    x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
-    closest, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
-    d = wp.length(p - closest)
-    if d < best or (best_tri < 0 and d <= best):
-        return d, tri
-    return best, best_tri
-
-
-@wp.func
-def _entry(pair: wp.array[wp.vec4i], vertex: wp.array2d[wp.int32], world_vertex: wp.array[Any], k: int, i: int):
-    """Vertex ``i`` of row ``k`` (0-2 of its first triangle, 3-5 of its second): its world position
-    and the other object."""
-    c = pair[k]
-    other = c[2]
-    if i >= 3:
-        other = c[0]
-    return wp.vec3d(world_vertex[vertex[k, i]]), other
-
-
-@wp.func
-def _entry_depth(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, tri: int,
-                 p: wp.vec3d, best: wp.float64, eps: wp.float64, tol_rel: wp.float64):
-    """How far ``p`` lies behind the surface of ``obj`` (``best`` from it, nearest on ``tri``), 0
-    when in front or within ``eps``."""
-    if best > eps and _side_at(mesh, surface, world_vertex, obj, tri, p, tol_rel) < wp.float64(0.0):
-        return best
-    return wp.float64(0.0)
-
-
-@wp.kernel
-def _depth_all_kernel(
-    mesh: MeshTopology,
-    surface: SurfaceTopology,
-    world_vertex: wp.array[Any],
-    pair: wp.array[wp.vec4i],
-    crossing: wp.array[wp.int32],
-    vertex: wp.array2d[wp.int32],
-    eps: wp.array[wp.float64],
-    tol_rel: wp.float64,
-    # Outputs
-    depth: wp.array2d[wp.float64],
-):
-    """The reference: thread ``(k, i)`` measures vertex ``i`` of crossing row ``k`` against every
-    triangle of the other object: how far it lies behind that object's surface (:func:`_entry_depth`)."""
-    k, i = wp.tid()
-    if crossing[k] == 0:
-        depth[k, i] = wp.float64(0.0)
-        return
-    p, obj = _entry(pair, vertex, world_vertex, k, i)
-    best = wp.float64(1.0e300)
-    best_tri = int(-1)
-    count = mesh.object_triangle_start[obj + 1] - mesh.object_triangle_start[obj]
-    for t in range(count):
-        best, best_tri = _nearer(mesh, world_vertex, obj, t, p, best, best_tri)
-    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k], tol_rel)
-
-
-@wp.kernel
-def _depth_tree_kernel(
-    mesh: MeshTopology,
-    surface: SurfaceTopology,
-    tree: TreeView,
-    world_vertex: wp.array[Any],
-    pose: wp.array[Any],
-    scale: wp.array[wp.float32],
-    deforming: wp.array[wp.int32],
-    pair: wp.array[wp.vec4i],
-    crossing: wp.array[wp.int32],
-    vertex: wp.array2d[wp.int32],
-    distance: wp.array2d[wp.float64],
-    eps: wp.array[wp.float64],
-    tol_rel: wp.float64,
-    # Outputs
-    depth: wp.array2d[wp.float64],
-):
-    """:func:`_depth_all_kernel` down the other object's tree: nodes whose box (in the object's box
-    space: its shape's for a rigid object, under its pose and scale) is farther than the nearest
-    triangle so far, or than the row's own triangle (``distance[k, i]``), are skipped."""
-    k, i = wp.tid()
-    if crossing[k] == 0:
-        depth[k, i] = wp.float64(0.0)
-        return
-    p, obj = _entry(pair, vertex, world_vertex, k, i)
-    s = mesh.object_shape[obj]
-    pb = p
-    sc = wp.float64(1.0)
-    slack = wp.float64(BOX_SLACK) * wp.length(p)
-    if deforming[obj] == 0:
-        x = pose[obj]
-        t = wp.vec3d(wp.transform_get_translation(x))
-        rf = wp.transform_get_rotation(x)
-        r = wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3]))
-        sc = wp.float64(scale[obj])
-        pb = wp.quat_rotate_inv(r, p - t) / sc
-        slack = wp.float64(BOX_SLACK) * (wp.length(t) + wp.length(p - t))
-    best = distance[k, i] * wp.float64(1.0 + 1.0e-9) + slack
-    best_tri = int(-1)
-    node_start = tree.layout_node_start[tree.shape_layout[s]]
-    slot_start = tree.object_node_start[obj]
-    tri_start = tree.shape_tri_order_start[s]
-    zero = wp.vec3d()
-    stack = _NodeStack()
-    stack[0] = 0
-    top = int(1)
-    while top > 0:
-        top -= 1
-        node = stack[top]
-        gap = wp.max(wp.max(wp.vec3d(tree.node_lower[slot_start + node]) - pb,
-                            pb - wp.vec3d(tree.node_upper[slot_start + node])), zero)
-        if wp.length(gap) * sc - slack > best:
-            continue
-        child = tree.node_child[node_start + node]
-        if child[0] < 0:
-            rng = tree.node_triangle[node_start + node]
-            for j in range(rng[0], rng[0] + rng[1]):
-                best, best_tri = _nearer(mesh, world_vertex, obj, tree.tri_order[tri_start + j], p, best, best_tri)
-        elif top + 2 <= TREE_STACK:
-            stack[top] = child[1]
-            stack[top + 1] = child[0]
-            top += 2
-    depth[k, i] = _entry_depth(mesh, surface, world_vertex, obj, best_tri, p, best, eps[k], tol_rel)
-
-
-_DEPTH_ALL = precision_overloads(_depth_all_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
-_DEPTH_TREE = precision_overloads(_depth_tree_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v],
-                                                                          "pose": wp.array[t]})
-
 
 @wp.kernel
 def _crossing_depth_kernel(
@@ -519,30 +352,54 @@ def pair_crossing_depth(scene, pairs: wp.array, tolerance: float = TOLERANCE, ou
     return out[:m]
 
 
-def _segment_max(values: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Per entry, the largest of ``values`` over the entries with its key."""
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    first = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]
-    group = np.empty(len(keys), np.int64)
-    group[order] = np.cumsum(first) - 1
-    return np.maximum.reduceat(values[order], np.flatnonzero(first))[group]
+@dataclass
+class Crossings:
+    """What :class:`CrossingClassifier` found for a frame's intersecting triangle pairs (host arrays).
+
+    Attributes:
+        crossing: ``(M,)`` bool, whether the surfaces cross at each row (else they touch).
+        depth: ``(M,)`` float64 depth of each row (scene units): for a crossing row the deeper of its two
+            triangles' parts inside the other object's solid, at least the row's tolerance (a crossing is
+            never 0 deep); NaN where neither object is closed (undefined); 0 for a touching row.
+        pairs: ``(K,)`` object pairs ``(a, b)``, ``a < b``, sorted, of the crossing rows.
+        pair_depth: ``(K,)`` float64 depth of each pair
+            (:class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`), at least its rows' tolerance; NaN
+            where neither object is closed.
+        contained_depth: ``(C,)`` float64 depth of the ``(inner, outer)`` pairs asked for.
+    """
+
+    crossing: np.ndarray
+    depth: np.ndarray
+    pairs: np.ndarray
+    pair_depth: np.ndarray
+    contained_depth: np.ndarray
+
+    def row_pair(self, rows: np.ndarray) -> np.ndarray:
+        """The index in :attr:`pairs` of each row's object pair, -1 where it is not one."""
+        key = self.pairs[:, 0].astype(np.int64) * (1 << 31) + self.pairs[:, 1]
+        want = rows[:, 0].astype(np.int64) * (1 << 31) + rows[:, 2]
+        if len(key) == 0:
+            return np.full(len(rows), -1, np.int64)
+        at = np.minimum(np.searchsorted(key, want), len(key) - 1)
+        return np.where(key[at] == want, at, -1)
 
 
 class CrossingClassifier:
-    """Penetrating or touching, for the intersecting triangle pairs of a scene (module docstring).
+    """Penetrating or touching, and how deep, for the intersecting triangle pairs of a scene (module
+    docstring).
 
-    Owns the scene's :class:`SurfaceTopology` (built once: topology does not change with the
-    poses or the world vertices) and its output buffers, grown as needed. A vertex's distance to
-    the other object is found down that object's tree when the pipeline's trees are given (as
-    they stand after its ``detect()``), else against every one of its triangles (the reference).
+    Owns the scene's :class:`SurfaceTopology` (built once: topology does not change with the poses or the
+    world vertices), its :class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth` and its output buffers,
+    grown as needed. Nearest points are found down the pipeline's trees when they are given (as they stand
+    after its ``detect()``), else down trees of the depth's own.
 
     Example::
 
         pipe = CollisionPipeline(scene)
         classify = CrossingClassifier(scene, trees=pipe.boxes)
         res = pipe.detect()
-        crossing, depth = classify(res.device_triangle_pairs)
+        found = classify(res.device_triangle_pairs)
+        found.pairs, found.pair_depth
     """
 
     def __init__(self, scene, *, tolerance: float = TOLERANCE, trees=None):
@@ -554,9 +411,10 @@ class CrossingClassifier:
         """
         self.scene = scene
         self.tolerance = float(tolerance)
-        self.trees = trees if isinstance(trees, SceneBVH) else None
         self.rounding = ROUNDING_ULPS * float(np.finfo(np.float32 if scene.precision == "float32" else np.float64).eps)
         self.surface = surface_topology(scene)
+        self.depth = PenetrationDepth(scene, trees=trees if isinstance(trees, SceneBVH) else None,
+                                      triangle_tolerance=self.tolerance, surface=self.surface)
         self._capacity = 0
 
     def _grow(self, m: int) -> None:
@@ -566,59 +424,49 @@ class CrossingClassifier:
         d = self.scene.device
         self._crossing = wp.zeros(cap, dtype=wp.int32, device=d)
         self._eps = wp.zeros(cap, dtype=wp.float64, device=d)
-        self._local = wp.zeros(cap, dtype=wp.float64, device=d)
-        self._distance = wp.zeros((cap, 6), dtype=wp.float64, device=d)
-        self._vertex = wp.zeros((cap, 6), dtype=wp.int32, device=d)
-        self._entry_depth = wp.zeros((cap, 6), dtype=wp.float64, device=d)
         self._capacity = cap
 
-    def __call__(self, pairs: wp.array) -> tuple[np.ndarray, np.ndarray]:
-        """Classifies rows of the scene as its world vertices are now.
+    def __call__(self, pairs: wp.array, contained: np.ndarray | None = None) -> Crossings:
+        """Classifies rows of the scene as its world vertices are now, and measures their depths.
 
         Args:
             pairs: ``(M,)`` ``wp.vec4i`` rows ``(obj_a, tri_a, obj_b, tri_b)`` of triangles that
                 meet, on the scene's device (a result's ``device_triangle_pairs``).
+            contained: ``(C, 2)`` ``(inner, outer)`` object pairs, one wholly inside the other's solid (a
+                result's ``containment_pairs``), whose depths are measured too.
 
         Returns:
-            ``(crossing (M,) bool, depth (M,) float64)``: whether the surfaces cross at each row,
-            and how deep (scene units; 0 where they only touch).
+            The :class:`Crossings`.
         """
         m = int(pairs.shape[0])
-        if m == 0:
-            return np.zeros(0, bool), np.zeros(0)
-        self._grow(m)
-        scene = self.scene
-        wp.launch(_CROSSING[scene.precision], dim=m,
-                  inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance, self.rounding],
-                  outputs=[self._crossing, self._eps, self._local, self._distance, self._vertex], device=scene.device)
-        crossing = self._crossing[:m].numpy().astype(bool)
-        if not crossing.any():
-            return crossing, np.zeros(m)
-        # How far each vertex of a crossing row lies behind the other object's surface.
-        d = scene.device
-        inputs = [scene.topology, self.surface]
-        if self.trees is not None:
-            tree = self.trees
-            inputs += [tree.tree, scene.world_vertex, scene.object_pose, scene.object_scale,
-                       tree.object_deforming, pairs, self._crossing, self._vertex, self._distance, self._eps,
-                       self.tolerance]
-            kernel = _DEPTH_TREE
-        else:
-            inputs += [scene.world_vertex, pairs, self._crossing, self._vertex, self._eps, self.tolerance]
-            kernel = _DEPTH_ALL
-        wp.launch(kernel[scene.precision], dim=(m, 6), inputs=inputs, outputs=[self._entry_depth], device=d)
-        depth = self._entry_depth[:m].numpy().max(axis=1)
-        # A crossing row with no vertex behind (sheets crossing between their vertices, flush
-        # faces): its local depth, at most its object pair's deepest vertex, at least eps.
-        need = crossing & (depth == 0)
-        if need.any():
-            at = np.flatnonzero(crossing)
-            rows = pairs.numpy().reshape(-1, 4)[at].astype(np.int64)
-            cap = _segment_max(depth[at], rows[:, 0] * scene.num_objects + rows[:, 2])
-            local, eps = self._local[:m].numpy()[at], self._eps[:m].numpy()[at]
-            fallback = np.maximum(np.where(cap > 0, np.minimum(local, cap), local), eps)
-            depth[at] = np.where(depth[at] > 0, depth[at], fallback)
-        return crossing, depth
+        contained = np.zeros((0, 2), np.int32) if contained is None else np.asarray(contained).reshape(-1, 2)
+        none = np.zeros((0, 2), np.int32)
+        if m == 0 and not len(contained):
+            return Crossings(np.zeros(0, bool), np.zeros(0), none, np.zeros(0), np.zeros(0))
+        crossing = np.zeros(0, bool)
+        eps = np.zeros(0)
+        rows = np.zeros((0, 4), np.int64)
+        if m:
+            self._grow(m)
+            scene = self.scene
+            wp.launch(_CROSSING[scene.precision], dim=m,
+                      inputs=[scene.topology, self.surface, scene.world_vertex, pairs, self.tolerance, self.rounding],
+                      outputs=[self._crossing, self._eps], device=scene.device)
+            crossing = self._crossing[:m].numpy().astype(bool)
+            eps = self._eps[:m].numpy()
+            rows = pairs.numpy().reshape(-1, 4).astype(np.int64)
+        at = np.flatnonzero(crossing)
+        object_pairs = np.unique(rows[at][:, [0, 2]], axis=0).astype(np.int32).reshape(-1, 2)
+        found = self.depth(object_pairs, rows[at], contained)
+        depth = np.zeros(m)
+        out = Crossings(crossing, depth, object_pairs, found.pair_depth, found.contained_depth)
+        if len(at):
+            # A crossing is never 0 deep: at least its tolerance (NaN stays: undefined).
+            depth[at] = np.where(np.isnan(found.row_depth), np.nan, np.fmax(found.row_depth, eps[at]))
+            floor = np.zeros(len(object_pairs))
+            np.maximum.at(floor, out.row_pair(rows[at]), eps[at])
+            out.pair_depth = np.where(np.isnan(found.pair_depth), np.nan, np.fmax(found.pair_depth, floor))
+        return out
 
 
 @wp.func

@@ -62,9 +62,11 @@ class CheckOptions:
         precision: ``"float32"`` (default) or ``"float64"``: vertices, poses and the exact test; float32 becomes
             float64, with a :class:`~warp_ccd._src.geometry.precision.PrecisionWarning`, where the coordinates are
             too far from the origin for it at the triangles' size.
-        min_depth: a triangle pair penetrates when its crossing depth exceeds this (scene units, >= 0; default 0:
-            every crossing).
-        count_touching: report touching pairs (depth <= ``min_depth``) as collisions too.
+        min_depth: a pair whose surfaces cross penetrates when its depth exceeds this (scene units, >= 0; default
+            0: every crossing). The depth is the deepest point of either surface inside the other's closed solid
+            (:mod:`~warp_ccd._src.narrowphase.depth`); a crossing of two open surfaces has none (undefined) and
+            penetrates whatever ``min_depth``.
+        count_touching: report touching pairs (and crossings no deeper than ``min_depth``) as collisions too.
         segments: keep the intersection segments (``(M, 2, 3)`` per frame: the report and the overlay).
         include_invisible: also check invisible prims.
         include_purposes: also check prims of these purposes (``"guide"``, ``"proxy"``; ``"render"`` and
@@ -84,6 +86,8 @@ class CheckOptions:
             that the frame does not report as collisions: soft clashes (the pipeline's ``clearance``).
         self_intersections: also report, per frame, the prims that pass through themselves, as pairs of their
             USD faces with a depth.
+        containment: also report, per frame, the closed meshes wholly inside another's solid (no surface
+            crossing), with their depth: how deep the inner surface lies inside the outer solid.
         duplicates: report, per frame, the pairs whose meshes coincide (the same triangles at the same place) as
             duplicates instead of as collisions.
         worlds: prim paths or ``fnmatch`` patterns (a tuple; a string may hold several, comma-separated), every
@@ -126,6 +130,7 @@ class CheckOptions:
     min_distance: float = 0.0
     clearance: float = 0.0
     self_intersections: bool = False
+    containment: bool = False
     duplicates: bool = False
     worlds: tuple[str, ...] | None = None
     ignore_pairs: tuple | None = None
@@ -165,10 +170,10 @@ class CheckOptions:
         return self._pair_filters
 
     def pipeline_options(self) -> PipelineOptions:
-        """The options of the pipeline that detects each frame: ``segments``, ``tolerance``, ``clearance`` and
-        ``self_intersections``."""
+        """The options of the pipeline that detects each frame: ``segments``, ``tolerance``, ``clearance``,
+        ``self_intersections`` and ``containment``."""
         return PipelineOptions(segments=self.segments, tolerance=self.tolerance, clearance=self.clearance,
-                               self_intersections=self.self_intersections)
+                               self_intersections=self.self_intersections, containment=self.containment)
 
     def sweep_options(self) -> PipelineOptions:
         """The options of the continuous pipeline that sweeps each interval (``continuous``): its

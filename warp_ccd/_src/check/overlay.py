@@ -20,12 +20,24 @@ from .report import CheckReport
 from .self_intersection import COLOR_SELF, self_flags
 from .sweep import COLOR_TUNNELLING, tunnelling_flags
 
-__all__ = ["COLOR_CLEAR", "COLOR_PENETRATING", "prepare_overlay", "write_overlay"]
+__all__ = ["COLOR_CLEAR", "COLOR_CONTAINED", "COLOR_PENETRATING", "contained_flags", "prepare_overlay", "write_overlay"]
 
 COLOR_PENETRATING = COLOR_COLLIDING
 """displayColor of a prim while it penetrates another (the animation writer's colliding colour)."""
 COLOR_CLEAR = COLOR_FREE
 """displayColor of a coloured prim in frames where it penetrates nothing (when it had no constant colour)."""
+COLOR_CONTAINED = (0.55, 0.25, 0.95)
+"""displayColor (linear RGB) of a prim wholly inside another, or holding one (``containment`` checks), where it
+penetrates nothing (red wins)."""
+
+
+def contained_flags(frames: list, num_objects: int) -> np.ndarray:
+    """``(F, N)`` bool: object ``i`` lies wholly inside another, or holds one, at frame ``k``."""
+    flags = np.zeros((len(frames), num_objects), bool)
+    for k, f in enumerate(frames):
+        if f.contained is not None:
+            flags[k, f.contained.ravel()] = True
+    return flags
 
 
 
@@ -33,7 +45,8 @@ def write_overlay(report: CheckReport, out_path: PathLike) -> str:
     """Writes a USD layer over the checked stage: penetrating prims in colour per frame (with a
     continuous check, tunnelling prims in orange at the start of the interval, and their
     ``warpCcd:tunnelling`` attribute; with a clearance, prims in a soft clash in yellow; with
-    duplicates, prims that coincide with another in blue), and as
+    duplicates, prims that coincide with another in blue; with containment, a prim wholly inside another and
+    the one holding it in violet), and as
     curves the intersection segments (when the check kept them) and the soft clashes' closest points.
 
     The layer's only sublayer is the checked stage's file (a relative path when they share a
@@ -101,22 +114,23 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
         soft = soft_clash_flags(report.frames, n)
         mine = self_flags(report.frames, n)  # a prim through itself (self checks): magenta, after red and orange
         twin = duplicate_flags(report.frames, n)  # a duplicate (duplicates checks): blue, after magenta
+        inner = contained_flags(report.frames, n)  # containment checks: violet, after red
         red, orange, yellow = Gf.Vec3f(*COLOR_PENETRATING), Gf.Vec3f(*COLOR_TUNNELLING), Gf.Vec3f(*COLOR_SOFT_CLASH)
-        magenta, blue = Gf.Vec3f(*COLOR_SELF), Gf.Vec3f(*COLOR_DUPLICATE)
+        magenta, blue, violet = Gf.Vec3f(*COLOR_SELF), Gf.Vec3f(*COLOR_DUPLICATE), Gf.Vec3f(*COLOR_CONTAINED)
         with Sdf.ChangeBlock():
             # Prims (instance proxies through their instanceable ancestor), one colour per frame.
             targets: dict[str, tuple[np.ndarray, ...]] = {}
-            for i in np.nonzero((hit | tunnel | soft | mine | twin).any(axis=0))[0].tolist():
+            for i in np.nonzero((hit | tunnel | soft | mine | twin | inner).any(axis=0))[0].tolist():
                 if report.object_instancer[i] is not None:
                     continue
                 prim = src.GetPrimAtPath(report.object_path[i])
                 while prim.IsInstanceProxy():
                     prim = prim.GetParent()
                 key = str(prim.GetPath())
-                was = targets.get(key, (np.zeros(len(times), bool),) * 5)
+                was = targets.get(key, (np.zeros(len(times), bool),) * 6)
                 targets[key] = (was[0] | hit[:, i], was[1] | tunnel[:, i], was[2] | soft[:, i], was[3] | mine[:, i],
-                                was[4] | twin[:, i])
-            for path, (flags, tunnels, softs, selfs, twins) in targets.items():
+                                was[4] | twin[:, i], was[5] | inner[:, i])
+            for path, (flags, tunnels, softs, selfs, twins, inners) in targets.items():
                 prim = stage.GetPrimAtPath(path)
                 primvar = UsdGeom.PrimvarsAPI(prim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
                                                                   UsdGeom.Tokens.constant)
@@ -125,9 +139,10 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
                 if own and own.GetInterpolation() == UsdGeom.Tokens.constant and own.Get() is not None \
                         and len(own.Get()) == 1:
                     clear = own.Get()[0]
-                for tc, f, g, m, d, y in zip(times, flags.tolist(), tunnels.tolist(), selfs.tolist(), twins.tolist(),
-                                             softs.tolist()):
-                    color = red if f else orange if g else magenta if m else blue if d else yellow if y else clear
+                for tc, f, c, g, m, d, y in zip(times, flags.tolist(), inners.tolist(), tunnels.tolist(),
+                                                selfs.tolist(), twins.tolist(), softs.tolist()):
+                    color = (red if f else violet if c else orange if g else magenta if m else blue if d
+                             else yellow if y else clear)
                     primvar.Set(Vt.Vec3fArray([color]), tc)
                 if report.intervals is not None:
                     flag = prim.CreateAttribute("warpCcd:tunnelling", Sdf.ValueTypeNames.Bool, custom=True)
@@ -137,7 +152,8 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
             instancer = np.array(report.object_instancer, dtype=object)
             for path in sorted({p for p in report.object_instancer if p is not None}):
                 rows = np.nonzero(instancer == path)[0]
-                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows] | twin[:, rows]).any():
+                if not (hit[:, rows] | tunnel[:, rows] | soft[:, rows] | mine[:, rows] | twin[:, rows]
+                        | inner[:, rows]).any():
                     continue
                 schema = UsdGeom.PointInstancer(src.GetPrimAtPath(path))
                 size = len(np.asarray(schema.GetProtoIndicesAttr().Get(Usd.TimeCode(times[0]))))
@@ -150,6 +166,7 @@ def prepare_overlay(report: CheckReport, out_path: PathLike) -> PendingFile:
                     colors[report.object_instance[rows][twin[k, rows]]] = COLOR_DUPLICATE
                     colors[report.object_instance[rows][mine[k, rows]]] = COLOR_SELF
                     colors[report.object_instance[rows][tunnel[k, rows]]] = COLOR_TUNNELLING
+                    colors[report.object_instance[rows][inner[k, rows]]] = COLOR_CONTAINED
                     colors[report.object_instance[rows][hit[k, rows]]] = COLOR_PENETRATING
                     primvar.Set(Vt.Vec3fArray.FromNumpy(colors), tc)
         # Defined outside the change block: a new prim needs the stage recomposed. The intersection

@@ -27,7 +27,7 @@ from .tables import pair_table, span
 
 __all__ = ["REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts", "report_schema"]
 
-SCHEMA_VERSION = "1.1"
+SCHEMA_VERSION = "2.0"
 """The version of the JSON report's layout (``"schema_version"`` in it): ``MAJOR.MINOR``, the minor number
 raised when optional fields are added, the major one when a field is removed or changes meaning or type."""
 REPORT_SCHEMA_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "report.schema.json")
@@ -50,6 +50,38 @@ def report_schema() -> dict:
     return json.loads(_schema_text())
 
 
+def _containment_stats(frames: list, object_path: list) -> list[dict]:
+    """Per ``(inner, outer)`` pair contained in some frame: names, frames, first and last time codes, depth."""
+    stats: dict[tuple[int, int], dict] = {}
+    for f in frames:
+        if f.contained is None:
+            continue
+        for (i, o), d in zip(f.contained.tolist(), f.contained_depth.tolist()):
+            s = stats.setdefault((i, o), {"inner": object_path[i], "outer": object_path[o], "frames": 0,
+                                          "first": f.time, "last": f.time, "max_depth": None})
+            s["frames"] += 1
+            s["last"] = f.time
+            if not np.isnan(d):
+                s["max_depth"] = d if s["max_depth"] is None else max(s["max_depth"], d)
+    return sorted(stats.values(), key=lambda s: (-s["frames"], s["first"], s["inner"], s["outer"]))
+
+
+def _containment_json(frames: list, object_path: list) -> dict:
+    """The report's ``containment`` section: every contained pair over the frames."""
+    return {"pairs": _containment_stats(frames, object_path)}
+
+
+def _containment_summary(frames: list, object_path: list, top: int) -> list[str]:
+    """The summary's lines on meshes wholly inside another."""
+    stats = _containment_stats(frames, object_path)
+    lines = [f"  contained (a mesh wholly inside another): {len(stats)} pairs"]
+    for s in stats[:top]:
+        depth = "undefined" if s["max_depth"] is None else f"{s['max_depth']:.3g}"
+        lines.append(f"    {s['inner']} inside {s['outer']}: {s['frames']} frames "
+                     f"({s['first']:g} .. {s['last']:g}), max depth {depth}")
+    return lines
+
+
 @dataclass
 class FrameContacts:
     """What one time code found.
@@ -60,10 +92,13 @@ class FrameContacts:
             (or, with ``count_touching``, all) triangle pairs, USD face indices, sorted by
             ``(obj_a, obj_b, face_a, face_b)`` and unique (two triangles of one polygon meeting one
             face count once).
-        depth: ``(M,)`` float64, the deepest crossing of each row, scene units.
+        depth: ``(M,)`` float64, the depth of each row, scene units: the deeper of its two faces' parts inside the
+            other prim's closed solid (at least the row's tolerance where the faces cross; 0 where they only
+            touch); NaN where neither prim is closed.
         segments: ``(M, 2, 3)`` float64 intersection segments of the rows (the first triangle
             pair of each), or None.
-        num_touching: face pairs that only touch (depth <= ``min_depth``) and are not reported.
+        num_touching: face pairs not reported: they only touch, or their prims' crossing is no deeper than
+            ``min_depth``.
         soft_clashes: with a clearance, the :class:`~warp_ccd._src.check.clearance.SoftClashes` (prim pairs
             within it that the frame does not report as collisions), else None.
         self_intersections: with ``self_intersections``, the
@@ -71,6 +106,14 @@ class FrameContacts:
         duplicates: with ``duplicates``, ``(D, 2)`` int32 object pairs ``(a, b)``, ``a < b``, sorted, whose
             meshes coincide at this time code (:mod:`~warp_ccd._src.check.duplicates`; their rows are not in
             ``triangle_pairs`` nor counted in ``num_touching``), else None.
+        penetrating: ``(M,)`` bool, whether each row belongs to a penetrating pair and crosses (all True unless
+            ``count_touching`` reports touching rows too); None: every row (a report made before rows had it).
+        pairs: ``(K, 2)`` int32 the penetrating object pairs ``(a, b)``, ``a < b``, sorted.
+        pair_depth: ``(K,)`` float64 their depths (:mod:`~warp_ccd._src.narrowphase.depth`, scene units): the
+            deepest point of either surface inside the other's closed solid; NaN where neither is closed.
+        contained: with ``containment``, ``(C, 2)`` int32 ``(inner, outer)`` object pairs, the inner's surface
+            wholly inside the outer's solid, else None.
+        contained_depth: ``(C,)`` float64 how deep each inner surface lies inside its outer solid, or None.
     """
 
     time: float
@@ -81,6 +124,22 @@ class FrameContacts:
     soft_clashes: SoftClashes | None = None
     self_intersections: SelfIntersections | None = None
     duplicates: np.ndarray | None = None
+    penetrating: np.ndarray | None = None
+    pairs: np.ndarray | None = None
+    pair_depth: np.ndarray | None = None
+    contained: np.ndarray | None = None
+    contained_depth: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.penetrating is None:
+            self.penetrating = np.ones(len(self.triangle_pairs), bool)
+        if self.pairs is None:
+            hit = self.triangle_pairs[self.penetrating]
+            self.pairs = np.unique(hit[:, [0, 2]], axis=0).astype(np.int32).reshape(-1, 2)
+            self.pair_depth = np.full(len(self.pairs), np.nan)
+            for i, (a, b) in enumerate(self.pairs.tolist()):
+                mine = (hit[:, 0] == a) & (hit[:, 2] == b)
+                self.pair_depth[i] = np.max(self.depth[self.penetrating][mine])
 
     @property
     def object_pairs(self) -> np.ndarray:
@@ -117,6 +176,7 @@ class CheckReport:
         clearance: the distance of soft clashes (0: none sought).
         self_checked: whether self-intersections were sought.
         duplicates_checked: whether duplicates (coincident meshes) were sought.
+        containment_checked: whether meshes wholly inside another were sought.
         filters: the :class:`~warp_ccd._src.usd.filters.FilterSummary` of the worlds, excluded pairs and sets
             (the report's ``filters`` section when any was used), or None.
         object_instancer: ``N`` PointInstancer paths of the objects (None for a mesh prim), for the overlay.
@@ -146,6 +206,7 @@ class CheckReport:
     clearance: float = 0.0
     self_checked: bool = False
     duplicates_checked: bool = False
+    containment_checked: bool = False
     filters: FilterSummary | None = None
     object_instancer: list = field(default_factory=list)
     object_instance: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -184,15 +245,20 @@ class CheckReport:
 
     @property
     def penetrating(self) -> bool:
-        """Whether any frame has a penetrating pair: one that crosses deeper than ``min_depth``
-        (with ``count_touching``, touching rows are reported but do not make this true)."""
-        return any(bool((f.depth > self.min_depth).any()) for f in self.frames)
+        """Whether any frame has a penetrating pair: its surfaces cross, deeper than ``min_depth`` or with an
+        undefined depth (with ``count_touching``, touching rows are reported but do not make this true)."""
+        return any(len(f.pairs) > 0 for f in self.frames)
 
     @property
     def touching(self) -> bool:
-        """Whether any frame has a touching pair (crossing no deeper than ``min_depth``), reported
+        """Whether any frame has a touching pair (or a crossing no deeper than ``min_depth``), reported
         (``count_touching``) or only counted."""
-        return any(f.num_touching > 0 or bool((f.depth <= self.min_depth).any()) for f in self.frames)
+        return any(f.num_touching > 0 or not bool(f.penetrating.all()) for f in self.frames)
+
+    @property
+    def contained(self) -> bool:
+        """Whether any frame has a mesh wholly inside another (``containment`` checks)."""
+        return any(f.contained is not None and len(f.contained) > 0 for f in self.frames)
 
     @property
     def findings(self) -> str | None:
@@ -205,6 +271,8 @@ class CheckReport:
         (exit status 0)."""
         if self.penetrating:
             return "penetrating"
+        if self.contained:
+            return "contained"
         if self.tunnelling:
             return "tunnelling"
         if self.self_intersecting:
@@ -224,25 +292,26 @@ class CheckReport:
         return int(np.argmax(counts)) if counts else 0
 
     def pair_summary(self) -> list[dict]:
-        """Per prim pair that penetrates in some frame: ``a``, ``b`` (names), ``frames`` (how many),
-        ``first`` and ``last`` time codes, ``max_triangle_pairs`` in one frame and ``max_depth``;
-        most frames first."""
+        """Per prim pair reported in some frame (penetrating; touching too with ``count_touching``): ``a``,
+        ``b`` (names), ``frames`` (how many), ``first`` and ``last`` time codes, ``max_triangle_pairs`` in one
+        frame and ``max_depth`` (its largest depth: 0 where it only touches, None where it is undefined, neither
+        prim closed); most frames first."""
         stats: dict[tuple[int, int], dict] = {}
         for f in self.frames:
             if not len(f.triangle_pairs):
                 continue
-            keys, inverse, counts = np.unique(f.triangle_pairs[:, [0, 2]], axis=0, return_inverse=True,
-                                              return_counts=True)
-            deepest = np.zeros(len(keys))
-            np.maximum.at(deepest, inverse.reshape(-1), f.depth)
-            for (a, b), c, d in zip(keys.tolist(), counts.tolist(), deepest.tolist()):
+            keys, counts = np.unique(f.triangle_pairs[:, [0, 2]], axis=0, return_counts=True)
+            depth = dict(zip(map(tuple, f.pairs.tolist()), f.pair_depth.tolist()))
+            for (a, b), c in zip(keys.tolist(), counts.tolist()):
+                d = depth.get((a, b), 0.0)
                 s = stats.setdefault((a, b), {"a": self.object_path[a], "b": self.object_path[b], "frames": 0,
                                               "first": f.time, "last": f.time, "max_triangle_pairs": 0,
-                                              "max_depth": 0.0})
+                                              "max_depth": None if np.isnan(d) else 0.0})
                 s["frames"] += 1
                 s["last"] = f.time
                 s["max_triangle_pairs"] = max(s["max_triangle_pairs"], c)
-                s["max_depth"] = max(s["max_depth"], d)
+                if s["max_depth"] is not None and not np.isnan(d):
+                    s["max_depth"] = max(s["max_depth"], d)
         return sorted(stats.values(), key=lambda s: (-s["frames"], s["first"], s["a"], s["b"]))
 
     def to_json(self) -> dict:
@@ -256,10 +325,12 @@ class CheckReport:
             if len(rows):
                 keys, first = np.unique(rows[:, [0, 2]], axis=0, return_index=True)
                 ends = list(first[1:]) + [len(rows)]
+                depth = {(a, b): d for (a, b), d in zip(f.pairs.tolist(), f.pair_depth.tolist())}
                 for (a, b), s, e in zip(keys.tolist(), first.tolist(), ends):
+                    d = depth.get((a, b), 0.0)
                     entry = {"a": self.object_path[a], "b": self.object_path[b],
-                             "faces": rows[s:e][:, [1, 3]].tolist(),
-                             "max_depth": float(f.depth[s:e].max())}
+                             "faces": rows[s:e][:, [1, 3]].tolist(), "penetrating": (a, b) in depth,
+                             "max_depth": None if np.isnan(d) else float(d)}
                     if f.segments is not None:
                         entry["segments"] = np.where(np.isfinite(f.segments[s:e]), f.segments[s:e], None).tolist()
                     pairs.append(entry)
@@ -271,6 +342,10 @@ class CheckReport:
                 entry["self_intersections"] = frame_self_json(f.self_intersections, self.object_path)
             if f.duplicates is not None:
                 entry["duplicates"] = frame_duplicates_json(f.duplicates, self.object_path)
+            if f.contained is not None:
+                entry["contained"] = [{"inner": self.object_path[i], "outer": self.object_path[o],
+                                       "depth": None if np.isnan(d) else float(d)}
+                                      for (i, o), d in zip(f.contained.tolist(), f.contained_depth.tolist())]
             frames.append(entry)
         with_contacts = [f.time for f in self.frames if len(f.triangle_pairs)]
         out = {
@@ -300,6 +375,9 @@ class CheckReport:
         if self.self_checked:
             out["self_intersecting"] = self.self_intersecting
             out["self_intersections"] = self_json(self.frames, self.object_path)
+        if self.containment_checked:
+            out["contained"] = self.contained
+            out["containment"] = _containment_json(self.frames, self.object_path)
         if self.duplicates_checked:
             out["duplicated"] = self.duplicated
             out["duplicates"] = duplicates_json(self.frames, self.object_path, REL_TOL)
@@ -351,7 +429,10 @@ class CheckReport:
         ws = max([11] + [len(span(p)) for p in pairs[:top]])
         lines += pair_table(pairs, top, f"frames  {'first..last':<{ws}}  max face pairs  max depth",
                             lambda p: f"{p['frames']:6d}  {span(p):<{ws}}  {p['max_triangle_pairs']:14d}  "
-                                      f"{p['max_depth']:.3g}")
+                                      + ("undefined (open surfaces)" if p["max_depth"] is None
+                                         else f"{p['max_depth']:.3g}"))
+        if self.containment_checked:
+            lines += _containment_summary(self.frames, self.object_path, top)
         if self.intervals is not None:
             lines += sweep_summary(self.intervals, self.object_path, self.min_distance, top)
         if self.clearance > 0.0:

@@ -68,7 +68,8 @@ PROG = "warp-ccd"
 CHECK_KERNEL_MODULES = ("warp_ccd._src.scene.scene", "warp_ccd._src.trees.build", "warp_ccd._src.trees.bvh",
                         "warp_ccd._src.broadphase.sap", "warp_ccd._src.midphase.bvh",
                         "warp_ccd._src.narrowphase.discrete",
-                        "warp_ccd._src.runtime.buffers", "warp_ccd._src.check.crossing")
+                        "warp_ccd._src.runtime.buffers", "warp_ccd._src.check.crossing",
+                        "warp_ccd._src.narrowphase.depth")
 """The modules whose Warp kernels ``check`` runs (``warp_ccd.preview`` too with ``--preview``)."""
 CONTINUOUS_KERNEL_MODULES = ("warp_ccd._src.narrowphase.continuous",)
 """The modules whose Warp kernels ``check --continuous`` runs besides."""
@@ -168,8 +169,10 @@ def _build_parser() -> OneLineParser:
         "With --self, also the prims that pass through themselves, as pairs of their faces with a depth. "
         "With --duplicates, the prim pairs whose meshes coincide (the same triangles at the same place) are "
         "reported as duplicates, not as colliding. "
+        "With --containment, also the closed meshes wholly inside another. "
         "--ignore-pairs, --set-a with --set-b, --worlds (and the stage's UsdPhysics filters) leave pairs unchecked. "
-        "Exit status: 0 nothing penetrates, 1 something does (or tunnels, or passes through itself with --self, "
+        "Exit status: 0 nothing penetrates, 1 something does (or lies inside another with --containment, or "
+        "tunnels, or passes through itself with --self, "
         "or duplicates another with --duplicates, or comes within --clearance, or "
         "touches with --count-touching), 2 bad arguments or input, 3 an internal error.",
     )
@@ -198,8 +201,11 @@ def _build_parser() -> OneLineParser:
     check.add_argument("--precision", default="float32", metavar="{float32,float64}",
                        help="vertices, poses and the exact test (default: %(default)s)")
     check.add_argument("--min-depth", type=_number, default=0.0, metavar="D",
-                       help="a triangle pair penetrates when it crosses deeper than D scene units; resting "
-                       "contact has depth 0 (default: %(default)s)")
+                       help="a prim pair whose surfaces cross penetrates when its depth exceeds D scene units: the "
+                       "deepest point of either surface inside the other's closed solid, measured to that solid's "
+                       "surface (two cubes overlapping by 0.7 with flush faces: 0.3); resting contact has depth 0; "
+                       "two open surfaces (sheets, cloths) that cross have no depth and always penetrate "
+                       "(default: %(default)s)")
     check.add_argument("--count-touching", action="store_true",
                        help="report touching (resting) contact as collisions too")
     check.add_argument("--continuous", action="store_true",
@@ -217,6 +223,9 @@ def _build_parser() -> OneLineParser:
                        help="also report the prims that pass through themselves (triangles of one mesh meeting beyond "
                        "the vertices they share: a cloth through itself, overlapping bodies in one CAD mesh), as "
                        "pairs of their faces with a depth; a finding like a penetration")
+    check.add_argument("--containment", action="store_true",
+                       help="also report the closed meshes wholly inside another's solid (no surface crossing), "
+                       "with their depth; a finding like a penetration")
     check.add_argument("--duplicates", action="store_true",
                        help="report the prim pairs whose meshes coincide (the same triangles at the same place, "
                        "e.g. a part exported twice) as duplicates instead of as touching or penetrating; a "

@@ -26,7 +26,7 @@ import warp as wp
 from ..geometry.primitives import _closest_on_triangle, _unit_normal
 from ..scene.scene import MeshTopology, mesh_triangle
 
-__all__ = ["SurfaceTopology", "shape_sides", "surface_topology"]
+__all__ = ["SurfaceTopology", "shape_sides", "shape_solids", "surface_topology"]
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -42,12 +42,16 @@ class SurfaceTopology:
     ``neighbour``) 1 for a triangle listed twice in its shape (a two-sided sheet: nothing behind it;
     the edge joining it to its twin is open). ``shape_side[s]``: 1, or -1 for a closed solid wound
     inside out (:func:`shape_sides`), which turns its normals the right way round.
+    ``shape_solid[s]``: 0 for an open surface (it bounds no solid), 1 for a closed one (no open edge, no
+    two-sided face), 2 for a closed one of Euler characteristic 2 (one component, a sphere's topology: where
+    every edge is convex, it bounds a convex solid).
     """
 
     neighbour: wp.array[wp.vec3i]
     two_sided: wp.array[wp.int32]
     vertex_open: wp.array[wp.int32]
     shape_side: wp.array[wp.float64]
+    shape_solid: wp.array[wp.int32]
     shape_vertex_start: wp.array[wp.int32]
     fan_start: wp.array[wp.int32]
     fan: wp.array[wp.int32]
@@ -104,12 +108,14 @@ def surface_topology(scene) -> SurfaceTopology:
     np.cumsum(np.bincount(corner, minlength=num_vertices), out=fan_start[1:])
     fan = (by_vertex // 3) - t_start[tri_shape[by_vertex // 3]]
     side = shape_sides(scene.shapes.vertices.reshape(-1, 3), tri, tri_shape, len(t_start) - 1, open_edge)
+    solid = shape_solids(tri, tri_shape, len(t_start) - 1, open_edge, num_vertices)
     d = scene.device
     s = SurfaceTopology()
     s.neighbour = wp.array(neighbour.reshape(num_tri, 3).astype(np.int32), dtype=wp.vec3i, device=d)
     s.two_sided = wp.array(two_sided.astype(np.int32), dtype=wp.int32, device=d)
     s.vertex_open = wp.array(vertex_open.astype(np.int32), dtype=wp.int32, device=d)
     s.shape_side = wp.array(side, dtype=wp.float64, device=d)
+    s.shape_solid = wp.array(solid, dtype=wp.int32, device=d)
     s.shape_vertex_start = scene.shape_vertex_start
     s.fan_start = wp.array(fan_start.astype(np.int32), dtype=wp.int32, device=d)
     s.fan = wp.array(fan.astype(np.int32), dtype=wp.int32, device=d)
@@ -143,6 +149,32 @@ def shape_sides(vertices: np.ndarray, tri: np.ndarray, tri_shape: np.ndarray, nu
                          minlength=num_shapes)
     open_edges = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.float64), minlength=num_shapes)
     return np.where((volume < 0) & (open_edges == 0), -1.0, 1.0)
+
+
+def shape_solids(tri: np.ndarray, tri_shape: np.ndarray, num_shapes: int, open_edge: np.ndarray,
+                 num_vertices: int) -> np.ndarray:
+    """Whether each shape bounds a solid (:class:`SurfaceTopology`'s ``shape_solid``): 0 open (an open or
+    non-manifold edge), 1 closed, 2 closed with Euler characteristic ``V - E + F = 2`` (one component).
+
+    Args:
+        tri: ``(T, 3)`` int64 shape-vertex ids (unique over all shapes); tri_shape: ``(T,)`` shape of each.
+        num_shapes: how many shapes; open_edge: ``(T * 3,)`` bool as in :func:`shape_sides`.
+        num_vertices: shape vertices in all.
+
+    Returns:
+        ``(num_shapes,)`` int32.
+    """
+    faces = np.bincount(tri_shape, minlength=num_shapes)
+    open_edges = np.bincount(np.repeat(tri_shape, 3), open_edge.astype(np.int64), minlength=num_shapes)
+    used = np.zeros(num_vertices, bool)
+    used[tri.reshape(-1)] = True
+    vertex_shape = np.zeros(num_vertices, np.int64)
+    vertex_shape[tri.reshape(-1)] = np.repeat(tri_shape, 3)
+    vertices = np.bincount(vertex_shape[used], minlength=num_shapes)
+    # Closed: every edge joins exactly two faces, so E = 3F / 2.
+    euler = 2 * vertices - faces  # twice V - E + F
+    closed = (open_edges == 0) & (faces > 0)
+    return np.where(closed, np.where(euler == 4, 2, 1), 0).astype(np.int32)
 
 
 @wp.func

@@ -1,0 +1,814 @@
+"""How deep two objects overlap: the deepest point of either surface inside the other's solid.
+
+**Definition.** A closed surface bounds a solid; an open one (a floor sheet, a cloth) bounds none. For
+objects ``A`` and ``B``::
+
+    depth(A, B) = max over p in surface(A) inside solid(B) of dist(p, surface(B))
+
+and a pair's depth is the larger of ``depth(A, B)`` and ``depth(B, A)``, each where the second object is
+closed; it is undefined (NaN) when neither is. Two unit cubes overlapping by 0.7 with flush faces: 0.3 (the
+centre of ``A``'s face inside ``B`` lies 0.3 from ``B``'s far face); a crate sunk ``h`` into a slab: ``h``; a
+pole of radius ``r`` through a plate of thickness ``w``: ``max(r, w / 2)``; a pole through a cloth: the
+depth of the cloth inside the pole, whichever way the cloth is wound. It depends on the surfaces only, not
+on how they are cut into triangles.
+
+**How it is found: branch and bound over the surface.** ``f(p) = dist(p, surface(B))`` is 1-Lipschitz; its
+maximum over the part of each triangle of ``A`` inside ``B`` is sought by splitting the triangle into four
+(midpoints) where the maximum may still be. A *region* ``R`` (a sub-triangle) is bounded from below by ``f``
+at its points found inside ``B`` (its corners, its centroid, and the point below), from above by a small
+linear program: ``f <= min over t in S of g_t`` on ``R`` for any set ``S`` of triangles of ``B``, where
+
+* ``B`` convex (closed, one component, every edge convex): ``g_t`` is the distance behind ``t``'s plane, and
+  ``f`` inside ``B`` *is* the least of those over all faces, so the bound is exact once ``S`` holds the faces
+  nearest at the maximum;
+* otherwise: ``g_t`` interpolates ``dist(., t)`` linearly from ``R``'s corners, above it because a distance
+  to a triangle is convex; exact where the nearest points lie inside faces, within ``h^2 / 8 d`` of the
+  truth near edges and vertices (``h`` the region's size, ``d`` the distance).
+
+``max over R of min g_t`` is the maximum of a concave piecewise-linear function over a triangle: at a
+corner, where an edge of ``R`` meets a line ``g_t = g_u``, or where three of them meet; all such points
+are tried (:func:`_bound`). ``S`` starts with the triangles of ``B`` nearest to ``R``'s corners and centroid
+and the parent region's best point; the point ``p*`` where the bound is reached is then measured, its
+nearest triangle joins ``S`` and the program is solved again (cutting planes, Kelley), up to
+:data:`MAX_PLANES` triangles. A region is dropped when its bound does not exceed what was already found
+by more than the relative tolerance (:data:`CONVEX_TOLERANCE` for convex ``B``, :data:`TOLERANCE`
+otherwise: never more than that fraction below the true depth), or when it lies wholly outside ``B``: in
+the ball about a sample point outside ``B`` that reaches no surface. Which triangles of ``A`` are tried:
+those that meet ``B``'s surface (the rows given) and those of ``A``'s tree within ``B``'s box (wholly inside
+or outside; the bounds drop the outside ones).
+
+Inside ``B`` or not is the side of a point at its nearest feature of ``B``'s surface (its pseudo-normal:
+:func:`~warp_ccd._src.narrowphase.surface._side_at`). Everything runs in float64 on the world vertices,
+one thread per region, levels of regions until none is left (at most :data:`MAX_LEVELS`); the host reads
+one count a level. Device agnostic: the same arithmetic on every device.
+
+A triangle's own depth (for a pair of intersecting triangles, the deepest of their two parts inside the
+other solid: :meth:`PenetrationDepth.row_depth`) is found to within :data:`ROW_FRACTION` of its pair's depth.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from ..geometry.precision import precision_overloads
+from ..geometry.primitives import _closest_on_triangle, _max_abs, _unit_normal
+from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
+from ..runtime.buffers import reserve_slot
+from ..scene.scene import MeshTopology, mesh_triangle
+from ..trees.bvh import SceneBVH, TreeView
+from .surface import SurfaceTopology, _side_at, surface_topology
+
+__all__ = ["CONVEX_TOLERANCE", "MAX_LEVELS", "MAX_PLANES", "ROW_FRACTION", "TOLERANCE", "PenetrationDepth"]
+
+wp.set_module_options({"enable_backward": False, "fuse_fp": False})
+
+TOLERANCE = 1.0e-3
+"""Relative tolerance of the depth against a non-convex solid: the depth found is never below the true one
+by more than this fraction of it."""
+CONVEX_TOLERANCE = 1.0e-9
+"""Relative tolerance against a convex solid, where the bound is exact (what is left is rounding)."""
+ROW_FRACTION = 1.0e-2
+"""A triangle's own depth is sought to within this fraction of its pair's depth."""
+MAX_LEVELS = 28
+"""Most times a triangle is split (regions 4**-28 of it): a bound left then is dropped."""
+MAX_PLANES = 6
+"""Most triangles of the other surface in one region's linear program."""
+ROUNDING = 1.0e-11
+"""Rounding allowance of a bound, relative to the largest coordinate of its region plus the region's size."""
+
+TREE_STACK = 64
+"""Nodes a nearest-point query keeps to visit: a balanced tree's depth plus one suffices (24 levels hold
+16M leaves)."""
+
+BOX_SLACK = 2.0**-15
+"""Relative slack of a node box's distance in a nearest-point query, in units of ``|t| + |p - t|``
+(pose translation ``t``, query point ``p``): covers the rounding of world vertices computed from
+poses (the mid phase's :data:`~warp_ccd._src.trees.bvh.WORLD_ERROR_ULPS` in float32) and of the query point
+taken to the box space."""
+
+_NodeStack = wp.types.vector(length=TREE_STACK, dtype=wp.int32)
+_Planes = wp.types.vector(length=MAX_PLANES, dtype=wp.float64)
+_PlaneIds = wp.types.vector(length=MAX_PLANES, dtype=wp.int32)
+Region = wp.types.vector(length=6, dtype=wp.float64)
+"""A region: the barycentric ``(u, v)`` of its three corners in its root triangle."""
+
+
+@wp.func
+def _to_box_space(pose: wp.array[Any], scale: wp.array[wp.float32], deforming: wp.array[wp.int32], obj: int,
+                  p: wp.vec3d):
+    """``p`` in the box space of ``obj`` (its shape's under its pose and scale for a rigid object, the world
+    for a deforming one), the box distances' scale, and the slack of a box distance."""
+    if deforming[obj] != 0:
+        return p, wp.float64(1.0), wp.float64(BOX_SLACK) * wp.length(p)
+    x = pose[obj]
+    t = wp.vec3d(wp.transform_get_translation(x))
+    rf = wp.transform_get_rotation(x)
+    r = wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3]))
+    sc = wp.float64(scale[obj])
+    pb = wp.quat_rotate_inv(r, p - t) / sc
+    return pb, sc, wp.float64(BOX_SLACK) * (wp.length(t) + wp.length(p - t))
+
+
+@wp.func
+def nearest_triangle(mesh: MeshTopology, tree: TreeView, pose: wp.array[Any], scale: wp.array[wp.float32],
+                     deforming: wp.array[wp.int32], world_vertex: wp.array[Any],
+                     obj: int, p: wp.vec3d):
+    """The triangle of ``obj`` nearest to ``p`` and its distance, down the object's tree: nodes whose box is
+    farther than the nearest triangle so far are skipped. ``(distance, local triangle)``; ``(inf, -1)`` for an
+    object without triangles."""
+    pb, sc, slack = _to_box_space(pose, scale, deforming, obj, p)
+    best = wp.float64(1.0e300)
+    best_tri = int(-1)
+    s = mesh.object_shape[obj]
+    if mesh.shape_triangle_start[s + 1] == mesh.shape_triangle_start[s]:
+        return best, best_tri
+    node_start = tree.layout_node_start[tree.shape_layout[s]]
+    slot_start = tree.object_node_start[obj]
+    tri_start = tree.shape_tri_order_start[s]
+    zero = wp.vec3d()
+    stack = _NodeStack()
+    stack[0] = 0
+    top = int(1)
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        gap = wp.max(wp.max(wp.vec3d(tree.node_lower[slot_start + node]) - pb,
+                            pb - wp.vec3d(tree.node_upper[slot_start + node])), zero)
+        if wp.length(gap) * sc - slack > best:
+            continue
+        child = tree.node_child[node_start + node]
+        if child[0] < 0:
+            rng = tree.node_triangle[node_start + node]
+            for j in range(rng[0], rng[0] + rng[1]):
+                tri = tree.tri_order[tri_start + j]
+                x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
+                c, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
+                d = wp.length(p - c)
+                if d < best or (d == best and tri < best_tri):
+                    best = d
+                    best_tri = tri
+        elif top + 2 <= TREE_STACK:
+            stack[top] = child[1]
+            stack[top + 1] = child[0]
+            top += 2
+    return best, best_tri
+
+
+@wp.func
+def _probe(mesh: MeshTopology, surface: SurfaceTopology, tree: TreeView, pose: wp.array[Any],
+           scale: wp.array[wp.float32], deforming: wp.array[wp.int32], world_vertex: wp.array[Any], obj: int,
+           p: wp.vec3d, tol_rel: wp.float64):
+    """``p`` against the surface of ``obj``: ``(distance, nearest triangle, inside)``."""
+    d, t = nearest_triangle(mesh, tree, pose, scale, deforming, world_vertex, obj, p)
+    inside = t >= 0 and _side_at(mesh, surface, world_vertex, obj, t, p, tol_rel) < wp.float64(0.0)
+    return d, t, inside
+
+
+@wp.func
+def _plane_values(mesh: MeshTopology, surface: SurfaceTopology, world_vertex: wp.array[Any], obj: int, t: int,
+                  convex: int, c0: wp.vec3d, c1: wp.vec3d, c2: wp.vec3d, tol_rel: wp.float64):
+    """The bound ``g_t`` (module docstring) at a region's corners: how far behind triangle ``t``'s plane
+    (``convex``), else the distance to ``t``. A degenerate triangle of a convex solid bounds nothing."""
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, obj, t)
+    a = wp.vec3d(y0)
+    b = wp.vec3d(y1)
+    c = wp.vec3d(y2)
+    if convex != 0:
+        n, degenerate = _unit_normal(a, b, c, tol_rel)
+        if degenerate:
+            big = wp.float64(1.0e300)
+            return wp.vec3d(big, big, big)
+        n = n * surface.shape_side[mesh.object_shape[obj]]
+        return wp.vec3d(-wp.dot(n, c0 - a), -wp.dot(n, c1 - a), -wp.dot(n, c2 - a))
+    q0, f0 = _closest_on_triangle(c0, a, b, c)
+    q1, f1 = _closest_on_triangle(c1, a, b, c)
+    q2, f2 = _closest_on_triangle(c2, a, b, c)
+    return wp.vec3d(wp.length(c0 - q0), wp.length(c1 - q1), wp.length(c2 - q2))
+
+
+@wp.func
+def _least(g0: _Planes, g1: _Planes, g2: _Planes, m: int, a: wp.float64, b: wp.float64):
+    """``min over the first m of g`` at barycentric ``(a, b)`` of the region (``g0`` at corner 0, ...)."""
+    v = wp.float64(1.0e300)
+    for i in range(m):
+        v = wp.min(v, g0[i] + a * (g1[i] - g0[i]) + b * (g2[i] - g0[i]))
+    return v
+
+
+@wp.func
+def _try(g0: _Planes, g1: _Planes, g2: _Planes, m: int, a: wp.float64, b: wp.float64, best: wp.float64,
+         ba: wp.float64, bb: wp.float64):
+    """The better of ``(best, ba, bb)`` and the point ``(a, b)`` (clamped into the region)."""
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    a = wp.clamp(a, zero, one)
+    b = wp.clamp(b, zero, one - a)
+    v = _least(g0, g1, g2, m, a, b)
+    if v > best:
+        return v, a, b
+    return best, ba, bb
+
+
+@wp.func
+def _corner_ab(k: int):
+    """Barycentric ``(a, b)`` of the region's corner ``k``."""
+    if k == 1:
+        return wp.float64(1.0), wp.float64(0.0)
+    if k == 2:
+        return wp.float64(0.0), wp.float64(1.0)
+    return wp.float64(0.0), wp.float64(0.0)
+
+
+@wp.func
+def _pick3(v: wp.vec3d, k: int):
+    if k == 1:
+        return v[1]
+    if k == 2:
+        return v[2]
+    return v[0]
+
+
+@wp.func
+def _bound(g0: _Planes, g1: _Planes, g2: _Planes, m: int):
+    """``max over the region of min over the first m of g``: a concave piecewise-linear function's maximum
+    over a triangle, at a corner, where an edge meets a line ``g_i = g_j``, or where three ``g`` are equal.
+    ``(value, a, b)``, the point barycentric in the region."""
+    best = wp.float64(-1.0e300)
+    ba = wp.float64(0.0)
+    bb = wp.float64(0.0)
+    for k in range(3):
+        a, b = _corner_ab(k)
+        best, ba, bb = _try(g0, g1, g2, m, a, b, best, ba, bb)
+    for i in range(m):
+        for j in range(i + 1, m):
+            h = wp.vec3d(g0[i] - g0[j], g1[i] - g1[j], g2[i] - g2[j])
+            for k in range(3):
+                hp = _pick3(h, k)
+                hq = _pick3(h, (k + 1) % 3)
+                if (hp < wp.float64(0.0) and hq > wp.float64(0.0)) or (hp > wp.float64(0.0) and hq < wp.float64(0.0)):
+                    s = hp / (hp - hq)
+                    pa, pb = _corner_ab(k)
+                    qa, qb = _corner_ab((k + 1) % 3)
+                    best, ba, bb = _try(g0, g1, g2, m, pa + s * (qa - pa), pb + s * (qb - pb), best, ba, bb)
+            for q in range(j + 1, m):
+                e = wp.vec3d(g0[i] - g0[q], g1[i] - g1[q], g2[i] - g2[q])
+                # h(a, b) = 0 and e(a, b) = 0, each h0 + a (h1 - h0) + b (h2 - h0).
+                m00 = h[1] - h[0]
+                m01 = h[2] - h[0]
+                m10 = e[1] - e[0]
+                m11 = e[2] - e[0]
+                det = m00 * m11 - m01 * m10
+                scale = wp.max(wp.abs(m00 * m11), wp.abs(m01 * m10))
+                if det != wp.float64(0.0) and wp.abs(det) > wp.float64(1.0e-14) * scale:
+                    a = (-h[0] * m11 + e[0] * m01) / det
+                    b = (-e[0] * m00 + h[0] * m10) / det
+                    if a >= wp.float64(0.0) and b >= wp.float64(0.0) and a + b <= wp.float64(1.0):
+                        best, ba, bb = _try(g0, g1, g2, m, a, b, best, ba, bb)
+    return best, ba, bb
+
+
+@wp.func
+def _has(ids: _PlaneIds, m: int, t: int):
+    for i in range(m):
+        if ids[i] == t:
+            return True
+    return False
+
+
+@wp.func
+def _corner(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, u: wp.float64, v: wp.float64):
+    return x0 + u * (x1 - x0) + v * (x2 - x0)
+
+
+@wp.kernel
+def _region_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    tree: TreeView,
+    pose: wp.array[Any],
+    scale: wp.array[wp.float32],
+    deforming: wp.array[wp.int32],
+    world_vertex: wp.array[Any],
+    job: wp.array[wp.vec2i],
+    job_convex: wp.array[wp.int32],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_hint: wp.array[wp.int32],
+    tol_rel: wp.float64,
+    # Outputs
+    region_bound: wp.array[wp.float64],
+    region_next_hint: wp.array[wp.int32],
+    job_depth: wp.array[wp.float64],
+    root_depth: wp.array[wp.float64],
+):
+    """One thread per region: its lower bound (the deepest of its points measured inside the other
+    solid, into ``job_depth`` and ``root_depth``), its upper bound (:func:`_bound` with cutting planes;
+    below 0 for a region wholly outside), and the triangle nearest to its best point (its children's hint)."""
+    k = wp.tid()
+    r = region_root[k]
+    j = root_job[r]
+    src = job[j][0]
+    dst = job[j][1]
+    convex = job_convex[j]
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, src, root_tri[r])
+    x0 = wp.vec3d(y0)
+    x1 = wp.vec3d(y1)
+    x2 = wp.vec3d(y2)
+    uv = region[k]
+    c0 = _corner(x0, x1, x2, uv[0], uv[1])
+    c1 = _corner(x0, x1, x2, uv[2], uv[3])
+    c2 = _corner(x0, x1, x2, uv[4], uv[5])
+    size = wp.max(wp.max(wp.length(c1 - c0), wp.length(c2 - c1)), wp.length(c0 - c2))
+    rounding = wp.float64(ROUNDING) * (wp.max(wp.max(_max_abs(c0), _max_abs(c1)), _max_abs(c2)) + size)
+    ids = _PlaneIds()
+    m = int(0)
+    low = wp.float64(0.0)
+    outside = False
+    for i in range(4):
+        q = (c0 + c1 + c2) / wp.float64(3.0)
+        if i < 3:
+            q = c0
+            if i == 1:
+                q = c1
+            if i == 2:
+                q = c2
+        d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, q, tol_rel)
+        if inside:
+            low = wp.max(low, d)
+        else:
+            reach = wp.max(wp.max(wp.length(c0 - q), wp.length(c1 - q)), wp.length(c2 - q))
+            if reach < d - rounding:  # the region lies in a ball about q that meets no surface
+                outside = True
+        if t >= 0 and not _has(ids, m, t):
+            ids[m] = t
+            m += 1
+    hint = region_hint[k]
+    if hint >= 0 and not _has(ids, m, hint):
+        ids[m] = hint
+        m += 1
+    bound = wp.float64(-1.0)
+    if not outside and m > 0:
+        g0 = _Planes()
+        g1 = _Planes()
+        g2 = _Planes()
+        for i in range(m):
+            g = _plane_values(mesh, surface, world_vertex, dst, ids[i], convex, c0, c1, c2, tol_rel)
+            g0[i] = g[0]
+            g1[i] = g[1]
+            g2[i] = g[2]
+        for _it in range(MAX_PLANES):
+            bound, a, b = _bound(g0, g1, g2, m)
+            p = _corner(c0, c1, c2, a, b)
+            d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, p, tol_rel)
+            if inside:
+                low = wp.max(low, d)
+            hint = t
+            if bound <= low + rounding or t < 0 or _has(ids, m, t) or m == MAX_PLANES:
+                break
+            g = _plane_values(mesh, surface, world_vertex, dst, t, convex, c0, c1, c2, tol_rel)
+            ids[m] = t
+            g0[m] = g[0]
+            g1[m] = g[1]
+            g2[m] = g[2]
+            m += 1
+        if bound <= low + rounding:
+            bound = low
+    region_bound[k] = bound
+    region_next_hint[k] = hint
+    if low > wp.float64(0.0):
+        wp.atomic_max(job_depth, j, low)
+        wp.atomic_max(root_depth, r, low)
+
+
+@wp.func
+def _mid(uv: Region, i: int, k: int):
+    """Barycentric ``(u, v)`` of the midpoint of corners ``i`` and ``k`` of a region."""
+    half = wp.float64(0.5)
+    return (uv[2 * i] + uv[2 * k]) * half, (uv[2 * i + 1] + uv[2 * k + 1]) * half
+
+
+@wp.kernel
+def _split_kernel(
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_bound: wp.array[wp.float64],
+    region_next_hint: wp.array[wp.int32],
+    root_job: wp.array[wp.int32],
+    root_row: wp.array[wp.int32],
+    job_tolerance: wp.array[wp.float64],
+    job_depth: wp.array[wp.float64],
+    root_depth: wp.array[wp.float64],
+    row_fraction: wp.float64,
+    capacity: int,
+    # Outputs
+    out_root: wp.array[wp.int32],
+    out_region: wp.array[Region],
+    out_hint: wp.array[wp.int32],
+    out_count: wp.array[wp.int64],
+):
+    """One thread per region: its four halves into the next level, unless its bound does not beat what
+    was found (its job's depth; for a triangle of a row, its own depth or a fraction of its job's)."""
+    k = wp.tid()
+    bound = region_bound[k]
+    r = region_root[k]
+    j = root_job[r]
+    found = job_depth[j]
+    if root_row[r] != 0:
+        found = wp.max(root_depth[r], found * row_fraction)
+    if bound <= wp.max(found, wp.float64(0.0)) * (wp.float64(1.0) + job_tolerance[j]):
+        return
+    slot = int(wp.atomic_add(out_count, 0, wp.int64(4)))
+    if slot + 4 > capacity:
+        return
+    uv = region[k]
+    a0, a1 = _mid(uv, 0, 1)
+    b0, b1 = _mid(uv, 1, 2)
+    e0, e1 = _mid(uv, 2, 0)
+    hint = region_next_hint[k]
+    out_region[slot] = Region(uv[0], uv[1], a0, a1, e0, e1)
+    out_region[slot + 1] = Region(a0, a1, uv[2], uv[3], b0, b1)
+    out_region[slot + 2] = Region(e0, e1, b0, b1, uv[4], uv[5])
+    out_region[slot + 3] = Region(a0, a1, b0, b1, e0, e1)
+    for i in range(4):
+        out_root[slot + i] = r
+        out_hint[slot + i] = hint
+
+
+@wp.kernel
+def _convex_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    world_vertex: wp.array[Any],
+    solid: wp.array[wp.int32],
+    solid_start: wp.array[wp.int32],
+    num_solids: int,
+    tol_rel: wp.float64,
+    # Outputs
+    convex: wp.array[wp.int32],
+):
+    """One thread per triangle of the solids asked about (``solid``, their triangles numbered from
+    ``solid_start``): clears a solid's convex flag where one of its edges bends inward (the vertex across it
+    in front of the triangle's plane by more than four times ``tol_rel`` times the triangle's longest edge)."""
+    g = wp.tid()
+    a = int(0)
+    b = num_solids
+    while b - a > 1:  # the last solid whose triangles start at or before g
+        mid = (a + b) // 2
+        if solid_start[mid] <= g:
+            a = mid
+        else:
+            b = mid
+    if convex[a] == 0:
+        return
+    obj = solid[a]
+    t = g - solid_start[a]
+    s = mesh.object_shape[obj]
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, obj, t)
+    x0 = wp.vec3d(y0)
+    x1 = wp.vec3d(y1)
+    x2 = wp.vec3d(y2)
+    n, degenerate = _unit_normal(x0, x1, x2, tol_rel)
+    if degenerate:
+        return
+    n = n * surface.shape_side[s]
+    size = wp.max(wp.max(wp.length(x1 - x0), wp.length(x2 - x1)), wp.length(x0 - x2))
+    for k in range(3):
+        nbr = surface.neighbour[mesh.shape_triangle_start[s] + t][k]
+        if nbr >= 0:
+            z0, z1, z2 = mesh_triangle(mesh, world_vertex, obj, nbr)
+            far = wp.max(wp.max(wp.dot(n, wp.vec3d(z0) - x0), wp.dot(n, wp.vec3d(z1) - x0)),
+                         wp.dot(n, wp.vec3d(z2) - x0))
+            if far > tol_rel * size * wp.float64(4.0):
+                convex[a] = 0
+
+
+@wp.kernel
+def _candidates_kernel(
+    mesh: MeshTopology,
+    tree: TreeView,
+    pose: wp.array[Any],
+    scale: wp.array[wp.float32],
+    deforming: wp.array[wp.int32],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
+    job: wp.array[wp.vec2i],
+    row_key: wp.array[wp.int64],
+    num_rows: int,
+    stride: wp.int64,
+    first_root: int,
+    capacity: int,
+    # Outputs
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    count: wp.array[wp.int64],
+):
+    """One thread per job: the triangles of its first object whose tree leaves meet the box of its
+    second (taken to the first's box space), other than the rows' (``row_key``, sorted keys
+    ``job * stride + triangle``), appended as roots after ``first_root``."""
+    j = wp.tid()
+    src = job[j][0]
+    dst = job[j][1]
+    lo = wp.vec3d(object_lower[dst])
+    hi = wp.vec3d(object_upper[dst])
+    blo = wp.vec3d(1.0e300, 1.0e300, 1.0e300)
+    bhi = -blo
+    slack = wp.float64(0.0)
+    for corner in range(8):
+        p = wp.vec3d(lo[0], lo[1], lo[2])
+        if corner & 1:
+            p[0] = hi[0]
+        if corner & 2:
+            p[1] = hi[1]
+        if corner & 4:
+            p[2] = hi[2]
+        pb, sc, sl = _to_box_space(pose, scale, deforming, src, p)
+        blo = wp.min(blo, pb)
+        bhi = wp.max(bhi, pb)
+        slack = wp.max(slack, sl / sc)
+    blo = blo - wp.vec3d(slack, slack, slack)
+    bhi = bhi + wp.vec3d(slack, slack, slack)
+    s = mesh.object_shape[src]
+    if mesh.shape_triangle_start[s + 1] == mesh.shape_triangle_start[s]:
+        return
+    node_start = tree.layout_node_start[tree.shape_layout[s]]
+    slot_start = tree.object_node_start[src]
+    tri_start = tree.shape_tri_order_start[s]
+    stack = _NodeStack()
+    stack[0] = 0
+    top = int(1)
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        nlo = wp.vec3d(tree.node_lower[slot_start + node])
+        nhi = wp.vec3d(tree.node_upper[slot_start + node])
+        if nlo[0] > bhi[0] or nlo[1] > bhi[1] or nlo[2] > bhi[2] or blo[0] > nhi[0] or blo[1] > nhi[1] or (
+                blo[2] > nhi[2]):
+            continue
+        child = tree.node_child[node_start + node]
+        if child[0] < 0:
+            rng = tree.node_triangle[node_start + node]
+            for i in range(rng[0], rng[0] + rng[1]):
+                tri = tree.tri_order[tri_start + i]
+                key = wp.int64(j) * stride + wp.int64(tri)
+                # Binary search of the rows' keys.
+                a = int(0)
+                b = num_rows
+                while a < b:
+                    mid = (a + b) // 2
+                    if row_key[mid] < key:
+                        a = mid + 1
+                    else:
+                        b = mid
+                if a < num_rows and row_key[a] == key:
+                    continue
+                slot = reserve_slot(count, capacity)
+                if slot >= 0:
+                    root_job[first_root + slot] = j
+                    root_tri[first_root + slot] = tri
+        elif top + 2 <= TREE_STACK:
+            stack[top] = child[1]
+            stack[top + 1] = child[0]
+            top += 2
+
+
+_REGION = precision_overloads(_region_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
+_CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose": wp.array[t]})
+_CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+
+
+@wp.kernel
+def _roots_kernel(
+    count: int,
+    # Outputs
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_hint: wp.array[wp.int32],
+):
+    """The first level: each root triangle whole."""
+    k = wp.tid()
+    if k >= count:
+        return
+    region_root[k] = k
+    region[k] = Region(wp.float64(0.0), wp.float64(0.0), wp.float64(1.0), wp.float64(0.0), wp.float64(0.0),
+                       wp.float64(1.0))
+    region_hint[k] = -1
+
+
+class DepthResult:
+    """What :class:`PenetrationDepth` found, host arrays.
+
+    Attributes:
+        pair_depth: ``(K,)`` float64 depth of each object pair asked for (scene units), NaN where neither
+            object is closed (undefined).
+        row_depth: ``(M,)`` float64 depth of each triangle row: the deeper of its two triangles' parts inside
+            the other object's solid (to within :data:`ROW_FRACTION` of its pair's depth), NaN where neither
+            object is closed.
+        contained_depth: ``(C,)`` float64 depth of each ``(inner, outer)`` pair: how deep the inner surface
+            lies inside the outer solid.
+        regions: regions measured in all (the work done).
+        levels: levels of regions.
+    """
+
+    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels):
+        self.pair_depth = pair_depth
+        self.row_depth = row_depth
+        self.contained_depth = contained_depth
+        self.regions = regions
+        self.levels = levels
+
+
+class PenetrationDepth:
+    """The depth of object pairs of a scene (module docstring), as the scene's world vertices are now.
+
+    Owns the scene's :class:`~warp_ccd._src.narrowphase.surface.SurfaceTopology` and its work buffers
+    (grown as needed). Nearest points are found down the pipeline's trees when they are given (as they
+    stand after its ``detect()``), else down trees of its own, refit at every call.
+
+    Example::
+
+        pipe = CollisionPipeline(scene)
+        depth = PenetrationDepth(scene, trees=pipe.boxes)
+        res = pipe.detect()
+        d = depth(res.intersecting_pairs, rows=res.triangle_pairs).pair_depth
+    """
+
+    def __init__(self, scene, *, trees: SceneBVH | None = None, tolerance: float = TOLERANCE,
+                 triangle_tolerance: float = TRIANGLE_TOLERANCE, surface: SurfaceTopology | None = None):
+        """
+        Args:
+            scene: the :class:`~warp_ccd._src.scene.scene.Scene`.
+            trees: the pipeline's :class:`~warp_ccd._src.trees.bvh.SceneBVH` (``CollisionPipeline.boxes``), or
+                None: trees of its own.
+            tolerance: relative tolerance against a non-convex solid (:data:`TOLERANCE`).
+            triangle_tolerance: relative tolerance of degenerate triangles and of an edge's convexity.
+            surface: the scene's surface topology, when the caller has it already.
+        """
+        self.scene = scene
+        self.tolerance = float(tolerance)
+        self.triangle_tolerance = float(triangle_tolerance)
+        self.own_trees = not isinstance(trees, SceneBVH)
+        self.trees = SceneBVH(scene) if self.own_trees else trees
+        self.surface = surface if surface is not None else surface_topology(scene)
+        shape_solid = self.surface.shape_solid.numpy()
+        self.object_solid = shape_solid[scene.object_shape.numpy()].astype(np.int32)
+        counts = np.diff(scene.shape_triangle_start_np)[scene.object_shape.numpy()]
+        self.object_triangles = counts.astype(np.int64)
+        self.stride = int(counts.max(initial=0)) + 1
+        self._buffers: dict[str, wp.array] = {}
+
+    def _buffer(self, name: str, n: int, dtype) -> wp.array:
+        """A work array of at least ``n`` items (grown by half again over the need)."""
+        a = self._buffers.get(name)
+        if a is None or a.shape[0] < n:
+            a = wp.empty(max(int(n * 1.5), 64), dtype=dtype, device=self.scene.device)
+            self._buffers[name] = a
+        return a
+
+    def jobs(self, pairs: np.ndarray, contained: np.ndarray) -> np.ndarray:
+        """``(J, 2)`` int32 rows ``(src, dst)``: a surface measured inside a closed object, both ways for each
+        pair, inner into outer for each contained pair; unique, sorted."""
+        pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+        contained = np.asarray(contained, np.int64).reshape(-1, 2)
+        cand = np.concatenate([pairs, pairs[:, ::-1], contained])
+        cand = cand[self.object_solid[cand[:, 1]] > 0] if len(cand) else cand
+        return np.unique(cand, axis=0).astype(np.int32).reshape(-1, 2)
+
+    def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None,
+                 contained: np.ndarray | None = None) -> DepthResult:
+        """Measures the depth of object pairs.
+
+        Args:
+            pairs: ``(K, 2)`` object pairs.
+            rows: ``(M, 4)`` rows ``(obj_a, tri_a, obj_b, tri_b)`` of triangles of those pairs that meet (local
+                triangle ids): their triangles are measured first, each to its own depth.
+            contained: ``(C, 2)`` ``(inner, outer)`` object pairs, the inner wholly inside the outer's solid.
+
+        Returns:
+            The :class:`DepthResult`.
+        """
+        scene = self.scene
+        d = scene.device
+        pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+        rows = np.zeros((0, 4), np.int64) if rows is None else np.asarray(rows, np.int64).reshape(-1, 4)
+        contained = np.zeros((0, 2), np.int64) if contained is None else np.asarray(contained, np.int64).reshape(-1, 2)
+        jobs = self.jobs(pairs, contained)
+        num_jobs = len(jobs)
+        if num_jobs == 0:
+            nan = np.full(len(pairs), np.nan)
+            return DepthResult(nan, np.full(len(rows), np.nan), np.zeros(len(contained)), 0, 0)
+        if self.own_trees:
+            self.trees.refit(scene)
+        job_key = jobs[:, 0].astype(np.int64) * scene.num_objects + jobs[:, 1]
+        # The rows' triangles, each a root of its job.
+        stride = np.int64(self.stride)
+        ja = self._job_of(job_key, rows[:, 0], rows[:, 2])
+        jb = self._job_of(job_key, rows[:, 2], rows[:, 0])
+        keys = np.concatenate([ja[ja >= 0] * stride + rows[ja >= 0, 1], jb[jb >= 0] * stride + rows[jb >= 0, 3]])
+        row_key = np.unique(keys)
+        num_rows = len(row_key)
+        # Roots: the rows' triangles, then the triangles of each job's first object in its second's box.
+        capacity = max(4 * num_rows + 64, 2 * num_jobs)
+        job_dev = wp.array(jobs, dtype=wp.vec2i, device=d)
+        key_dev = wp.array(row_key if num_rows else np.zeros(1, np.int64), dtype=wp.int64, device=d)
+        count = wp.zeros(1, dtype=wp.int64, device=d)
+        tree = self.trees
+        while True:
+            root_job = self._buffer("root_job", num_rows + capacity, wp.int32)
+            root_tri = self._buffer("root_tri", num_rows + capacity, wp.int32)
+            count.zero_()
+            wp.launch(_CANDIDATES[scene.precision], dim=num_jobs,
+                      inputs=[scene.topology, tree.tree, scene.object_pose, scene.object_scale, tree.object_deforming,
+                              tree.lower, tree.upper, job_dev, key_dev, num_rows, stride, num_rows,
+                              root_job.shape[0] - num_rows],
+                      outputs=[root_job, root_tri, count], device=d)
+            extra = int(count.numpy()[0])
+            if num_rows + extra <= root_job.shape[0]:
+                break
+            capacity = extra
+            self._buffers.pop("root_job")
+            self._buffers.pop("root_tri")
+        num_roots = num_rows + extra
+        if num_rows:
+            root_job[:num_rows].assign(wp.array((row_key // stride).astype(np.int32), dtype=wp.int32, device=d))
+            root_tri[:num_rows].assign(wp.array((row_key % stride).astype(np.int32), dtype=wp.int32, device=d))
+        root_row = np.zeros(num_roots, np.int32)
+        root_row[:num_rows] = 1
+        root_row = wp.array(root_row, dtype=wp.int32, device=d)
+        # Which solids are convex: closed with a sphere's topology, and no edge bending inward now.
+        solids, job_solid = np.unique(jobs[:, 1], return_inverse=True)
+        start = np.concatenate([[0], np.cumsum(self.object_triangles[solids])]).astype(np.int32)
+        flags = wp.array((self.object_solid[solids] == 2).astype(np.int32), dtype=wp.int32, device=d)
+        if start[-1]:
+            wp.launch(_CONVEX[scene.precision], dim=int(start[-1]),
+                      inputs=[scene.topology, self.surface, scene.world_vertex,
+                              wp.array(solids.astype(np.int32), dtype=wp.int32, device=d),
+                              wp.array(start[:-1], dtype=wp.int32, device=d), len(solids), self.triangle_tolerance],
+                      outputs=[flags], device=d)
+        convex = flags.numpy()[job_solid.reshape(-1)]
+        job_convex = wp.array(convex.astype(np.int32), dtype=wp.int32, device=d)
+        job_tolerance = wp.array(np.where(convex != 0, CONVEX_TOLERANCE, self.tolerance), dtype=wp.float64, device=d)
+        job_depth = wp.zeros(num_jobs, dtype=wp.float64, device=d)
+        root_depth = wp.zeros(num_roots, dtype=wp.float64, device=d)
+        # Levels of regions.
+        n = num_roots
+        cur = [self._buffer(f"{name}0", n, t) for name, t in (("root", wp.int32), ("region", Region),
+                                                                ("hint", wp.int32))]
+        wp.launch(_roots_kernel, dim=n, inputs=[n], outputs=cur, device=d)
+        total = 0
+        level = 0
+        while n > 0 and level < MAX_LEVELS:
+            total += n
+            bound = self._buffer("bound", n, wp.float64)
+            next_hint = self._buffer("next_hint", n, wp.int32)
+            wp.launch(_REGION[scene.precision], dim=n,
+                      inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
+                              tree.object_deforming, scene.world_vertex, job_dev, job_convex, root_job, root_tri,
+                              cur[0], cur[1], cur[2], self.triangle_tolerance],
+                      outputs=[bound, next_hint, job_depth, root_depth], device=d)
+            level += 1
+            want = 4 * n
+            while True:
+                nxt = [self._buffer(f"{name}{level % 2}", want, t)
+                       for name, t in (("root", wp.int32), ("region", Region), ("hint", wp.int32))]
+                count.zero_()
+                wp.launch(_split_kernel, dim=n,
+                          inputs=[cur[0], cur[1], bound, next_hint, root_job, root_row, job_tolerance, job_depth,
+                                  root_depth, ROW_FRACTION, nxt[0].shape[0]],
+                          outputs=[nxt[0], nxt[1], nxt[2], count], device=d)
+                m = int(count.numpy()[0])
+                if m <= nxt[0].shape[0]:
+                    break
+                want = m
+            cur, n = nxt, m
+        depth_job = job_depth.numpy()
+        depth_root = root_depth.numpy()
+        # Per pair, per row, per contained pair.
+        ab = self._job_of(job_key, pairs[:, 0], pairs[:, 1])
+        ba = self._job_of(job_key, pairs[:, 1], pairs[:, 0])
+        pair_depth = np.fmax(np.where(ab >= 0, depth_job[np.maximum(ab, 0)], np.nan),
+                             np.where(ba >= 0, depth_job[np.maximum(ba, 0)], np.nan))
+        row_depth = np.fmax(self._root_depth(depth_root, row_key, ja, rows[:, 1], stride),
+                            self._root_depth(depth_root, row_key, jb, rows[:, 3], stride))
+        inner = self._job_of(job_key, contained[:, 0], contained[:, 1])
+        contained_depth = np.where(inner >= 0, depth_job[np.maximum(inner, 0)], np.nan)
+        return DepthResult(pair_depth, row_depth, contained_depth, total, level)
+
+    def _job_of(self, job_key: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+        """The job index of each ``(src, dst)``, -1 where there is none."""
+        key = np.asarray(src, np.int64) * self.scene.num_objects + np.asarray(dst, np.int64)
+        at = np.minimum(np.searchsorted(job_key, key), max(len(job_key) - 1, 0))
+        return np.where((len(job_key) > 0) & (job_key[at] == key), at, -1) if len(key) else np.zeros(0, np.int64)
+
+    @staticmethod
+    def _root_depth(depth_root: np.ndarray, row_key: np.ndarray, job: np.ndarray, tri: np.ndarray,
+                    stride: np.int64) -> np.ndarray:
+        """The depth of each row triangle's root (NaN where its job does not exist)."""
+        key = job * stride + tri
+        at = np.minimum(np.searchsorted(row_key, key), max(len(row_key) - 1, 0))
+        ok = (job >= 0) & (len(row_key) > 0)
+        return np.where(ok, depth_root[at] if len(row_key) else np.nan, np.nan)
