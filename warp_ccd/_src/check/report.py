@@ -27,7 +27,7 @@ from .tables import pair_table, span
 
 __all__ = ["REPORT_SCHEMA_PATH", "SCHEMA_VERSION", "CheckReport", "FrameContacts", "report_schema"]
 
-SCHEMA_VERSION = "1.1"
+SCHEMA_VERSION = "1.2"
 """The version of the JSON report's layout (``"schema_version"`` in it): ``MAJOR.MINOR``, the minor number
 raised when optional fields are added, the major one when a field is removed or changes meaning or type."""
 REPORT_SCHEMA_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "report.schema.json")
