@@ -73,7 +73,7 @@ def test_ignore_pairs_makes_the_check_clean(stages, tmp_path, capsys, content, n
     rc, out, err = run(capsys, stages["two"], "--device", DEFAULT_DEVICE, "--ignore-pairs", pairs, "--report", report)
     assert rc == 0, err
     data = valid(json.loads(report.read_text()))
-    assert data["schema_version"] == "1.1" and data["findings"] is None
+    assert data["schema_version"] == "2.0" and data["findings"] is None
     f = data["filters"]
     assert (f["excluded_pairs"], f["excluded_given"], f["excluded_usd"], f["ignore_lines"]) == (1, 1, 0, 1)
     assert f["ignore_pairs"] == [str(pairs)] and f["usd_filters"] is True

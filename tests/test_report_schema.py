@@ -108,7 +108,7 @@ def test_reports_follow_the_schema(stages, device, case):
     name, options = CASES[case]
     report = check_usd(stages[name], device=device, **options)
     data = report.to_json()
-    assert data["schema_version"] == SCHEMA_VERSION == "1.1"
+    assert data["schema_version"] == SCHEMA_VERSION == "2.0"
     assert_valid(data)
     assert_valid(json.loads(report.json_text()))  # as written: tuples are lists, numbers plain
     # The optional sections are there when asked for, and only then.

@@ -53,10 +53,14 @@ follows the JSON Schema (draft 2020-12) shipped beside this module, ``report.sch
 fields (``additionalProperties: false``), so a report with a field the schema does not know fails
 validation. The version's policy: the minor number grows when optional fields are added (a reader of
 ``1.x`` reads every later ``1.y``), the major number when a field is removed or changes its meaning or
-type. ``1.1`` added the ``filters`` section.
+type. ``1.1`` added the ``filters`` section. ``2.0``: a pair's ``max_depth`` is its depth as
+:mod:`~warp_ccd._src.narrowphase.depth` defines it (null where neither prim is closed), a frame's pairs say
+whether they penetrate, ``contained``/``containment`` with ``containment``, and ``filters`` counts the pairs each
+of USD Physics' rules excludes (rigid bodies, joints, articulations).
 
 **Filters** (:mod:`~warp_ccd._src.usd.filters`): pairs of two ``worlds``, excluded pairs (``ignore_pairs``, the
-stage's ``UsdPhysics`` filters) and, with ``set_a`` / ``set_b``, pairs not of one prim of each set are dropped
+stage's ``UsdPhysics`` rules: meshes of one rigid body, bodies a joint joins, filtered pairs, collision groups;
+:mod:`~warp_ccd._src.usd.physics`) and, with ``set_a`` / ``set_b``, pairs not of one prim of each set are dropped
 by the broad phase (so for every kind of check; self-intersection, per prim, is not filtered).
 """
 

@@ -97,8 +97,9 @@ class CheckOptions:
             a line, separated by whitespace or a comma, ``#`` comments; ``.json``: a list of ``[a, b]``) and
             ``(a, b)`` pairs (a single file may be given as it is); every mesh at or under ``a`` is excluded
             against every mesh at or under ``b``. The files are read when the options are made.
-        usd_filters: also exclude the pairs the stage's ``UsdPhysics.FilteredPairsAPI`` and
-            ``UsdPhysics.CollisionGroup`` prims filter out (default True).
+        usd_filters: also exclude the pairs the stage's ``UsdPhysics`` rules leave out (default True): meshes of
+            one ``RigidBodyAPI`` body, bodies a ``Joint`` joins with ``physics:collisionEnabled`` false
+            (:mod:`~warp_ccd._src.usd.physics`), ``FilteredPairsAPI`` and ``CollisionGroup`` prims.
         set_a: prim paths or patterns (a string may hold several, comma-separated; held as a tuple, one pattern
             an item): with ``set_b``, only pairs of one mesh of set A and one of set B are checked (a mesh may be
             in both).

@@ -13,7 +13,7 @@ Subcommands:
   tunnel (no end frame shows them); with ``--clearance D``, the prim pairs closer than ``D`` (soft
   clashes); with ``--self``, the prims that pass through themselves; with ``--duplicates``, the prim
   pairs whose meshes coincide (reported as duplicates, not as collisions); ``--worlds``,
-  ``--ignore-pairs`` (and the stage's ``UsdPhysics`` filters, unless ``--no-usd-filters``), ``--set-a`` with
+  ``--ignore-pairs`` (and the stage's ``UsdPhysics`` rules, unless ``--no-usd-filters``), ``--set-a`` with
   ``--set-b`` leave pairs out (:mod:`warp_ccd._src.usd.filters`). Exit status 0 when nothing
   penetrates, 1 when something does (or tunnels, or passes through itself, or duplicates another, or
   comes within the clearance, or, with ``--count-touching``, touches), 2 when the input or the
@@ -251,8 +251,9 @@ def _build_parser() -> OneLineParser:
                        "or a comma, '#' comments; a .json file: a list of [a, b]. Every mesh under a is excluded "
                        "against every mesh under b (repeatable)")
     check.add_argument("--no-usd-filters", dest="usd_filters", action="store_false",
-                       help="check the pairs the stage's UsdPhysics filtered pairs and collision groups filter "
-                       "out too (default: they are excluded)")
+                       help="check the pairs the stage's UsdPhysics rules leave out too: meshes of one rigid "
+                       "body, bodies a joint joins (physics:collisionEnabled false), filtered pairs and collision "
+                       "groups (default: they are excluded)")
     check.add_argument("--set-a", type=_prims, action="append", default=None, metavar="PATH[,PATH...]",
                        help="with --set-b: only pairs of one mesh under these prims (paths or fnmatch patterns) "
                        "and one under --set-b's are checked, as clash tools do (repeatable)")

@@ -25,6 +25,10 @@ broad phase then never pairs what they rule out.
   ``UsdPhysics.CollisionGroup.ComputeCollisionGroupTable`` reads them; members from the
   ``collectionAPI:colliders`` collection): the members of two groups that do not collide are excluded
   pairwise. Objects in no group are not affected (an inverted group's filter applies among groups only).
+* **The stage's rigid bodies and joints** (``usd_filters`` too; :mod:`~warp_ccd._src.usd.physics`): meshes of one
+  ``UsdPhysics.RigidBodyAPI`` body are one object (never checked against each other), and the meshes of two
+  bodies that a ``UsdPhysics.Joint`` with ``physics:collisionEnabled`` false joins are never checked against
+  each other. The report counts the pairs each rule excludes.
 * **Sets** (``set_a``, ``set_b``): only pairs with one object in set A and the other in set B are
   tested, through collision groups and masks: A only ``group 1 mask 2``, B only ``group 2 mask 1``,
   both ``group 3 mask 3``, neither ``group 0 mask 0`` (never tested). A pattern matching no checked
@@ -47,6 +51,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..runtime.aliases import PathLike
+from .physics import PhysicsPrims, body_keys, joint_keys, object_bodies
 
 if TYPE_CHECKING:
     from pxr import Usd
@@ -249,6 +254,24 @@ class PrimIndex:
         rows[self._row_of[hit[self._col]]] = True
         return rows[self._object_row]
 
+    def ancestor_id(self, path: str) -> int | None:
+        """The id of the ancestor at ``path`` (no pattern), or None when no object is at or under it."""
+        return self._id.get(path.rstrip("/") or "/")
+
+    @property
+    def depth(self) -> np.ndarray:
+        """``(A,)`` int64: each ancestor's depth (``/`` 0, ``/World`` 1, ``/World/A`` 2)."""
+        names = self.ancestors.astype(str)
+        return np.where(names == "/", 0, np.char.count(names, "/")).astype(np.int64)
+
+    def innermost(self, hit: np.ndarray) -> np.ndarray:
+        """``(N,)`` int64: each object's innermost (nearest) ancestor in ``hit`` (an ancestor id), or ``-1``."""
+        pos = np.nonzero(hit[self._col])[0][::-1]  # root last within each row: the first per row is innermost
+        rows, first = np.unique(self._row_of[pos], return_index=True)
+        out = np.full(len(self._row_start) - 1, -1, np.int64)
+        out[rows] = self._col[pos[first]]
+        return out[self._object_row]
+
     def outermost(self, hit: np.ndarray) -> np.ndarray:
         """``(N,)`` int64: each object's outermost ancestor in ``hit`` (an ancestor id), or ``-1``."""
         pos = np.nonzero(hit[self._col])[0]  # root first within each row: the first per row is outermost
@@ -296,7 +319,14 @@ class FilterSummary:
         usd_filters: whether the stage's physics filters were read (None: no filters were asked about).
         usd_filtered_pairs: ``physics:filteredPairs`` targets read.
         usd_collision_groups: ``UsdPhysics.CollisionGroup`` prims read.
-        excluded_usd: object pairs the physics filters exclude.
+        usd_rigid_bodies: enabled ``UsdPhysics.RigidBodyAPI`` prims read (:mod:`~warp_ccd._src.usd.physics`).
+        usd_joints: ``UsdPhysics.Joint`` prims read.
+        usd_articulations: ``UsdPhysics.ArticulationRootAPI`` prims read.
+        excluded_usd: object pairs the physics filters exclude (the union of the four below).
+        excluded_rigid_body: object pairs of two meshes of one rigid body.
+        excluded_joints: object pairs of two bodies a joint joins with ``collisionEnabled`` false.
+        excluded_filtered_pairs: object pairs ``physics:filteredPairs`` exclude.
+        excluded_collision_groups: object pairs of collision groups that do not collide.
         excluded: object pairs excluded in all (given and from USD, each once).
         set_a: the set A patterns, or None.
         set_b: the set B patterns, or None.
@@ -313,7 +343,14 @@ class FilterSummary:
     usd_filters: bool | None = None
     usd_filtered_pairs: int = 0
     usd_collision_groups: int = 0
+    usd_rigid_bodies: int = 0
+    usd_joints: int = 0
+    usd_articulations: int = 0
     excluded_usd: int = 0
+    excluded_rigid_body: int = 0
+    excluded_joints: int = 0
+    excluded_filtered_pairs: int = 0
+    excluded_collision_groups: int = 0
     excluded: int = 0
     set_a: list[str] | None = None
     set_b: list[str] | None = None
@@ -325,7 +362,12 @@ class FilterSummary:
     def used(self) -> bool:
         """Whether any filter was asked for or found (the report then has a ``filters`` section)."""
         return bool(self.worlds or self.set_a or self.ignore_lines or self.ignore_files or self.usd_filters is False
-                    or self.usd_filtered_pairs or self.usd_collision_groups or self.notes)
+                    or self._usd_read or self.notes)
+
+    @property
+    def _usd_read(self) -> bool:
+        return bool(self.usd_filtered_pairs or self.usd_collision_groups or self.usd_rigid_bodies or self.usd_joints
+                    or self.usd_articulations)
 
     def to_json(self) -> dict:
         """The report's ``filters`` section."""
@@ -335,17 +377,23 @@ class FilterSummary:
                 "usd_filtered_pairs": self.usd_filtered_pairs, "usd_collision_groups": self.usd_collision_groups,
                 "set_a": self.set_a, "set_b": self.set_b, "set_a_objects": self.set_a_objects,
                 "set_b_objects": self.set_b_objects, "worlds": self.worlds, "world_count": len(self.world_roots),
-                "world_roots": list(self.world_roots), "notes": list(self.notes)}
+                "world_roots": list(self.world_roots), "notes": list(self.notes),
+                "usd_rigid_bodies": self.usd_rigid_bodies, "usd_joints": self.usd_joints,
+                "usd_articulations": self.usd_articulations, "excluded_rigid_body": self.excluded_rigid_body,
+                "excluded_joints": self.excluded_joints, "excluded_filtered_pairs": self.excluded_filtered_pairs,
+                "excluded_collision_groups": self.excluded_collision_groups}
 
     def summary_lines(self) -> list[str]:
         """The summary's header lines on the filters (none when no filter was used)."""
         if not self.used:
             return []
         lines = []
-        if self.excluded or self.ignore_lines or self.usd_filtered_pairs or self.usd_collision_groups \
-                or self.usd_filters is False:
-            usd = (f"{self.excluded_usd} from USD physics filters ({self.usd_filtered_pairs} filtered pairs, "
-                   f"{self.usd_collision_groups} collision groups)" if self.usd_filters else "USD physics filters off")
+        if self.excluded or self.ignore_lines or self._usd_read or self.usd_filters is False:
+            usd = (f"{self.excluded_usd} from USD physics filters ({self.excluded_rigid_body} within "
+                   f"{self.usd_rigid_bodies} rigid bodies, {self.excluded_joints} by {self.usd_joints} joints, "
+                   f"{self.excluded_filtered_pairs} by {self.usd_filtered_pairs} filtered pairs, "
+                   f"{self.excluded_collision_groups} by {self.usd_collision_groups} collision groups)"
+                   if self.usd_filters else "USD physics filters off")
             lines.append(f"  excluded object pairs: {self.excluded} ({self.excluded_given} given in "
                          f"{self.ignore_lines} prim pairs; {usd})")
         if self.set_a is not None:
@@ -365,7 +413,7 @@ class PairFilters:
 
     Args:
         ignore_pairs: an ignore-pairs file, or a sequence of files and ``(a, b)`` prim path pairs, or None.
-        usd_filters: read the stage's ``UsdPhysics`` filtered pairs and collision groups.
+        usd_filters: read the stage's ``UsdPhysics`` rigid bodies, joints, filtered pairs and collision groups.
         set_a: prim paths or patterns of set A (a string may hold several, comma-separated), or None.
         set_b: likewise for set B; given with ``set_a`` or not at all.
         allow_missing: a prim pair naming no prim, or a set or world pattern matching no checked mesh,
@@ -388,13 +436,18 @@ class PairFilters:
         self.allow_missing = bool(allow_missing)
 
     def resolve(self, stage: Usd.Stage, object_prim: Sequence[str] | PrimIndex,
-                summary: FilterSummary | None = None) -> tuple[dict, FilterSummary]:
+                summary: FilterSummary | None = None,
+                instances: tuple[np.ndarray, Sequence[str], np.ndarray] | None = None) -> tuple[dict, FilterSummary]:
         """The scene's filter arguments for objects ``object_prim`` of ``stage``.
 
         Args:
             stage: the stage the prim paths name prims of.
             object_prim: ``N`` prim paths, one per object, or their :class:`PrimIndex`.
             summary: a summary to fill in (one holding the worlds already), or None.
+            instances: the point instances among the objects, ``(instancer, paths, instance)``: ``(N,)`` int64
+                each object's PointInstancer (an index into ``paths``, ``-1`` for none), the instancers' prim
+                paths, and ``(N,)`` int64 each point instance's index; or None (no object is one). A rigid body
+                inside a prototype is one body per instance.
 
         Returns:
             ``(arguments, summary)``: ``exclude_pairs``, ``group`` and ``mask`` for the
@@ -402,7 +455,8 @@ class PairFilters:
 
         Raises:
             ValueError: a pair naming no prim, a set pattern matching no checked mesh (unless
-                ``allow_missing``), or more than :data:`MAX_EXCLUDED` excluded pairs.
+                ``allow_missing``), a joint with a bad body target (naming the joint), or more than
+                :data:`MAX_EXCLUDED` excluded pairs.
         """
         index = object_prim if isinstance(object_prim, PrimIndex) else PrimIndex(object_prim)
         s = summary if summary is not None else FilterSummary()
@@ -422,7 +476,13 @@ class PairFilters:
                     s.notes.append(message + "; pair ignored")
                 sides.append(objects)
             given.append(self._expand(sides[0], sides[1], pair.source, budget))
-        usd = self._usd_keys(stage, index, s, budget) if self.usd_filters else []
+        rules = self._usd_keys(stage, index, s, budget, instances) if self.usd_filters else {}
+        usd = [k for keys in rules.values() for k in keys]
+        counts = {rule: len(np.unique(np.concatenate(keys))) if keys else 0 for rule, keys in rules.items()}
+        s.excluded_rigid_body = counts.get("rigid_body", 0)
+        s.excluded_joints = counts.get("joints", 0)
+        s.excluded_filtered_pairs = counts.get("filtered_pairs", 0)
+        s.excluded_collision_groups = counts.get("collision_groups", 0)
         given_pairs, usd_pairs = _pairs_of(given), _pairs_of(usd)
         s.excluded_given, s.excluded_usd = len(given_pairs), len(usd_pairs)
         excluded = _pairs_of(given + usd)
@@ -459,16 +519,21 @@ class PairFilters:
             inside |= objects
         return inside
 
-    def _usd_keys(self, stage: Usd.Stage, index: PrimIndex, s: FilterSummary, budget: list) -> list[np.ndarray]:
-        """Excluded pairs from the stage's ``FilteredPairsAPI`` and ``CollisionGroup`` prims."""
+    def _usd_keys(self, stage: Usd.Stage, index: PrimIndex, s: FilterSummary, budget: list,
+                  instances: tuple[np.ndarray, Sequence[str], np.ndarray] | None) -> dict[str, list[np.ndarray]]:
+        """Excluded pairs from the stage's physics, per rule (``rigid_body``, ``joints``, ``filtered_pairs``,
+        ``collision_groups``): its rigid bodies and joints (:mod:`~warp_ccd._src.usd.physics`),
+        ``FilteredPairsAPI`` and ``CollisionGroup`` prims."""
         from pxr import Usd, UsdPhysics
 
         keys = []
         predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
         groups = False
+        found = PhysicsPrims()
         for prim in Usd.PrimRange(stage.GetPseudoRoot(), predicate):
             if prim.IsA(UsdPhysics.CollisionGroup):
                 groups = True
+            found.add(prim)
             if not prim.HasAPI(UsdPhysics.FilteredPairsAPI):
                 continue
             path = str(prim.GetPath())
@@ -481,9 +546,19 @@ class PairFilters:
                     continue
                 theirs = index.select(str(target))
                 keys.append(self._expand(mine, theirs, source, budget))
-        if groups:
-            keys += self._group_keys(stage, index, s, budget)
-        return keys
+        s.usd_rigid_bodies, s.usd_joints = len(found.bodies), found.num_joints
+        s.usd_articulations = found.num_articulations
+        s.notes += found.notes
+        instancer = instance = None
+        if instances is not None:
+            which, paths, instance = instances
+            anc = np.array([-1 if (k := index.ancestor_id(p)) is None else k for p in paths] + [-1], np.int64)
+            instancer = anc[np.asarray(which, np.int64)]  # -1 picks the last entry: no instancer
+        body, group = object_bodies(index, found.bodies, instancer, instance)
+        return {"rigid_body": [body_keys(group, index, body, budget)],
+                "joints": [joint_keys(found.joints, index, body, found.bodies, budget)],
+                "filtered_pairs": keys,
+                "collision_groups": self._group_keys(stage, index, s, budget) if groups else []}
 
     def _group_keys(self, stage: Usd.Stage, index: PrimIndex, s: FilterSummary, budget: list) -> list[np.ndarray]:
         from pxr import Usd, UsdPhysics

@@ -502,6 +502,7 @@ class UsdMeshImport:
         self.object_deforming = deforming[order]
         self.object_instancer = [self._instancers[j].path if j >= 0 else None for j in self._obj_instancer[order]]
         self.object_instance = self._obj_instance[order]
+        self._object_instancer_id = self._obj_instancer[order]
 
         # Shapes: rigid objects share one per (mesh content, baked linear part); each deforming object has its own.
         canonical: dict[bytes, int] = {}
@@ -569,7 +570,10 @@ class UsdMeshImport:
             self.object_world, summary = world_ids(self.stage, index, self._worlds, allow, summary)
         args = {"world": self.object_world}
         if self._filters is not None:
-            more, summary = self._filters.resolve(self.stage, index, summary)
+            instances = None
+            if self._instancers:
+                instances = (self._object_instancer_id, [rec.path for rec in self._instancers], self.object_instance)
+            more, summary = self._filters.resolve(self.stage, index, summary, instances)
             args.update(more)
         self.filters = summary
         return args
