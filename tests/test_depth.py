@@ -13,14 +13,15 @@ import math
 
 import numpy as np
 import pytest
-from conftest import ALL_DEVICES
 from depth_reference import convex_depth, pair_convex_depth, sampled_depth
-from test_clearance import asset_meshes
 from test_crossing import box, grid
 
 import warp_ccd as wc
 from warp_ccd._src.check.crossing import CrossingClassifier
 from warp_ccd._src.narrowphase.depth import CONVEX_TOLERANCE, TOLERANCE, PenetrationDepth
+
+from conftest import ALL_DEVICES
+from test_clearance import asset_meshes
 
 
 def prism(r: float, z0: float, z1: float, n: int = 12, centre=(0.0, 0.0)):

@@ -46,8 +46,9 @@ nearest feature come from :mod:`~warp_ccd._src.narrowphase.surface`.
 
 **Depth** (:mod:`~warp_ccd._src.narrowphase.depth`): an object pair's is the deepest point of either surface
 inside the other object's closed solid, measured to that solid's surface; undefined (NaN) where neither
-object is closed. A crossing row's depth is the deeper of its two triangles' parts inside the other solid;
-a crossing is never 0 deep (at least its tolerance), and a touching row has depth 0.
+object is closed. A crossing row's depth is the deepest point the pair's search measured on its two triangles
+inside the other solid (a lower bound of their own); a crossing is never 0 deep (at least its tolerance), and a
+touching row has depth 0.
 """
 
 from __future__ import annotations
@@ -358,9 +359,9 @@ class Crossings:
 
     Attributes:
         crossing: ``(M,)`` bool, whether the surfaces cross at each row (else they touch).
-        depth: ``(M,)`` float64 depth of each row (scene units): for a crossing row the deeper of its two
-            triangles' parts inside the other object's solid, at least the row's tolerance (a crossing is
-            never 0 deep); NaN where neither object is closed (undefined); 0 for a touching row.
+        depth: ``(M,)`` float64 depth of each row (scene units): for a crossing row the deepest point measured on
+            its two triangles inside the other object's solid, at least the row's tolerance (a crossing is never
+            0 deep); NaN where neither object is closed (undefined); 0 for a touching row.
         pairs: ``(K,)`` object pairs ``(a, b)``, ``a < b``, sorted, of the crossing rows.
         pair_depth: ``(K,)`` float64 depth of each pair
             (:class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`), at least its rows' tolerance; NaN
@@ -456,17 +457,16 @@ class CrossingClassifier:
             eps = self._eps[:m].numpy()
             rows = pairs.numpy().reshape(-1, 4).astype(np.int64)
         at = np.flatnonzero(crossing)
-        object_pairs = np.unique(rows[at][:, [0, 2]], axis=0).astype(np.int32).reshape(-1, 2)
-        found = self.depth(object_pairs, rows[at], contained)
+        object_pairs, row_pair = np.unique(rows[at][:, [0, 2]], axis=0, return_inverse=True)
+        object_pairs = object_pairs.astype(np.int32).reshape(-1, 2)
+        # A crossing is never 0 deep: at least its tolerance, below which depths are not told apart.
+        floor = np.zeros(len(object_pairs))
+        np.maximum.at(floor, row_pair.reshape(-1), eps[at])
+        found = self.depth(object_pairs, rows[at], contained, floors=floor)
         depth = np.zeros(m)
-        out = Crossings(crossing, depth, object_pairs, found.pair_depth, found.contained_depth)
-        if len(at):
-            # A crossing is never 0 deep: at least its tolerance (NaN stays: undefined).
-            depth[at] = np.where(np.isnan(found.row_depth), np.nan, np.fmax(found.row_depth, eps[at]))
-            floor = np.zeros(len(object_pairs))
-            np.maximum.at(floor, out.row_pair(rows[at]), eps[at])
-            out.pair_depth = np.where(np.isnan(found.pair_depth), np.nan, np.fmax(found.pair_depth, floor))
-        return out
+        depth[at] = np.where(np.isnan(found.row_depth), np.nan, np.fmax(found.row_depth, eps[at]))
+        pair_depth = np.where(np.isnan(found.pair_depth), np.nan, np.fmax(found.pair_depth, floor))
+        return Crossings(crossing, depth, object_pairs, pair_depth, found.contained_depth)
 
 
 @wp.func

@@ -92,9 +92,9 @@ class FrameContacts:
             (or, with ``count_touching``, all) triangle pairs, USD face indices, sorted by
             ``(obj_a, obj_b, face_a, face_b)`` and unique (two triangles of one polygon meeting one
             face count once).
-        depth: ``(M,)`` float64, the depth of each row, scene units: the deeper of its two faces' parts inside the
-            other prim's closed solid (at least the row's tolerance where the faces cross; 0 where they only
-            touch); NaN where neither prim is closed.
+        depth: ``(M,)`` float64, the depth of each row, scene units: the deepest point measured on its two faces
+            inside the other prim's closed solid (at least the row's tolerance where the faces cross; 0 where they
+            only touch); NaN where neither prim is closed.
         segments: ``(M, 2, 3)`` float64 intersection segments of the rows (the first triangle
             pair of each), or None.
         num_touching: face pairs not reported: they only touch, or their prims' crossing is no deeper than

@@ -43,7 +43,14 @@ one thread per region, levels of regions until none is left (at most :data:`MAX_
 one count a level. Device agnostic: the same arithmetic on every device.
 
 A triangle's own depth (for a pair of intersecting triangles, the deepest of their two parts inside the
-other solid: :meth:`PenetrationDepth.row_depth`) is found to within :data:`ROW_FRACTION` of its pair's depth.
+other solid: :attr:`DepthResult.row_depth`) is the deepest point the pair's search measured on them: a lower
+bound of it, no more refined than the pair's depth needs.
+
+Each object pair's search stops early where it would not end: depths against a non-convex solid are told apart
+down to :data:`RESOLUTION` of the smaller object's size (surfaces meeting flush, shallower than that both
+ways, would otherwise split their whole shared area ever finer), and a pair measures at most
+:data:`PAIR_REGIONS` regions (:attr:`DepthResult.stopped` says which pairs reached it: their depth is then the
+deepest point found, a lower bound).
 """
 
 from __future__ import annotations
@@ -61,7 +68,8 @@ from ..scene.scene import MeshTopology, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from .surface import SurfaceTopology, _side_at, surface_topology
 
-__all__ = ["CONVEX_TOLERANCE", "MAX_LEVELS", "MAX_PLANES", "ROW_FRACTION", "TOLERANCE", "PenetrationDepth"]
+__all__ = ["CONVEX_TOLERANCE", "MAX_LEVELS", "MAX_PLANES", "MAX_REGIONS", "PAIR_REGIONS", "TOLERANCE", "DepthResult",
+           "PenetrationDepth"]
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -70,14 +78,21 @@ TOLERANCE = 1.0e-3
 by more than this fraction of it."""
 CONVEX_TOLERANCE = 1.0e-9
 """Relative tolerance against a convex solid, where the bound is exact (what is left is rounding)."""
-ROW_FRACTION = 1.0e-2
-"""A triangle's own depth is sought to within this fraction of its pair's depth."""
+PAIR_REGIONS = 1 << 18
+"""Most regions one object pair (both ways) measures: a level that would take it past this is not split."""
 MAX_LEVELS = 28
 """Most times a triangle is split (regions 4**-28 of it): a bound left then is dropped."""
+MAX_REGIONS = 1 << 24
+"""Most regions of one level: past it the search stops (:attr:`DepthResult.stopped`)."""
 MAX_PLANES = 6
 """Most triangles of the other surface in one region's linear program."""
-ROUNDING = 1.0e-11
-"""Rounding allowance of a bound, relative to the largest coordinate of its region plus the region's size."""
+ROUNDING_ULPS = 8.0
+"""What the world vertices' precision resolves, in units in the last place of a region's largest coordinate
+plus its size: a bound is lowered by it (float32 at 1 unit from the origin: 1e-6), so that depths equal to
+within the input's rounding (a tessellated plateau) do not keep their regions splitting."""
+RESOLUTION = 1.0e-4
+"""Against a non-convex solid, depths are told apart down to this fraction of the smaller object's box
+diagonal (besides the crossing's tolerance): a region whose bound is below it is not split further."""
 
 TREE_STACK = 64
 """Nodes a nearest-point query keeps to visit: a balanced tree's depth plus one suffices (24 levels hold
@@ -300,18 +315,22 @@ def _region_kernel(
     region: wp.array[Region],
     region_hint: wp.array[wp.int32],
     tol_rel: wp.float64,
+    resolution: wp.float64,
     # Outputs
     region_bound: wp.array[wp.float64],
     region_next_hint: wp.array[wp.int32],
     job_depth: wp.array[wp.float64],
     root_depth: wp.array[wp.float64],
+    job_count: wp.array[wp.int64],
 ):
-    """One thread per region: its lower bound (the deepest of its points measured inside the other
+    """One thread per region (counted in ``job_count``): its lower bound (the deepest of its points measured
+    inside the other
     solid, into ``job_depth`` and ``root_depth``), its upper bound (:func:`_bound` with cutting planes;
     below 0 for a region wholly outside), and the triangle nearest to its best point (its children's hint)."""
     k = wp.tid()
     r = region_root[k]
     j = root_job[r]
+    wp.atomic_add(job_count, j, wp.int64(1))
     src = job[j][0]
     dst = job[j][1]
     convex = job_convex[j]
@@ -324,11 +343,12 @@ def _region_kernel(
     c1 = _corner(x0, x1, x2, uv[2], uv[3])
     c2 = _corner(x0, x1, x2, uv[4], uv[5])
     size = wp.max(wp.max(wp.length(c1 - c0), wp.length(c2 - c1)), wp.length(c0 - c2))
-    rounding = wp.float64(ROUNDING) * (wp.max(wp.max(_max_abs(c0), _max_abs(c1)), _max_abs(c2)) + size)
+    rounding = resolution * (wp.max(wp.max(_max_abs(c0), _max_abs(c1)), _max_abs(c2)) + size)
     ids = _PlaneIds()
     m = int(0)
     low = wp.float64(0.0)
-    outside = False
+    # The signed distance (+ inside) is 1-Lipschitz: at most its value at a sample plus the reach from it.
+    lipschitz = wp.float64(1.0e300)
     for i in range(4):
         q = (c0 + c1 + c2) / wp.float64(3.0)
         if i < 3:
@@ -338,12 +358,12 @@ def _region_kernel(
             if i == 2:
                 q = c2
         d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, q, tol_rel)
+        reach = wp.max(wp.max(wp.length(c0 - q), wp.length(c1 - q)), wp.length(c2 - q))
         if inside:
             low = wp.max(low, d)
+            lipschitz = wp.min(lipschitz, d + reach)
         else:
-            reach = wp.max(wp.max(wp.length(c0 - q), wp.length(c1 - q)), wp.length(c2 - q))
-            if reach < d - rounding:  # the region lies in a ball about q that meets no surface
-                outside = True
+            lipschitz = wp.min(lipschitz, reach - d)
         if t >= 0 and not _has(ids, m, t):
             ids[m] = t
             m += 1
@@ -352,7 +372,7 @@ def _region_kernel(
         ids[m] = hint
         m += 1
     bound = wp.float64(-1.0)
-    if not outside and m > 0:
+    if lipschitz + rounding > wp.float64(0.0) and m > 0:  # else wholly outside: in a ball that meets no surface
         g0 = _Planes()
         g1 = _Planes()
         g2 = _Planes()
@@ -376,13 +396,35 @@ def _region_kernel(
             g1[m] = g[1]
             g2[m] = g[2]
             m += 1
-        if bound <= low + rounding:
-            bound = low
+        # What the input's precision resolves is no depth: a bound within it of what was found is that.
+        bound = wp.max(wp.min(bound, lipschitz) - rounding, low)
     region_bound[k] = bound
     region_next_hint[k] = hint
     if low > wp.float64(0.0):
         wp.atomic_max(job_depth, j, low)
         wp.atomic_max(root_depth, r, low)
+
+
+@wp.kernel
+def _stop_kernel(
+    job_count: wp.array[wp.int64],
+    job_before: wp.array[wp.int64],
+    job_twin: wp.array[wp.int32],
+    budget: wp.int64,
+    # Outputs
+    job_stop: wp.array[wp.int32],
+):
+    """One thread per job: stops it (and its pair's other way, by the same sums) where splitting this level
+    would take the pair past ``budget`` regions (``job_count`` now, ``job_before`` before this level)."""
+    j = wp.tid()
+    total = job_count[j]
+    level = job_count[j] - job_before[j]
+    t = job_twin[j]
+    if t >= 0:
+        total += job_count[t]
+        level += job_count[t] - job_before[t]
+    if total + wp.int64(4) * level > budget:
+        job_stop[j] = 1
 
 
 @wp.func
@@ -399,11 +441,11 @@ def _split_kernel(
     region_bound: wp.array[wp.float64],
     region_next_hint: wp.array[wp.int32],
     root_job: wp.array[wp.int32],
-    root_row: wp.array[wp.int32],
+    job_twin: wp.array[wp.int32],
     job_tolerance: wp.array[wp.float64],
+    job_floor: wp.array[wp.float64],
     job_depth: wp.array[wp.float64],
-    root_depth: wp.array[wp.float64],
-    row_fraction: wp.float64,
+    job_stop: wp.array[wp.int32],
     capacity: int,
     # Outputs
     out_root: wp.array[wp.int32],
@@ -412,15 +454,19 @@ def _split_kernel(
     out_count: wp.array[wp.int64],
 ):
     """One thread per region: its four halves into the next level, unless its bound does not beat what
-    was found (its job's depth; for a triangle of a row, its own depth or a fraction of its job's)."""
+    was found (its pair's depth, both ways) by the job's relative tolerance, or its floor (depths below it are
+    not told apart), or its job stopped (:data:`PAIR_REGIONS`)."""
     k = wp.tid()
     bound = region_bound[k]
     r = region_root[k]
     j = root_job[r]
+    if job_stop[j] != 0:
+        return
     found = job_depth[j]
-    if root_row[r] != 0:
-        found = wp.max(root_depth[r], found * row_fraction)
-    if bound <= wp.max(found, wp.float64(0.0)) * (wp.float64(1.0) + job_tolerance[j]):
+    twin = job_twin[j]
+    if twin >= 0:
+        found = wp.max(found, job_depth[twin])
+    if bound <= wp.max(found * (wp.float64(1.0) + job_tolerance[j]), job_floor[j]):
         return
     slot = int(wp.atomic_add(out_count, 0, wp.int64(4)))
     if slot + 4 > capacity:
@@ -605,21 +651,25 @@ class DepthResult:
     Attributes:
         pair_depth: ``(K,)`` float64 depth of each object pair asked for (scene units), NaN where neither
             object is closed (undefined).
-        row_depth: ``(M,)`` float64 depth of each triangle row: the deeper of its two triangles' parts inside
-            the other object's solid (to within :data:`ROW_FRACTION` of its pair's depth), NaN where neither
+        row_depth: ``(M,)`` float64 depth of each triangle row: the deepest point the pair's search measured on
+            its two triangles inside the other object's solid (a lower bound of their own depth), NaN where neither
             object is closed.
         contained_depth: ``(C,)`` float64 depth of each ``(inner, outer)`` pair: how deep the inner surface
             lies inside the outer solid.
         regions: regions measured in all (the work done).
         levels: levels of regions.
+        stopped: ``(K,)`` bool, the pair's search stopped before every region was decided (:data:`PAIR_REGIONS`,
+            :data:`MAX_LEVELS` levels, or a level of more than :data:`MAX_REGIONS` regions): its depth is the
+            deepest point found, a lower bound.
     """
 
-    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels):
+    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels, stopped=None):
         self.pair_depth = pair_depth
         self.row_depth = row_depth
         self.contained_depth = contained_depth
         self.regions = regions
         self.levels = levels
+        self.stopped = np.zeros(len(pair_depth), bool) if stopped is None else stopped
 
 
 class PenetrationDepth:
@@ -659,7 +709,19 @@ class PenetrationDepth:
         counts = np.diff(scene.shape_triangle_start_np)[scene.object_shape.numpy()]
         self.object_triangles = counts.astype(np.int64)
         self.stride = int(counts.max(initial=0)) + 1
+        # Each object's size (its shape's box diagonal, scaled): the resolution of depths against it.
+        v = np.asarray(scene.shapes.vertices, np.float64).reshape(-1, 3)
+        start = np.asarray(scene.shape_vertex_start_np, np.int64)
+        diag = np.zeros(len(start) - 1)
+        full = np.diff(start) > 0
+        if len(v):
+            lo = np.minimum.reduceat(v, start[:-1][full], axis=0)
+            hi = np.maximum.reduceat(v, start[:-1][full], axis=0)
+            diag[full] = np.linalg.norm(hi - lo, axis=1)
+        self.object_size = diag[scene.object_shape.numpy()] * scene.object_scale.numpy().astype(np.float64)
         self._buffers: dict[str, wp.array] = {}
+        self.resolution = ROUNDING_ULPS * float(np.finfo(np.float32 if scene.precision == "float32"
+                                                         else np.float64).eps)
 
     def _buffer(self, name: str, n: int, dtype) -> wp.array:
         """A work array of at least ``n`` items (grown by half again over the need)."""
@@ -678,8 +740,8 @@ class PenetrationDepth:
         cand = cand[self.object_solid[cand[:, 1]] > 0] if len(cand) else cand
         return np.unique(cand, axis=0).astype(np.int32).reshape(-1, 2)
 
-    def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None,
-                 contained: np.ndarray | None = None) -> DepthResult:
+    def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None, contained: np.ndarray | None = None,
+                 floors: np.ndarray | None = None) -> DepthResult:
         """Measures the depth of object pairs.
 
         Args:
@@ -687,6 +749,9 @@ class PenetrationDepth:
             rows: ``(M, 4)`` rows ``(obj_a, tri_a, obj_b, tri_b)`` of triangles of those pairs that meet (local
                 triangle ids): their triangles are measured first, each to its own depth.
             contained: ``(C, 2)`` ``(inner, outer)`` object pairs, the inner wholly inside the outer's solid.
+            floors: ``(K,)`` the depth below which each pair's depths need not be told apart (scene units: its
+                crossing's tolerance), or None: 0. Where both ways of a pair stay below it (surfaces that only
+                meet), the search stops there instead of refining about every point where they meet.
 
         Returns:
             The :class:`DepthResult`.
@@ -704,6 +769,8 @@ class PenetrationDepth:
         if self.own_trees:
             self.trees.refit(scene)
         job_key = jobs[:, 0].astype(np.int64) * scene.num_objects + jobs[:, 1]
+        ab = self._job_of(job_key, pairs[:, 0], pairs[:, 1])
+        ba = self._job_of(job_key, pairs[:, 1], pairs[:, 0])
         # The rows' triangles, each a root of its job.
         stride = np.int64(self.stride)
         ja = self._job_of(job_key, rows[:, 0], rows[:, 2])
@@ -736,9 +803,6 @@ class PenetrationDepth:
         if num_rows:
             root_job[:num_rows].assign(wp.array((row_key // stride).astype(np.int32), dtype=wp.int32, device=d))
             root_tri[:num_rows].assign(wp.array((row_key % stride).astype(np.int32), dtype=wp.int32, device=d))
-        root_row = np.zeros(num_roots, np.int32)
-        root_row[:num_rows] = 1
-        root_row = wp.array(root_row, dtype=wp.int32, device=d)
         # Which solids are convex: closed with a sphere's topology, and no edge bending inward now.
         solids, job_solid = np.unique(jobs[:, 1], return_inverse=True)
         start = np.concatenate([[0], np.cumsum(self.object_triangles[solids])]).astype(np.int32)
@@ -752,7 +816,19 @@ class PenetrationDepth:
         convex = flags.numpy()[job_solid.reshape(-1)]
         job_convex = wp.array(convex.astype(np.int32), dtype=wp.int32, device=d)
         job_tolerance = wp.array(np.where(convex != 0, CONVEX_TOLERANCE, self.tolerance), dtype=wp.float64, device=d)
+        twin = self._job_of(job_key, jobs[:, 1], jobs[:, 0])
+        floor = np.zeros(num_jobs)
+        if floors is not None and len(pairs):
+            for way in (ab, ba):
+                np.maximum.at(floor, way[way >= 0], np.asarray(floors, np.float64)[way >= 0])
+        smaller = np.minimum(self.object_size[jobs[:, 0]], self.object_size[jobs[:, 1]])
+        floor = np.where(convex != 0, floor, np.maximum(floor, RESOLUTION * smaller))
+        job_twin = wp.array(twin.astype(np.int32), dtype=wp.int32, device=d)
+        job_floor = wp.array(floor, dtype=wp.float64, device=d)
         job_depth = wp.zeros(num_jobs, dtype=wp.float64, device=d)
+        job_count = wp.zeros(num_jobs, dtype=wp.int64, device=d)
+        job_before = wp.zeros(num_jobs, dtype=wp.int64, device=d)
+        job_stop = wp.zeros(num_jobs, dtype=wp.int32, device=d)
         root_depth = wp.zeros(num_roots, dtype=wp.float64, device=d)
         # Levels of regions.
         n = num_roots
@@ -761,15 +837,21 @@ class PenetrationDepth:
         wp.launch(_roots_kernel, dim=n, inputs=[n], outputs=cur, device=d)
         total = 0
         level = 0
+        exhausted = False
+        self.level_regions = []
         while n > 0 and level < MAX_LEVELS:
             total += n
+            self.level_regions.append(n)
             bound = self._buffer("bound", n, wp.float64)
             next_hint = self._buffer("next_hint", n, wp.int32)
             wp.launch(_REGION[scene.precision], dim=n,
                       inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
                               tree.object_deforming, scene.world_vertex, job_dev, job_convex, root_job, root_tri,
-                              cur[0], cur[1], cur[2], self.triangle_tolerance],
-                      outputs=[bound, next_hint, job_depth, root_depth], device=d)
+                              cur[0], cur[1], cur[2], self.triangle_tolerance, self.resolution],
+                      outputs=[bound, next_hint, job_depth, root_depth, job_count], device=d)
+            wp.launch(_stop_kernel, dim=num_jobs, inputs=[job_count, job_before, job_twin, PAIR_REGIONS],
+                      outputs=[job_stop], device=d)
+            wp.copy(job_before, job_count)
             level += 1
             want = 4 * n
             while True:
@@ -777,26 +859,31 @@ class PenetrationDepth:
                        for name, t in (("root", wp.int32), ("region", Region), ("hint", wp.int32))]
                 count.zero_()
                 wp.launch(_split_kernel, dim=n,
-                          inputs=[cur[0], cur[1], bound, next_hint, root_job, root_row, job_tolerance, job_depth,
-                                  root_depth, ROW_FRACTION, nxt[0].shape[0]],
+                          inputs=[cur[0], cur[1], bound, next_hint, root_job, job_twin, job_tolerance, job_floor,
+                                  job_depth, job_stop, nxt[0].shape[0]],
                           outputs=[nxt[0], nxt[1], nxt[2], count], device=d)
                 m = int(count.numpy()[0])
                 if m <= nxt[0].shape[0]:
+                    break
+                if m > MAX_REGIONS:  # give up refining: what was found stands (a lower bound)
+                    m = 0
+                    exhausted = True
                     break
                 want = m
             cur, n = nxt, m
         depth_job = job_depth.numpy()
         depth_root = root_depth.numpy()
         # Per pair, per row, per contained pair.
-        ab = self._job_of(job_key, pairs[:, 0], pairs[:, 1])
-        ba = self._job_of(job_key, pairs[:, 1], pairs[:, 0])
         pair_depth = np.fmax(np.where(ab >= 0, depth_job[np.maximum(ab, 0)], np.nan),
                              np.where(ba >= 0, depth_job[np.maximum(ba, 0)], np.nan))
         row_depth = np.fmax(self._root_depth(depth_root, row_key, ja, rows[:, 1], stride),
                             self._root_depth(depth_root, row_key, jb, rows[:, 3], stride))
         inner = self._job_of(job_key, contained[:, 0], contained[:, 1])
         contained_depth = np.where(inner >= 0, depth_job[np.maximum(inner, 0)], np.nan)
-        return DepthResult(pair_depth, row_depth, contained_depth, total, level)
+        stop = job_stop.numpy() != 0
+        stopped = (np.where(ab >= 0, stop[np.maximum(ab, 0)], False) | np.where(ba >= 0, stop[np.maximum(ba, 0)], False)
+                   | exhausted | (n > 0))
+        return DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped)
 
     def _job_of(self, job_key: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         """The job index of each ``(src, dst)``, -1 where there is none."""
