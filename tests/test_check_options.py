@@ -51,8 +51,8 @@ def test_every_field_has_its_rule_or_its_filter():
     assert names - set(OPTIONS) == CHECKED_ELSEWHERE
     assert names == {"precision", "min_depth", "count_touching", "segments", "include_invisible", "include_purposes",
                      "tolerance", "progress", "allow_missing", "continuous", "min_distance", "clearance",
-                     "self_intersections", "duplicates", "worlds", "ignore_pairs", "usd_filters", "set_a", "set_b",
-                     "read_workers"}
+                     "self_intersections", "containment", "duplicates", "worlds", "ignore_pairs", "usd_filters",
+                     "set_a", "set_b", "read_workers"}
 
 
 @pytest.mark.parametrize("name", sorted({f.name for f in fields(CheckOptions)} - CHECKED_ELSEWHERE))

@@ -145,7 +145,7 @@ def frame_with_pairs(data):
     (lambda d: d["frames"][0].update(time=None), "a frame's time: null"),
     (lambda d: frame_with_pairs(d)["pairs"][0].update(faces=[[1, 2, 3]]), "a face pair of three"),
     (lambda d: d["duplicates"].update(duplicated="yes"), "duplicated: a string"),
-    (lambda d: d.update(schema_version="2.0"), "another major version"),
+    (lambda d: d.update(schema_version="3.0"), "another major version"),
     (lambda d: d.pop("findings"), "a required field missing"),
     (lambda d: d.pop("tunnelling"), "a section without its flag"),
     (lambda d: d["frames"][0].pop("pairs"), "a frame without its pairs"),

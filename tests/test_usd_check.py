@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 import warp as wp
+from depth_reference import convex_depth
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
@@ -345,8 +346,14 @@ def test_tetrahedron_vertex_poking_through(device, h):
     report = check_usd(stage, device=device)
     (pair,) = report.pair_summary()
     assert (pair["a"], pair["b"]) == ("/World/Floor", "/World/Tet")
-    assert pair["max_depth"] == pytest.approx(h, rel=1e-4)
-    assert (report.frames[0].depth <= h * (1 + 1e-4)).all()  # nothing crosses deeper than the vertex pokes
+    # The floor is open: the depth is the floor's part inside the tetrahedron, measured to its faces (the
+    # exact linear program), less than h; nothing crosses deeper than the vertex pokes.
+    points, _, quads = grid(2, 4.0)
+    quads = np.reshape(quads, (-1, 4))
+    floor = (points, np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]))
+    solid = (np.array(tet, np.float64), np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    assert pair["max_depth"] == pytest.approx(convex_depth(floor, solid), rel=1e-4) and 0 < pair["max_depth"] < h
+    assert (report.frames[0].depth <= h * (1 + 1e-4)).all()
 
 
 def test_invisible_and_guides_on_request(mixed, device):
@@ -905,7 +912,11 @@ def test_worker_processes_name_a_transform_that_is_not_finite(tmp_path):
 def test_deepest_face_pair_rows_match_the_full_sort():
     """The frame's rows without segments (one sort of a packed key, or of two keys where it does not fit in 63
     bits) equal the full sort by (a, b, face_a, face_b, deepest first, triangles) and its first row per face pair."""
-    from warp_ccd._src.check.check import _deepest_per_face_pair
+    from warp_ccd._src.check.check import _face_pair_groups
+
+    def _deepest_per_face_pair(faces, depth, objects, count):
+        order, starts = _face_pair_groups(faces, objects, count)
+        return faces[order][starts], np.maximum.reduceat(depth[order], starts)
 
     rng = np.random.default_rng(1)
     for _ in range(100):
