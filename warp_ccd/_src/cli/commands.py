@@ -516,8 +516,10 @@ def _check(args) -> tuple[int, str | None]:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", PrecisionWarning)
             report = check_usd(stage, options, frames=frames, prims=flat_values(args.prims), device=device)
-    except ValueError as exc:
-        raise fail(str(exc)) from None
+    except ValueError as exc:  # the input at fault: the line names the file
+        text = str(exc)
+        raise fail(text if text.startswith((args.stage, os.path.realpath(args.stage))) else f"{args.stage}: {text}") \
+            from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)
         if issubclass(w.category, PrecisionWarning):
             print(f"{PROG} check: note: {w.message}", file=sys.stderr)
