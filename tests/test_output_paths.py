@@ -1,6 +1,7 @@
-"""Destinations of the files the library writes (:mod:`warp_ccd._src.output`): a FIFO, a device or
-another file that is not a regular one is refused, never replaced; a symbolic link is written through
-to its target and stays a link."""
+"""Where output goes. A destination of the files the library writes (:mod:`warp_ccd._src.output`)
+that is a FIFO, a device or another file that is not a regular one is refused, never replaced; a
+symbolic link is written through to its target and stays a link. A standard output whose reader
+has gone (a closed pipe) ends the command quietly with its verdict's status."""
 
 import os
 
@@ -62,3 +63,27 @@ def test_the_cli_refuses_a_fifo_output(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and err.startswith(f"warp-ccd check: error: cannot write {fifo}: it is a FIFO"), err
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("report", [False, True])
+def test_a_closed_standard_output_ends_quietly_with_the_verdict(tmp_path, report):
+    """``warp-ccd check a.usda | true``: the reader has gone before the summary; the command ends with
+    its verdict's status (1: the cubes penetrate), nothing on stderr about a broken pipe, and its
+    files written all the same."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("pxr")
+    from test_hostile_input import TRANSLATE, cube, ops, write_stage
+
+    stage = write_stage(tmp_path, cube("B", xform=ops("double3 xformOp:translate = (0.3, 0, 0)", order=TRANSLATE)))
+    out = tmp_path / "r.json"
+    argv = ["check", str(stage), "--device", "cpu", *(["--report", str(out)] if report else [])]
+    code = "import sys; from warp_ccd._src.cli.commands import main; sys.exit(main())"
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    p = subprocess.Popen([sys.executable, "-c", code, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=root)
+    p.stdout.close()  # the reader goes before anything is written
+    err = p.stderr.read().decode()
+    assert p.wait() == 1, err
+    assert "BrokenPipe" not in err and "Broken pipe" not in err and "Exception ignored" not in err, err
+    assert out.is_file() == report

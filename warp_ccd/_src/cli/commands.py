@@ -50,6 +50,7 @@ from .common import (
     REPORT_STDOUT,
     CliError,
     OneLineParser,
+    QuietClosedStdout,
     check_options_from,
     flat_values,
     init_warp,
@@ -607,7 +608,17 @@ def main(argv: list[str] | None = None) -> int:
         2 bad arguments or input; 3 an internal error (an unexpected exception: one line on stderr,
         its traceback with ``--debug``); 130 interrupted.
     """
-    argv = list(sys.argv[1:] if argv is None else argv)
+    stdout = sys.stdout
+    sys.stdout = QuietClosedStdout(stdout)  # a reader that has gone: the verdict's status, no BrokenPipeError
+    try:
+        return _main(list(sys.argv[1:] if argv is None else argv))
+    finally:
+        sys.stdout.flush()
+        sys.stdout = stdout
+
+
+def _main(argv: list[str]) -> int:
+    """:func:`main` with its standard output in place."""
     if argv and argv[0] == "bench":
         return _run_bench(argv[1:])
     args = None

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
     from ..check.options import CheckOptions
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "REPORT_STDOUT",
-           "CliError", "OneLineParser", "check_options_from", "flat_values", "init_warp",
+           "CliError", "OneLineParser", "QuietClosedStdout", "check_options_from", "flat_values", "init_warp",
            "pending_outputs", "quiet_warp", "refuse_overwriting", "require_usd", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
@@ -42,6 +43,64 @@ class CliError(Exception):
     def __init__(self, message: str, status: int = EXIT_USAGE):
         super().__init__(message)
         self.status = status
+
+
+class QuietClosedStdout(io.TextIOBase):
+    """A command's standard output that ends quietly where its reader has gone.
+
+    ``warp-ccd check a.usda | head -1`` (or ``| true``) closes the pipe before the summary is written;
+    Python ignores SIGPIPE, so the next write raises BrokenPipeError. Here, as Python's documentation
+    recommends (the ``signal`` module, "Note on SIGPIPE"), standard output is redirected to
+    ``os.devnull`` at the first such error (so that no later write, nor the flush at exit, raises
+    again) and the command goes on: its files are written and it ends with its verdict's status.
+
+    Args:
+        stream: the standard output to write to.
+    """
+
+    def __init__(self, stream):
+        super().__init__()
+        self.stream = stream
+        self.reader_gone = False
+
+    def _gone(self) -> None:
+        self.reader_gone = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(devnull, self.stream.fileno())
+            finally:
+                os.close(devnull)
+        except (OSError, ValueError, AttributeError, io.UnsupportedOperation):  # no descriptor (captured output)
+            pass
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def writable(self) -> bool:
+        return True
+
+    def isatty(self) -> bool:
+        return not self.reader_gone and self.stream.isatty()
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
+
+    @property
+    def encoding(self):
+        return getattr(self.stream, "encoding", "utf-8")
 
 
 class OneLineParser(argparse.ArgumentParser):
