@@ -23,6 +23,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from ..runtime.start import init_warp
 from .options import CheckOptions
 from .tasks import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
@@ -52,7 +53,7 @@ class CheckWorker:
         import warp as wp
 
         wp.config.quiet = quiet
-        wp.init()
+        init_warp()
         self.device = "cuda:0" if wp.is_cuda_available() else "cpu"
         self._stages: OrderedDict[str, Any] = OrderedDict()
         self.read_tasks = read_tasks

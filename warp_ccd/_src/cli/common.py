@@ -10,11 +10,11 @@ import argparse
 import contextlib
 import io
 import os
-import sys
-import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import fields
 from typing import TYPE_CHECKING
+
+from ..runtime.start import init_warp
 
 if TYPE_CHECKING:
     from ..check.options import CheckOptions
@@ -31,11 +31,6 @@ EXIT_USAGE = 2
 EXIT_INTERNAL = 3
 """An unexpected exception: a bug or the machine (out of memory), not the input."""
 EXIT_INTERRUPTED = 130
-
-DRIVER_NOTICE = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
-"""The start of the line Warp's native library prints on initialisation when there is no CUDA
-driver (a machine without a GPU): the device list says as much, so the commands leave it out."""
-
 
 class CliError(Exception):
     """A problem to report in one line, with the exit status to end with."""
@@ -121,40 +116,6 @@ def quiet_warp() -> None:
     if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     wp.config.quiet = True
-
-
-def init_warp() -> None:
-    """Initialises Warp, without its no-CUDA-driver notice on stderr.
-
-    Warp's native library prints :data:`DRIVER_NOTICE` to the process's stderr on
-    initialisation on a machine without a CUDA driver. Here stderr (file descriptor 2) goes to a
-    temporary file while Warp initialises, and every other line written meanwhile is passed on.
-    Nothing happens when Warp is initialised already.
-    """
-    import warp as wp
-
-    sys.stderr.flush()
-    try:
-        saved = os.dup(2)
-    except OSError:  # no stderr to redirect
-        wp.init()
-        return
-    try:
-        with tempfile.TemporaryFile() as held:
-            os.dup2(held.fileno(), 2)
-            try:
-                wp.init()
-            finally:
-                sys.stderr.flush()
-                os.dup2(saved, 2)
-            held.seek(0)
-            text = held.read().decode(errors="replace")
-    finally:
-        os.close(saved)
-    rest = [line for line in text.splitlines(keepends=True) if not line.startswith(DRIVER_NOTICE)]
-    if rest:
-        sys.stderr.write("".join(rest))
-        sys.stderr.flush()
 
 
 def uncached_modules(device, names) -> list[str] | None:

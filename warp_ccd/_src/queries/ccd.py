@@ -17,6 +17,7 @@ import warp as wp
 from ..geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, NO_HIT, _points, primitive_toi, query_excluded
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.options import check_option
+from ..runtime.start import init_warp
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -159,6 +160,7 @@ def ccd_queries(kind: str, x0: ArrayLike, x1: ArrayLike, *, min_distance: float 
     min_distance = check_option("min_distance", min_distance)
     tolerance = check_option("ccd_tolerance", tolerance, given_as="tolerance")
     max_iterations = check_option("ccd_max_iterations", max_iterations, given_as="max_iterations")
+    init_warp()
     device = wp.get_device(device)
     a0 = _query_points("x0", x0, device)
     a1 = _query_points("x1", x1, device)

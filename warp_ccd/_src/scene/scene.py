@@ -42,6 +42,7 @@ from ..geometry.precision import (
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.arrays import device_view, host_array, is_device_array, packed_arrays
 from ..runtime.checks import integer_option, number_option
+from ..runtime.start import init_warp
 from .filter import CollisionFilter
 from .inputs import InputCheck
 from .motion import EllipseMotion, advance_time
@@ -356,6 +357,7 @@ class Scene:
         mask: ArrayLike | None = None,
         exclude_pairs: ArrayLike | None = None,
     ) -> None:
+        init_warp()  # without the no-CUDA-driver notice on a machine without a GPU
         self.scalar_type, self.vec3_type, _, self.transform_type = precision_types(precision)
         self.device = wp.get_device(device)
         self.precision = precision
