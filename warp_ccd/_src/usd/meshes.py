@@ -73,8 +73,8 @@ def fan_triangles(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, pa
     indices = np.asarray(indices, np.int64)
     if counts.size and counts.min() < 3:
         f = int(np.argmax(counts < 3))
-        raise ValueError(f"prim {path}: faceVertexCounts[{f}] = {int(counts[f])}: face {f} has {int(counts[f])} "
-                         "vertices (at least 3 needed)")
+        raise ValueError(f"prim {path}: face {f} has {int(counts[f])} vertices (faceVertexCounts[{f}] = "
+                         f"{int(counts[f])}; at least 3 needed)")
     if counts.sum() != indices.size:
         raise ValueError(f"prim {path}: faceVertexCounts sum to {int(counts.sum())}, "
                          f"but faceVertexIndices has {indices.size} entries")
