@@ -8,6 +8,7 @@ import pytest
 import warp as wp
 
 import warp_ccd as wc
+from warp_ccd._src.geometry.precision import FLOAT32_MAX, coordinate_limit, needed_precision
 from warp_ccd._src.runtime.arrays import device_view, host_array, is_device_array
 from warp_ccd.scene import icosphere, matrix_to_quat, quat_to_matrix, shape
 
@@ -259,3 +260,62 @@ def test_device_faults_name_their_setter_and_follow_the_latest_call(device):
     one.set_poses(torch.tensor([[0, 0, 0, 0, 0, 0, 3.0]]))
     with pytest.raises(ValueError, match="set_poses: row 0 has a quaternion that is not unit"):
         single.detect()
+
+
+def test_coordinates_beyond_the_scenes_precision_are_named_by_the_frame(device):
+    """A device input with a coordinate the scene's precision cannot resolve at its triangle size
+    (``needed_precision``, the rule ``collide()`` refuses by) is a fault the frame raises, naming the setter
+    and the row, as a host input is refused at once (at 1e20 one vertex of two cubes overlapping by 0.7 made
+    the frame find no pair); the bad row is not written."""
+    v, t = shape("cube")
+    w = np.concatenate([v, v + [0.3, 0, 0]])
+    scene = wc.Scene.from_meshes([(v, t), (v + [0.3, 0, 0], t)], deforming=True, device=device)
+    pipe = wc.CollisionPipeline(scene)
+    assert pipe.detect().object_pairs.tolist() == [[0, 1]]
+    far = w.copy()
+    far[3, 0] = 1e20
+    for given in (wp.array(far, dtype=wp.float32, device=device), torch.tensor(far, dtype=torch.float64)):
+        scene.set_world_vertices(given)
+        with pytest.raises(ValueError, match=r"set_world_vertices: vertex 3 has a coordinate beyond 7\.35e\+12, "
+                                             r"what float64 resolves .*: move the scene nearer the origin"):
+            pipe.detect()
+        assert pipe.detect().object_pairs.tolist() == [[0, 1]]  # the fault is cleared, the far vertex not written
+    with pytest.raises(ValueError, match="set_world_vertices: vertex 3 has a coordinate beyond 7.35e"):
+        scene.set_world_vertices(far)  # a host array: refused here
+    near = w.copy()
+    near[3, 0] = 1e5  # beyond float32 at triangles of 1.63 (1.37e4), within float64
+    scene.set_world_vertices(wp.array(near, dtype=wp.float64, device=device))
+    with pytest.raises(ValueError, match=r"vertex 3 has a coordinate beyond 1\.37e\+04, what float32 resolves at "
+                                         r"this scene's triangle size \(1\.63\): use precision='float64'"):
+        pipe.detect()
+    wide = wc.Scene.from_meshes([(v, t), (v + [0.3, 0, 0], t)], deforming=True, device=device, precision="float64")
+    wide.set_world_vertices(wp.array(near, dtype=wp.float64, device=device))
+    wc.CollisionPipeline(wide).detect()  # float64 resolves it
+
+    rigid = wc.Scene.from_meshes([(v, t)] * 2, device=device)
+    pipe = wc.CollisionPipeline(rigid)
+    poses = np.array([[0, 0, 0, 0, 0, 0, 1.0], [0.3, 0, 0, 0, 0, 0, 1]])
+    rigid.set_poses(poses)
+    assert pipe.detect().object_pairs.tolist() == [[0, 1]]
+    poses[1, 1] = -1.37e4  # its corners reach 1.37e4 + 0.87: beyond float32's limit
+    rigid.set_poses(wp.array(poses, dtype=wp.float64, device=device))
+    with pytest.raises(ValueError, match="set_poses: row 1 places its object beyond 1.37e.*use precision='float64'"):
+        pipe.detect()
+    m = torch.eye(4, dtype=torch.float64).repeat(2, 1, 1)
+    m[1, 2, 3] = 1e20
+    rigid.set_transforms(m)
+    with pytest.raises(ValueError, match="set_transforms: row 1 places its object beyond 7.35e.*nearer the origin"):
+        pipe.detect()
+    with pytest.raises(ValueError, match="set_transforms: row 1 places its object beyond 7.35e"):
+        rigid.set_transforms(m.numpy())
+    with pytest.raises(ValueError, match="set_poses: row 1 places its object beyond 1.37e"):
+        rigid.set_poses(poses)
+    assert pipe.detect().object_pairs.tolist() == [[0, 1]]
+
+
+def test_coordinate_limit_is_needed_precisions_rule():
+    rng = np.random.default_rng(5)
+    for r, s in zip(10.0 ** rng.uniform(-3, 39, 2000), 10.0 ** rng.uniform(-6, 36, 2000)):
+        within = [p for p in ("float32", "float64") if r <= coordinate_limit(s, p)]
+        assert needed_precision(r, s) == (within[0] if within else None)
+    assert coordinate_limit(1.0, "float32") == 1e-3 * 2**23 and coordinate_limit(0.0, "float64") == FLOAT32_MAX

@@ -216,3 +216,21 @@ def test_kind_must_be_a_name(device):
     x = np.zeros((1, 4, 3))
     with pytest.raises(ValueError, match="kind"):
         warp_ccd.ccd_queries(["vertex_face"], x, x, device=device)
+
+
+@pytest.mark.parametrize("scale, refused", [(1e300, True), (1e39, True), (1e14, True), (1e6, False)])
+def test_coordinates_the_precision_cannot_resolve_are_refused(device, scale, refused):
+    """A vertex falling through a unit triangle's plane at ``t = 0.5``, the whole query scaled: at 1e300
+    the answer was ``toi 0`` (the squares overflow); as ``collide()``, coordinates that float64 cannot
+    resolve at the query's size (or beyond float32's range) are refused, naming the query; a far but
+    resolvable query keeps its answer."""
+    x0 = np.array([[[0.25, 0.25, 1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    x1 = x0.copy()
+    x1[0, 0, 2] = -1.0
+    if refused:  # the same query moved far from the origin at its size, or all of it scaled up
+        x0f, x1f = (x0 * scale, x1 * scale) if scale > 1e38 else (x0 + scale, x1 + scale)
+        with pytest.raises(ValueError, match=r"query 0: coordinates up to .* are beyond"):
+            warp_ccd.ccd_queries("vertex_face", x0f, x1f, device=device)
+    else:
+        hit, toi = warp_ccd.ccd_queries("vertex_face", x0 * scale, x1 * scale, device=device)
+        assert hit[0] and toi[0] <= 0.5 and toi[0] > 0.49

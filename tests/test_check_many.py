@@ -12,6 +12,9 @@ killed mid-task included. Small stages of :mod:`usd_stages`; the Ray group needs
 import json
 import os
 import pickle
+import signal
+import threading
+import time
 import warnings
 
 import numpy as np
@@ -502,12 +505,35 @@ def test_ray_failing_files_among_good_ones(ray_cluster, tmp_path, files):
 
 
 def test_ray_worker_killed_mid_task_is_retried(ray_cluster, files):
+    """A worker killed while it runs a task (the first task to start writes its process id to the marker and waits:
+    this test kills that process, once) is restarted and the task run again, once: the report equals a clean
+    run's, however loaded the machine (Ray refused the retries sent while it restarted the actor: on a loaded
+    machine four refusals, each counted as a loss, failed the file)."""
     ray, marker = ray_cluster
-    marker.unlink()  # armed: the next task to start ends its actor's process, once
+    starts = marker.with_name(marker.name + ".starts")
+    starts.unlink(missing_ok=True)
+    marker.unlink()  # armed
+    killed = []
+
+    def kill_when_started():
+        deadline = time.monotonic() + 600.0
+        while time.monotonic() < deadline:
+            pid = marker.read_text().strip() if marker.exists() else ""
+            if pid:
+                os.kill(int(pid), signal.SIGKILL)
+                killed.append(int(pid))
+                return
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_when_started, daemon=True)
+    killer.start()
     options = {"continuous": True, "clearance": 0.2}
     batch = ray_check(ray, files["mixed"], frames_per_task=7, **options)
-    assert marker.exists() and int(marker.read_text()) > 0  # the fault happened (the dead process's id)
+    killer.join(timeout=10.0)
+    assert len(killed) == 1  # the fault happened, once, to a task that had started
     assert batch.files[0].tasks == 4 and batch.files[0].error is None
+    lines = starts.read_text().split()
+    assert len(lines) == 4 + 1 and lines.count(str(killed[0])) == 1  # one task ran twice: once killed, once again
     assert_same(batch.files[0].report, serial(files["mixed"], DEFAULT_DEVICE, **options))
 
 

@@ -273,6 +273,32 @@ def test_missing_layers_and_check_usd_allow_missing(missing_ref, layered, tmp_pa
     assert check_usd(layered, frames=[0.0], device=DEFAULT_DEVICE).to_json()["missing"] == []
 
 
+def test_missing_layers_print_nothing_of_usds_own(missing_ref, tmp_path):
+    """USD's warnings about the layers it cannot open ("Warning: in _ReportErrors at line ... Could not open
+    asset @gone.usda@ ...") are not printed: the command's standard error is its one line, which names them;
+    check_usd prints nothing either, raising or keeping them in the report (a child process: the warnings are
+    written to the C-level standard error, which capsys does not see)."""
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    stage = new_stage(tmp_path / "sub.usda")
+    stage.GetRootLayer().subLayerPaths.append("./nosuch.usda")
+    stage.GetRootLayer().Save()
+    for path in (missing_ref, tmp_path / "sub.usda"):
+        proc = subprocess.run([sys.executable, "-m", "warp_ccd", "check", str(path), "--device", DEFAULT_DEVICE],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 2, proc.stderr
+        (line,) = message_lines(proc.stderr)
+        assert line.startswith("warp-ccd check: error:") and ("gone.usda" in line or "nosuch.usda" in line)
+    code = ("import sys\nfrom warp_ccd.usd import check_usd\n"
+            f"try:\n    check_usd({str(missing_ref)!r}, device={DEFAULT_DEVICE!r})\n"
+            "except ValueError as exc:\n    print(exc)\n"
+            f"print(check_usd({str(missing_ref)!r}, device={DEFAULT_DEVICE!r}, allow_missing=True).missing)")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert message_lines(proc.stderr) == []
+    assert "cannot open" in proc.stdout and str(tmp_path / "gone.usda") in proc.stdout
+
+
 # ---------------------------------------------------------------------------------------------
 # 3. all outputs or none
 

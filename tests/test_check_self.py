@@ -95,3 +95,27 @@ def test_command_line_report_and_overlay(stage_path, device, tmp_path, capsys):
     assert stage_path.read_bytes() == before
     rc = cli.main(["check", str(stage_path), "--device", device, "--frames", "0:0", "--self"])
     assert rc == 0
+
+
+def test_preview_draws_the_frame_with_the_most_findings(tmp_path, device, capsys):
+    """``--self --preview`` draws the frame whose findings are most (here the one frame of five, time code 3,
+    where the cloth passes through itself; no pair penetrates, so it drew time code 0)."""
+    path = tmp_path / "late.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(4)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    points, counts, indices = grid(8, 2.0)
+    attr = define_mesh(stage, "/World/Cloth", points, counts, indices).GetPointsAttr()
+    for t in range(5):
+        attr.Set(Vt.Vec3fArray.FromNumpy((folded(points) if t == 3 else points).astype(np.float32)), t)
+    define_mesh(stage, "/World/Box", *box_mesh((3.0, -1.0, -1.0), (4.0, 1.0, 1.0)))
+    stage.GetRootLayer().Save()
+    report = check_usd(path, device=device, self_intersections=True)
+    per_frame = report.findings_per_frame()
+    assert per_frame[3] > 4 and per_frame.tolist() == [0, 0, 0, per_frame[3], 0] and report.worst_frame == 3
+    assert check_usd(path, device=device).worst_frame == 0  # no findings: the first frame
+    rc = cli.main(["check", str(path), "--device", device, "--self", "--preview", str(tmp_path / "p.png")])
+    out = capsys.readouterr()
+    assert rc == 1, out.err
+    assert "(time 3)" in out.out + out.err and (tmp_path / "p.png").stat().st_size > 0

@@ -168,9 +168,19 @@ def _anim_nonuniform_scale(stage):
 def _anim_uniform_scale_from_zero(stage):
     mesh = define_mesh(stage, "/World/Grow", *prism(5, radius=0.5))
     op = UsdGeom.Xformable(mesh).AddScaleOp()
-    for f in range(4):  # a zero scale at the first time code: no similarity to take apart
+    for f in range(4):  # a zero scale at the first time code: the mesh collapses to a point
         op.Set(Gf.Vec3f(0.4 * f, 0.4 * f, 0.4 * f), f)
     return {"/World/Grow"}
+
+
+def test_import_refuses_a_zero_scale_naming_prim_op_and_time(device):
+    """A zero scale collapses the mesh (a point here): an error naming the prim, its op and the time."""
+    stage = new_stage(end=3)
+    define_mesh(stage, "/World/Floor", *grid(2, 4.0))
+    _anim_uniform_scale_from_zero(stage)
+    with pytest.raises(ValueError, match=re.escape("prim /World/Grow: xformOp:scale at time 0 is (0, 0, 0): a zero "
+                                                   "scale collapses the mesh")):
+        UsdMeshImport(stage, times=[0.0, 1.0, 3.0], device=device)
 
 
 def _proxies_scaled_and_mirrored(stage):
@@ -211,11 +221,11 @@ def _deforming_and_moving(stage):
     return {"/World/Wobble"}
 
 
-@pytest.mark.parametrize("build", [_anim_nonuniform_scale, _anim_uniform_scale_from_zero, _proxies_scaled_and_mirrored,
+@pytest.mark.parametrize("build", [_anim_nonuniform_scale, _proxies_scaled_and_mirrored,
                                    _instancer_animated_scales, _deforming_and_moving], ids=lambda f: f.__name__[1:])
 def test_import_of_awkward_transforms(device, build):
-    """Transforms that do not stay a rotation times a uniform scale, or start singular: the
-    objects deform (world vertices from the host) or get baked shapes, and land where USD puts them."""
+    """Transforms that do not stay a rotation times a uniform scale: the objects deform (world
+    vertices from the host) or get baked shapes, and land where USD puts them."""
     stage = new_stage(end=3)
     define_mesh(stage, "/Proto/Left", *prism(4, radius=0.4, height=0.6))
     stage.GetPrimAtPath("/Proto").SetSpecifier(Sdf.SpecifierClass)
@@ -905,7 +915,7 @@ def test_worker_processes_name_a_transform_that_is_not_finite(tmp_path):
     for f in range(4):
         op.Set(Gf.Vec3d(float("nan") if f == 2 else 0.0, 0.0, 0.0), f)
     stage.GetRootLayer().Save()
-    with pytest.raises(ValueError, match="/World/Box: its world transform is not finite at time 2"):
+    with pytest.raises(ValueError, match="/World/Box: xformOp:translate at time 2 is not finite"):
         UsdMeshImport(path, times=[0, 1, 2, 3], workers=2)
 
 

@@ -11,11 +11,19 @@ Every file the library writes (USD stages, preview images) goes through here:
   stays as it was until the new one is whole. :func:`commit_all` moves several into place
   together once every one of them is written, so that a run writing several files leaves all of
   them or none.
+
+**Destinations that are not regular files.** A destination that exists and is not a regular file
+(a FIFO, a character or block device, a socket) is refused with a ValueError naming it, at the
+check and again just before the rename: replacing it would remove a device node or a pipe another
+program reads. A **symbolic link** is written *through*: the file it points to is replaced (its
+temporary file made in the target's folder) and the link stays a link, as ``open(path, "w")``
+would do; a link whose target is not a regular file is refused as that target is.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 import weakref
 
@@ -35,8 +43,8 @@ def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str
 
     Raises:
         ValueError: one line naming the path and the problem: an unknown extension, a missing
-            folder, a folder where the file should be, a read-only file, or a folder in which no
-            file can be created.
+            folder, a folder where the file should be, a FIFO, device or socket there (not a
+            regular file), a read-only file, or a folder in which no file can be created.
     """
     try:
         text = os.fsdecode(os.fspath(path))
@@ -50,12 +58,14 @@ def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str
             f"cannot write {text}: unknown {kind} extension {ext or '(none)'!r} (use {', '.join(extensions)})"
         )
     full = os.path.abspath(text)
-    folder = os.path.dirname(full)
+    target = os.path.realpath(full)  # a symbolic link is written through to its target
+    folder = os.path.dirname(target)
     if not os.path.isdir(folder):
         raise ValueError(f"cannot write {text}: folder {folder} does not exist")
-    if os.path.isdir(full):
+    if os.path.isdir(target):
         raise ValueError(f"cannot write {text}: it is a folder")
-    if os.path.exists(full) and not os.access(full, os.W_OK):
+    _refuse_special(target, text)
+    if os.path.exists(target) and not os.access(target, os.W_OK):
         raise ValueError(f"cannot write {text}: the file exists and is read-only")
     try:
         fd, probe = tempfile.mkstemp(prefix=".warp_ccd-probe-", dir=folder)
@@ -64,6 +74,23 @@ def check_output_path(path, extensions: tuple[str, ...], kind: str) -> tuple[str
     os.close(fd)
     os.remove(probe)
     return full, ext
+
+
+_SPECIAL = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+            (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def _refuse_special(target: str, text: str) -> None:
+    """Raises ValueError where ``target`` exists and is not a regular file (``text``: the path as given)."""
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        return
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    what = next((name for test, name in _SPECIAL if test(mode)), "not a regular file")
+    via = "" if target == os.path.abspath(text) else f" (through a link to {target})"
+    raise ValueError(f"cannot write {text}: it is {what}{via}, not a regular file: refused rather than replaced")
 
 
 def _remove_quietly(path: str) -> None:
@@ -93,7 +120,8 @@ class PendingFile:
 
     def __init__(self, path: str):
         self.path = path
-        folder, name = os.path.split(path)
+        self._target = os.path.realpath(path)  # a symbolic link stays one: its target is replaced
+        folder, name = os.path.split(self._target)
         ext = os.path.splitext(name)[1]
         try:
             fd, self.temp_path = tempfile.mkstemp(prefix=f".{name}.", suffix=f".partial{ext}", dir=folder)
@@ -113,11 +141,16 @@ class PendingFile:
             The destination path.
 
         Raises:
-            ValueError: the rename failed (the temporary file is removed).
+            ValueError: the rename failed, or the destination is now not a regular file (the
+                temporary file is removed).
         """
         try:
-            os.chmod(self.temp_path, _new_file_mode(self.path))
-            os.replace(self.temp_path, self.path)
+            _refuse_special(self._target, self.path)
+            os.chmod(self.temp_path, _new_file_mode(self._target))
+            os.replace(self.temp_path, self._target)
+        except ValueError:
+            self.discard()
+            raise
         except OSError as exc:
             self.discard()
             raise ValueError(f"cannot write {self.path}: {exc.strerror or exc}") from None

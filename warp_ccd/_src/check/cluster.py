@@ -9,7 +9,9 @@ GPU actor holds no CPU: it reads the transforms of a big animation as cluster ta
 (shares of the prims, :data:`~warp_ccd._src.usd.workers.POOL`); a CPU actor reads in its own process. No reader
 processes of its own: the cluster schedules all the work. An actor
 that dies (a killed process, a lost node) is restarted by Ray and its task run again, up to
-:data:`MAX_RETRIES` times (then the task's file fails; the other tasks go on); workers the cluster cannot place
+:data:`MAX_RETRIES` times (then the task's file fails; the other tasks go on); a worker that lost its task gets
+the next one once it answers again (Ray refuses tasks sent to an actor while it restarts, which took longer than
+four such refusals on a loaded machine, each of which counted as a loss); workers the cluster cannot place
 are ended after :data:`START_TIMEOUT`; results come back as plain data
 (:class:`~warp_ccd._src.check.report.CheckReport` pickles without the stage).
 
@@ -19,10 +21,12 @@ are ended after :data:`START_TIMEOUT`; results come back as plain data
 from __future__ import annotations
 
 import os
+import time
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from ..runtime.start import init_warp
 from .options import CheckOptions
 from .tasks import EXIT_INTERNAL, CheckTask, TaskOutcome, run_task
 
@@ -31,8 +35,14 @@ __all__ = ["FAULT_ENV", "MAX_RETRIES", "START_TIMEOUT", "CheckWorker", "RayEngin
 MAX_RETRIES = 3
 """How many times a task runs again after its worker died under it (Ray restarts the worker)."""
 FAULT_ENV = "WARP_CCD_FAULT_EXIT_ONCE"
-"""Fault injection for tests: where this environment variable names a file that does not exist yet, an actor
-creates it and ends its process at the start of its next task (as a killed worker would)."""
+"""Fault injection for tests: where this environment variable names a file ``F``, each task an actor starts adds
+a line to ``F.starts``; where ``F`` does not exist yet, the first actor to create it writes its process id there
+and waits to be killed (:data:`FAULT_WAIT` seconds at most, then it ends its process itself), as a worker killed
+mid-task."""
+FAULT_WAIT = 300.0
+"""Seconds an actor of :data:`FAULT_ENV` waits to be killed."""
+RESTART_POLL = 0.2
+"""Seconds between two probes of an actor that Ray is restarting."""
 START_TIMEOUT = 300.0
 """Seconds the workers have to start (Warp initialised, the CUDA context made); those the cluster cannot place
 in that time are ended."""
@@ -52,7 +62,7 @@ class CheckWorker:
         import warp as wp
 
         wp.config.quiet = quiet
-        wp.init()
+        init_warp()
         self.device = "cuda:0" if wp.is_cuda_available() else "cpu"
         self._stages: OrderedDict[str, Any] = OrderedDict()
         self.read_tasks = read_tasks
@@ -66,10 +76,8 @@ class CheckWorker:
         device; ``frames`` (the time codes of a whole file) and ``prims`` as
         :func:`~warp_ccd._src.check.tasks.run_task` takes them."""
         marker = os.environ.get(FAULT_ENV)
-        if marker and not os.path.exists(marker):
-            with open(marker, "w") as fh:
-                fh.write(str(os.getpid()))
-            os._exit(1)
+        if marker:
+            _fault(marker)
         return run_task(task, options, frames=frames, prims=prims, device=self.device, stage=self._stage(task.path))
 
     def _stage(self, path: str) -> Any:
@@ -92,6 +100,21 @@ class CheckWorker:
     def pid(self) -> int:
         """This actor's process id."""
         return os.getpid()
+
+
+def _fault(marker: str) -> None:
+    """The test's fault of :data:`FAULT_ENV`: the task's start counted, and the first task to claim ``marker`` (created
+    exclusively) waits to be killed."""
+    with open(marker + ".starts", "a") as fh:
+        fh.write(f"{os.getpid()}\n")
+    try:
+        fh = open(marker, "x")
+    except FileExistsError:
+        return
+    with fh:
+        fh.write(str(os.getpid()))
+    time.sleep(FAULT_WAIT)
+    os._exit(1)
 
 
 def _ray_pool(fn: Callable, tasks: list) -> Callable[[], list]:
@@ -196,22 +219,33 @@ class RayEngine:
         options = options.replace(read_workers=None if self.read_tasks > 1 else 0, progress=False)
         pending = list(enumerate(tasks))[::-1]
         running: dict[Any, tuple[int, Any]] = {}
+        waking: dict[Any, tuple[Any, float]] = {}  # a probe of an actor that lost its task: (actor, since)
         out: list[TaskOutcome | None] = [None] * len(tasks)
         tries = [0] * len(tasks)
         free = list(self._actors)
-        while pending or running:
+        while pending or running or waking:  # an actor that lost its task is awaited: the next run has it too
             while pending and free:
                 i, task = pending.pop()
                 actor = free.pop()
                 tries[i] += 1
                 running[actor.run.remote(task, options, frames, prims)] = (i, actor)
-            ready, _ = ray.wait(list(running), num_returns=1)
+            if not running and not waking:  # every actor gone for good
+                for i, task in pending:
+                    out[i] = TaskOutcome(task, error="internal error: no Ray worker is left", status=EXIT_INTERNAL)
+                    if done is not None:
+                        done(out[i])
+                break
+            ready, _ = ray.wait(list(running) + list(waking), num_returns=1)
             for ref in ready:
+                if ref in waking:
+                    self._woken(ref, waking, free)
+                    continue
                 i, actor = running.pop(ref)
-                free.append(actor)  # restarted by Ray where it died
                 try:
                     out[i] = ray.get(ref)
+                    free.append(actor)
                 except ray.exceptions.RayError as exc:
+                    waking[actor.pid.remote()] = (actor, time.monotonic())  # Ray restarts it: its next task then
                     if tries[i] <= MAX_RETRIES:
                         pending.append((i, tasks[i]))
                         continue
@@ -221,6 +255,25 @@ class RayEngine:
                 if done is not None:
                     done(out[i])
         return out
+
+    def _woken(self, probe: Any, waking: dict, free: list) -> None:
+        """An actor's probe after it lost its task has answered: the actor is free again where it did; probed again
+        while Ray restarts it (every :data:`RESTART_POLL` seconds, for :data:`START_TIMEOUT` seconds at most); ended
+        and dropped where it is gone for good."""
+        ray = self._ray
+        actor, since = waking.pop(probe)
+        try:
+            ray.get(probe)
+            free.append(actor)
+            return
+        except ray.exceptions.RayError as exc:
+            restarting = isinstance(exc, getattr(ray.exceptions, "ActorUnavailableError", ()))
+            if restarting and time.monotonic() - since < START_TIMEOUT:
+                time.sleep(RESTART_POLL)
+                waking[actor.pid.remote()] = (actor, since)
+                return
+        ray.kill(actor)
+        self._actors.remove(actor)
 
     def close(self) -> None:
         """Ends the actors, and the local cluster where this engine started it."""

@@ -285,11 +285,29 @@ class CheckReport:
             return "touching"
         return None
 
+    def findings_per_frame(self) -> np.ndarray:
+        """``(F,)`` int64 findings of each frame, of every kind the report has: its reported triangle pairs, and
+        the rows of each other finding it holds (every :class:`FrameContacts` field but its time, depths,
+        segments and touching count: an array's rows, or those of a finding's ``face_pairs`` or
+        ``object_pairs``: self-intersecting face pairs, soft clashes, duplicates, ...), plus the tunnelling
+        pairs of the interval that starts at it (continuous checks)."""
+
+        def rows(value) -> int:
+            value = getattr(value, "face_pairs", getattr(value, "object_pairs", value))
+            return len(value) if isinstance(value, np.ndarray) else 0
+
+        skip = ("time", "depth", "segments", "num_touching")
+        counts = np.array([sum(rows(v) for k, v in vars(f).items() if k not in skip) for f in self.frames], np.int64)
+        for k, iv in enumerate((self.intervals or [])[: len(counts)]):
+            counts[k] += int(np.count_nonzero(iv.tunnelling))
+        return counts
+
     @property
     def worst_frame(self) -> int:
-        """Index of the frame with the most penetrating triangle pairs (the first of equals; 0 if none)."""
-        counts = [len(f.triangle_pairs) for f in self.frames]
-        return int(np.argmax(counts)) if counts else 0
+        """Index of the frame with the most findings (:meth:`findings_per_frame`; the first of equals; 0 if
+        none): the frame ``check --preview`` draws."""
+        counts = self.findings_per_frame()
+        return int(np.argmax(counts)) if len(counts) else 0
 
     def pair_summary(self) -> list[dict]:
         """Per prim pair reported in some frame (penetrating; touching too with ``count_touching``): ``a``,

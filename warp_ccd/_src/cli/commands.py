@@ -50,6 +50,7 @@ from .common import (
     REPORT_STDOUT,
     CliError,
     OneLineParser,
+    QuietClosedStdout,
     check_options_from,
     flat_values,
     init_warp,
@@ -526,8 +527,10 @@ def _check(args) -> tuple[int, str | None]:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", PrecisionWarning)
             report = check_usd(stage, options, frames=frames, prims=flat_values(args.prims), device=device)
-    except ValueError as exc:
-        raise fail(str(exc)) from None
+    except ValueError as exc:  # the input at fault: the line names the file
+        text = str(exc)
+        raise fail(text if text.startswith((args.stage, os.path.realpath(args.stage))) else f"{args.stage}: {text}") \
+            from None
     for w in caught:  # a switch to float64: one plain line (others as Python shows them)
         if issubclass(w.category, PrecisionWarning):
             print(f"{PROG} check: note: {w.message}", file=sys.stderr)
@@ -615,7 +618,17 @@ def main(argv: list[str] | None = None) -> int:
         2 bad arguments or input; 3 an internal error (an unexpected exception: one line on stderr,
         its traceback with ``--debug``); 130 interrupted.
     """
-    argv = list(sys.argv[1:] if argv is None else argv)
+    stdout = sys.stdout
+    sys.stdout = QuietClosedStdout(stdout)  # a reader that has gone: the verdict's status, no BrokenPipeError
+    try:
+        return _main(list(sys.argv[1:] if argv is None else argv))
+    finally:
+        sys.stdout.flush()
+        sys.stdout = stdout
+
+
+def _main(argv: list[str]) -> int:
+    """:func:`main` with its standard output in place."""
     if argv and argv[0] == "bench":
         return _run_bench(argv[1:])
     args = None

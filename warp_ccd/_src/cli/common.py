@@ -8,18 +8,19 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import os
-import sys
-import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import fields
 from typing import TYPE_CHECKING
+
+from ..runtime.start import init_warp
 
 if TYPE_CHECKING:
     from ..check.options import CheckOptions
 
 __all__ = ["EXIT_ERROR", "EXIT_FINDINGS", "EXIT_INTERNAL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "REPORT_STDOUT",
-           "CliError", "OneLineParser", "check_options_from", "flat_values", "init_warp",
+           "CliError", "OneLineParser", "QuietClosedStdout", "check_options_from", "flat_values", "init_warp",
            "pending_outputs", "quiet_warp", "refuse_overwriting", "require_usd", "resolve_device", "uncached_modules"]
 
 EXIT_OK = 0
@@ -31,17 +32,70 @@ EXIT_INTERNAL = 3
 """An unexpected exception: a bug or the machine (out of memory), not the input."""
 EXIT_INTERRUPTED = 130
 
-DRIVER_NOTICE = "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver"
-"""The start of the line Warp's native library prints on initialisation when there is no CUDA
-driver (a machine without a GPU): the device list says as much, so the commands leave it out."""
-
-
 class CliError(Exception):
     """A problem to report in one line, with the exit status to end with."""
 
     def __init__(self, message: str, status: int = EXIT_USAGE):
         super().__init__(message)
         self.status = status
+
+
+class QuietClosedStdout(io.TextIOBase):
+    """A command's standard output that ends quietly where its reader has gone.
+
+    ``warp-ccd check a.usda | head -1`` (or ``| true``) closes the pipe before the summary is written;
+    Python ignores SIGPIPE, so the next write raises BrokenPipeError. Here, as Python's documentation
+    recommends (the ``signal`` module, "Note on SIGPIPE"), standard output is redirected to
+    ``os.devnull`` at the first such error (so that no later write, nor the flush at exit, raises
+    again) and the command goes on: its files are written and it ends with its verdict's status.
+
+    Args:
+        stream: the standard output to write to.
+    """
+
+    def __init__(self, stream):
+        super().__init__()
+        self.stream = stream
+        self.reader_gone = False
+
+    def _gone(self) -> None:
+        self.reader_gone = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(devnull, self.stream.fileno())
+            finally:
+                os.close(devnull)
+        except (OSError, ValueError, AttributeError, io.UnsupportedOperation):  # no descriptor (captured output)
+            pass
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                return self.stream.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self.stream.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def writable(self) -> bool:
+        return True
+
+    def isatty(self) -> bool:
+        return not self.reader_gone and self.stream.isatty()
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
+
+    @property
+    def encoding(self):
+        return getattr(self.stream, "encoding", "utf-8")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -62,40 +116,6 @@ def quiet_warp() -> None:
     if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
     wp.config.quiet = True
-
-
-def init_warp() -> None:
-    """Initialises Warp, without its no-CUDA-driver notice on stderr.
-
-    Warp's native library prints :data:`DRIVER_NOTICE` to the process's stderr on
-    initialisation on a machine without a CUDA driver. Here stderr (file descriptor 2) goes to a
-    temporary file while Warp initialises, and every other line written meanwhile is passed on.
-    Nothing happens when Warp is initialised already.
-    """
-    import warp as wp
-
-    sys.stderr.flush()
-    try:
-        saved = os.dup(2)
-    except OSError:  # no stderr to redirect
-        wp.init()
-        return
-    try:
-        with tempfile.TemporaryFile() as held:
-            os.dup2(held.fileno(), 2)
-            try:
-                wp.init()
-            finally:
-                sys.stderr.flush()
-                os.dup2(saved, 2)
-            held.seek(0)
-            text = held.read().decode(errors="replace")
-    finally:
-        os.close(saved)
-    rest = [line for line in text.splitlines(keepends=True) if not line.startswith(DRIVER_NOTICE)]
-    if rest:
-        sys.stderr.write("".join(rest))
-        sys.stderr.flush()
 
 
 def uncached_modules(device, names) -> list[str] | None:

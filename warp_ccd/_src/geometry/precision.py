@@ -21,7 +21,7 @@ import warp as wp
 
 from ..runtime.options import PRECISIONS, check_option
 
-__all__ = ["PRECISIONS", "RESOLUTION", "PrecisionWarning", "coordinate_message", "needed_precision",
+__all__ = ["PRECISIONS", "RESOLUTION", "PrecisionWarning", "coordinate_limit", "coordinate_message", "needed_precision",
            "precision_overloads", "precision_types", "shape_radius", "triangle_size"]
 
 RESOLUTION = 1e-3
@@ -81,14 +81,30 @@ def needed_precision(max_coordinate: float, size: float) -> str | None:
         ``"float32"``, ``"float64"`` when only float64 resolves it, or None when neither does
         (``R * 2**-52 > 1e-3 * s``, or ``R`` beyond float32's range).
     """
-    r, s = float(max_coordinate), float(size)
-    if not r <= FLOAT32_MAX:
-        return None
-    if s > 0.0 and r * FLOAT64_STEP > RESOLUTION * s:
-        return None
-    if s > 0.0 and r * FLOAT32_STEP > RESOLUTION * s:
-        return "float64"
-    return "float32"
+    r = float(max_coordinate)
+    for precision in PRECISIONS:
+        if r <= coordinate_limit(size, precision):
+            return precision
+    return None
+
+
+def coordinate_limit(size: float, precision: str) -> float:
+    """The largest ``|coordinate|`` that ``precision`` resolves at triangles of ``size`` (the rule of
+    :func:`needed_precision`): ``1e-3 * s / 2**-23`` in float32, ``1e-3 * s / 2**-52`` in float64 (scaling
+    by a power of two is exact, so ``R <= limit`` is ``R * step <= 1e-3 * s``), never beyond float32's range.
+
+    Args:
+        size: ``s``, the typical triangle size (scene units; 0: only float32's range is checked).
+        precision: ``"float32"`` or ``"float64"``.
+
+    Returns:
+        The limit (scene units).
+    """
+    s = float(size)
+    if not s > 0.0:
+        return FLOAT32_MAX
+    step = FLOAT64_STEP if precision == "float64" else FLOAT32_STEP
+    return min(FLOAT32_MAX, RESOLUTION * s / step)
 
 
 def coordinate_message(max_coordinate: float, size: float, precision: str) -> str:

@@ -15,8 +15,10 @@ import numpy as np
 import warp as wp
 
 from ..geometry.ccd import CCD_KINDS, CCD_MAX_ITERATIONS, CCD_TOLERANCE, NO_HIT, _points, primitive_toi, query_excluded
+from ..geometry.precision import FLOAT32_MAX, coordinate_message, needed_precision
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.options import check_option
+from ..runtime.start import init_warp
 
 wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
@@ -104,6 +106,22 @@ def _query_points(name: str, x, device) -> wp.array:
     return wp.array(np.ascontiguousarray(a, dtype=np.float64), dtype=wp.vec3d, device=device)
 
 
+def _check_reach(a0: wp.array, a1: wp.array) -> None:
+    """Raises ValueError where a query's coordinates are too far from the origin for its size, as
+    ``collide()`` refuses them (:func:`~warp_ccd._src.geometry.precision.needed_precision`, float64: the
+    queries' precision at best): the query's size is the extent of its eight points (``x0`` and ``x1``),
+    its reach their largest ``|coordinate|``; the worst query is named."""
+    p = np.concatenate([a0.numpy(), a1.numpy()], axis=1).astype(np.float64, copy=False)  # (n, 8, 3)
+    reach = np.abs(p).max(axis=(1, 2))
+    size = (p.max(axis=1) - p.min(axis=1)).max(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(size > 0.0, reach / size, 0.0)
+    worst = int(np.argmax(reach)) if reach.max() > FLOAT32_MAX else int(np.argmax(ratio))
+    if needed_precision(reach[worst], size[worst]) is None:
+        raise ValueError(f"query {worst}: {coordinate_message(reach[worst], size[worst], 'float64')}: move the "
+                         "queries nearer the origin")
+
+
 def run_queries(kind: int, x0: wp.array, x1: wp.array, min_distance: float, tolerance: float, max_iterations: int,
                 toi: wp.array, deferred: wp.array | None = None, deferred_count: wp.array | None = None) -> None:
     """Enqueues the two passes over ``n`` queries (no host read: a graph can hold them): every query's
@@ -151,14 +169,17 @@ def ccd_queries(kind: str, x0: ArrayLike, x1: ArrayLike, *, min_distance: float 
         float32 inputs the same as for the same values in float64.
 
     Raises:
-        ValueError: an unknown ``kind``, a bad shape, non-finite coordinates, ``x0`` and ``x1`` of
-            different lengths, or a bad option.
+        ValueError: an unknown ``kind``, a bad shape, non-finite coordinates, coordinates too far
+            from the origin for a query's size (as ``collide()`` refuses them:
+            :func:`~warp_ccd._src.geometry.precision.needed_precision` in float64, naming the query),
+            ``x0`` and ``x1`` of different lengths, or a bad option.
     """
     if not isinstance(kind, str) or kind not in CCD_KINDS:
         raise ValueError(f"kind must be one of {tuple(CCD_KINDS)}, got {kind!r}")
     min_distance = check_option("min_distance", min_distance)
     tolerance = check_option("ccd_tolerance", tolerance, given_as="tolerance")
     max_iterations = check_option("ccd_max_iterations", max_iterations, given_as="max_iterations")
+    init_warp()
     device = wp.get_device(device)
     a0 = _query_points("x0", x0, device)
     a1 = _query_points("x1", x1, device)
@@ -168,6 +189,8 @@ def ccd_queries(kind: str, x0: ArrayLike, x1: ArrayLike, *, min_distance: float 
         a0, a1 = (a if a.dtype == wp.vec3d else wp.array(a.numpy().astype(np.float64), dtype=wp.vec3d, device=device)
                   for a in (a0, a1))
     n = a0.shape[0]
+    if n:
+        _check_reach(a0, a1)
     toi = wp.empty(n, dtype=wp.float64, device=device)
     if n:
         run_queries(CCD_KINDS[kind], a0, a1, min_distance, tolerance, max_iterations, toi)

@@ -19,6 +19,7 @@ import numpy as np
 import warp as wp
 
 from .aliases import ArrayLike, DeviceLike
+from .start import init_warp
 
 __all__ = ["ArrayLike", "DeviceLike", "device_view", "host_array", "is_device_array", "packed_arrays", "packed_upload"]
 
@@ -32,7 +33,7 @@ def _foreign(x: ArrayLike) -> wp.array | None:
     if isinstance(x, np.ndarray):
         return None
     if hasattr(x, "__dlpack__") or hasattr(x, "__cuda_array_interface__"):
-        wp.init()  # DLPack's device lookup needs Warp's runtime (a no-op once it is up)
+        init_warp()  # DLPack's device lookup needs Warp's runtime (a no-op once it is up)
     if hasattr(x, "__dlpack__") and hasattr(x, "__dlpack_device__"):
         try:
             return wp.from_dlpack(x)

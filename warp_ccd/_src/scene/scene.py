@@ -42,6 +42,7 @@ from ..geometry.precision import (
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.arrays import device_view, host_array, is_device_array, packed_arrays
 from ..runtime.checks import integer_option, number_option
+from ..runtime.start import init_warp
 from .filter import CollisionFilter
 from .inputs import InputCheck
 from .motion import EllipseMotion, advance_time
@@ -356,6 +357,7 @@ class Scene:
         mask: ArrayLike | None = None,
         exclude_pairs: ArrayLike | None = None,
     ) -> None:
+        init_warp()  # without the no-CUDA-driver notice on a machine without a GPU
         self.scalar_type, self.vec3_type, _, self.transform_type = precision_types(precision)
         self.device = wp.get_device(device)
         self.precision = precision
@@ -436,7 +438,9 @@ class Scene:
         self.topology.object_triangle_start = self.object_triangle_start
         self._time = 0.0
         self.time_device = wp.zeros(1, dtype=wp.float64, device=d)
-        self.input_check = InputCheck(d)
+        size = triangle_size(packed.vertices, packed.triangles, packed.vertex_start, packed.triangle_start, inst, scale)
+        radius = shape_radius(packed.vertices, packed.vertex_start)[inst] * scale if n else np.zeros(0)
+        self.input_check = InputCheck(d, precision=precision, size=size, object_radius=radius)
         if motion is not None:
             motion.launch(self.time_device, self.object_pose)
         self.pose_world_vertices()  # a deforming scene too: it starts as its meshes were given
@@ -650,7 +654,9 @@ class Scene:
                 ``x, y, z, w``). An array already on this scene's device (a ``wp.array``, or a torch,
                 JAX or CuPy array through DLPack or ``__cuda_array_interface__``) is read in place by a
                 kernel that checks it (no copy through the host: a bad row is raised by the next
-                ``detect()`` or :meth:`check_inputs`); a host array is checked here, then uploaded.
+                ``detect()`` or :meth:`check_inputs`); a host array is checked here, then uploaded. A
+                transform that places its object beyond what the scene's precision resolves at its triangle
+                size (:func:`~warp_ccd._src.geometry.precision.needed_precision`) is bad.
 
         Raises:
             ValueError: a deforming scene, a bad shape, or (host arrays) the first bad transform.
@@ -661,6 +667,7 @@ class Scene:
             self._device_poses(transforms, "set_transforms", matrices=True)
         else:
             poses = transforms_to_poses(transforms, self.num_objects)
+            self._check_reach(poses, "set_transforms")
             self.object_pose.assign(poses.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
 
@@ -682,8 +689,19 @@ class Scene:
             self._device_poses(poses, "set_poses", matrices=False)
         else:
             rows = poses_to_rows(poses, self.num_objects, name="set_poses")
+            self._check_reach(rows, "set_poses")
             self.object_pose.assign(rows.astype(np.float64 if self.precision == "float64" else np.float32))
         self.update_world_vertices()
+
+    def _check_reach(self, poses: np.ndarray, source: str) -> None:
+        """Raises ValueError for the first of host ``(N, 7)`` ``poses`` that places its object beyond what the
+        scene's precision resolves at its triangles' size (the device's check, :mod:`warp_ccd._src.scene.inputs`)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            reach = np.abs(np.asarray(poses[:, :3], np.float64)).max(axis=1, initial=0.0) \
+                + self.input_check.object_radius_np
+        msg = self.input_check.far_row(reach, source)
+        if msg is not None:
+            raise ValueError(msg)
 
     def _device_poses(self, x, source: str, matrices: bool) -> None:
         """Enqueues the kernel that reads poses (or, with ``matrices``, ``(N, 4, 4)`` transforms too)
@@ -708,10 +726,12 @@ class Scene:
                 on this scene's device (Warp, torch, JAX, CuPy) is read in place and checked by a
                 kernel (no copy through the host; a vertex that is not finite is raised by the next
                 ``detect()`` or :meth:`check_inputs`); a host array is checked here (shape,
-                finiteness), then uploaded.
+                finiteness), then uploaded. A vertex with a coordinate beyond what the scene's precision
+                resolves at its triangle size (:func:`~warp_ccd._src.geometry.precision.needed_precision`) is
+                bad too.
 
         Raises:
-            ValueError: a rigid scene, a bad shape, or (host arrays) the first vertex not finite.
+            ValueError: a rigid scene, a bad shape, or (host arrays) the first vertex not finite or too far.
         """
         if not self.deforming:
             raise ValueError("set_world_vertices: this scene's objects are rigid, placed by their poses "
@@ -734,6 +754,9 @@ class Scene:
             v = v.astype(np.float64 if self.precision == "float64" else np.float32)
         if not np.isfinite(v).all():
             raise ValueError("set_world_vertices: vertices overflow float32")
+        msg = self.input_check.far_row(row_max(np.abs(v)) if len(v) else np.zeros(0), "set_world_vertices")
+        if msg is not None:
+            raise ValueError(msg)
         self.world_vertex.assign(v)
 
     def check_inputs(self) -> None:

@@ -338,6 +338,12 @@ def _key_kernel(
 _KEY = precision_overloads(_key_kernel, lambda s, v, q, t: {"shape_vertex": wp.array[v], "world_vertex": wp.array[v]})
 
 
+_SIGN_BIT = wp.constant(wp.uint32(0x80000000))
+"""A float32's sign bit, typed as a constant: ``wp.uint32(0x80000000)`` in a kernel is generated as an
+int32 literal first (clang's ``-Wconstant-conversion``: 2147483648 becomes -2147483648, then the same
+bits as uint32)."""
+
+
 @wp.kernel
 def _axis_key_kernel(key_bits: wp.array[wp.uint32], tri_shape: wp.array[wp.int32], axis: int,
                      # Outputs
@@ -347,10 +353,10 @@ def _axis_key_kernel(key_bits: wp.array[wp.uint32], tri_shape: wp.array[wp.int32
     (``key_bits``: the keys' bits; no -0, no NaN), the triangle as its value."""
     g = wp.tid()
     bits = key_bits[3 * g + axis]
-    if (bits & wp.uint32(0x80000000)) != wp.uint32(0):
+    if (bits & _SIGN_BIT) != wp.uint32(0):
         bits = ~bits
     else:
-        bits = bits | wp.uint32(0x80000000)
+        bits = bits | _SIGN_BIT
     sort_key[g] = (wp.uint64(tri_shape[g]) << wp.uint64(32)) | wp.uint64(bits)
     sort_value[g] = g
 

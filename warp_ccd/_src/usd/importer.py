@@ -25,7 +25,16 @@ per object its world transform at every time code asked for:
   linear part is a rotation times a uniform scale becomes a pose and ``object_scale``. One with
   a non-uniform scale, a shear or a reflection is baked into a shape of its own (the points times
   the linear part at the first time code), and the object moves rigidly from there while the
-  rest of its transform stays a rotation and a uniform scale.
+  rest of its transform stays a rotation and a uniform scale. A **mirror** (a negative scale, a
+  negative determinant) is valid: the mesh is wound the other way round, and it is checked as the
+  mirrored surface it is. A **zero scale** (a singular linear part, at any time code read) collapses
+  the mesh onto a plane, a line or a point: a ValueError names the prim, the xform op and the time
+  (:func:`~warp_ccd._src.usd.xforms.xform_fault`); so does a mirror that comes or goes during the
+  animation (the winding chosen at the first time code would turn the surface inside out), an xform
+  op whose value USD makes no transform of (a wrong type) and one that is not finite.
+* **Attribute types.** ``points`` must hold 3-vectors (a flat ``float[]`` is refused), and
+  ``faceVertexCounts``, ``faceVertexIndices`` and ``holeIndices`` integers: an error names the prim,
+  the attribute and the time code (:mod:`~warp_ccd._src.usd.meshes`).
 * **Precision.** Where float32 cannot resolve the coordinates of every time code read at the
   triangles' size (:func:`~warp_ccd._src.geometry.precision.needed_precision`: coordinates beyond about
   ``8.4e3`` times the typical triangle), the scene is float64 instead, with a
@@ -78,10 +87,10 @@ from ..scene.scene import Scene
 from ..scene.shapes import MeshSet
 from .filters import FilterSummary, PairFilters, PrimIndex, world_ids
 from .meshes import MeshData, read_meshes
-from .poses import baked_linear, finite_matrix_poses, matrix_poses
+from .poses import SINGULAR_DETERMINANT, baked_linear, finite_matrix_poses, matrix_poses
 from .stage import MAX_FRAMES, open_stage
 from .workers import auto_workers, read_shared
-from .xforms import WorldPoses, XformInfo, paused_gc
+from .xforms import WorldPoses, XformInfo, paused_gc, world_transform, xform_fault
 
 if TYPE_CHECKING:
     from pxr import Usd
@@ -451,11 +460,11 @@ class UsdMeshImport:
         first[read_v] = read.first
         finite = np.isfinite(first).all(axis=(1, 2))
         if not finite.all():
-            raise ValueError(f"prim {obj_path[int(np.argmin(finite))]}: its world transform is not finite")
+            self._not_finite(obj_path, int(np.argmin(finite)), float(self.times[0]))
         if not read.finite.all():
             f, k = np.unravel_index(int(np.argmin(read.finite)), read.finite.shape)
-            raise ValueError(f"prim {obj_path[int(read_v[k])]}: its world transform is not finite at time "
-                             f"{self.times[f]:g}")
+            self._not_finite(obj_path, int(read_v[k]), float(self.times[f]))
+        self._check_linear(obj_path, np.arange(n), first, float(self.times[0]))
         bake, similar0 = baked_linear(first)  # baked at the first time code
         deforming = np.array([self._meshes[k].deforming for k in obj_mesh.tolist()], bool)
         poses0, scale0, ok0 = matrix_poses(first, bake)
@@ -471,8 +480,7 @@ class UsdMeshImport:
             finite, var_poses[f, ~by_prim], var_scale[f, ~by_prim], ok = finite_matrix_poses(
                 first[rest] if f == 0 else self._matrices(code, rest), bake[rest])
             if not finite.all():
-                raise ValueError(f"prim {obj_path[int(rest[np.argmin(finite)])]}: its world transform is not "
-                                 f"finite at time {code.GetValue():g}")
+                self._not_finite(obj_path, int(rest[np.argmin(finite)]), float(code.GetValue()))
             var_ok[~by_prim] &= ok
         deforming[varying[~var_ok]] = True
 
@@ -636,6 +644,42 @@ class UsdMeshImport:
             workers = auto_workers() if objects.size * len(self._codes) >= PARALLEL_LOOKUPS else 0
         return read_shared(self.stage, prims, paths, self.times, workers, info=self._xinfo, progress=self._progress)
 
+    def _check_linear(self, names: list, objects: np.ndarray, matrix: np.ndarray, time: float,
+                      first: np.ndarray | None = None) -> None:
+        """Raises ValueError naming the prim (and the xform op, :func:`~warp_ccd._src.usd.xforms.xform_fault`)
+        where a world matrix ``matrix[k]`` of object ``objects[k]`` (traversal order; ``names[k]`` its
+        path) at ``time`` has a zero scale (a singular linear part: the mesh collapses onto a plane, a
+        line or a point), or, given the ``first`` matrices, where it mirrors and the first one did not
+        or the other way round (the winding chosen at the first time code would be wrong: the inside and
+        outside of the surface swap). A mirror that holds at every time code is valid: the mesh is wound
+        the other way round (the module docstring)."""
+        det = np.linalg.det(np.asarray(matrix, np.float64)[:, :3, :3])
+        zero = ~(np.abs(det) > SINGULAR_DETERMINANT) & np.isfinite(det)
+        if zero.any():
+            k = int(np.argmax(zero))
+            obj = int(objects[k])
+            fault = None
+            if self._obj_instancer[obj] < 0:
+                fault = xform_fault(self._prims[int(self._obj_handle[obj])], time, singular=True)
+            raise ValueError(fault or f"prim {names[k]}: its world transform at time {time:g} has a zero scale: "
+                             "it collapses the mesh")
+        if first is not None:
+            flips = (det < 0) != (np.linalg.det(np.asarray(first, np.float64)[:, :3, :3]) < 0)
+            if flips.any():
+                k = int(np.argmax(flips))
+                raise ValueError(f"prim {names[k]}: its world transform at time {time:g} "
+                                 f"{'mirrors' if det[k] < 0 else 'no longer mirrors'} where the first time code's "
+                                 "did not: a mirror that comes or goes in an animation turns the surface inside out "
+                                 "(not supported)")
+
+    def _not_finite(self, obj_path: list, obj: int, time: float) -> None:
+        """Raises the ValueError for object ``obj``'s world transform that is not finite at ``time``,
+        naming the xform op at fault where one is (:func:`~warp_ccd._src.usd.xforms.xform_fault`)."""
+        h = int(self._obj_handle[obj])
+        rec = self._obj_instancer[obj]
+        fault = xform_fault(self._prims[h], time) if rec < 0 else None
+        raise ValueError(fault or f"prim {obj_path[obj]}: its world transform is not finite at time {time:g}")
+
     def _matrices(self, code, objects: np.ndarray) -> np.ndarray:
         """``(K, 4, 4)`` world matrices (row vectors) of ``objects`` (indices in traversal order) at ``code``."""
         from pxr import UsdGeom
@@ -646,7 +690,8 @@ class UsdMeshImport:
         rows = np.nonzero(which < 0)[0]
         if rows.size:
             prims = self._prims
-            out[rows] = np.array([cache.GetLocalToWorldTransform(prims[h])
+            t = float(code.GetValue())
+            out[rows] = np.array([world_transform(cache, prims[h], t)
                                   for h in self._obj_handle[objects[rows]].tolist()], np.float64).reshape(-1, 4, 4)
         for j in np.unique(which[which >= 0]).tolist():
             rec = self._instancers[j]
@@ -658,7 +703,7 @@ class UsdMeshImport:
             if xforms.shape[0] <= int(rec.instance_index.max(initial=-1)):
                 raise ValueError(f"prim {rec.path}: {xforms.shape[0]} instance transforms at time "
                                  f"{code.GetValue():g}, fewer than its instances")
-            world = np.asarray(cache.GetLocalToWorldTransform(rec.schema.GetPrim()), np.float64)
+            world = world_transform(cache, rec.schema.GetPrim(), float(code.GetValue()))
             # Each prototype mesh's transform relative to its prototype root (whose own transform
             # the instance transforms include), once per mesh.
             rel = np.array([cache.ComputeRelativeTransform(p, root)[0] for _, _, p, root in rec.slots],
@@ -692,6 +737,9 @@ class UsdMeshImport:
             if self._def_varying.size:
                 matrix = matrix.copy()
                 matrix[self._def_varying] = self._matrices(code, self._def_varying_objects)
+                self._check_linear([self.object_path[b + d] for d in self._def_varying.tolist()],
+                                   self._def_varying_objects, matrix[self._def_varying], float(self.times[frame]),
+                                   self._def_matrix[self._def_varying])
             read: dict[int, np.ndarray] = {}
             parts = []
             for d, k in enumerate(self._def_mesh.tolist()):

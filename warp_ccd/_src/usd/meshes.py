@@ -43,7 +43,7 @@ class MeshData:
         """
         if not self.deforming:
             return self.points
-        p = np.asarray(self.points_attr.Get(time), dtype=np.float64).reshape(-1, 3)
+        p = _points(self.points_attr.Get(time), self.path, float(time.GetValue())).astype(np.float64, copy=False)
         if p.shape != self.points.shape:
             raise ValueError(f"prim {self.path}: {len(p)} points at time {float(time.GetValue()):g}, "
                              f"{len(self.points)} at the first time code (a changing vertex count is not supported)")
@@ -73,7 +73,8 @@ def fan_triangles(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, pa
     indices = np.asarray(indices, np.int64)
     if counts.size and counts.min() < 3:
         f = int(np.argmax(counts < 3))
-        raise ValueError(f"prim {path}: face {f} has {int(counts[f])} vertices (at least 3 needed)")
+        raise ValueError(f"prim {path}: face {f} has {int(counts[f])} vertices (faceVertexCounts[{f}] = "
+                         f"{int(counts[f])}; at least 3 needed)")
     if counts.sum() != indices.size:
         raise ValueError(f"prim {path}: faceVertexCounts sum to {int(counts.sum())}, "
                          f"but faceVertexIndices has {indices.size} entries")
@@ -100,7 +101,31 @@ def fan_triangles(counts: np.ndarray, indices: np.ndarray, holes: np.ndarray, pa
     return tri.astype(np.int32), face.astype(np.int32)
 
 
-def _raw(source, t0, names=None) -> tuple:
+def _typed(value, attribute: str, path: str, time: float, kind: str) -> np.ndarray:
+    """A mesh attribute's value as an array, checked for its type where it is read: ``kind`` ``"points"``
+    (an array of 3-vectors of float, double or half: ``point3f[]`` and its kin) or ``"integers"`` (an
+    integer array: ``faceVertexCounts``, ``faceVertexIndices``, ``holeIndices``).
+
+    Raises:
+        ValueError: ``prim <path>: <attribute> at time <t> is a <type> ...``: a flat ``float[]`` is
+            not points, and ``float[]`` indices are not indices (numpy would round them).
+    """
+    a = np.asarray(value)
+    ok = (a.ndim == 2 and a.shape[1] == 3 and a.dtype.kind == "f") if kind == "points" else \
+        (a.ndim == 1 and (a.dtype.kind in "iu" or a.size == 0 and a.dtype.kind != "O"))
+    if not ok:
+        want = "an array of 3-vectors (point3f[])" if kind == "points" else "an integer array (int[])"
+        raise ValueError(f"prim {path}: {attribute} at time {time:g} is a {type(value).__name__} ({a.size} values), "
+                         f"not {want}")
+    return a
+
+
+def _points(value, path: str, time: float) -> np.ndarray:
+    """``points`` as an ``(n, 3)`` array, checked by :func:`_typed`."""
+    return _typed(value, "points", path, time, "points")
+
+
+def _raw(source, t0, names=None, path: str = "") -> tuple:
     """The raw arrays of one mesh prim: ``(points attribute, points, counts, indices, holes, left-handed,
     deforming, animated topology attribute name or None)``. ``names``: its authored property names, if
     known (attributes it does not author are not read)."""
@@ -113,10 +138,13 @@ def _raw(source, t0, names=None) -> tuple:
     counts, indices = counts_attr.Get(t0), indices_attr.Get(t0)
     holes = source.GetAttribute("holeIndices").Get(t0) if "holeIndices" in names else None
     left = "orientation" in names and source.GetAttribute("orientation").Get(t0) == "leftHanded"
-    return (points_attr, np.zeros((0, 3)) if raw is None else np.asarray(raw).reshape(-1, 3),
-            np.zeros(0, np.int32) if counts is None else np.asarray(counts),
-            np.zeros(0, np.int32) if indices is None else np.asarray(indices),
-            np.zeros(0, np.int64) if holes is None else np.asarray(holes, np.int64),
+    time = float(t0.GetValue()) if not t0.IsDefault() else float("nan")
+    path = path or str(source.GetPath())
+    return (points_attr, np.zeros((0, 3)) if raw is None else _points(raw, path, time),
+            np.zeros(0, np.int32) if counts is None else _typed(counts, "faceVertexCounts", path, time, "integers"),
+            np.zeros(0, np.int32) if indices is None else _typed(indices, "faceVertexIndices", path, time, "integers"),
+            np.zeros(0, np.int64) if holes is None else
+            _typed(holes, "holeIndices", path, time, "integers").astype(np.int64),
             left, points_attr.ValueMightBeTimeVarying(), animated)
 
 
@@ -146,9 +174,10 @@ def read_meshes(sources: list, names: list[str], t0: Usd.TimeCode, authored: lis
         ``M`` :class:`MeshData`, in order.
 
     Raises:
-        ValueError: naming the first prim at fault, as :func:`read_mesh` does.
+        ValueError: naming the first prim at fault, as :func:`read_mesh` does (an attribute of the
+            wrong type as it is read: :func:`_typed`).
     """
-    raws = [_raw(s, t0, None if authored is None else authored[k]) for k, s in enumerate(sources)]
+    raws = [_raw(s, t0, None if authored is None else authored[k], names[k]) for k, s in enumerate(sources)]
     m = len(raws)
     if not m:
         return []

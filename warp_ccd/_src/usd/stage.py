@@ -1,8 +1,10 @@
 """USD stages as the import and the check open them: the stage of a path, its layers, its time codes.
 
 :func:`open_stage` opens a file (or passes a ``Usd.Stage`` through), naming the path in every
-error; :func:`missing_layers` lists the sublayers, references and payloads that composition could
-not open, :func:`require_layers` refuses them unless asked to check without; :func:`layer_files`
+error, without USD's own warnings about the layers it could not open (``Tf.DiagnosticTrap``, where pxr has
+it: those layers are the caller's to name, in one error or in a report's ``missing``);
+:func:`missing_layers` lists the sublayers, references and payloads that composition could not open,
+:func:`require_layers` refuses them unless asked to check without; :func:`layer_files`
 lists every file a stage reads (so that no output is written over one of them);
 :func:`stage_time_codes` turns ``frames`` (``None``, numbers or a ``slice``) into the time codes to
 check. ``pxr`` is imported inside the functions.
@@ -51,7 +53,7 @@ def open_stage(stage_or_path: Usd.Stage | PathLike) -> Usd.Stage:
         loaded = Sdf.Layer.Find(path)
         if loaded is not None:
             loaded.Reload()  # a layer still open from an earlier read: the file as it is now
-        stage = Usd.Stage.Open(path)
+        stage = _open_without_missing_warnings(path)
     except Exception as exc:  # pxr.Tf.ErrorException
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(f"cannot read {path}: not a USD file USD can open ({first})") from None
@@ -60,12 +62,38 @@ def open_stage(stage_or_path: Usd.Stage | PathLike) -> Usd.Stage:
     return stage
 
 
+def _open_without_missing_warnings(path: str) -> Usd.Stage:
+    """``Usd.Stage.Open(path)``, less the warnings USD reports (on standard error) for the sublayers,
+    references and payloads it could not open: each names one of :func:`missing_layers`, which the caller
+    reports. Every other diagnostic is passed on as USD reports it. Without ``Tf.DiagnosticTrap`` (USD before
+    it), USD's warnings are printed as before."""
+    from pxr import Tf, Usd
+
+    trap_type = getattr(Tf, "DiagnosticTrap", None)
+    if trap_type is None:
+        return Usd.Stage.Open(path)
+    with trap_type() as trap:  # on leaving, what is left of the trapped diagnostics is reported as usual
+        stage = Usd.Stage.Open(path)
+        if stage is not None and trap.HasWarnings():
+            missing = set(missing_layers(stage))
+            trap.EraseMatching(lambda d: isinstance(d, Tf.Warning) and _asset_of(d.commentary) in missing)
+    return stage
+
+
+def _asset_of(text: str) -> str:
+    """The first ``@asset@`` path of a USD message (the whole message stripped where it names none)."""
+    import re
+
+    match = re.search(r"@([^@]+)@", text)
+    return match.group(1) if match else text.strip()
+
+
 def missing_layers(stage) -> list[str]:
     """The sublayers, references and payloads of a stage that could not be opened.
 
-    USD opens a stage whose sublayer, reference or payload files are missing (it prints a
-    warning and composes the stage without them); this lists those files, as composition
-    reported them (``Usd.Stage.GetCompositionErrors``; muted layers are not listed).
+    USD opens a stage whose sublayer, reference or payload files are missing (it reports a
+    warning, which :func:`open_stage` holds back, and composes the stage without them); this lists those
+    files, as composition reported them (``Usd.Stage.GetCompositionErrors``; muted layers are not listed).
 
     Args:
         stage: a ``Usd.Stage``.
@@ -73,18 +101,12 @@ def missing_layers(stage) -> list[str]:
     Returns:
         Their asset paths (absolute where USD made them so), sorted, each once.
     """
-    import re
-
     from pxr import Ar, Pcp
 
     if hasattr(stage, "GetCompositionErrors"):
         kinds = (Pcp.ErrorType_InvalidAssetPath, Pcp.ErrorType_InvalidSublayerPath)
-        found = set()
-        for error in stage.GetCompositionErrors():
-            if error.errorType in kinds:
-                match = re.search(r"@([^@]+)@", str(error))
-                found.add(match.group(1) if match else str(error).strip())
-        return sorted(found)
+        errors = stage.GetCompositionErrors()
+        return sorted({_asset_of(str(error)) for error in errors if error.errorType in kinds})
     # Older USD: every composition arc of the layers in use that does not resolve.
     resolver = Ar.GetResolver()
     found = set()

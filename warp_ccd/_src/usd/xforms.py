@@ -62,6 +62,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .poses import (
+    SINGULAR_DETERMINANT,
     affine_poses,
     baked_linear,
     compose_ops,
@@ -76,7 +77,7 @@ if TYPE_CHECKING:
     from pxr import Usd
 
 __all__ = ["BATCH", "FAST_XFORMS", "WHOLE_READ_SHARE", "WorldPoses", "XformInfo", "paused_gc", "read_world_matrices",
-           "read_world_poses"]
+           "read_world_poses", "world_transform", "xform_fault"]
 
 FAST_XFORMS = True
 """Whether :func:`read_world_poses` composes the transforms it can reproduce in numpy (False: every
@@ -124,6 +125,56 @@ class WorldPoses:
     finite: np.ndarray  # (F, P) bool: the world transform is finite
     fast: np.ndarray  # (P,) bool: read in bulk (False: through XformCache)
     matrices: np.ndarray | None = None  # (F, P, 4, 4) world matrices, where asked for
+
+
+def xform_fault(prim: Usd.Prim, time: float, singular: bool = False) -> str | None:
+    """What makes a prim's world transform unusable at a time code, naming the prim and attribute:
+    the first xform op of the prim or of an ancestor (up to one that resets the transform stack)
+    whose value USD cannot make a matrix of (a wrong type: ``xformOp:translate`` authored as a
+    string) or whose matrix is not finite, or, with ``singular``, whose linear part is singular (a
+    zero scale); None when every op is fine."""
+    from pxr import Tf, Usd, UsdGeom
+
+    code = Usd.TimeCode(time)
+    p = prim
+    while p and p.IsValid() and not p.IsPseudoRoot():
+        xformable = UsdGeom.Xformable(p)
+        if xformable:
+            for op in xformable.GetOrderedXformOps():
+                try:
+                    m = np.asarray(op.GetOpTransform(code), np.float64)
+                except Tf.ErrorException:
+                    return (f"prim {p.GetPath()}: {op.GetName()} at time {time:g} is {op.Get(code)!r} "
+                            f"({op.GetTypeName()}), of which USD makes no transform")
+                if not np.isfinite(m).all():
+                    return f"prim {p.GetPath()}: {op.GetName()} at time {time:g} is not finite ({op.Get(code)})"
+                if singular and not abs(np.linalg.det(m[:3, :3])) > SINGULAR_DETERMINANT:
+                    return (f"prim {p.GetPath()}: {op.GetName()} at time {time:g} is {op.Get(code)}: a zero scale "
+                            "collapses the mesh")
+            if xformable.GetResetXformStack():
+                break
+        p = p.GetParent()
+    return None
+
+
+def world_transform(cache, prim: Usd.Prim, time: float) -> np.ndarray:
+    """``(4, 4)`` world matrix (row vectors) of ``prim`` from a ``UsdGeom.XformCache`` at ``time``.
+
+    Raises:
+        ValueError: naming the prim, attribute and time (:func:`xform_fault`) where USD cannot
+            compute it (it raises its own error for an op of the wrong value type).
+    """
+    from pxr import Tf
+
+    try:
+        return np.asarray(cache.GetLocalToWorldTransform(prim), np.float64)
+    except Tf.ErrorException as exc:
+        fault = xform_fault(prim, time)
+        if fault is None:
+            text = [line.strip() for line in str(exc).splitlines() if line.strip()]
+            fault = (f"prim {prim.GetPath()}: its transform cannot be computed at time {time:g} "
+                     f"({text[-1] if text else 'USD error'})")
+        raise ValueError(fault) from None
 
 
 def _order_tokens(text: str, count: int) -> tuple | None:
@@ -621,7 +672,7 @@ def _read(stage, prims: list, times: np.ndarray, info: XformInfo, progress: bool
             bar.update(len(rows))
     if static:
         rows = np.array(static, np.int64)
-        first = np.array([reader.cache0.GetLocalToWorldTransform(prims[r]) for r in static], np.float64)
+        first = np.array([world_transform(reader.cache0, prims[r], times[0]) for r in static], np.float64)
         out.first[rows] = first.reshape(-1, 4, 4)
         finite, poses, scale, ok = finite_matrix_poses(out.first[rows], baked_linear(out.first[rows])[0])
         out.poses[:, rows], out.scale[:, rows], out.ok[rows], out.finite[:, rows] = poses, scale, ok, finite
@@ -634,7 +685,7 @@ def _read(stage, prims: list, times: np.ndarray, info: XformInfo, progress: bool
         bake = None
         for f, t in enumerate(times.tolist()):
             cache = reader.cache0 if f == 0 else UsdGeom.XformCache(Usd.TimeCode(t))
-            m = np.array([cache.GetLocalToWorldTransform(p) for p in chosen], np.float64).reshape(-1, 4, 4)
+            m = np.array([world_transform(cache, p, t) for p in chosen], np.float64).reshape(-1, 4, 4)
             if f == 0:
                 out.first[rows] = m
                 bake = baked_linear(m)[0]
