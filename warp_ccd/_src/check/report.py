@@ -288,15 +288,15 @@ class CheckReport:
     def findings_per_frame(self) -> np.ndarray:
         """``(F,)`` int64 findings of each frame, of every kind the report has: its reported triangle pairs, and
         the rows of each other finding it holds (every :class:`FrameContacts` field but its time, depths,
-        segments and touching count: an array's rows, or those of a finding's ``face_pairs`` or
-        ``object_pairs``: self-intersecting face pairs, soft clashes, duplicates, ...), plus the tunnelling
-        pairs of the interval that starts at it (continuous checks)."""
+        segments, touching count and what describes its rows or pairs: an array's rows, or those of a finding's
+        ``face_pairs`` or ``object_pairs``: self-intersecting face pairs, soft clashes, duplicates, contained
+        pairs, ...), plus the tunnelling pairs of the interval that starts at it (continuous checks)."""
 
         def rows(value) -> int:
             value = getattr(value, "face_pairs", getattr(value, "object_pairs", value))
             return len(value) if isinstance(value, np.ndarray) else 0
 
-        skip = ("time", "depth", "segments", "num_touching")
+        skip = ("time", "depth", "segments", "num_touching", "penetrating", "pairs", "pair_depth", "contained_depth")
         counts = np.array([sum(rows(v) for k, v in vars(f).items() if k not in skip) for f in self.frames], np.int64)
         for k, iv in enumerate((self.intervals or [])[: len(counts)]):
             counts[k] += int(np.count_nonzero(iv.tunnelling))
