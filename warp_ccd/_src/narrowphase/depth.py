@@ -84,6 +84,9 @@ MAX_LEVELS = 28
 """Most times a triangle is split (regions 4**-28 of it): a bound left then is dropped."""
 MAX_REGIONS = 1 << 24
 """Most regions of one level: past it the search stops (:attr:`DepthResult.stopped`)."""
+FLAT_CANDIDATES = 1 << 24
+"""Where the jobs' first objects hold at most this many triangles in all, the triangles in the other's box are
+found one thread a triangle; beyond, one thread a job walks its object's tree."""
 MAX_PLANES = 6
 """Most triangles of the other surface in one region's linear program."""
 ROUNDING_ULPS = 8.0
@@ -350,13 +353,14 @@ def _region_kernel(
     # The signed distance (+ inside) is 1-Lipschitz: at most its value at a sample plus the reach from it.
     lipschitz = wp.float64(1.0e300)
     for i in range(4):
+        # The centroid first: a region wholly outside (most triangles in the other's box) ends there.
         q = (c0 + c1 + c2) / wp.float64(3.0)
-        if i < 3:
+        if i == 1:
             q = c0
-            if i == 1:
-                q = c1
-            if i == 2:
-                q = c2
+        if i == 2:
+            q = c1
+        if i == 3:
+            q = c2
         d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, q, tol_rel)
         reach = wp.max(wp.max(wp.length(c0 - q), wp.length(c1 - q)), wp.length(c2 - q))
         if inside:
@@ -364,6 +368,10 @@ def _region_kernel(
             lipschitz = wp.min(lipschitz, d + reach)
         else:
             lipschitz = wp.min(lipschitz, reach - d)
+            if lipschitz + rounding <= wp.float64(0.0):
+                region_bound[k] = wp.float64(-1.0)
+                region_next_hint[k] = t
+                return
         if t >= 0 and not _has(ids, m, t):
             ids[m] = t
             m += 1
@@ -622,8 +630,73 @@ def _candidates_kernel(
             top += 2
 
 
+@wp.kernel
+def _candidates_flat_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    object_lower: wp.array[wp.vec3],
+    object_upper: wp.array[wp.vec3],
+    job: wp.array[wp.vec2i],
+    job_start: wp.array[wp.int64],
+    num_jobs: int,
+    row_key: wp.array[wp.int64],
+    num_rows: int,
+    stride: wp.int64,
+    first_root: int,
+    capacity: int,
+    # Outputs
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    count: wp.array[wp.int64],
+):
+    """:func:`_candidates_kernel` one thread per (job, triangle of its first object), the triangles of the jobs
+    numbered from ``job_start``: the triangle's world box against the second object's box."""
+    g = wp.int64(wp.tid())
+    a = int(0)
+    b = num_jobs
+    while b - a > 1:  # the last job whose triangles start at or before g
+        mid = (a + b) // 2
+        if job_start[mid] <= g:
+            a = mid
+        else:
+            b = mid
+    j = a
+    tri = int(g - job_start[j])
+    src = job[j][0]
+    dst = job[j][1]
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, src, tri)
+    x0 = wp.vec3d(y0)
+    x1 = wp.vec3d(y1)
+    x2 = wp.vec3d(y2)
+    lo = wp.min(wp.min(x0, x1), x2)
+    hi = wp.max(wp.max(x0, x1), x2)
+    slack = wp.float64(BOX_SLACK) * (_max_abs(lo) + _max_abs(hi))
+    olo = wp.vec3d(object_lower[dst])
+    ohi = wp.vec3d(object_upper[dst])
+    if lo[0] > ohi[0] + slack or lo[1] > ohi[1] + slack or lo[2] > ohi[2] + slack:
+        return
+    if olo[0] > hi[0] + slack or olo[1] > hi[1] + slack or olo[2] > hi[2] + slack:
+        return
+    key = wp.int64(j) * stride + wp.int64(tri)
+    lo_i = int(0)
+    hi_i = num_rows
+    while lo_i < hi_i:
+        mid = (lo_i + hi_i) // 2
+        if row_key[mid] < key:
+            lo_i = mid + 1
+        else:
+            hi_i = mid
+    if lo_i < num_rows and row_key[lo_i] == key:
+        return
+    slot = reserve_slot(count, capacity)
+    if slot >= 0:
+        root_job[first_root + slot] = j
+        root_tri[first_root + slot] = tri
+
+
 _REGION = precision_overloads(_region_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose": wp.array[t]})
+_CANDIDATES_FLAT = precision_overloads(_candidates_flat_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
@@ -763,6 +836,7 @@ class PenetrationDepth:
         contained = np.zeros((0, 2), np.int64) if contained is None else np.asarray(contained, np.int64).reshape(-1, 2)
         jobs = self.jobs(pairs, contained)
         num_jobs = len(jobs)
+        self.level_regions: list[int] = []  # regions measured at each level (the work done), for benchmarks
         if num_jobs == 0:
             nan = np.full(len(pairs), np.nan)
             return DepthResult(nan, np.full(len(rows), np.nan), np.zeros(len(contained)), 0, 0)
@@ -784,15 +858,25 @@ class PenetrationDepth:
         key_dev = wp.array(row_key if num_rows else np.zeros(1, np.int64), dtype=wp.int64, device=d)
         count = wp.zeros(1, dtype=wp.int64, device=d)
         tree = self.trees
+        per_job = self.object_triangles[jobs[:, 0]]
+        flat_total = int(per_job.sum())
+        flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
+                              device=d) if flat_total <= FLAT_CANDIDATES else None
         while True:
             root_job = self._buffer("root_job", num_rows + capacity, wp.int32)
             root_tri = self._buffer("root_tri", num_rows + capacity, wp.int32)
             count.zero_()
-            wp.launch(_CANDIDATES[scene.precision], dim=num_jobs,
-                      inputs=[scene.topology, tree.tree, scene.object_pose, scene.object_scale, tree.object_deforming,
-                              tree.lower, tree.upper, job_dev, key_dev, num_rows, stride, num_rows,
-                              root_job.shape[0] - num_rows],
-                      outputs=[root_job, root_tri, count], device=d)
+            if flat_total <= FLAT_CANDIDATES:  # one thread a triangle of each job's first object
+                wp.launch(_CANDIDATES_FLAT[scene.precision], dim=flat_total,
+                          inputs=[scene.topology, scene.world_vertex, tree.lower, tree.upper, job_dev, flat_start,
+                                  num_jobs, key_dev, num_rows, stride, num_rows, root_job.shape[0] - num_rows],
+                          outputs=[root_job, root_tri, count], device=d)
+            else:  # one thread a job, down its first object's tree
+                wp.launch(_CANDIDATES[scene.precision], dim=num_jobs,
+                          inputs=[scene.topology, tree.tree, scene.object_pose, scene.object_scale,
+                                  tree.object_deforming, tree.lower, tree.upper, job_dev, key_dev, num_rows, stride,
+                                  num_rows, root_job.shape[0] - num_rows],
+                          outputs=[root_job, root_tri, count], device=d)
             extra = int(count.numpy()[0])
             if num_rows + extra <= root_job.shape[0]:
                 break
@@ -838,7 +922,6 @@ class PenetrationDepth:
         total = 0
         level = 0
         exhausted = False
-        self.level_regions = []
         while n > 0 and level < MAX_LEVELS:
             total += n
             self.level_regions.append(n)
