@@ -13,6 +13,8 @@ import pytest
 
 from warp_ccd._src.cli import commands as cli
 
+from conftest import DEFAULT_DEVICE
+
 pytest.importorskip("pxr")
 from warp_ccd._src.usd.importer import UsdMeshImport  # noqa: E402
 
@@ -41,7 +43,7 @@ def write_stage(tmp_path, b_text):
 
 
 def check(path, capsys, *argv):
-    rc = cli.main(["check", str(path), "--device", "cpu", *argv])
+    rc = cli.main(["check", str(path), "--device", DEFAULT_DEVICE, *argv])
     return rc, capsys.readouterr()
 
 
@@ -91,7 +93,7 @@ def test_hostile_input_is_one_line_naming_file_prim_attribute_and_time(tmp_path,
 def test_hostile_input_to_the_importer_names_the_prim(tmp_path, case):
     text, where, what = CASES[case]
     with pytest.raises(ValueError, match=re.escape(f"prim /World/B: {where}")):
-        UsdMeshImport(str(write_stage(tmp_path, text)), device="cpu")
+        UsdMeshImport(str(write_stage(tmp_path, text)), device=DEFAULT_DEVICE)
 
 
 def test_a_constant_mirror_is_valid_and_wound_back(tmp_path, capsys):

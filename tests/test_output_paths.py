@@ -9,6 +9,8 @@ import pytest
 
 from warp_ccd._src.output import check_output_path, prepare_text
 
+from conftest import DEFAULT_DEVICE
+
 
 def test_a_fifo_is_refused_not_replaced(tmp_path):
     fifo = tmp_path / "report.json"
@@ -78,7 +80,7 @@ def test_a_closed_standard_output_ends_quietly_with_the_verdict(tmp_path, report
 
     stage = write_stage(tmp_path, cube("B", xform=ops("double3 xformOp:translate = (0.3, 0, 0)", order=TRANSLATE)))
     out = tmp_path / "r.json"
-    argv = ["check", str(stage), "--device", "cpu", *(["--report", str(out)] if report else [])]
+    argv = ["check", str(stage), "--device", DEFAULT_DEVICE, *(["--report", str(out)] if report else [])]
     code = "import sys; from warp_ccd._src.cli.commands import main; sys.exit(main())"
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     p = subprocess.Popen([sys.executable, "-c", code, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=root)
