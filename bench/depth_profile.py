@@ -44,6 +44,15 @@ def main() -> None:
             print(kind, k, f"classify {(time.perf_counter() - t) * 1e3:.1f} ms", "rows",
                   res.device_triangle_pairs.shape[0], "pairs", len(found.pairs), "levels",
                   classify.depth.level_regions, flush=True)
+        import cProfile
+        import pstats
+
+        prof = cProfile.Profile()
+        prof.enable()
+        classify(res.device_triangle_pairs)
+        wp.synchronize()
+        prof.disable()
+        pstats.Stats(prof).sort_stats("tottime").print_stats(12)
         rows = res.device_triangle_pairs.numpy().reshape(-1, 4)
         wp.timing_begin(cuda_filter=wp.TIMING_ALL)
         classify.depth(found.pairs, rows[found.crossing], floors=np.full(len(found.pairs), 1e-6))

@@ -639,6 +639,7 @@ def _candidates_flat_kernel(
     job: wp.array[wp.vec2i],
     job_start: wp.array[wp.int64],
     num_jobs: int,
+    job_all: wp.array[wp.int32],
     row_key: wp.array[wp.int64],
     num_rows: int,
     stride: wp.int64,
@@ -661,6 +662,8 @@ def _candidates_flat_kernel(
         else:
             b = mid
     j = a
+    if job_all[j] == 0:
+        return
     tri = int(g - job_start[j])
     src = job[j][0]
     dst = job[j][1]
@@ -694,9 +697,104 @@ def _candidates_flat_kernel(
         root_tri[first_root + slot] = tri
 
 
+@wp.kernel
+def _mark_rows_kernel(
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    job_start: wp.array[wp.int64],
+    # Outputs
+    state: wp.array[wp.int32],
+):
+    """One thread per row root: its triangle's state, 1 (it meets the other's surface)."""
+    k = wp.tid()
+    state[job_start[root_job[k]] + wp.int64(root_tri[k])] = 1
+
+
+@wp.kernel
+def _seed_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    tree: TreeView,
+    pose: wp.array[Any],
+    scale: wp.array[wp.float32],
+    deforming: wp.array[wp.int32],
+    world_vertex: wp.array[Any],
+    job: wp.array[wp.vec2i],
+    job_start: wp.array[wp.int64],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    tol_rel: wp.float64,
+    first_root: int,
+    capacity: int,
+    # Outputs
+    state: wp.array[wp.int32],
+    out_job: wp.array[wp.int32],
+    out_tri: wp.array[wp.int32],
+    count: wp.array[wp.int64],
+):
+    """One thread per (row root, edge): the triangle across the edge, where it meets nothing of the other's
+    surface (state 0), lies wholly inside or wholly outside the other's solid: its centroid says which
+    (state 2 inside, appended as a root after ``first_root``; 3 outside)."""
+    k, e = wp.tid()
+    j = root_job[k]
+    src = job[j][0]
+    s = mesh.object_shape[src]
+    nbr = surface.neighbour[mesh.shape_triangle_start[s] + root_tri[k]][e]
+    if nbr < 0:
+        return
+    g = job_start[j] + wp.int64(nbr)
+    if state[g] != 0:
+        return
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, src, nbr)
+    c = (wp.vec3d(y0) + wp.vec3d(y1) + wp.vec3d(y2)) / wp.float64(3.0)
+    d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, job[j][1], c, tol_rel)
+    mark = 3
+    if inside:
+        mark = 2
+    if wp.atomic_cas(state, int(g), 0, mark) == 0 and inside:
+        slot = reserve_slot(count, capacity)
+        if slot >= 0:
+            out_job[first_root + slot] = j
+            out_tri[first_root + slot] = nbr
+
+
+@wp.kernel
+def _spread_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    job: wp.array[wp.vec2i],
+    job_start: wp.array[wp.int64],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    begin: int,
+    end: int,
+    capacity: int,
+    # Outputs
+    state: wp.array[wp.int32],
+    count: wp.array[wp.int64],
+):
+    """One thread per (inside root of the last step, edge): the triangle across the edge, unless it meets the
+    other's surface or was reached already, is inside too (no surface crossed between them): a root, appended."""
+    k, e = wp.tid()
+    i = begin + k
+    if i >= end:
+        return
+    j = root_job[i]
+    s = mesh.object_shape[job[j][0]]
+    nbr = surface.neighbour[mesh.shape_triangle_start[s] + root_tri[i]][e]
+    if nbr < 0:
+        return
+    if wp.atomic_cas(state, int(job_start[j] + wp.int64(nbr)), 0, 2) == 0:
+        slot = reserve_slot(count, capacity)
+        if slot >= 0:
+            root_job[end + slot] = j
+            root_tri[end + slot] = nbr
+
+
 _REGION = precision_overloads(_region_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose": wp.array[t]})
 _CANDIDATES_FLAT = precision_overloads(_candidates_flat_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_SEED = precision_overloads(_seed_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
@@ -852,8 +950,6 @@ class PenetrationDepth:
         keys = np.concatenate([ja[ja >= 0] * stride + rows[ja >= 0, 1], jb[jb >= 0] * stride + rows[jb >= 0, 3]])
         row_key = np.unique(keys)
         num_rows = len(row_key)
-        # Roots: the rows' triangles, then the triangles of each job's first object in its second's box.
-        capacity = max(4 * num_rows + 64, 2 * num_jobs)
         job_dev = wp.array(jobs, dtype=wp.vec2i, device=d)
         key_dev = wp.array(row_key if num_rows else np.zeros(1, np.int64), dtype=wp.int64, device=d)
         count = wp.zeros(1, dtype=wp.int64, device=d)
@@ -862,31 +958,11 @@ class PenetrationDepth:
         flat_total = int(per_job.sum())
         flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
                               device=d) if flat_total <= FLAT_CANDIDATES else None
-        while True:
-            root_job = self._buffer("root_job", num_rows + capacity, wp.int32)
-            root_tri = self._buffer("root_tri", num_rows + capacity, wp.int32)
-            count.zero_()
-            if flat_total <= FLAT_CANDIDATES:  # one thread a triangle of each job's first object
-                wp.launch(_CANDIDATES_FLAT[scene.precision], dim=flat_total,
-                          inputs=[scene.topology, scene.world_vertex, tree.lower, tree.upper, job_dev, flat_start,
-                                  num_jobs, key_dev, num_rows, stride, num_rows, root_job.shape[0] - num_rows],
-                          outputs=[root_job, root_tri, count], device=d)
-            else:  # one thread a job, down its first object's tree
-                wp.launch(_CANDIDATES[scene.precision], dim=num_jobs,
-                          inputs=[scene.topology, tree.tree, scene.object_pose, scene.object_scale,
-                                  tree.object_deforming, tree.lower, tree.upper, job_dev, key_dev, num_rows, stride,
-                                  num_rows, root_job.shape[0] - num_rows],
-                          outputs=[root_job, root_tri, count], device=d)
-            extra = int(count.numpy()[0])
-            if num_rows + extra <= root_job.shape[0]:
-                break
-            capacity = extra
-            self._buffers.pop("root_job")
-            self._buffers.pop("root_tri")
-        num_roots = num_rows + extra
-        if num_rows:
-            root_job[:num_rows].assign(wp.array((row_key // stride).astype(np.int32), dtype=wp.int32, device=d))
-            root_tri[:num_rows].assign(wp.array((row_key % stride).astype(np.int32), dtype=wp.int32, device=d))
+        if flat_total <= FLAT_CANDIDATES:
+            root_job, root_tri, num_roots = self._roots_by_adjacency(jobs, job_dev, flat_start, flat_total, row_key,
+                                                                     key_dev, contained)
+        else:
+            root_job, root_tri, num_roots = self._roots_in_boxes(job_dev, num_jobs, row_key, key_dev)
         # Which solids are convex: closed with a sphere's topology, and no edge bending inward now.
         solids, job_solid = np.unique(jobs[:, 1], return_inverse=True)
         start = np.concatenate([[0], np.cumsum(self.object_triangles[solids])]).astype(np.int32)
@@ -967,6 +1043,86 @@ class PenetrationDepth:
         stopped = (np.where(ab >= 0, stop[np.maximum(ab, 0)], False) | np.where(ba >= 0, stop[np.maximum(ba, 0)], False)
                    | exhausted | (n > 0))
         return DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped)
+
+    def _row_roots(self, row_key: np.ndarray, size: int) -> tuple[wp.array, wp.array]:
+        """Root buffers of at least ``size`` roots, the rows' triangles first."""
+        d = self.scene.device
+        root_job = self._buffer("root_job", size, wp.int32)
+        root_tri = self._buffer("root_tri", size, wp.int32)
+        if len(row_key):
+            stride = np.int64(self.stride)
+            root_job[:len(row_key)].assign(wp.array((row_key // stride).astype(np.int32), dtype=wp.int32, device=d))
+            root_tri[:len(row_key)].assign(wp.array((row_key % stride).astype(np.int32), dtype=wp.int32, device=d))
+        return root_job, root_tri
+
+    def _roots_by_adjacency(self, jobs: np.ndarray, job_dev: wp.array, job_start: wp.array, total: int,
+                            row_key: np.ndarray, key_dev: wp.array, contained: np.ndarray) -> tuple:
+        """The triangles to measure: the rows', then those of each job's first object wholly inside the other's
+        solid, reached from the rows' across edges: a row triangle's neighbour that meets nothing of the other's
+        surface is wholly inside or wholly outside (its centroid says which), and an inside triangle's such
+        neighbours are inside too, one launch a step; the triangles of a contained pair's inner object, all.
+        ``(root_job, root_tri, count)``. A component of the first object that meets nothing of the other's
+        surface and holds no row is not reached (unless the pair is contained)."""
+        scene, d, tree = self.scene, self.scene.device, self.trees
+        num_rows, num_jobs = len(row_key), len(jobs)
+        root_job, root_tri = self._row_roots(row_key, num_rows + total)
+        capacity = root_job.shape[0]
+        state = self._buffer("state", total, wp.int32)
+        state.zero_()
+        count = wp.zeros(1, dtype=wp.int64, device=d)
+        if num_rows:
+            wp.launch(_mark_rows_kernel, dim=num_rows, inputs=[root_job, root_tri, job_start], outputs=[state],
+                      device=d)
+            wp.launch(_SEED[scene.precision], dim=(num_rows, 3),
+                      inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
+                              tree.object_deforming, scene.world_vertex, job_dev, job_start, root_job, root_tri,
+                              self.triangle_tolerance, num_rows, capacity - num_rows],
+                      outputs=[state, root_job, root_tri, count], device=d)
+        begin, end = num_rows, num_rows + int(count.numpy()[0])
+        while end > begin:
+            count.zero_()
+            wp.launch(_spread_kernel, dim=(end - begin, 3),
+                      inputs=[scene.topology, self.surface, job_dev, job_start, root_job, root_tri, begin, end,
+                              capacity - end],
+                      outputs=[state, count], device=d)
+            begin, end = end, end + int(count.numpy()[0])
+        # A contained pair's inner object: all of it.
+        inner = np.zeros(num_jobs, np.int32)
+        if len(contained):
+            key = jobs[:, 0].astype(np.int64) * scene.num_objects + jobs[:, 1]
+            inner[np.isin(key, contained[:, 0].astype(np.int64) * scene.num_objects + contained[:, 1])] = 1
+        if inner.any():
+            count.zero_()
+            wp.launch(_CANDIDATES_FLAT[scene.precision], dim=total,
+                      inputs=[scene.topology, scene.world_vertex, tree.lower, tree.upper, job_dev, job_start, num_jobs,
+                              wp.array(inner, dtype=wp.int32, device=d), key_dev, num_rows, np.int64(self.stride),
+                              end, capacity - end],
+                      outputs=[root_job, root_tri, count], device=d)
+            end += int(count.numpy()[0])
+        return root_job, root_tri, end
+
+    def _roots_in_boxes(self, job_dev: wp.array, num_jobs: int, row_key: np.ndarray, key_dev: wp.array) -> tuple:
+        """The triangles to measure where the jobs' first objects are too big to number (:data:`FLAT_CANDIDATES`):
+        the rows', then each job's first object's triangles in the other's box, one thread a job down the first
+        object's tree. ``(root_job, root_tri, count)``."""
+        scene, d, tree = self.scene, self.scene.device, self.trees
+        num_rows = len(row_key)
+        capacity = max(4 * num_rows + 64, 2 * num_jobs)
+        count = wp.zeros(1, dtype=wp.int64, device=d)
+        while True:
+            root_job, root_tri = self._row_roots(row_key, num_rows + capacity)
+            count.zero_()
+            wp.launch(_CANDIDATES[scene.precision], dim=num_jobs,
+                      inputs=[scene.topology, tree.tree, scene.object_pose, scene.object_scale, tree.object_deforming,
+                              tree.lower, tree.upper, job_dev, key_dev, num_rows, np.int64(self.stride), num_rows,
+                              root_job.shape[0] - num_rows],
+                      outputs=[root_job, root_tri, count], device=d)
+            extra = int(count.numpy()[0])
+            if num_rows + extra <= root_job.shape[0]:
+                return root_job, root_tri, num_rows + extra
+            capacity = extra
+            self._buffers.pop("root_job")
+            self._buffers.pop("root_tri")
 
     def _job_of(self, job_key: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         """The job index of each ``(src, dst)``, -1 where there is none."""
