@@ -319,6 +319,7 @@ def _region_kernel(
     region_hint: wp.array[wp.int32],
     tol_rel: wp.float64,
     resolution: wp.float64,
+    quick: int,
     # Outputs
     region_bound: wp.array[wp.float64],
     region_next_hint: wp.array[wp.int32],
@@ -372,6 +373,13 @@ def _region_kernel(
                 region_bound[k] = wp.float64(-1.0)
                 region_next_hint[k] = t
                 return
+        if quick != 0:  # the centroid alone: its depth, and the bound it gives (1-Lipschitz)
+            region_bound[k] = wp.max(lipschitz, wp.float64(-1.0))
+            region_next_hint[k] = t
+            if low > wp.float64(0.0):
+                wp.atomic_max(job_depth, j, low)
+                wp.atomic_max(root_depth, r, low)
+            return
         if t >= 0 and not _has(ids, m, t):
             ids[m] = t
             m += 1
@@ -454,6 +462,7 @@ def _split_kernel(
     job_floor: wp.array[wp.float64],
     job_depth: wp.array[wp.float64],
     job_stop: wp.array[wp.int32],
+    split: int,
     capacity: int,
     # Outputs
     out_root: wp.array[wp.int32],
@@ -475,6 +484,13 @@ def _split_kernel(
     if twin >= 0:
         found = wp.max(found, job_depth[twin])
     if bound <= wp.max(found * (wp.float64(1.0) + job_tolerance[j]), job_floor[j]):
+        return
+    if split == 0:  # kept whole: the first level's survivors of its centroids' bounds
+        slot = int(wp.atomic_add(out_count, 0, wp.int64(1)))
+        if slot < capacity:
+            out_region[slot] = region[k]
+            out_root[slot] = r
+            out_hint[slot] = region_next_hint[k]
         return
     slot = int(wp.atomic_add(out_count, 0, wp.int64(4)))
     if slot + 4 > capacity:
@@ -998,6 +1014,8 @@ class PenetrationDepth:
         total = 0
         level = 0
         exhausted = False
+        quick = 1  # first the roots' centroids alone: the deep ones set a depth that drops most others
+        step = 0
         while n > 0 and level < MAX_LEVELS:
             total += n
             self.level_regions.append(n)
@@ -1006,20 +1024,21 @@ class PenetrationDepth:
             wp.launch(_REGION[scene.precision], dim=n,
                       inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
                               tree.object_deforming, scene.world_vertex, job_dev, job_convex, root_job, root_tri,
-                              cur[0], cur[1], cur[2], self.triangle_tolerance, self.resolution],
+                              cur[0], cur[1], cur[2], self.triangle_tolerance, self.resolution, quick],
                       outputs=[bound, next_hint, job_depth, root_depth, job_count], device=d)
             wp.launch(_stop_kernel, dim=num_jobs, inputs=[job_count, job_before, job_twin, PAIR_REGIONS],
                       outputs=[job_stop], device=d)
             wp.copy(job_before, job_count)
-            level += 1
-            want = 4 * n
+            step += 1
+            level += 1 - quick
+            want = n if quick else 4 * n
             while True:
-                nxt = [self._buffer(f"{name}{level % 2}", want, t)
+                nxt = [self._buffer(f"{name}{step % 2}", want, t)
                        for name, t in (("root", wp.int32), ("region", Region), ("hint", wp.int32))]
                 count.zero_()
                 wp.launch(_split_kernel, dim=n,
                           inputs=[cur[0], cur[1], bound, next_hint, root_job, job_twin, job_tolerance, job_floor,
-                                  job_depth, job_stop, nxt[0].shape[0]],
+                                  job_depth, job_stop, 1 - quick, nxt[0].shape[0]],
                           outputs=[nxt[0], nxt[1], nxt[2], count], device=d)
                 m = int(count.numpy()[0])
                 if m <= nxt[0].shape[0]:
@@ -1030,6 +1049,7 @@ class PenetrationDepth:
                     break
                 want = m
             cur, n = nxt, m
+            quick = 0
         depth_job = job_depth.numpy()
         depth_root = root_depth.numpy()
         # Per pair, per row, per contained pair.
