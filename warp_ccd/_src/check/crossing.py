@@ -457,8 +457,9 @@ class CrossingClassifier:
             eps = self._eps[:m].numpy()
             rows = pairs.numpy().reshape(-1, 4).astype(np.int64)
         at = np.flatnonzero(crossing)
-        object_pairs, row_pair = np.unique(rows[at][:, [0, 2]], axis=0, return_inverse=True)
-        object_pairs = object_pairs.astype(np.int32).reshape(-1, 2)
+        n = np.int64(max(self.scene.num_objects, 1))
+        key, row_pair = np.unique(rows[at, 0] * n + rows[at, 2], return_inverse=True)  # one key, not rows
+        object_pairs = np.stack([key // n, key % n], axis=1).astype(np.int32).reshape(-1, 2)
         # A crossing is never 0 deep: at least its tolerance, below which depths are not told apart.
         floor = np.zeros(len(object_pairs))
         np.maximum.at(floor, row_pair.reshape(-1), eps[at])

@@ -925,7 +925,9 @@ class PenetrationDepth:
         contained = np.asarray(contained, np.int64).reshape(-1, 2)
         cand = np.concatenate([pairs, pairs[:, ::-1], contained])
         cand = cand[self.object_solid[cand[:, 1]] > 0] if len(cand) else cand
-        return np.unique(cand, axis=0).astype(np.int32).reshape(-1, 2)
+        n = np.int64(max(self.scene.num_objects, 1))
+        key = np.unique(cand[:, 0] * n + cand[:, 1])  # one sort of one key, not of rows
+        return np.stack([key // n, key % n], axis=1).astype(np.int32).reshape(-1, 2)
 
     def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None, contained: np.ndarray | None = None,
                  floors: np.ndarray | None = None) -> DepthResult:
