@@ -34,8 +34,11 @@ nearest triangle joins ``S`` and the program is solved again (cutting planes, Ke
 by more than the relative tolerance (:data:`CONVEX_TOLERANCE` for convex ``B``, :data:`TOLERANCE`
 otherwise: never more than that fraction below the true depth), or when it lies wholly outside ``B``: in
 the ball about a sample point outside ``B`` that reaches no surface. Which triangles of ``A`` are tried:
-those that meet ``B``'s surface (the rows given) and those of ``A``'s tree within ``B``'s box (wholly inside
-or outside; the bounds drop the outside ones).
+those that meet ``B``'s surface (the rows given), and those wholly inside ``B`` reached from them across edges (a
+neighbour that meets nothing of ``B``'s surface is wholly inside or out: its centroid says which; inside spreads);
+a contained pair's inner object whole; where the objects are too big to number (:data:`FLAT_CANDIDATES`), those
+of ``A``'s tree within ``B``'s box. Every root's centroid is measured first; only the roots whose centroid's
+bound beats the depth so found are measured further.
 
 Inside ``B`` or not is the side of a point at its nearest feature of ``B``'s surface (its pseudo-normal:
 :func:`~warp_ccd._src.narrowphase.surface._side_at`). Everything runs in float64 on the world vertices,
