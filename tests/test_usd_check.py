@@ -17,6 +17,7 @@ import warp_ccd as wc
 from warp_ccd._src.check.check import check_usd
 from warp_ccd._src.check.crossing import pair_crossing_depth
 from warp_ccd._src.check.overlay import COLOR_PENETRATING
+from warp_ccd._src.check.report import report_schema
 from warp_ccd._src.cli import commands as cli
 from warp_ccd._src.usd.importer import UsdMeshImport, scene_from_usd
 from warp_ccd._src.usd.stage import stage_time_codes
@@ -942,3 +943,70 @@ def test_deepest_face_pair_rows_match_the_full_sort():
             got, deepest = _deepest_per_face_pair(faces, depth, objects, count)
             assert got.dtype == np.int32 and np.array_equal(got, faces[order][first])
             assert np.array_equal(deepest, depth[order][first])
+
+
+# The depth the check gates on, containment (narrowphase/depth.py).
+
+def test_flush_cubes_have_depth_03_and_min_depth_gates_on_it(tmp_path, capsys):
+    """Two unit cubes overlapping by 0.7 along x, flush on y and z: no vertex of either lies inside the other,
+    yet the depth is 0.3 (the middle of A's face x = 0.5 lies 0.3 inside B): ``--min-depth 0.01`` exits 1, 0.31
+    exits 0; the report says 0.3 for the pair."""
+    path = tmp_path / "flush.usda"
+    stage = new_stage(path, end=0)
+    define_mesh(stage, "/World/A", *box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)))
+    define_mesh(stage, "/World/B", *box((-0.2, -0.5, -0.5), (0.8, 0.5, 0.5)))
+    stage.GetRootLayer().Save()
+    report = tmp_path / "r.json"
+    rc, captured = run_cli(capsys, ["check", str(path), "--min-depth", "0.01", "--report", str(report)])
+    assert rc == 1, captured.err
+    data = json.loads(report.read_text())
+    assert data["findings"] == "penetrating" and data["pairs"][0]["max_depth"] == pytest.approx(0.3, rel=1e-6)
+    rc, captured = run_cli(capsys, ["check", str(path), "--min-depth", "0.31"])
+    assert rc == 0, captured.err
+
+
+def test_crossing_open_sheets_have_no_depth_and_always_penetrate(tmp_path, capsys):
+    """Two open quads crossing in an X bound no solid: the report's depth is null, the summary says undefined,
+    and the pair penetrates whatever --min-depth."""
+    path = tmp_path / "sheets.usda"
+    stage = new_stage(path, end=0)
+    define_mesh(stage, "/World/A", [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], [4], [0, 1, 2, 3])
+    define_mesh(stage, "/World/B", [[0, -1, -1], [0, 1, -1], [0, 1, 1], [0, -1, 1]], [4], [0, 1, 2, 3])
+    stage.GetRootLayer().Save()
+    report = tmp_path / "r.json"
+    rc, captured = run_cli(capsys, ["check", str(path), "--min-depth", "10", "--report", str(report)])
+    assert rc == 1, captured.err
+    assert "undefined" in captured.out
+    data = json.loads(report.read_text())
+    assert data["pairs"][0]["max_depth"] is None and data["frames"][0]["pairs"][0]["max_depth"] is None
+
+
+def test_containment_is_a_finding_with_its_depth(tmp_path, capsys):
+    """A box wholly inside another passes a plain check (exit 0); with --containment it is a finding
+    ("contained", exit 1) with its depth (its bottom face's middle, 0.4 from the outer surface), in the report,
+    the summary and the overlay (violet)."""
+    from warp_ccd._src.check.overlay import COLOR_CONTAINED
+
+    path = tmp_path / "inside.usda"
+    stage = new_stage(path, end=0)
+    define_mesh(stage, "/World/Outer", *box((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)))
+    define_mesh(stage, "/World/Inner", *box((-0.2, -0.1, -0.2), (0.2, 0.3, 0.2)))
+    stage.GetRootLayer().Save()
+    rc, captured = run_cli(capsys, ["check", str(path)])
+    assert rc == 0, captured.err
+    report, overlay = tmp_path / "r.json", tmp_path / "o.usda"
+    rc, captured = run_cli(capsys, ["check", str(path), "--containment", "--report", str(report),
+                                    "--usd-out", str(overlay)])
+    assert rc == 1, captured.err
+    assert "/World/Inner inside /World/Outer" in captured.out
+    data = json.loads(report.read_text())
+    assert data["findings"] == "contained" and data["contained"] is True
+    (row,) = data["frames"][0]["contained"]
+    assert (row["inner"], row["outer"]) == ("/World/Inner", "/World/Outer")
+    assert row["depth"] == pytest.approx(0.4, rel=1e-6)
+    assert data["containment"]["pairs"][0]["max_depth"] == pytest.approx(0.4, rel=1e-6)
+    jsonschema = pytest.importorskip("jsonschema")
+    jsonschema.validate(data, report_schema())
+    layered = Usd.Stage.Open(str(overlay))
+    color = UsdGeom.PrimvarsAPI(layered.GetPrimAtPath("/World/Inner")).GetPrimvar("displayColor").Get(0)
+    assert tuple(color[0]) == pytest.approx(COLOR_CONTAINED)
