@@ -78,7 +78,8 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 
 TOLERANCE = 1.0e-3
 """Relative tolerance of the depth against a non-convex solid: the depth found is never below the true one
-by more than this fraction of it."""
+by more than this fraction of it, besides what the input's precision resolves (:data:`ROUNDING_ULPS`) and,
+against a non-convex solid, :data:`RESOLUTION`."""
 CONVEX_TOLERANCE = 1.0e-9
 """Relative tolerance against a convex solid, where the bound is exact (what is left is rounding)."""
 PAIR_REGIONS = 1 << 18
@@ -135,13 +136,15 @@ def _to_box_space(pose: wp.array[Any], scale: wp.array[wp.float32], deforming: w
 
 @wp.func
 def nearest_triangle(mesh: MeshTopology, tree: TreeView, pose: wp.array[Any], scale: wp.array[wp.float32],
-                     deforming: wp.array[wp.int32], world_vertex: wp.array[Any],
-                     obj: int, p: wp.vec3d):
-    """The triangle of ``obj`` nearest to ``p`` and its distance, down the object's tree: nodes whose box is
-    farther than the nearest triangle so far are skipped. ``(distance, local triangle)``; ``(inf, -1)`` for an
-    object without triangles."""
+                     deforming: wp.array[wp.int32], world_vertex: wp.array[Any], obj: int, p: wp.vec3d,
+                     tol_rel: wp.float64):
+    """The distance from ``p`` to the surface of ``obj`` and its nearest non-degenerate triangle, down the
+    object's tree: nodes whose box is farther than the nearest so far are skipped. A degenerate triangle (a
+    sliver patching a T-junction) counts for the distance but not as the nearest: it has no side, and its points
+    lie on its neighbours' edges. ``(distance, local triangle)``; ``(inf, -1)`` for an object without triangles."""
     pb, sc, slack = _to_box_space(pose, scale, deforming, obj, p)
     best = wp.float64(1.0e300)
+    proper = wp.float64(1.0e300)
     best_tri = int(-1)
     s = mesh.object_shape[obj]
     if mesh.shape_triangle_start[s + 1] == mesh.shape_triangle_start[s]:
@@ -158,19 +161,25 @@ def nearest_triangle(mesh: MeshTopology, tree: TreeView, pose: wp.array[Any], sc
         node = stack[top]
         gap = wp.max(wp.max(wp.vec3d(tree.node_lower[slot_start + node]) - pb,
                             pb - wp.vec3d(tree.node_upper[slot_start + node])), zero)
-        if wp.length(gap) * sc - slack > best:
+        if wp.length(gap) * sc - slack > proper:
             continue
         child = tree.node_child[node_start + node]
         if child[0] < 0:
             rng = tree.node_triangle[node_start + node]
             for j in range(rng[0], rng[0] + rng[1]):
                 tri = tree.tri_order[tri_start + j]
-                x0, x1, x2 = mesh_triangle(mesh, world_vertex, obj, tri)
-                c, feature = _closest_on_triangle(p, wp.vec3d(x0), wp.vec3d(x1), wp.vec3d(x2))
+                y0, y1, y2 = mesh_triangle(mesh, world_vertex, obj, tri)
+                x0 = wp.vec3d(y0)
+                x1 = wp.vec3d(y1)
+                x2 = wp.vec3d(y2)
+                c, feature = _closest_on_triangle(p, x0, x1, x2)
                 d = wp.length(p - c)
-                if d < best or (d == best and tri < best_tri):
-                    best = d
-                    best_tri = tri
+                best = wp.min(best, d)
+                if d < proper or (d == proper and tri < best_tri):
+                    n, degenerate = _unit_normal(x0, x1, x2, tol_rel)
+                    if not degenerate:
+                        proper = d
+                        best_tri = tri
         elif top + 2 <= TREE_STACK:
             stack[top] = child[1]
             stack[top + 1] = child[0]
@@ -183,7 +192,7 @@ def _probe(mesh: MeshTopology, surface: SurfaceTopology, tree: TreeView, pose: w
            scale: wp.array[wp.float32], deforming: wp.array[wp.int32], world_vertex: wp.array[Any], obj: int,
            p: wp.vec3d, tol_rel: wp.float64):
     """``p`` against the surface of ``obj``: ``(distance, nearest triangle, inside)``."""
-    d, t = nearest_triangle(mesh, tree, pose, scale, deforming, world_vertex, obj, p)
+    d, t = nearest_triangle(mesh, tree, pose, scale, deforming, world_vertex, obj, p, tol_rel)
     inside = t >= 0 and _side_at(mesh, surface, world_vertex, obj, t, p, tol_rel) < wp.float64(0.0)
     return d, t, inside
 
@@ -375,6 +384,9 @@ def _region_kernel(
             if lipschitz + rounding <= wp.float64(0.0):
                 region_bound[k] = wp.float64(-1.0)
                 region_next_hint[k] = t
+                if low > wp.float64(0.0):  # sides told apart near the surface may disagree: keep what was found
+                    wp.atomic_max(job_depth, j, low)
+                    wp.atomic_max(root_depth, r, low)
                 return
         if quick != 0:  # the centroid alone: its depth, and the bound it gives (1-Lipschitz)
             region_bound[k] = wp.max(lipschitz, wp.float64(-1.0))
@@ -526,7 +538,8 @@ def _convex_kernel(
 ):
     """One thread per triangle of the solids asked about (``solid``, their triangles numbered from
     ``solid_start``): clears a solid's convex flag where one of its edges bends inward (the vertex across it
-    in front of the triangle's plane by more than four times ``tol_rel`` times the triangle's longest edge)."""
+    in front of the triangle's plane by more than four times ``tol_rel`` times the triangle's longest edge), or
+    where one of its triangles is degenerate."""
     g = wp.tid()
     a = int(0)
     b = num_solids
@@ -547,6 +560,9 @@ def _convex_kernel(
     x2 = wp.vec3d(y2)
     n, degenerate = _unit_normal(x0, x1, x2, tol_rel)
     if degenerate:
+        # A sliver (say, patching a T-junction) would hide the bend between the faces on either side of it:
+        # such a solid is not taken for convex.
+        convex[a] = 0
         return
     n = n * surface.shape_side[s]
     size = wp.max(wp.max(wp.length(x1 - x0), wp.length(x2 - x1)), wp.length(x0 - x2))
