@@ -133,13 +133,12 @@ class FrameContacts:
     def __post_init__(self) -> None:
         if self.penetrating is None:
             self.penetrating = np.ones(len(self.triangle_pairs), bool)
-        if self.pairs is None:
+        if self.pairs is None:  # a frame made by hand: each pair's depth, its rows' deepest
             hit = self.triangle_pairs[self.penetrating]
-            self.pairs = np.unique(hit[:, [0, 2]], axis=0).astype(np.int32).reshape(-1, 2)
-            self.pair_depth = np.full(len(self.pairs), np.nan)
-            for i, (a, b) in enumerate(self.pairs.tolist()):
-                mine = (hit[:, 0] == a) & (hit[:, 2] == b)
-                self.pair_depth[i] = np.max(self.depth[self.penetrating][mine])
+            self.pairs, at = np.unique(hit[:, [0, 2]], axis=0, return_inverse=True)
+            self.pairs = self.pairs.astype(np.int32).reshape(-1, 2)
+            self.pair_depth = np.full(len(self.pairs), -np.inf)
+            np.maximum.at(self.pair_depth, at.reshape(-1), self.depth[self.penetrating])
 
     @property
     def object_pairs(self) -> np.ndarray:

@@ -66,7 +66,7 @@ import warp as wp
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _closest_on_triangle, _max_abs, _unit_normal
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
-from ..runtime.buffers import reserve_slot
+from ..runtime.buffers import reserve_slot, upper_bound
 from ..scene.scene import MeshTopology, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from .surface import SurfaceTopology, _side_at, surface_topology
@@ -89,8 +89,9 @@ MAX_LEVELS = 28
 MAX_REGIONS = 1 << 24
 """Most regions of one level: past it the search stops (:attr:`DepthResult.stopped`)."""
 FLAT_CANDIDATES = 1 << 24
-"""Where the jobs' first objects hold at most this many triangles in all, the triangles in the other's box are
-found one thread a triangle; beyond, one thread a job walks its object's tree."""
+"""Where the jobs' first objects hold at most this many triangles in all, the triangles inside the other's solid
+are reached from the rows' across edges (a state per triangle); beyond, one thread a job walks its object's tree
+for the triangles in the other's box."""
 MAX_PLANES = 6
 """Most triangles of the other surface in one region's linear program."""
 ROUNDING_ULPS = 8.0
@@ -541,14 +542,7 @@ def _convex_kernel(
     in front of the triangle's plane by more than four times ``tol_rel`` times the triangle's longest edge), or
     where one of its triangles is degenerate."""
     g = wp.tid()
-    a = int(0)
-    b = num_solids
-    while b - a > 1:  # the last solid whose triangles start at or before g
-        mid = (a + b) // 2
-        if solid_start[mid] <= g:
-            a = mid
-        else:
-            b = mid
+    a = upper_bound(solid_start, 0, num_solids, g) - 1  # the last solid whose triangles start at or before g
     if convex[a] == 0:
         return
     obj = solid[a]
@@ -644,16 +638,8 @@ def _candidates_kernel(
             for i in range(rng[0], rng[0] + rng[1]):
                 tri = tree.tri_order[tri_start + i]
                 key = wp.int64(j) * stride + wp.int64(tri)
-                # Binary search of the rows' keys.
-                a = int(0)
-                b = num_rows
-                while a < b:
-                    mid = (a + b) // 2
-                    if row_key[mid] < key:
-                        a = mid + 1
-                    else:
-                        b = mid
-                if a < num_rows and row_key[a] == key:
+                after = upper_bound(row_key, 0, num_rows, key)  # the rows' keys are sorted
+                if after > 0 and row_key[after - 1] == key:
                     continue
                 slot = reserve_slot(count, capacity)
                 if slot >= 0:
@@ -666,18 +652,10 @@ def _candidates_kernel(
 
 
 @wp.kernel
-def _candidates_flat_kernel(
-    mesh: MeshTopology,
-    world_vertex: wp.array[Any],
-    object_lower: wp.array[wp.vec3],
-    object_upper: wp.array[wp.vec3],
-    job: wp.array[wp.vec2i],
+def _whole_kernel(
     job_start: wp.array[wp.int64],
     num_jobs: int,
-    job_all: wp.array[wp.int32],
-    row_key: wp.array[wp.int64],
-    num_rows: int,
-    stride: wp.int64,
+    job_whole: wp.array[wp.int32],
     first_root: int,
     capacity: int,
     # Outputs
@@ -685,51 +663,17 @@ def _candidates_flat_kernel(
     root_tri: wp.array[wp.int32],
     count: wp.array[wp.int64],
 ):
-    """:func:`_candidates_kernel` one thread per (job, triangle of its first object), the triangles of the jobs
-    numbered from ``job_start``: the triangle's world box against the second object's box."""
+    """One thread per (job, triangle of its first object), the triangles of the jobs numbered from
+    ``job_start``: every triangle of a job flagged in ``job_whole`` (a contained pair's inner object, which
+    meets nothing of the other's surface), appended as a root after ``first_root``."""
     g = wp.int64(wp.tid())
-    a = int(0)
-    b = num_jobs
-    while b - a > 1:  # the last job whose triangles start at or before g
-        mid = (a + b) // 2
-        if job_start[mid] <= g:
-            a = mid
-        else:
-            b = mid
-    j = a
-    if job_all[j] == 0:
-        return
-    tri = int(g - job_start[j])
-    src = job[j][0]
-    dst = job[j][1]
-    y0, y1, y2 = mesh_triangle(mesh, world_vertex, src, tri)
-    x0 = wp.vec3d(y0)
-    x1 = wp.vec3d(y1)
-    x2 = wp.vec3d(y2)
-    lo = wp.min(wp.min(x0, x1), x2)
-    hi = wp.max(wp.max(x0, x1), x2)
-    slack = wp.float64(BOX_SLACK) * (_max_abs(lo) + _max_abs(hi))
-    olo = wp.vec3d(object_lower[dst])
-    ohi = wp.vec3d(object_upper[dst])
-    if lo[0] > ohi[0] + slack or lo[1] > ohi[1] + slack or lo[2] > ohi[2] + slack:
-        return
-    if olo[0] > hi[0] + slack or olo[1] > hi[1] + slack or olo[2] > hi[2] + slack:
-        return
-    key = wp.int64(j) * stride + wp.int64(tri)
-    lo_i = int(0)
-    hi_i = num_rows
-    while lo_i < hi_i:
-        mid = (lo_i + hi_i) // 2
-        if row_key[mid] < key:
-            lo_i = mid + 1
-        else:
-            hi_i = mid
-    if lo_i < num_rows and row_key[lo_i] == key:
+    j = upper_bound(job_start, 0, num_jobs, g) - 1  # the last job whose triangles start at or before g
+    if job_whole[j] == 0:
         return
     slot = reserve_slot(count, capacity)
     if slot >= 0:
         root_job[first_root + slot] = j
-        root_tri[first_root + slot] = tri
+        root_tri[first_root + slot] = int(g - job_start[j])
 
 
 @wp.kernel
@@ -828,7 +772,6 @@ def _spread_kernel(
 
 _REGION = precision_overloads(_region_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose": wp.array[t]})
-_CANDIDATES_FLAT = precision_overloads(_candidates_flat_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _SEED = precision_overloads(_seed_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
@@ -986,20 +929,18 @@ class PenetrationDepth:
         jb = self._job_of(job_key, rows[:, 2], rows[:, 0])
         keys = np.concatenate([ja[ja >= 0] * stride + rows[ja >= 0, 1], jb[jb >= 0] * stride + rows[jb >= 0, 3]])
         row_key = np.unique(keys)
-        num_rows = len(row_key)
         job_dev = wp.array(jobs, dtype=wp.vec2i, device=d)
-        key_dev = wp.array(row_key if num_rows else np.zeros(1, np.int64), dtype=wp.int64, device=d)
         count = wp.zeros(1, dtype=wp.int64, device=d)
         tree = self.trees
         per_job = self.object_triangles[jobs[:, 0]]
         flat_total = int(per_job.sum())
-        flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
-                              device=d) if flat_total <= FLAT_CANDIDATES else None
         if flat_total <= FLAT_CANDIDATES:
+            flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
+                                  device=d)
             root_job, root_tri, num_roots = self._roots_by_adjacency(jobs, job_dev, flat_start, flat_total, row_key,
-                                                                     key_dev, contained)
+                                                                     contained)
         else:
-            root_job, root_tri, num_roots = self._roots_in_boxes(job_dev, num_jobs, row_key, key_dev)
+            root_job, root_tri, num_roots = self._roots_in_boxes(job_dev, num_jobs, row_key)
         # Which solids are convex: closed with a sphere's topology, and no edge bending inward now.
         solids, job_solid = np.unique(jobs[:, 1], return_inverse=True)
         start = np.concatenate([[0], np.cumsum(self.object_triangles[solids])]).astype(np.int32)
@@ -1097,7 +1038,7 @@ class PenetrationDepth:
         return root_job, root_tri
 
     def _roots_by_adjacency(self, jobs: np.ndarray, job_dev: wp.array, job_start: wp.array, total: int,
-                            row_key: np.ndarray, key_dev: wp.array, contained: np.ndarray) -> tuple:
+                            row_key: np.ndarray, contained: np.ndarray) -> tuple:
         """The triangles to measure: the rows', then those of each job's first object wholly inside the other's
         solid, reached from the rows' across edges: a row triangle's neighbour that meets nothing of the other's
         surface is wholly inside or wholly outside (its centroid says which), and an inside triangle's such
@@ -1134,20 +1075,19 @@ class PenetrationDepth:
             inner[np.isin(key, contained[:, 0].astype(np.int64) * scene.num_objects + contained[:, 1])] = 1
         if inner.any():
             count.zero_()
-            wp.launch(_CANDIDATES_FLAT[scene.precision], dim=total,
-                      inputs=[scene.topology, scene.world_vertex, tree.lower, tree.upper, job_dev, job_start, num_jobs,
-                              wp.array(inner, dtype=wp.int32, device=d), key_dev, num_rows, np.int64(self.stride),
-                              end, capacity - end],
+            wp.launch(_whole_kernel, dim=total,
+                      inputs=[job_start, num_jobs, wp.array(inner, dtype=wp.int32, device=d), end, capacity - end],
                       outputs=[root_job, root_tri, count], device=d)
             end += int(count.numpy()[0])
         return root_job, root_tri, end
 
-    def _roots_in_boxes(self, job_dev: wp.array, num_jobs: int, row_key: np.ndarray, key_dev: wp.array) -> tuple:
+    def _roots_in_boxes(self, job_dev: wp.array, num_jobs: int, row_key: np.ndarray) -> tuple:
         """The triangles to measure where the jobs' first objects are too big to number (:data:`FLAT_CANDIDATES`):
         the rows', then each job's first object's triangles in the other's box, one thread a job down the first
         object's tree. ``(root_job, root_tri, count)``."""
         scene, d, tree = self.scene, self.scene.device, self.trees
         num_rows = len(row_key)
+        key_dev = wp.array(row_key if num_rows else np.zeros(1, np.int64), dtype=wp.int64, device=d)
         capacity = max(4 * num_rows + 64, 2 * num_jobs)
         count = wp.zeros(1, dtype=wp.int64, device=d)
         while True:
