@@ -120,6 +120,9 @@ OPTIONS: dict[str, Rule] = {
     "ccd_max_iterations": Rule("integer", low=1, high=COUNT_MAX),
     "clearance": Rule("number", low=0.0, high=CLEARANCE_MAX),
     "self_intersections": FLAG,
+    "contacts": FLAG,
+    "max_per_pair": Rule("integer", low=1, high=32),
+    "margin": Rule("number", low=0.0, high=CLEARANCE_MAX),
     "duplicates": FLAG,
     # How a frame runs.
     "timings": FLAG,
