@@ -56,7 +56,7 @@ def scene_digest(precision: str, device) -> str:
     scene = wc.Scene(shapes, rng.integers(0, 2, n), object_scale=rng.uniform(0.5, 1.5, n), poses=poses, device=device,
                      precision=precision)
     res = wc.CollisionPipeline(scene, clearance=0.3).detect()
-    far = wc.DistanceQuery(scene).query()
+    far = wc.DistanceQuery(scene, signed=False).query()  # the least distances (signed ones: test_contacts)
     # An intersecting pair's direction is a sum of float64 atomics, in the order the device ran them: its
     # last bits may vary, so only the others' directions are held to the record.
     apart = ~res.object_intersecting

@@ -27,12 +27,10 @@ The API in levels: this module holds what a user of :func:`collide`, :class:`Sce
 """
 
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
-from ._src.broadphase.sap import broad_phase_pairs
 from ._src.check.check import check_usd
 from ._src.check.report import CheckReport
 from ._src.geometry.precision import PrecisionWarning
 from ._src.geometry.triangle import TOLERANCE
-from ._src.narrowphase.contacts import Contacts
 from ._src.pipeline.options import PipelineOptions
 from ._src.pipeline.pipeline import CollisionPipeline, collide, contacts
 from ._src.pipeline.result import CollisionResult
@@ -47,13 +45,11 @@ __all__ = [
     "CheckReport",
     "CollisionPipeline",
     "CollisionResult",
-    "Contacts",
     "DistanceQuery",
     "DistanceResult",
     "PipelineOptions",
     "PrecisionWarning",
     "Scene",
-    "broad_phase_pairs",
     "ccd_queries",
     "check_usd",
     "collide",

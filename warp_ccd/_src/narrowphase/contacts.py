@@ -13,8 +13,9 @@ that surface; ``depth < 0`` is a speculative contact of a pair apart by ``-depth
   pair's depth.
 * *vertices*: each vertex of a row's triangle that lies inside the other object's closed solid, with its nearest
   point on the other surface and its own depth (a box resting on a floor: its corners).
-* *crossing*: the ends of each row's intersection segment, on both surfaces at once (depth 0): where the surfaces
-  meet; the outline of the contact region (and the only contacts of open surfaces, which bound no solid).
+* *crossing*: the ends of each row's intersection segment, or the corners of the area where coplanar triangles
+  overlap, on both surfaces at once (depth 0): where the surfaces meet; the outline of the contact region (and
+  the only contacts of open surfaces, which bound no solid, and of surfaces resting on each other).
 * *near* (a margin ``d > 0``): a pair apart but within ``d`` gets its closest points, ``depth = -distance``.
 
 The normal of a contact deeper than its tolerance is the direction between its two points. One at depth 0 (a
@@ -74,10 +75,12 @@ KIND_NEAR = wp.constant(3)
 """Candidate kind: the closest points of a pair apart within the margin."""
 NO_KEY = wp.constant(wp.int64(0x7FFFFFFFFFFFFFFF))
 """Key of an empty candidate slot: sorted last."""
-ROW_SLOTS = 8
-"""Candidate slots of a row: three vertices of each triangle, two ends of its segment."""
+ROW_SLOTS = 12
+"""Candidate slots of a row: three vertices of each triangle, then the two ends of its segment or the (at most
+six) corners of the area where coplanar triangles overlap."""
 
 _Chosen = wp.types.vector(length=MAX_PER_PAIR_LIMIT, dtype=wp.int32)
+_Polygon = wp.types.matrix(shape=(9, 3), dtype=wp.float64)
 
 
 @wp.func
@@ -109,6 +112,70 @@ def _face_normal(na: wp.vec3d, nb: wp.vec3d):
     if wp.length(na) > wp.float64(0.5):
         return -na
     return wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(1.0))
+
+
+@wp.func
+def _corner_of(poly: _Polygon, i: int):
+    return wp.vec3d(poly[i, 0], poly[i, 1], poly[i, 2])
+
+
+@wp.func
+def _clip_edge(poly: _Polygon, count: int, o: wp.vec3d, m: wp.vec3d, eps: wp.float64):
+    """Sutherland-Hodgman: the polygon's part where ``dot(x - o, m) >= -eps``."""
+    out = _Polygon()
+    k = int(0)
+    for i in range(count):
+        p = _corner_of(poly, i)
+        q = _corner_of(poly, (i + 1) % count)
+        dp = wp.dot(p - o, m)
+        dq = wp.dot(q - o, m)
+        if dp >= -eps:
+            if k < 9:
+                out[k, 0] = p[0]
+                out[k, 1] = p[1]
+                out[k, 2] = p[2]
+                k += 1
+        if (dp >= -eps) != (dq >= -eps):
+            x = p + (q - p) * (dp / (dp - dq))
+            if k < 9:
+                out[k, 0] = x[0]
+                out[k, 1] = x[1]
+                out[k, 2] = x[2]
+                k += 1
+    return out, k
+
+
+@wp.func
+def _coplanar_overlap(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, y0: wp.vec3d, y1: wp.vec3d, y2: wp.vec3d,
+                      eps: wp.float64):
+    """The corners of the area where two coplanar triangles overlap: ``a``'s triangle clipped by ``b``'s edges
+    (within ``eps``). ``(corners, count)``."""
+    poly = _Polygon()
+    for i in range(3):
+        x = x0
+        if i == 1:
+            x = x1
+        if i == 2:
+            x = x2
+        poly[i, 0] = x[0]
+        poly[i, 1] = x[1]
+        poly[i, 2] = x[2]
+    count = int(3)
+    nb = wp.cross(y1 - y0, y2 - y0)
+    for i in range(3):
+        p = y0
+        q = y1
+        if i == 1:
+            p = y1
+            q = y2
+        if i == 2:
+            p = y2
+            q = y0
+        m = wp.cross(nb, q - p)
+        ml = wp.length(m)
+        if ml > wp.float64(0.0) and count > 0:
+            poly, count = _clip_edge(poly, count, p, m / ml, eps)
+    return poly, count
 
 
 @wp.func
@@ -224,14 +291,20 @@ def _row_candidates_kernel(
         cand_key[c] = _key(p, KIND_VERTEX, side * (1 << 29) + local)
         return
     kind, s0, s1 = tri_tri_segment(x0, x1, x2, y0, y1, y2, tol_rel)
-    if kind != CONTACT_SEGMENT and kind != CONTACT_AREA:
-        return
     e = slot - 6
-    if e == 1 and (kind == CONTACT_AREA or wp.length(s1 - s0) <= eps):
-        return  # one point: the area's centre, or a segment of no length
     q = s0
-    if e == 1:
-        q = s1
+    if kind == CONTACT_SEGMENT:
+        if e > 1 or (e == 1 and wp.length(s1 - s0) <= eps):
+            return  # the two ends (one, for a segment of no length)
+        if e == 1:
+            q = s1
+    elif kind == CONTACT_AREA:
+        poly, count = _coplanar_overlap(x0, x1, x2, y0, y1, y2, eps)
+        if e >= count:
+            return
+        q = _corner_of(poly, e)
+    else:
+        return
     n = ref
     if wp.length(ref) < wp.float64(0.5):
         n = _touch_normal(x0, x1, x2, y0, y1, y2, _outward(mesh, surface, world_vertex, oa, ta, tol_rel),
@@ -241,7 +314,7 @@ def _row_candidates_kernel(
     cand_normal[c] = n
     cand_depth[c] = wp.float64(0.0)
     cand_triangles[c] = wp.vec2i(ta, tb)
-    cand_key[c] = _key(p, KIND_CROSSING, 2 * k + e)
+    cand_key[c] = _key(p, KIND_CROSSING, 6 * k + e)
 
 
 @wp.kernel
@@ -454,6 +527,8 @@ class Contacts:
         self.pair_depth = np.asarray(pair_depth, np.float64)
 
     def _read(self, a, shape) -> np.ndarray:
+        if self.count == 0:
+            return np.zeros((0, *shape[1:]))
         return a[: self.count].numpy().reshape(shape)
 
     @cached_property

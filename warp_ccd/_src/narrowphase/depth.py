@@ -102,6 +102,10 @@ RESOLUTION = 1.0e-4
 """Against a non-convex solid, depths are told apart down to this fraction of the smaller object's box
 diagonal (besides the crossing's tolerance): a region whose bound is below it is not split further."""
 
+WITNESS_TIE = 1.0e-6
+"""Depths within this fraction of each other are equal when the witness is chosen (:attr:`DepthResult.pair_points`):
+the first by place wins."""
+
 TREE_STACK = 64
 """Nodes a nearest-point query keeps to visit: a balanced tree's depth plus one suffices (24 levels hold
 16M leaves)."""
@@ -558,6 +562,15 @@ def _witness_key(tri: int, uv: Region):
     return wp.int64(tri) * wp.int64(4294967296) + q
 
 
+@wp.func
+def _bids(low: wp.float64, depth: wp.float64, kept: wp.float64):
+    """Whether a region's deepest point ``low`` may be its job's witness: within :data:`WITNESS_TIE` of the job's
+    depth, and deeper than the witness kept by more than that (points of a plateau, equal but for rounding, are
+    one choice: the same under motions of the order of rounding)."""
+    tie = wp.float64(WITNESS_TIE)
+    return low > wp.float64(0.0) and low >= depth * (wp.float64(1.0) - tie) and low > kept * (wp.float64(1.0) + tie)
+
+
 @wp.kernel
 def _pick_witness_kernel(
     region_root: wp.array[wp.int32],
@@ -576,7 +589,7 @@ def _pick_witness_kernel(
     low = region_low[k]
     r = region_root[k]
     j = root_job[r]
-    if low > wp.float64(0.0) and low >= job_depth[j] and low > job_witness_depth[j]:
+    if _bids(low, job_depth[j], job_witness_depth[j]):
         wp.atomic_min(job_witness_key, j, _witness_key(root_tri[r], region[k]))
 
 
@@ -602,7 +615,7 @@ def _keep_witness_kernel(
     low = region_low[k]
     r = region_root[k]
     j = root_job[r]
-    if low > wp.float64(0.0) and low >= job_depth[j] and low > job_witness_depth[j]:
+    if _bids(low, job_depth[j], job_witness_depth[j]):
         if job_witness_key[j] == _witness_key(root_tri[r], region[k]):
             job_witness_depth[j] = low
             job_witness_point[j] = region_point[k]
@@ -918,8 +931,9 @@ class DepthResult:
             deepest point found, a lower bound.
         pair_points: ``(K, 2, 3)`` float64 the depth's witness of each pair (world, scene units): the deepest point
             found of one surface inside the other's solid and its nearest point on that other surface, given as
-            ``(point on a, point on b)``, ``|a - b|`` the pair's depth; NaN where the depth is 0 or undefined. Among
-            points of equal depth, one chosen by place (root triangle, then position in it), the same on every device.
+            ``(point on a, point on b)``, ``|a - b|`` the pair's depth (within :data:`WITNESS_TIE` of it); NaN where the
+            depth is 0 or undefined. Among points of equal depth (within :data:`WITNESS_TIE`), one chosen by place
+            (root triangle, then position in it), the same on every device.
         pair_triangles: ``(K, 2)`` int32 the local triangles of ``a`` and ``b`` the witness lies on, -1 where none.
     """
 
@@ -1007,7 +1021,7 @@ class PenetrationDepth:
         return np.stack([key // n, key % n], axis=1).astype(np.int32).reshape(-1, 2)
 
     def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None, contained: np.ndarray | None = None,
-                 floors: np.ndarray | None = None) -> DepthResult:
+                 floors: np.ndarray | None = None, in_boxes: bool = False) -> DepthResult:
         """Measures the depth of object pairs.
 
         Args:
@@ -1018,6 +1032,9 @@ class PenetrationDepth:
             floors: ``(K,)`` the depth below which each pair's depths need not be told apart (scene units: its
                 crossing's tolerance), or None: 0. Where both ways of a pair stay below it (surfaces that only
                 meet), the search stops there instead of refining about every point where they meet.
+            in_boxes: measure every triangle of each object within the other's box (its tree walked), not only those
+                reached from the rows: for pairs known to intersect without their rows (the trees' object boxes must
+                be current).
 
         Returns:
             The :class:`DepthResult`.
@@ -1049,7 +1066,7 @@ class PenetrationDepth:
         tree = self.trees
         per_job = self.object_triangles[jobs[:, 0]]
         flat_total = int(per_job.sum())
-        if flat_total <= FLAT_CANDIDATES:
+        if flat_total <= FLAT_CANDIDATES and not in_boxes:
             flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
                                   device=d)
             root_job, root_tri, num_roots = self._roots_by_adjacency(jobs, job_dev, flat_start, flat_total, row_key,

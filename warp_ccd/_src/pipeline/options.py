@@ -135,6 +135,8 @@ class PipelineOptions:
         if self.self_intersections and self.mid_phase != "bvh":
             raise ValueError("self_intersections: needs the trees of the bvh mid phase, "
                              f"got mid_phase={self.mid_phase!r}")
+        if self.margin > self.clearance:  # speculative contacts come from the pairs within the clearance
+            object.__setattr__(self, "clearance", self.margin)
         if not self.contacts:
             for name, default in (("max_per_pair", 8), ("margin", 0.0)):
                 if getattr(self, name) != default:

@@ -41,7 +41,6 @@ from ..runtime.buffers import CounterRead, GrowableBuffer
 from ..runtime.frame import CountedFrame, FrameCache, frame_mode
 from ..runtime.options import check_option
 from ..scene.scene import Scene, quat_to_matrix, transforms_to_poses
-from ..trees.bvh import SceneBVH
 from .options import DEFORMING_LEAF_SIZE, RIGID_LEAF_SIZE, PipelineOptions, pipeline_options
 from .result import NEAR_ROWS, CollisionResult
 from .stages import make_mid_phase, make_narrow_phase
@@ -96,7 +95,7 @@ class CollisionPipeline:
         self.scene = scene
         self.device = d = scene.device
         n = scene.num_objects
-        self.clearance = max(o.clearance, o.margin)
+        self.clearance = o.clearance
         self.continuous = o.continuous
         self.timings = o.timings
         self.rebuild_every = o.rebuild_every
@@ -115,7 +114,7 @@ class CollisionPipeline:
                            if self.clearance > 0.0 else None)
         self.contact_phase = None
         if o.contacts:
-            self.depth = PenetrationDepth(scene, trees=self.boxes if isinstance(self.boxes, SceneBVH) else None,
+            self.depth = PenetrationDepth(scene, trees=self.boxes if o.mid_phase == "bvh" else None,
                                           triangle_tolerance=self.narrow.tolerance)
             self.contact_phase = ContactStage(scene, self.depth.trees, self.depth.surface, self.depth.object_solid,
                                               max_per_pair=o.max_per_pair, tolerance=self.narrow.tolerance)
@@ -348,10 +347,14 @@ class CollisionPipeline:
         no_self = self_rows
         if self_rows is None and self.self_phase is not None:
             no_self = (wp.zeros(0, dtype=wp.vec3i, device=d), wp.zeros(n, dtype=wp.int32, device=d))
-        return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
-                               {s: 0.0 for s in stages} if self.timings else None,
-                               device_contained=empty, device_segments=no_segments, device_toi=no_toi,
-                               clearance=self.clearance, near=near, self_rows=no_self)
+        result = CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
+                                 {s: 0.0 for s in stages} if self.timings else None,
+                                 device_contained=empty, device_segments=no_segments, device_toi=no_toi,
+                                 clearance=self.clearance, near=near, self_rows=no_self)
+        if self.contact_phase is not None:
+            result.contacts = self.contact_phase(np.zeros((0, 2)), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 2, 3)),
+                                                 np.zeros((0, 2)))
+        return result
 
 
 def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: DeviceLike = None,

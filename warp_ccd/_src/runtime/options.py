@@ -121,6 +121,7 @@ OPTIONS: dict[str, Rule] = {
     "clearance": Rule("number", low=0.0, high=CLEARANCE_MAX),
     "self_intersections": FLAG,
     "contacts": FLAG,
+    "signed": FLAG,
     "max_per_pair": Rule("integer", low=1, high=32),
     "margin": Rule("number", low=0.0, high=CLEARANCE_MAX),
     "duplicates": FLAG,
