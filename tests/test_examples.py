@@ -84,14 +84,34 @@ def test_example_user_meshes_collide_over_time():
     assert deforming == {True, False}
 
 
+def test_example_newton_pile_one_frame(tmp_path, device):
+    pytest.importorskip("newton")
+    pxr = pytest.importorskip("pxr")
+    module = load_example("example_newton_pile")
+    path = tmp_path / "pile.usda"
+    with wp.ScopedDevice(device):
+        example = module.Example(stage_path=str(path), num_rings=2, num_blocks=1)
+        example.step()
+        example.render()
+        example.close()
+    assert example.bridge.mesh_shapes.tolist() == [1, 2, 3, 4]  # the peg, two rings, a block: every mesh
+    assert len(example.bridge.newton_pairs) == 3  # each body on the ground plane, left to newton
+    z = example.state_0.body_q.numpy()[:, 2]
+    assert (z < [0.9, 1.2, 2.1]).all()  # falling
+    assert pxr.Usd.Stage.Open(str(path)).GetPseudoRoot().GetChildren()
+
+
 @pytest.mark.parametrize(
     "name, args, files",
     [
         ("example_collision", ["--num-objects", "10"], ["example_collision.usd"]),
         ("example_user_meshes", [], ["example_user_meshes.usd", "example_user_meshes_deforming.usd"]),
+        ("example_newton_pile", ["--num-rings", "1", "--num-blocks", "1"], ["example_newton_pile.usd"]),
     ],
 )
 def test_example_scripts_run_one_frame(tmp_path, name, args, files):
+    if name == "example_newton_pile":
+        pytest.importorskip("newton")
     proc = run_script(name, "--device", DEFAULT_DEVICE, "--num-frames", "1", *args, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(files)  # default stage path(s)
