@@ -38,6 +38,7 @@ ROOMS = {
     "preview": (*CORE, "output"),
     "cli": (*CORE, "output", "usd", "check", "preview", "bench"),
     "bench": (*CORE, "output", "cli"),
+    "compat": CORE,
     "_src": (),
 }
 """Every folder (or single module) of ``warp_ccd/_src`` and what it may import: a new concept gets its row here."""
