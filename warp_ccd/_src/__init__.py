@@ -1,6 +1,7 @@
 """warp_ccd's implementation, by concept. Nothing here is public: the public modules (``warp_ccd``,
 ``warp_ccd.geometry``, ``warp_ccd.scene``, ``warp_ccd.stages``, ``warp_ccd.usd``, ``warp_ccd.preview``,
-``warp_ccd.bench``) re-export what users call, and a name may move between these folders without notice.
+``warp_ccd.bench``, ``warp_ccd.trimesh``) re-export what users call, and a name may move between these folders
+without notice.
 
 Folders, each importing only those above it in this list (``tests/test_layout.py`` keeps the rule):
 
@@ -16,4 +17,5 @@ Folders, each importing only those above it in this list (``tests/test_layout.py
 * ``check``: the check application (``check_usd``, its report, overlay, many files, Ray).
 * ``preview``, ``output``, ``cli``, ``bench``: pictures, atomic file writing, the ``warp-ccd`` command,
   the scaling benchmark.
+* ``compat``: drop-ins for other libraries' collision APIs (trimesh's ``CollisionManager``), on the core.
 """
