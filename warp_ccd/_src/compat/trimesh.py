@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
 import sys
 import weakref
 from collections import OrderedDict
@@ -234,16 +235,16 @@ def _matrix(transform: ArrayLike | None, what: str) -> np.ndarray:
 def _rigid_problem(m: np.ndarray) -> str | None:
     """Why the ``(4, 4)`` float64 ``m`` is not a rigid transform, or None (one matrix, quickly: every
     :meth:`CollisionManager.set_transform` checks one)."""
-    if not np.isfinite(m).all():
+    (a, b, c, x), (d, e, f, y), (g, h, i, z), bottom = m.tolist()  # Python floats: a few microseconds
+    if not all(map(math.isfinite, (a, b, c, x, d, e, f, y, g, h, i, z, *bottom))):
         return "transform contains NaN or inf"
-    if m[3, 0] != 0.0 or m[3, 1] != 0.0 or m[3, 2] != 0.0 or m[3, 3] != 1.0:
-        return f"transform's bottom row must be (0, 0, 0, 1), got {m[3].tolist()}"
-    r = m[:3, :3]
-    e = r @ r.T
-    e.flat[::4] -= 1.0
-    if np.abs(e).max() > RIGID_TOLERANCE:
+    if bottom != [0.0, 0.0, 0.0, 1.0]:
+        return f"transform's bottom row must be (0, 0, 0, 1), got {bottom}"
+    off = max(abs(a * a + b * b + c * c - 1.0), abs(d * d + e * e + f * f - 1.0), abs(g * g + h * h + i * i - 1.0),
+              abs(a * d + b * e + c * f), abs(a * g + b * h + c * i), abs(d * g + e * h + f * i))
+    if off > RIGID_TOLERANCE:
         return "transform is not rigid (scale or shear); warp_ccd takes rotations and translations only"
-    if np.linalg.det(r) < 0.0:
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0.0:
         return "transform is not rigid (a reflection); warp_ccd takes rotations and translations only"
     return None
 
