@@ -11,6 +11,7 @@ device; the signed distance (python-fcl's sign) against the same oracle.
 
 import numpy as np
 import pytest
+import distance_digests
 from depth_reference import closest_distance, inside, pair_convex_depth
 from test_crossing import box, grid
 from test_depth import _convex_shapes, random_rotation, rotated
@@ -191,6 +192,14 @@ def test_pipeline_contacts_every_frame_and_options(device):
         wc.CollisionPipeline(scene, margin=0.1)
     with pytest.raises(ValueError, match="contacts: a continuous pipeline"):
         wc.CollisionPipeline(scene, contacts=True, continuous=True)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_every_device_gives_the_recorded_contacts(device, precision):
+    """Contacts and signed distances bit for bit as recorded on the CPU, so that a GPU machine without a CPU device
+    checks it too."""
+    got = distance_digests.contacts_digest(precision, device)
+    assert got == distance_digests.read_reference()[f"contacts_{precision}"], f"differs on {device} from the CPU's"
 
 
 @pytest.mark.skipif(len(ALL_DEVICES) < 2, reason="one device")
