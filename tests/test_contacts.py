@@ -11,13 +11,13 @@ device; the signed distance (python-fcl's sign) against the same oracle.
 
 import numpy as np
 import pytest
-import distance_digests
 from depth_reference import closest_distance, inside, pair_convex_depth
 from test_crossing import box, grid
 from test_depth import _convex_shapes, random_rotation, rotated
 
 import warp_ccd as wc
 
+import distance_digests
 from conftest import ALL_DEVICES
 
 
@@ -192,6 +192,14 @@ def test_pipeline_contacts_every_frame_and_options(device):
         wc.CollisionPipeline(scene, margin=0.1)
     with pytest.raises(ValueError, match="contacts: a continuous pipeline"):
         wc.CollisionPipeline(scene, contacts=True, continuous=True)
+    cube = wc.scene.shape("cube")
+    for bad, match in (({"max_per_pair": 33}, "max_per_pair"), ({"max_per_pair": True}, "max_per_pair"),
+                       ({"max_per_pair": 2.5}, "max_per_pair"), ({"margin": -0.1}, "margin"),
+                       ({"margin": float("nan")}, "margin")):
+        with pytest.raises(ValueError, match=match):
+            wc.contacts([cube, cube], **bad)
+    with pytest.raises(ValueError, match="mesh 1"):
+        wc.contacts([cube, (cube[0], cube[1] + 100)])
 
 
 @pytest.mark.parametrize("precision", ["float32", "float64"])
