@@ -84,9 +84,9 @@ def test_nxn_is_all_pairs(device):
     rng = np.random.default_rng(3)
     lower = rng.uniform(0, 10, (50, 3)).astype(np.float32)
     upper = lower + rng.uniform(0, 2, (50, 3)).astype(np.float32)
-    want = wc.broad_phase_pairs(lower, upper, method="all_pairs", device=device)
-    np.testing.assert_array_equal(wc.broad_phase_pairs(lower, upper, method="nxn", device=device), want)
-    np.testing.assert_array_equal(wc.broad_phase_pairs(lower, upper, method="sap", device=device), want)
+    want = wc.stages.broad_phase_pairs(lower, upper, method="all_pairs", device=device)
+    np.testing.assert_array_equal(wc.stages.broad_phase_pairs(lower, upper, method="nxn", device=device), want)
+    np.testing.assert_array_equal(wc.stages.broad_phase_pairs(lower, upper, method="sap", device=device), want)
     assert len(want) > 10
 
 

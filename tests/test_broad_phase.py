@@ -91,10 +91,10 @@ SAP_PATHS = {"sweep": 0, "all_pairs": ALL_PAIRS_LIMIT}
 
 
 def pairs_of(method: str, lo, hi, device) -> np.ndarray:
-    """Sorted pairs of a method of :func:`wc.broad_phase_pairs`, or of a path of the SAP (``sap_sweep``,
+    """Sorted pairs of a method of :func:`wc.stages.broad_phase_pairs`, or of a path of the SAP (``sap_sweep``,
     ``sap_all_pairs``) forced with ``all_pairs_max``."""
     if not method.startswith("sap_"):
-        return wc.broad_phase_pairs(lo, hi, method=method, device=device)
+        return wc.stages.broad_phase_pairs(lo, hi, method=method, device=device)
     if len(lo) < 2:
         return np.zeros((0, 2), np.int32)
     bp = wc.stages.BroadPhaseSAP(device=device, all_pairs_max=SAP_PATHS[method[4:]])
@@ -132,7 +132,7 @@ def test_sap_key_bits():
 def test_sap_either_side_of_16_bit_keys(device, n):
     rng = np.random.default_rng(n)
     lo, hi = boxes_random(rng, n, spread=40.0, size=(0.3, 2.0))
-    assert np.array_equal(wc.broad_phase_pairs(lo, hi, device=device), box_pairs_numpy(lo, hi))
+    assert np.array_equal(wc.stages.broad_phase_pairs(lo, hi, device=device), box_pairs_numpy(lo, hi))
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 3])
@@ -200,7 +200,7 @@ def test_float64_input_rounds_outward(device):
     lo = np.array([[0.0, 0, 0], [1.0 + 1e-12, 0, 0]])
     hi = np.array([[1.0, 1, 1], [2.0, 1, 1]])
     # float32 cannot tell 1 + 1e-12 from 1: rounding outward keeps the pair (never loses one)
-    assert wc.broad_phase_pairs(lo, hi, device=device).tolist() == [[0, 1]]
+    assert wc.stages.broad_phase_pairs(lo, hi, device=device).tolist() == [[0, 1]]
 
 
 @pytest.mark.parametrize(
@@ -216,7 +216,7 @@ def test_float64_input_rounds_outward(device):
 )
 def test_bad_input(lower, upper, match):
     with pytest.raises(ValueError, match=match):
-        wc.broad_phase_pairs(lower, upper)
+        wc.stages.broad_phase_pairs(lower, upper)
 
 
 @pytest.mark.parametrize("value", [-1, ALL_PAIRS_LIMIT + 1, 2.5, True, "all"])
@@ -243,7 +243,7 @@ def test_sap_all_pairs_below_the_limit(device):
 
 def test_unknown_method():
     with pytest.raises(ValueError, match=r"^broad_phase must be one of \['all_pairs', 'nxn', 'sap'\], got 'bvh'$"):
-        wc.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")
+        wc.stages.broad_phase_pairs(np.zeros((2, 3)), np.ones((2, 3)), method="bvh")
 
 
 def test_nxn_is_an_alias_of_all_pairs(device):

@@ -50,7 +50,7 @@ def test_worlds_on_top_of_each_other(device, rng, method):
     world = world * 7 - 3  # any ids >= 0 (numbered by the filter), here not consecutive
     world[world == -3] = 1000
     world[::37] = -1  # some shared by every world
-    got = wc.broad_phase_pairs(lo, hi, method=method, device=device, world=world)
+    got = wc.stages.broad_phase_pairs(lo, hi, method=method, device=device, world=world)
     assert np.array_equal(got, brute_pairs(lo, hi, world=world))
 
 
@@ -68,7 +68,7 @@ def brute_pairs_by_world(lo, hi, per_world):
 def test_many_worlds_one_launch(device, rng, num_worlds):
     per = 5 if num_worlds > 255 else 20
     lo, hi, world = colocated_worlds(rng, num_worlds, per, spread=3.0)
-    got = wc.broad_phase_pairs(lo, hi, device=device, world=world)
+    got = wc.stages.broad_phase_pairs(lo, hi, device=device, world=world)
     want = brute_pairs_by_world(lo, hi, per)
     if num_worlds <= 255:
         assert np.array_equal(want, brute_pairs(lo, hi, world=world))  # the two references agree
@@ -87,7 +87,7 @@ def test_groups_masks_and_excluded_pairs(device, rng):
     world = rng.integers(-1, 3, n)
     for kwargs in ({"group": group, "mask": mask}, {"exclude_pairs": exclude}, {"group": group},
                    {"world": world, "group": group, "mask": mask, "exclude_pairs": exclude}):
-        got = wc.broad_phase_pairs(lo, hi, device=device, **kwargs)
+        got = wc.stages.broad_phase_pairs(lo, hi, device=device, **kwargs)
         want = brute_pairs(lo, hi, world=kwargs.get("world"), group=kwargs.get("group"), mask=kwargs.get("mask"),
                            exclude=[tuple(p) for p in kwargs.get("exclude_pairs", [])])
         assert np.array_equal(got, want), kwargs
@@ -102,7 +102,7 @@ def test_world_minus_one_big_and_small(device, rng):
     lo = np.concatenate([lo, floor_lo, fix_lo])
     hi = np.concatenate([hi, floor_hi, fix_hi])
     world = np.concatenate([world, [-1, -1]])
-    got = wc.broad_phase_pairs(lo, hi, device=device, world=world)
+    got = wc.stages.broad_phase_pairs(lo, hi, device=device, world=world)
     assert np.array_equal(got, brute_pairs(lo, hi, world=world))
 
 
@@ -116,7 +116,7 @@ def test_property_filters_equal_brute_force(seed, worlds, per, shared, excluded)
     every = brute_pairs(lo, hi, world=world)
     exclude = every[rng.random(len(every)) < excluded]
     group = rng.integers(0, 8, len(lo))
-    got = wc.broad_phase_pairs(lo, hi, world=world, group=group, mask=7 - group // 2, exclude_pairs=exclude)
+    got = wc.stages.broad_phase_pairs(lo, hi, world=world, group=group, mask=7 - group // 2, exclude_pairs=exclude)
     want = brute_pairs(lo, hi, world=world, group=group, mask=7 - group // 2, exclude=[tuple(p) for p in exclude])
     assert np.array_equal(got, want)
 

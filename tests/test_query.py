@@ -68,14 +68,18 @@ def test_rotated_polyhedra_with_transforms(device):
     assert (res.normal[:, 2] < -0.999).all()
 
 
-def test_intersecting_and_touching_pairs_are_at_zero(device):
+def test_intersecting_pairs_at_minus_their_depth_touching_ones_at_zero(device):
     a = _box([0, 0, 0], [1, 1, 1])
-    res = wc.distance([a], [_box([0.5, 0.5, 0.5], [2, 2, 2]), _box([1, 0, 0], [2, 1, 1]),
-                            _box([3, 0, 0], [4, 1, 1])], device=device)
-    np.testing.assert_allclose(res.distance, [0.0, 0.0, 2.0], atol=1e-6)
+    others = [_box([0.5, 0.5, 0.5], [2, 2, 2]), _box([1, 0, 0], [2, 1, 1]), _box([3, 0, 0], [4, 1, 1])]
+    res = wc.distance([a], others, device=device)
+    np.testing.assert_allclose(res.distance, [-0.5, 0.0, 2.0], atol=1e-6)  # the corner 0.5 deep both ways
     np.testing.assert_array_equal(res.intersecting, [True, True, False])
+    assert np.linalg.norm(res.closest_points[0, 0] - res.closest_points[0, 1]) == pytest.approx(0.5, rel=1e-6)
+    assert (res.closest_points[1, 0] == res.closest_points[1, 1]).all()
+    unsigned = wc.distance([a], others, device=device, signed=False)
+    np.testing.assert_allclose(unsigned.distance, [0.0, 0.0, 2.0], atol=1e-6)
     for row in (0, 1):
-        assert (res.closest_points[row, 0] == res.closest_points[row, 1]).all()
+        assert (unsigned.closest_points[row, 0] == unsigned.closest_points[row, 1]).all()
 
 
 def test_python_fcl_agrees_on_real_meshes(device):

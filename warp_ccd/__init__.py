@@ -6,6 +6,7 @@ narrow phase (Möller's exact triangle test) -> object pairs, triangle pairs, pe
 >>> import warp_ccd as wc
 >>> res = wc.collide(meshes, transforms)            # one shot
 >>> res = wc.collide(meshes, transforms, clearance=0.01)  # and the pairs within 0.01: distances, points
+>>> c = wc.contacts(meshes, transforms)             # for a solver: points, normals, depths
 >>> far = wc.distance(arm_links, [table])           # least distances however far apart
 >>> folds = wc.self_intersections(vertices, triangles)  # one mesh through itself
 >>> scene = wc.Scene.random(1000, seed=0)           # polyhedra in motion
@@ -26,13 +27,12 @@ The API in levels: this module holds what a user of :func:`collide`, :class:`Sce
 """
 
 from . import geometry, preview, scene, stages, usd  # noqa: F401 (the namespaces, as wc.stages, ...)
-from ._src.broadphase.sap import broad_phase_pairs
 from ._src.check.check import check_usd
 from ._src.check.report import CheckReport
 from ._src.geometry.precision import PrecisionWarning
 from ._src.geometry.triangle import TOLERANCE
 from ._src.pipeline.options import PipelineOptions
-from ._src.pipeline.pipeline import CollisionPipeline, collide
+from ._src.pipeline.pipeline import CollisionPipeline, collide, contacts
 from ._src.pipeline.result import CollisionResult
 from ._src.queries.ccd import ccd_queries
 from ._src.queries.distance import DistanceQuery, DistanceResult, distance, self_intersections
@@ -50,10 +50,10 @@ __all__ = [
     "PipelineOptions",
     "PrecisionWarning",
     "Scene",
-    "broad_phase_pairs",
     "ccd_queries",
     "check_usd",
     "collide",
+    "contacts",
     "distance",
     "self_intersections",
 ]

@@ -10,7 +10,9 @@ kernels, in data-flow order:
 4. Narrow phase: :class:`NarrowPhase` (the exact triangle test) or :class:`ContinuousNarrowPhase` (times of
    impact over a linear motion).
 5. With a clearance: :class:`ClearancePhase`, the object pairs within it, their least distances, closest
-   points and directions; with self-intersections, :class:`SelfIntersection`.
+   points and directions; with self-intersections, :class:`SelfIntersection`; with contacts,
+   :class:`PenetrationDepth` (each pair's depth and its witness) and :class:`ContactStage` (the
+   :class:`Contacts`: points, normals, depths, a few per pair).
 
 Apart from the frame, :class:`TreeDistance` measures the least distance of chosen object pairs however far
 apart (branch and bound over their trees).
@@ -28,7 +30,9 @@ from ._src.broadphase.sap import BroadPhaseAllPairs, BroadPhaseSAP, broad_phase_
 from ._src.midphase.all_pairs import MidPhaseAllPairs
 from ._src.midphase.bvh import MidPhaseBVH
 from ._src.narrowphase.clearance import ClearancePhase
+from ._src.narrowphase.contacts import Contacts, ContactStage
 from ._src.narrowphase.continuous import ContinuousNarrowPhase
+from ._src.narrowphase.depth import DepthResult, PenetrationDepth
 from ._src.narrowphase.discrete import NarrowPhase
 from ._src.narrowphase.self_intersection import SelfIntersection
 from ._src.pipeline.stages import (
@@ -54,7 +58,10 @@ __all__ = [
     "BroadPhaseStage",
     "ClearancePhase",
     "ClearanceStage",
+    "ContactStage",
+    "Contacts",
     "ContinuousNarrowPhase",
+    "DepthResult",
     "GrowableBuffer",
     "MidPhaseAllPairs",
     "MidPhaseBVH",
@@ -62,6 +69,7 @@ __all__ = [
     "NarrowPhase",
     "NarrowPhaseStage",
     "ObjectBounds",
+    "PenetrationDepth",
     "SceneBVH",
     "SelfIntersection",
     "SelfStage",

@@ -102,6 +102,10 @@ RESOLUTION = 1.0e-4
 """Against a non-convex solid, depths are told apart down to this fraction of the smaller object's box
 diagonal (besides the crossing's tolerance): a region whose bound is below it is not split further."""
 
+WITNESS_TIE = 1.0e-6
+"""Depths within this fraction of each other are equal when the witness is chosen (:attr:`DepthResult.pair_points`):
+the first by place wins."""
+
 TREE_STACK = 64
 """Nodes a nearest-point query keeps to visit: a balanced tree's depth plus one suffices (24 levels hold
 16M leaves)."""
@@ -339,11 +343,16 @@ def _region_kernel(
     job_depth: wp.array[wp.float64],
     root_depth: wp.array[wp.float64],
     job_count: wp.array[wp.int64],
+    region_low: wp.array[wp.float64],
+    region_point: wp.array[wp.vec3d],
+    region_near: wp.array[wp.int32],
 ):
     """One thread per region (counted in ``job_count``): its lower bound (the deepest of its points measured
     inside the other
     solid, into ``job_depth`` and ``root_depth``), its upper bound (:func:`_bound` with cutting planes;
-    below 0 for a region wholly outside), and the triangle nearest to its best point (its children's hint)."""
+    below 0 for a region wholly outside), and the triangle nearest to its best point (its children's hint); its
+    deepest point measured inside (``region_low``, 0 where none; ``region_point``; the other surface's nearest
+    triangle there, ``region_near``: the depth's witness, :func:`_pick_witness_kernel`)."""
     k = wp.tid()
     r = region_root[k]
     j = root_job[r]
@@ -364,6 +373,8 @@ def _region_kernel(
     ids = _PlaneIds()
     m = int(0)
     low = wp.float64(0.0)
+    low_p = c0
+    low_t = int(-1)
     # The signed distance (+ inside) is 1-Lipschitz: at most its value at a sample plus the reach from it.
     lipschitz = wp.float64(1.0e300)
     for i in range(4):
@@ -378,6 +389,9 @@ def _region_kernel(
         d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, q, tol_rel)
         reach = wp.max(wp.max(wp.length(c0 - q), wp.length(c1 - q)), wp.length(c2 - q))
         if inside:
+            if d > low:
+                low_p = q
+                low_t = t
             low = wp.max(low, d)
             lipschitz = wp.min(lipschitz, d + reach)
         else:
@@ -385,6 +399,9 @@ def _region_kernel(
             if lipschitz + rounding <= wp.float64(0.0):
                 region_bound[k] = wp.float64(-1.0)
                 region_next_hint[k] = t
+                region_low[k] = low
+                region_point[k] = low_p
+                region_near[k] = low_t
                 if low > wp.float64(0.0):  # sides told apart near the surface may disagree: keep what was found
                     wp.atomic_max(job_depth, j, low)
                     wp.atomic_max(root_depth, r, low)
@@ -392,6 +409,9 @@ def _region_kernel(
         if quick != 0:  # the centroid alone: its depth, and the bound it gives (1-Lipschitz)
             region_bound[k] = wp.max(lipschitz, wp.float64(-1.0))
             region_next_hint[k] = t
+            region_low[k] = low
+            region_point[k] = low_p
+            region_near[k] = low_t
             if low > wp.float64(0.0):
                 wp.atomic_max(job_depth, j, low)
                 wp.atomic_max(root_depth, r, low)
@@ -418,6 +438,9 @@ def _region_kernel(
             p = _corner(c0, c1, c2, a, b)
             d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, p, tol_rel)
             if inside:
+                if d > low:
+                    low_p = p
+                    low_t = t
                 low = wp.max(low, d)
             hint = t
             if bound <= low + rounding or t < 0 or _has(ids, m, t) or m == MAX_PLANES:
@@ -432,6 +455,9 @@ def _region_kernel(
         bound = wp.max(wp.min(bound, lipschitz) - rounding, low)
     region_bound[k] = bound
     region_next_hint[k] = hint
+    region_low[k] = low
+    region_point[k] = low_p
+    region_near[k] = low_t
     if low > wp.float64(0.0):
         wp.atomic_max(job_depth, j, low)
         wp.atomic_max(root_depth, r, low)
@@ -523,6 +549,98 @@ def _split_kernel(
     for i in range(4):
         out_root[slot + i] = r
         out_hint[slot + i] = hint
+
+
+@wp.func
+def _witness_key(tri: int, uv: Region):
+    """A region's place, to choose one witness among equal depths the same way on every device: its root triangle,
+    then its centroid's barycentric coordinates to 16 bits each."""
+    third = wp.float64(1.0 / 3.0)
+    u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
+    v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
+    q = wp.int64(int(u * wp.float64(65535.0))) * wp.int64(65536) + wp.int64(int(v * wp.float64(65535.0)))
+    return wp.int64(tri) * wp.int64(4294967296) + q
+
+
+@wp.func
+def _bids(low: wp.float64, depth: wp.float64, kept: wp.float64):
+    """Whether a region's deepest point ``low`` may be its job's witness: within :data:`WITNESS_TIE` of the job's
+    depth, and deeper than the witness kept by more than that (points of a plateau, equal but for rounding, are
+    one choice: the same under motions of the order of rounding)."""
+    tie = wp.float64(WITNESS_TIE)
+    return low > wp.float64(0.0) and low >= depth * (wp.float64(1.0) - tie) and low > kept * (wp.float64(1.0) + tie)
+
+
+@wp.kernel
+def _pick_witness_kernel(
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_low: wp.array[wp.float64],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    job_depth: wp.array[wp.float64],
+    job_witness_depth: wp.array[wp.float64],
+    # Outputs
+    job_witness_key: wp.array[wp.int64],
+):
+    """One thread per region of a level: a region whose deepest point is its job's depth, deeper than the witness
+    kept so far, bids its place (:func:`_witness_key`); the least wins."""
+    k = wp.tid()
+    low = region_low[k]
+    r = region_root[k]
+    j = root_job[r]
+    if _bids(low, job_depth[j], job_witness_depth[j]):
+        wp.atomic_min(job_witness_key, j, _witness_key(root_tri[r], region[k]))
+
+
+@wp.kernel
+def _keep_witness_kernel(
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_low: wp.array[wp.float64],
+    region_point: wp.array[wp.vec3d],
+    region_near: wp.array[wp.int32],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    job_depth: wp.array[wp.float64],
+    job_witness_key: wp.array[wp.int64],
+    # Outputs
+    job_witness_depth: wp.array[wp.float64],
+    job_witness_point: wp.array[wp.vec3d],
+    job_witness_triangles: wp.array[wp.vec2i],
+):
+    """One thread per region of a level: the winner of :func:`_pick_witness_kernel` keeps its point as its job's
+    witness (the point, its root triangle and the other surface's nearest triangle there)."""
+    k = wp.tid()
+    low = region_low[k]
+    r = region_root[k]
+    j = root_job[r]
+    if _bids(low, job_depth[j], job_witness_depth[j]):
+        if job_witness_key[j] == _witness_key(root_tri[r], region[k]):
+            job_witness_depth[j] = low
+            job_witness_point[j] = region_point[k]
+            job_witness_triangles[j] = wp.vec2i(root_tri[r], region_near[k])
+
+
+@wp.kernel
+def _witness_kernel(
+    mesh: MeshTopology,
+    world_vertex: wp.array[Any],
+    job: wp.array[wp.vec2i],
+    job_witness_depth: wp.array[wp.float64],
+    job_witness_point: wp.array[wp.vec3d],
+    job_witness_triangles: wp.array[wp.vec2i],
+    # Outputs
+    job_witness_other: wp.array[wp.vec3d],
+):
+    """One thread per job with a witness: its nearest point on the other surface (on the nearest triangle found)."""
+    j = wp.tid()
+    t = job_witness_triangles[j][1]
+    if job_witness_depth[j] <= wp.float64(0.0) or t < 0:
+        return
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, job[j][1], t)
+    c, feature = _closest_on_triangle(job_witness_point[j], wp.vec3d(y0), wp.vec3d(y1), wp.vec3d(y2))
+    job_witness_other[j] = c
 
 
 @wp.kernel
@@ -774,6 +892,7 @@ _REGION = precision_overloads(_region_kernel, lambda s, v, q, t: {"world_vertex"
 _CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose": wp.array[t]})
 _SEED = precision_overloads(_seed_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_WITNESS = precision_overloads(_witness_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 
 
 @wp.kernel
@@ -810,15 +929,25 @@ class DepthResult:
         stopped: ``(K,)`` bool, the pair's search stopped before every region was decided (:data:`PAIR_REGIONS`,
             :data:`MAX_LEVELS` levels, or a level of more than :data:`MAX_REGIONS` regions): its depth is the
             deepest point found, a lower bound.
+        pair_points: ``(K, 2, 3)`` float64 the depth's witness of each pair (world, scene units): the deepest point
+            found of one surface inside the other's solid and its nearest point on that other surface, given as
+            ``(point on a, point on b)``, ``|a - b|`` the pair's depth (within :data:`WITNESS_TIE` of it); NaN where the
+            depth is 0 or undefined. Among points of equal depth (within :data:`WITNESS_TIE`), one chosen by place
+            (root triangle, then position in it), the same on every device.
+        pair_triangles: ``(K, 2)`` int32 the local triangles of ``a`` and ``b`` the witness lies on, -1 where none.
     """
 
-    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels, stopped=None):
+    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels, stopped=None, pair_points=None,
+                 pair_triangles=None):
         self.pair_depth = pair_depth
         self.row_depth = row_depth
         self.contained_depth = contained_depth
         self.regions = regions
         self.levels = levels
         self.stopped = np.zeros(len(pair_depth), bool) if stopped is None else stopped
+        k = len(pair_depth)
+        self.pair_points = np.full((k, 2, 3), np.nan) if pair_points is None else pair_points
+        self.pair_triangles = np.full((k, 2), -1, np.int32) if pair_triangles is None else pair_triangles
 
 
 class PenetrationDepth:
@@ -892,7 +1021,7 @@ class PenetrationDepth:
         return np.stack([key // n, key % n], axis=1).astype(np.int32).reshape(-1, 2)
 
     def __call__(self, pairs: np.ndarray, rows: np.ndarray | None = None, contained: np.ndarray | None = None,
-                 floors: np.ndarray | None = None) -> DepthResult:
+                 floors: np.ndarray | None = None, in_boxes: bool = False) -> DepthResult:
         """Measures the depth of object pairs.
 
         Args:
@@ -903,6 +1032,9 @@ class PenetrationDepth:
             floors: ``(K,)`` the depth below which each pair's depths need not be told apart (scene units: its
                 crossing's tolerance), or None: 0. Where both ways of a pair stay below it (surfaces that only
                 meet), the search stops there instead of refining about every point where they meet.
+            in_boxes: measure every triangle of each object within the other's box (its tree walked), not only those
+                reached from the rows: for pairs known to intersect without their rows (the trees' object boxes must
+                be current).
 
         Returns:
             The :class:`DepthResult`.
@@ -934,7 +1066,7 @@ class PenetrationDepth:
         tree = self.trees
         per_job = self.object_triangles[jobs[:, 0]]
         flat_total = int(per_job.sum())
-        if flat_total <= FLAT_CANDIDATES:
+        if flat_total <= FLAT_CANDIDATES and not in_boxes:
             flat_start = wp.array(np.concatenate([[0], np.cumsum(per_job)[:-1]]).astype(np.int64), dtype=wp.int64,
                                   device=d)
             root_job, root_tri, num_roots = self._roots_by_adjacency(jobs, job_dev, flat_start, flat_total, row_key,
@@ -968,6 +1100,11 @@ class PenetrationDepth:
         job_before = wp.zeros(num_jobs, dtype=wp.int64, device=d)
         job_stop = wp.zeros(num_jobs, dtype=wp.int32, device=d)
         root_depth = wp.zeros(num_roots, dtype=wp.float64, device=d)
+        witness_depth = wp.zeros(num_jobs, dtype=wp.float64, device=d)
+        witness_key = wp.empty(num_jobs, dtype=wp.int64, device=d)
+        witness_point = wp.zeros(num_jobs, dtype=wp.vec3d, device=d)
+        witness_other = wp.zeros(num_jobs, dtype=wp.vec3d, device=d)
+        witness_triangles = wp.full(num_jobs, wp.vec2i(-1, -1), dtype=wp.vec2i, device=d)
         # Levels of regions.
         n = num_roots
         cur = [self._buffer(f"{name}0", n, t) for name, t in (("root", wp.int32), ("region", Region),
@@ -983,11 +1120,21 @@ class PenetrationDepth:
             self.level_regions.append(n)
             bound = self._buffer("bound", n, wp.float64)
             next_hint = self._buffer("next_hint", n, wp.int32)
+            low = self._buffer("low", n, wp.float64)
+            low_point = self._buffer("low_point", n, wp.vec3d)
+            low_near = self._buffer("low_near", n, wp.int32)
             wp.launch(_REGION[scene.precision], dim=n,
                       inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
                               tree.object_deforming, scene.world_vertex, job_dev, job_convex, root_job, root_tri,
                               cur[0], cur[1], cur[2], self.triangle_tolerance, self.resolution, quick],
-                      outputs=[bound, next_hint, job_depth, root_depth, job_count], device=d)
+                      outputs=[bound, next_hint, job_depth, root_depth, job_count, low, low_point, low_near], device=d)
+            witness_key.fill_(np.iinfo(np.int64).max)
+            wp.launch(_pick_witness_kernel, dim=n,
+                      inputs=[cur[0], cur[1], low, root_job, root_tri, job_depth, witness_depth],
+                      outputs=[witness_key], device=d)
+            wp.launch(_keep_witness_kernel, dim=n,
+                      inputs=[cur[0], cur[1], low, low_point, low_near, root_job, root_tri, job_depth, witness_key],
+                      outputs=[witness_depth, witness_point, witness_triangles], device=d)
             wp.launch(_stop_kernel, dim=num_jobs, inputs=[job_count, job_before, job_twin, PAIR_REGIONS],
                       outputs=[job_stop], device=d)
             wp.copy(job_before, job_count)
@@ -1012,6 +1159,9 @@ class PenetrationDepth:
                 want = m
             cur, n = nxt, m
             quick = 0
+        wp.launch(_WITNESS[scene.precision], dim=num_jobs,
+                  inputs=[scene.topology, scene.world_vertex, job_dev, witness_depth, witness_point, witness_triangles],
+                  outputs=[witness_other], device=d)
         depth_job = job_depth.numpy()
         depth_root = root_depth.numpy()
         # Per pair, per row, per contained pair.
@@ -1024,7 +1174,21 @@ class PenetrationDepth:
         stop = job_stop.numpy() != 0
         stopped = (np.where(ab >= 0, stop[np.maximum(ab, 0)], False) | np.where(ba >= 0, stop[np.maximum(ba, 0)], False)
                    | exhausted | (n > 0))
-        return DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped)
+        # Each pair's witness: the deeper way's (a's way on a tie), as points on a and on b.
+        has = witness_depth.numpy() > 0.0
+        src, dst = witness_point.numpy(), witness_other.numpy()
+        tris = witness_triangles.numpy()
+        depth_ab = np.where(ab >= 0, depth_job[np.maximum(ab, 0)], -1.0)
+        depth_ba = np.where(ba >= 0, depth_job[np.maximum(ba, 0)], -1.0)
+        use_ab = depth_ab >= depth_ba
+        way = np.maximum(np.where(use_ab, ab, ba), 0)
+        ok = np.where(use_ab, ab, ba) >= 0
+        ok &= has[way]
+        points = np.where(use_ab[:, None, None], np.stack([src[way], dst[way]], 1), np.stack([dst[way], src[way]], 1))
+        points[~ok] = np.nan
+        triangles = np.where(use_ab[:, None], tris[way], tris[way][:, ::-1]).astype(np.int32)
+        triangles[~ok] = -1
+        return DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped, points, triangles)
 
     def _row_roots(self, row_key: np.ndarray, size: int) -> tuple[wp.array, wp.array]:
         """Root buffers of at least ``size`` roots, the rows' triangles first."""

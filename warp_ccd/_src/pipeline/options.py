@@ -86,6 +86,12 @@ class PipelineOptions:
             ``[0, 1e37]``), with its least distance, closest points and direction; 0 (default) adds nothing.
         self_intersections: also report the triangles of each object that meet each other beyond the
             vertices they share (``bvh`` mid phase).
+        contacts: also report contacts a solver can use (:attr:`CollisionResult.contacts
+            <warp_ccd._src.pipeline.result.CollisionResult.contacts>`, :mod:`warp_ccd._src.narrowphase.contacts`):
+            per contact a point on each surface, a normal from ``b`` to ``a`` and a depth. Not with ``continuous``.
+        max_per_pair: with ``contacts``, the most contacts an object pair keeps (in ``[1, 32]``; default 8).
+        margin: with ``contacts``, pairs apart by at most this distance (scene units) get a speculative contact
+            (their closest points, depth minus the distance); the pipeline's clearance is at least the margin.
     """
 
     broad_phase: str = "sap"
@@ -114,6 +120,9 @@ class PipelineOptions:
     near_capacity: int | None = None
     self_intersections: bool = False
     self_capacity: int | None = None
+    contacts: bool = False
+    max_per_pair: int = 8
+    margin: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -126,6 +135,12 @@ class PipelineOptions:
         if self.self_intersections and self.mid_phase != "bvh":
             raise ValueError("self_intersections: needs the trees of the bvh mid phase, "
                              f"got mid_phase={self.mid_phase!r}")
+        if self.margin > self.clearance:  # speculative contacts come from the pairs within the clearance
+            object.__setattr__(self, "clearance", self.margin)
+        if not self.contacts:
+            for name, default in (("max_per_pair", 8), ("margin", 0.0)):
+                if getattr(self, name) != default:
+                    raise ValueError(f"{name} is an option of contacts (contacts=True), got {getattr(self, name)!r}")
         if not self.continuous:
             for name, default in CONTINUOUS_ONLY.items():
                 if getattr(self, name) != default:
@@ -139,6 +154,8 @@ class PipelineOptions:
         if self.narrow_phase != "moller":
             raise ValueError(f"narrow_phase: a continuous pipeline's narrow phase is its own (continuous=True), "
                              f"got {self.narrow_phase!r}")
+        if self.contacts:
+            raise ValueError("contacts: a continuous pipeline reports times of impact, not contacts (continuous=True)")
         if self.clearance > 0.0:
             raise ValueError("clearance: a continuous pipeline's least distance is its min_distance "
                              f"(continuous=True), got clearance={self.clearance!r}")

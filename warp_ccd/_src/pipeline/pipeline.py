@@ -32,6 +32,8 @@ import warp as wp
 from ..broadphase.sap import make_broad_phase
 from ..geometry.triangle import TOLERANCE
 from ..narrowphase.clearance import ClearancePhase
+from ..narrowphase.contacts import Contacts, ContactStage
+from ..narrowphase.depth import PenetrationDepth
 from ..narrowphase.self_intersection import SelfIntersection
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.arrays import host_array
@@ -43,7 +45,7 @@ from .options import DEFORMING_LEAF_SIZE, RIGID_LEAF_SIZE, PipelineOptions, pipe
 from .result import NEAR_ROWS, CollisionResult
 from .stages import make_mid_phase, make_narrow_phase
 
-__all__ = ["CollisionPipeline", "CollisionResult", "collide"]  # CollisionResult: from .result
+__all__ = ["CollisionPipeline", "CollisionResult", "collide", "contacts"]  # CollisionResult: from .result
 
 STAGES = ("refit", "broad", "mid", "narrow")
 """Stage names of :attr:`CollisionResult.timings` (``refit``: tree refit, or object boxes alone
@@ -110,6 +112,12 @@ class CollisionPipeline:
         self.near_phase = (ClearancePhase(n, self.clearance, tolerance=self.narrow.tolerance,
                                           capacity=o.near_capacity or max(64, n), device=d)
                            if self.clearance > 0.0 else None)
+        self.contact_phase = None
+        if o.contacts:
+            self.depth = PenetrationDepth(scene, trees=self.boxes if o.mid_phase == "bvh" else None,
+                                          triangle_tolerance=self.narrow.tolerance)
+            self.contact_phase = ContactStage(scene, self.depth.trees, self.depth.surface, self.depth.object_solid,
+                                              max_per_pair=o.max_per_pair, tolerance=self.narrow.tolerance)
         self.self_phase = None
         if o.self_intersections:  # the bvh mid phase's trees (PipelineOptions asks for them)
             self.self_phase = SelfIntersection(scene, self.boxes, tolerance=self.narrow.tolerance, device=d,
@@ -282,10 +290,37 @@ class CollisionPipeline:
         result = CollisionResult._of_buffers(scene.num_objects, rows, narrow.object_colliding, self._times,
                                              self.mid.candidates.last_count, self.pairs.last_count, self.clearance,
                                              None if near is None else near.object_near)
+        result.object_world = self._object_world
+        if self.contact_phase is not None:
+            result.contacts = self._contacts(result)
         result.host_ms = (time.perf_counter() - start) * 1e3 - wait_ms
         result.runs = runs
-        result.object_world = self._object_world
         return result
+
+    def _contacts(self, result: CollisionResult) -> Contacts:
+        """The frame's contacts (:mod:`~warp_ccd._src.narrowphase.contacts`): the intersecting pairs' depths and
+        witnesses (:class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`), then the contact stage; with a
+        margin, the pairs apart within it too."""
+        rows = result.triangle_pairs.astype(np.int64)
+        pairs = result.intersecting_pairs.astype(np.int64).reshape(-1, 2)
+        found = self.depth(pairs, rows=rows)
+        points, triangles, depth = found.pair_points, found.pair_triangles, found.pair_depth
+        apart = np.zeros(len(pairs), bool)
+        margin = self.options.margin
+        if margin > 0.0 and result.object_distance is not None:
+            near = result.object_pairs.astype(np.int64).reshape(-1, 2)
+            keep = (~result.object_intersecting.astype(bool)) & (result.object_distance <= margin)
+            n = np.int64(max(self.scene.num_objects, 1))
+            keep &= ~np.isin(near[:, 0] * n + near[:, 1], pairs[:, 0] * n + pairs[:, 1])
+            pairs = np.concatenate([pairs, near[keep]])
+            points = np.concatenate([points, result.closest_points[keep].reshape(-1, 2, 3)])
+            triangles = np.concatenate([triangles, result.closest_triangles[keep].reshape(-1, 2)]).astype(np.int32)
+            depth = np.concatenate([depth, -result.object_distance[keep]])
+            apart = np.concatenate([apart, np.ones(int(keep.sum()), bool)])
+            order = np.argsort(pairs[:, 0] * n + pairs[:, 1], kind="stable")
+            pairs, points, triangles, depth, apart = pairs[order], points[order], triangles[order], depth[order], \
+                apart[order]
+        return self.contact_phase(pairs, rows, depth, points, triangles, near={"apart": apart})
 
     def _no_pairs(self, step: float | None, self_rows: tuple | None = None) -> CollisionResult:
         """The result of a scene of fewer than two objects (moved by ``step`` first, when given); with
@@ -312,10 +347,14 @@ class CollisionPipeline:
         no_self = self_rows
         if self_rows is None and self.self_phase is not None:
             no_self = (wp.zeros(0, dtype=wp.vec3i, device=d), wp.zeros(n, dtype=wp.int32, device=d))
-        return CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
-                               {s: 0.0 for s in stages} if self.timings else None,
-                               device_contained=empty, device_segments=no_segments, device_toi=no_toi,
-                               clearance=self.clearance, near=near, self_rows=no_self)
+        result = CollisionResult(n, wp.zeros(0, dtype=wp.vec4i, device=d), wp.zeros(n, dtype=wp.int32, device=d),
+                                 {s: 0.0 for s in stages} if self.timings else None,
+                                 device_contained=empty, device_segments=no_segments, device_toi=no_toi,
+                                 clearance=self.clearance, near=near, self_rows=no_self)
+        if self.contact_phase is not None:
+            result.contacts = self.contact_phase(np.zeros((0, 2)), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 2, 3)),
+                                                 np.zeros((0, 2)))
+        return result
 
 
 def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: DeviceLike = None,
@@ -404,6 +443,38 @@ def collide(meshes: Sequence, transforms: ArrayLike | None = None, device: Devic
     elif transforms_end is not None:
         scene.set_transforms(transforms_end)
     return pipeline.detect()
+
+
+def contacts(meshes: Sequence, transforms: ArrayLike | None = None, device: DeviceLike = None,
+             precision: str = "float32", *, max_per_pair: int = 8, margin: float = 0.0, world: ArrayLike | None = None,
+             group: ArrayLike | None = None, mask: ArrayLike | None = None, exclude_pairs: ArrayLike | None = None,
+             options: PipelineOptions | None = None, **kwargs: Any) -> Contacts:
+    """One-shot contacts among meshes, for a solver (:mod:`~warp_ccd._src.narrowphase.contacts`).
+
+    Args:
+        meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
+        transforms: ``(N, 4, 4)`` rigid transforms or ``(N, 7)`` poses, or None (vertices in world space).
+        device: Warp device (default: Warp's default device).
+        precision: ``"float32"`` (default) or ``"float64"``.
+        world: ``(N,)`` world id of each object (as :func:`collide`).
+        group: ``(N,)`` collision group of each object (as :func:`collide`).
+        mask: ``(N,)`` collision mask of each object (as :func:`collide`).
+        exclude_pairs: ``(E, 2)`` object pairs that never collide.
+        options: the pipeline's :class:`~warp_ccd._src.pipeline.options.PipelineOptions`; None: the defaults.
+        **kwargs: options by name, over ``options`` (``tolerance``, capacities, ...).
+        max_per_pair: the most contacts an object pair keeps (in ``[1, 32]``).
+        margin: pairs apart by at most this distance (scene units) get a speculative contact too: their closest
+            points, ``depth = -distance``.
+
+    Returns:
+        The :class:`~warp_ccd._src.narrowphase.contacts.Contacts`: ``pairs`` ``(C, 2)`` (``a < b``), ``point_a``,
+        ``point_b`` ``(C, 3)`` on each surface, ``normal`` ``(C, 3)`` unit from ``b`` to ``a``, ``depth`` ``(C,)``
+        (``point_a = point_b - depth * normal``), ``triangles`` ``(C, 2)``.
+    """
+    res = collide(meshes, transforms, device, precision, world=world, group=group, mask=mask,
+                  exclude_pairs=exclude_pairs, options=options, contacts=True, max_per_pair=max_per_pair,
+                  margin=margin, **kwargs)
+    return res.contacts
 
 
 def _vertices_end(meshes: Sequence, vertices_end) -> list[np.ndarray]:

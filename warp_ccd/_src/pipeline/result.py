@@ -48,6 +48,8 @@ class CollisionResult:
             ``(object, tri_a, tri_b)`` (unsorted) and ``(N,)`` int32 flags on the device, else None.
         object_world: ``(N,)`` int64 world id of each object (a scene built with ``world=``), else
             None (one world); :attr:`pair_world` gives each object pair's.
+        contacts: with ``contacts=True``, the frame's :class:`~warp_ccd._src.narrowphase.contacts.Contacts`
+            (per contact a point on each surface, a normal from ``b`` to ``a``, a depth), else None.
 
     Every ``device_*`` array is a ``wp.array``: hand it to torch, JAX or CuPy without a copy through
     DLPack (``torch.from_dlpack(res.device_colliding)``) or with ``wp.to_torch``.
@@ -99,7 +101,7 @@ class CollisionResult:
         self.__dict__.update(num_objects=num_objects, device_colliding=device_colliding, timings=timings,
                              num_candidates=num_candidates, num_broad_pairs=num_broad_pairs,
                              _num_triangle_pairs=num_triangle_pairs, host_ms=0.0, runs=1, _rows=rows,
-                             continuous=False, clearance=0.0, device_near=None, object_world=None)
+                             continuous=False, clearance=0.0, device_near=None, object_world=None, contacts=None)
 
     def _view(self, name: str):
         held = self._rows.get(name)
@@ -334,7 +336,9 @@ class CollisionResult:
         t = self.triangle_pairs
         if t.shape[0] == 0:
             return np.zeros((0, 2), np.int32)
-        return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
+        n = np.int64(max(self.num_objects, 1))
+        key = np.unique(t[:, 0].astype(np.int64) * n + t[:, 2])  # one int64 key a row: no sort of records
+        return np.stack([key // n, key % n], axis=1).astype(np.int32)
 
     @cached_property
     def containment_pairs(self) -> np.ndarray | None:

@@ -18,6 +18,7 @@ import numpy as np
 import warp as wp
 
 from ..geometry.triangle import TOLERANCE
+from ..narrowphase.depth import PenetrationDepth
 from ..narrowphase.self_intersection import SelfIntersection
 from ..runtime.aliases import ArrayLike, DeviceLike
 from ..runtime.buffers import CounterRead, GrowableBuffer
@@ -66,6 +67,11 @@ class DistanceQuery:
         graph: run each query as a captured CUDA graph (default: on CUDA).
         front_capacity: initial capacity of the walk's front of node pairs (it grows).
         listed_capacity: initial capacity of the walk's measured triangle pairs (it grows).
+        signed: the distance of intersecting pairs is minus their penetration depth (python-fcl's sign; the depth of
+            :mod:`~warp_ccd._src.narrowphase.depth`: the deepest point of either surface inside the other's solid),
+            their closest points the depth's witness (a point of one surface inside the other and its nearest point
+            on that other); False: 0 and one point of the intersection. Touching pairs and pairs of open surfaces
+            (no solid) stay at 0.
 
     Attributes:
         bvh: the :class:`~warp_ccd._src.trees.bvh.SceneBVH`; ``stage``: the
@@ -75,7 +81,7 @@ class DistanceQuery:
 
     def __init__(self, scene: Scene, pairs: ArrayLike | None = None, *, tolerance: float = TOLERANCE,
                  leaf_size: int = 1, graph: bool | None = None, front_capacity: int | None = None,
-                 listed_capacity: int | None = None) -> None:
+                 listed_capacity: int | None = None, signed: bool = True) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene: expected a warp_ccd.Scene, got {type(scene).__name__}")
         n = scene.num_objects
@@ -106,6 +112,9 @@ class DistanceQuery:
         self.pairs.last_count = count
         self.counter_read = CounterRead(self.stage.counters, d, stages=[0, 1], watch=scene.input_check.fault)
         self._frames = FrameCache(self.counter_read, mode)
+        self.signed = bool(check_option("signed", signed))
+        self.tolerance = float(tolerance)
+        self._depth = None
 
     def set_pairs(self, pairs: ArrayLike) -> None:
         """Measures other object pairs from the next :meth:`query` on, keeping the trees and the buffers as
@@ -146,8 +155,47 @@ class DistanceQuery:
             grew = self._frames.get(None, self._launch).run_once()
             runs += 1
         stage, count = self.stage, len(self.pair_ids)
+        if self.signed and count:
+            self._sign(stage, count)
         return DistanceResult(self.pair_ids, stage.distance[:count], stage.point[:count], stage.normal[:count],
                               stage.triangle[:count], runs=runs)
+
+    def _sign(self, stage: TreeDistance, count: int) -> None:
+        """Intersecting pairs' distances made minus their depths, with the depth's witness as closest points and
+        the direction from ``a`` to ``b`` ``(p - q) / |p - q|`` (``a`` leaves ``b`` along minus it), written into
+        the query's arrays. Their depths come from :class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth` down the
+        query's trees, over each object's triangles within the other's box."""
+        dist = stage.distance[:count].numpy()
+        hit = np.flatnonzero(dist <= 0.0)
+        if not len(hit):
+            return
+        if self._depth is None:
+            self._depth = PenetrationDepth(self.scene, trees=self.bvh, triangle_tolerance=self.tolerance)
+        self.bvh.refit(self.scene)  # the object boxes too: each object's triangles within the other's are measured
+        ids = self.pair_ids[hit].astype(np.int64)
+        swap = ids[:, 0] > ids[:, 1]
+        found = self._depth(np.sort(ids, axis=1), in_boxes=True)
+        ok = np.isfinite(found.pair_depth) & (found.pair_depth > 0.0) & np.isfinite(found.pair_points).all(axis=(1, 2))
+        if not ok.any():
+            return
+        at, depth = hit[ok], found.pair_depth[ok]
+        points = found.pair_points[ok]
+        tris = found.pair_triangles[ok]
+        points = np.where(swap[ok, None, None], points[:, ::-1], points)  # as (point on a, point on b) of the row
+        tris = np.where(swap[ok, None], tris[:, ::-1], tris)
+        gap = points[:, 0] - points[:, 1]
+        normal = gap / np.maximum(np.linalg.norm(gap, axis=1), 1e-300)[:, None]
+        all_dist, all_points = dist.copy(), stage.point[:count].numpy()
+        all_normal, all_tris = stage.normal[:count].numpy(), stage.triangle[:count].numpy()
+        all_dist[at] = -depth
+        all_points[at] = points
+        all_normal[at] = normal
+        all_tris[at] = tris
+        d = self.device
+        stage.distance[:count].assign(wp.array(all_dist, dtype=stage.distance.dtype, device=d))
+        stage.point[:count].assign(wp.array(all_points, dtype=stage.point.dtype, device=d))
+        stage.normal[:count].assign(wp.array(all_normal, dtype=stage.normal.dtype, device=d))
+        stage.triangle[:count].assign(wp.array(all_tris, dtype=wp.vec2i, device=d))
 
 
 def _as_meshes(meshes, name: str) -> list:
@@ -161,7 +209,7 @@ def _as_meshes(meshes, name: str) -> list:
 
 def distance(meshes_a: Sequence, meshes_b: Sequence | None = None, transforms_a: ArrayLike | None = None,
              transforms_b: ArrayLike | None = None, *, pairs: ArrayLike | None = None, device: DeviceLike = None,
-             precision: str = "float32", tolerance: float = TOLERANCE) -> DistanceResult:
+             precision: str = "float32", tolerance: float = TOLERANCE, signed: bool = True) -> DistanceResult:
     """One-shot least distances between meshes, however far apart ("how far is the arm from the table").
 
     Args:
@@ -176,6 +224,7 @@ def distance(meshes_a: Sequence, meshes_b: Sequence | None = None, transforms_a:
         device: Warp device (default: Warp's default device).
         precision: ``"float32"`` or ``"float64"`` (vertices, poses and the tests).
         tolerance: relative tolerance of the triangle tests (see :class:`DistanceQuery`).
+        signed: intersecting pairs at minus their penetration depth (python-fcl's sign; see :class:`DistanceQuery`).
 
     Returns:
         :class:`~warp_ccd._src.queries.distance.DistanceResult`: per row of ``pairs`` (indices into the sets as given)
@@ -214,7 +263,7 @@ def distance(meshes_a: Sequence, meshes_b: Sequence | None = None, transforms_a:
         else:
             rows = _pairs_array(pairs, n_a + len(b), sets=(n_a, len(b)))
         ids = rows + [0, n_a]
-    query = DistanceQuery(scene, ids, tolerance=tolerance)
+    query = DistanceQuery(scene, ids, tolerance=tolerance, signed=signed)
     result = query.query()
     result.pairs = rows.astype(np.int32)
     return result
@@ -273,20 +322,23 @@ class DistanceResult:
 
     @cached_property
     def distance(self) -> np.ndarray:
-        """``(P,)`` float64 least distance of each pair's surfaces (0 where they intersect), scene units."""
+        """``(P,)`` float64 least distance of each pair's surfaces, scene units; where they intersect, minus the
+        pair's penetration depth (a signed query, the default; 0 where they only touch or neither is closed)."""
         return self.device_distance.numpy().astype(np.float64)
 
     @cached_property
     def closest_points(self) -> np.ndarray:
-        """``(P, 2, 3)`` float64: a closest point on ``a``, then on ``b`` (one point twice where they intersect)."""
+        """``(P, 2, 3)`` float64: a closest point on ``a``, then on ``b``; where they intersect (signed), the depth's
+        witness: the deepest point of one surface inside the other and its nearest point on that other surface
+        (else one point of the intersection twice)."""
         return self.device_points.numpy().reshape(-1, 2, 3).astype(np.float64)
 
     @cached_property
     def normal(self) -> np.ndarray:
-        """``(P, 3)`` float64 unit directions from ``a`` to ``b``: ``(q - p) / |q - p|``; where the
-        surfaces intersect, from the normals of the closest triangles, ``n_a - n_b`` normalised (zero
-        when that vanishes; :class:`~warp_ccd._src.pipeline.pipeline.CollisionPipeline` with a clearance gives the
-        direction of least penetration over the whole crossing)."""
+        """``(P, 3)`` float64 unit directions from ``a`` to ``b``: ``(q - p) / |q - p|`` (``a`` moving along minus
+        it moves away); where the surfaces intersect (signed, a positive depth) ``(p - q) / |p - q|`` of the depth's
+        witness (``a`` moving along minus it by the depth leaves ``b`` at that point); where they only touch, from
+        the normals of the closest triangles, ``n_a - n_b`` normalised (zero when that vanishes)."""
         return self.device_normal.numpy().reshape(-1, 3).astype(np.float64)
 
     @cached_property
@@ -303,7 +355,7 @@ class DistanceResult:
     @cached_property
     def intersecting(self) -> np.ndarray:
         """``(P,)`` bool: the pair's surfaces intersect (or touch within the tolerance)."""
-        return self.distance == 0.0
+        return self.distance <= 0.0
 
     def __repr__(self) -> str:
         low = f", least={self.distance.min():.6g}" if len(self.pairs) else ""
