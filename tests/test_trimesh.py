@@ -6,17 +6,11 @@ import importlib.util
 import numpy as np
 import pytest
 
-import warp_ccd as wc
-from warp_ccd._src.pipeline.options import PipelineOptions
 from warp_ccd.trimesh import CollisionManager, ContactData, DistanceData, scene_to_collision
 
 from conftest import DEFAULT_DEVICE
 
 trimesh = pytest.importorskip("trimesh")
-
-CONTACTS = "contacts" in PipelineOptions.__dataclass_fields__
-"""Whether this warp_ccd computes contacts (``return_data`` of the in_collision calls)."""
-
 
 def moved(x=0.0, y=0.0, z=0.0) -> np.ndarray:
     t = np.eye(4)
@@ -27,13 +21,6 @@ def moved(x=0.0, y=0.0, z=0.0) -> np.ndarray:
 @pytest.fixture(scope="module")
 def cube():
     return trimesh.creation.box()  # the unit cube about the origin
-
-
-def signed_distances() -> bool:
-    """Whether the library's distance of intersecting meshes is negative (minus their depth)."""
-    box = trimesh.creation.box()
-    d = wc.distance([(box.vertices, box.faces)], [(box.vertices + [0.75, 0, 0], box.faces)])
-    return bool(d.distance[0] < 0)
 
 
 def test_one_to_many_internal_and_moves(cube, device):
@@ -90,10 +77,7 @@ def test_distances(cube):
     m.add_object("cube1", cube, moved(5))
     assert m.min_distance_single(cube) == pytest.approx(4.0)
     assert m.min_distance_single(cube, return_name=True) == (pytest.approx(4.0), "cube1")
-    if signed_distances():
-        assert m.min_distance_single(cube, moved(5.75)) == pytest.approx(-0.25)
-    else:
-        assert m.min_distance_single(cube, moved(5.75)) == pytest.approx(0.0)
+    assert m.min_distance_single(cube, moved(5.75)) == pytest.approx(-0.25)  # minus the depth, python-fcl's sign
 
     m.add_object("cube2", cube, moved(-5))
     assert m.min_distance_single(cube, moved(2), return_name=True) == (pytest.approx(2.0), "cube1")
@@ -230,38 +214,43 @@ def test_rigid_motion_with_rotation(cube):
     turn = trimesh.transformations.rotation_matrix(np.pi / 2, [0, 0, 1])
     m.set_transform("bar", turn)
     assert m.in_collision_internal() is True
-    assert m.min_distance_internal(name="cube") == pytest.approx(-0.3 if signed_distances() else 0.0, abs=1e-5)
+    assert m.min_distance_internal(name="cube") == pytest.approx(-0.3, abs=1e-5)
 
 
-@pytest.mark.skipif(not CONTACTS, reason="this warp_ccd computes no contacts yet")
 def test_contact_data(cube):
+    """The library's contacts of a pair (its deepest point, then the outline of the region where the surfaces
+    cross, at depth 0), with python-fcl's normal: from the first name towards the second."""
     m = CollisionManager()
     m.add_object("cube0", cube)
     m.add_object("cube1", cube, moved(5))
     hit, names, data = m.in_collision_single(cube, moved(0.75), return_names=True, return_data=True)
-    assert hit is True and names == {"cube0"} and data
+    assert hit is True and names == {"cube0"} and 1 <= len(data) <= 8
     for c in data:
         assert isinstance(c, ContactData) and c.names == {"cube0", "__external"}
-        # python-fcl's normal: from the first name to the second, here along +x (the query lies at +x)
-        np.testing.assert_allclose(c.normal, [1, 0, 0], atol=1e-5)
-        assert c.depth == pytest.approx(0.25, abs=1e-5)
-        assert 0.25 - 1e-5 <= c.point[0] <= 0.5 + 1e-5 and np.abs(c.point[1:]).max() <= 0.5 + 1e-5
+        np.testing.assert_allclose(c.normal, [1, 0, 0], atol=1e-6)  # the query lies at +x
+        assert -1e-6 <= c.depth <= 0.25 + 1e-6
+        assert 0.25 - 1e-6 <= c.point[0] <= 0.5 + 1e-6 and np.abs(c.point[1:]).max() <= 0.5 + 1e-6
         assert 0 <= c.index("cube0") < 12 and 0 <= c.index("__external") < 12
+    deepest = max(data, key=lambda c: c.depth)
+    assert deepest.depth == pytest.approx(0.25, abs=1e-6)  # the cubes overlap by 0.25 along x
+    assert deepest.point[0] == pytest.approx(0.375, abs=1e-6)  # midway between the deepest points
     hit, data = m.in_collision_single(cube, moved(-5), return_data=True)
     assert hit is False and data == []
 
     m.add_object("cube2", cube, moved(5.75, 0.1))
     hit, names, data = m.in_collision_internal(return_names=True, return_data=True)
     assert names == {("cube1", "cube2")} and data
-    for c in data:
-        assert c.names == {"cube1", "cube2"}
-        assert c.depth == pytest.approx(0.25, abs=1e-5)
-        assert 0 <= c.index("cube1") < 12
+    assert {frozenset(c.names) for c in data} == {frozenset({"cube1", "cube2"})}
+    assert max(c.depth for c in data) == pytest.approx(0.25, abs=1e-6)
+    deepest = max(data, key=lambda c: c.depth)
+    np.testing.assert_allclose(deepest.normal, [1, 0, 0], atol=1e-6)  # from cube1 (added first) towards cube2
+    assert 0 <= deepest.index("cube1") < 12 and 0 <= deepest.index("cube2") < 12
     n = CollisionManager()
     n.add_object("other", cube, moved(-0.75))
     hit, names, data = m.in_collision_other(n, return_names=True, return_data=True)
-    assert names == {("cube0", "other")}
-    np.testing.assert_allclose(data[0].normal, [-1, 0, 0], atol=1e-5)  # from cube0 towards the other
+    assert names == {("cube0", "other")} and data
+    deepest = max(data, key=lambda c: c.depth)
+    np.testing.assert_allclose(deepest.normal, [-1, 0, 0], atol=1e-6)  # from cube0 towards the other
 
 
 def test_every_probe_of_a_batch_is_reported():

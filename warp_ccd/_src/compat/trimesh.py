@@ -17,7 +17,9 @@ How the calls map onto the library:
   ``group`` and ``mask``): the pipeline's broad phase never sees a pair of one side. That scene is kept,
   by the set of objects on both sides (a few such scenes at once), so a call that only moved objects
   uploads poses and detects.
-* ``return_data``: the pipeline's contacts (``contacts=True``), one :class:`ContactData` each.
+* ``return_data``: the pipeline's contacts (``contacts=True``), one :class:`ContactData` each: its point midway
+  between the contact's points on the two surfaces, its normal turned to python-fcl's way (from the first name to
+  the second), its depth, and each object's triangle.
 * ``min_distance_*``: a :class:`~warp_ccd._src.queries.distance.DistanceQuery` on the same scene measures
   object pairs in increasing order of a lower bound (their boxes' gap; for boxes that overlap, minus the
   deepest a point of their overlap can lie in either box), in batches, until the least distance measured
@@ -36,7 +38,9 @@ Where it differs from trimesh's FCL-based manager:
 * A mesh wholly inside a closed mesh collides with it, whatever their shapes (FCL: only when both are
   convex); surfaces that touch within the library's relative tolerance collide.
 * Ties of the least distance go to the pair first in name order (FCL: the first pair its tree visits).
-* Contacts are at most ``max_per_pair`` a pair (the library's reduction), where FCL lists every triangle pair.
+* Contacts are the library's (:mod:`~warp_ccd._src.narrowphase.contacts`): at most ``max_per_pair`` a pair, the
+  deepest first, then points spanning the region where the surfaces meet (at depth 0 where they cross); FCL gives
+  one contact per crossing triangle pair of non-convex meshes and one (EPA's) for two convex ones.
 """
 
 from __future__ import annotations
@@ -55,7 +59,6 @@ import numpy as np
 import warp as wp
 
 from ..broadphase.sap import broad_phase_pairs
-from ..pipeline.options import PipelineOptions
 from ..pipeline.pipeline import CollisionPipeline
 from ..queries.distance import DistanceQuery
 from ..runtime.aliases import ArrayLike, DeviceLike
@@ -335,8 +338,6 @@ class _World:
         if pipe is None:
             options = {"containment": True}
             if contacts:
-                if "contacts" not in PipelineOptions.__dataclass_fields__:
-                    raise NotImplementedError("return_data: this warp_ccd computes no contacts yet")
                 options.update(contacts=True, max_per_pair=self.max_per_pair)
             pipe = self.pipelines[contacts] = CollisionPipeline(self.scene, **options)
         return pipe
