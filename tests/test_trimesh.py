@@ -217,6 +217,46 @@ def test_rigid_motion_with_rotation(cube):
     assert m.min_distance_internal(name="cube") == pytest.approx(-0.3, abs=1e-5)
 
 
+def test_far_from_the_origin_in_float64(cube):
+    """A scene that float32 cannot resolve at its triangles' size is built again in float64 (where FCL computes);
+    beyond float64 too, the error names the object."""
+    m = CollisionManager()
+    m.add_object("a", cube)
+    m.add_object("b", cube, moved(0.9))
+    assert m.in_collision_internal() is True and m._own_world().scene.precision == "float32"
+    m.set_transform("a", moved(1e5))
+    m.set_transform("b", moved(1e5 + 0.9))
+    assert m.in_collision_internal() is True and m._own_world().scene.precision == "float64"
+    assert m.min_distance_internal() == pytest.approx(-0.1, abs=1e-6)
+    m.set_transform("b", moved(1e5 + 1.25))
+    assert m.min_distance_internal() == pytest.approx(0.25, abs=1e-6)
+    m.set_transform("b", moved(1e14))
+    with pytest.raises(ValueError, match="'b': placed too far from the origin"):
+        m.in_collision_internal()
+
+
+def test_least_distance_measures_few_pairs(monkeypatch):
+    """Among 300 spheres the search measures pairs in increasing order of their bound and stops early: its
+    answer is the least over all pairs, for a small part of the 44,850 pairs."""
+    from warp_ccd._src.compat.trimesh import _World
+
+    measured = []
+    distances = _World.distances
+    monkeypatch.setattr(_World, "distances", lambda self, pairs: measured.append(len(pairs)) or distances(self, pairs))
+    rng = np.random.default_rng(3)
+    ball = trimesh.creation.icosphere(subdivisions=1, radius=0.4)
+    m = CollisionManager()
+    centres = rng.uniform(0, 40, (300, 3))
+    for k, c in enumerate(centres):
+        m.add_object(f"ball{k:03d}", ball, moved(*c))
+    d, names = m.min_distance_internal(return_names=True)
+    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=2) + np.diag(np.full(300, np.inf))
+    i, j = np.unravel_index(np.argmin(gaps), gaps.shape)
+    assert names == tuple(sorted((f"ball{i:03d}", f"ball{j:03d}")))
+    assert d == pytest.approx(gaps[i, j] - 0.8, abs=0.05)  # the icosphere's faces lie within 0.8 of its radius
+    assert sum(measured) < 200
+
+
 def test_contact_data(cube):
     """The library's contacts of a pair (its deepest point, then the outline of the region where the surfaces
     cross, at depth 0), with python-fcl's normal: from the first name towards the second."""
