@@ -293,6 +293,15 @@ def test_contact_data(cube):
     np.testing.assert_allclose(deepest.normal, [-1, 0, 0], atol=1e-6)  # from cube0 towards the other
 
 
+def test_max_per_pair(cube):
+    with pytest.raises(ValueError, match="max_per_pair"):
+        CollisionManager(max_per_pair=0)
+    m = CollisionManager(max_per_pair=1)
+    m.add_object("a", cube)
+    _, data = m.in_collision_single(cube, moved(0.75, 0.1), return_data=True)
+    assert len(data) == 1 and data[0].depth == pytest.approx(0.25, abs=1e-6)  # the deepest
+
+
 def test_every_probe_of_a_batch_is_reported():
     """700 probes each crossing one large anvil: no pair is dropped."""
     anvil = trimesh.creation.box(extents=[200, 200, 200])

@@ -16,7 +16,7 @@ How the calls map onto the library:
   one scene with this manager's, in two collision groups that pair only with each other (the scene's
   ``group`` and ``mask``): the pipeline's broad phase never sees a pair of one side. That scene is kept,
   by the set of objects on both sides (a few such scenes at once), so a call that only moved objects
-  uploads poses and detects.
+  uploads poses and detects; a query mesh never seen (equal vertices and faces count as seen) builds one.
 * ``return_data``: the pipeline's contacts (``contacts=True``), one :class:`ContactData` each: its point midway
   between the contact's points on the two surfaces, its normal turned to python-fcl's way (from the first name to
   the second), its depth, and each object's triangle.
@@ -62,6 +62,7 @@ from ..broadphase.sap import broad_phase_pairs
 from ..pipeline.pipeline import CollisionPipeline
 from ..queries.distance import DistanceQuery
 from ..runtime.aliases import ArrayLike, DeviceLike
+from ..runtime.options import check_option
 from ..runtime.start import init_warp
 from ..scene.scene import Scene, quat_to_matrix, transforms_to_poses
 from ..scene.shapes import validate_mesh
@@ -270,7 +271,7 @@ class _World:
         shapes: the :class:`_Shape` of each object.
         split: None (every pair of objects may collide), or ``k``: objects ``[0, k)`` pair only with
             objects ``[k, N)`` (two collision groups).
-        names: each object's name, for messages.
+        names: each object's name (the query mesh's: ``"__external"``), for the data returned and messages.
         device: the Warp device.
         max_per_pair: most contacts a pair (``return_data``).
     """
@@ -443,7 +444,7 @@ def _nearest(world: _World, pairs: np.ndarray, bound: np.ndarray, key: Callable[
     if len(tied) > 1:
         try:
             k = int(min(tied.tolist(), key=lambda i: key(rows[i])))
-        except TypeError:  # names that do not compare: the first pair in object order
+        except TypeError:  # names that do not compare: the first of the tied pairs measured
             pass
     return rows[k], float(d[k]), points[k], triangles[k]
 
@@ -491,7 +492,7 @@ class CollisionManager:
     def __init__(self, *, device: DeviceLike = None, max_per_pair: int = 8) -> None:
         init_warp()
         self.device = wp.get_device(device)
-        self.max_per_pair = int(max_per_pair)
+        self.max_per_pair = check_option("max_per_pair", max_per_pair)
         self._serial = next(_SERIAL)
         self._names: list = []
         self._index: dict = {}
