@@ -57,13 +57,16 @@ def export(checkout: str, ref: str, folder: Path) -> str:
     return commit
 
 
-def outcomes(junit: Path) -> dict[str, str]:
-    """``{test name: passed | failed | error | skipped}`` from pytest's JUnit XML report."""
+def outcomes(junit: Path) -> dict[str, dict]:
+    """``{test name: {"outcome": passed | failed | error | skipped, "message": pytest's first line, "line": the
+    statement that failed}}`` (None where it passed) from pytest's JUnit XML report."""
     out = {}
     for case in ET.parse(junit).getroot().iter("testcase"):
-        kinds = [child.tag for child in case if child.tag in ("failure", "error", "skipped")]
-        out[case.get("name")] = {"failure": "failed", "error": "error", "skipped": "skipped"}.get(
-            kinds[0] if kinds else "", "passed")
+        bad = [child for child in case if child.tag in ("failure", "error", "skipped")]
+        outcome = {"failure": "failed", "error": "error", "skipped": "skipped"}[bad[0].tag] if bad else "passed"
+        message = (bad[0].get("message") or "").splitlines()[0] if bad and bad[0].get("message") else None
+        failing = [line[1:].strip() for line in (bad[0].text or "").splitlines() if line.startswith(">")] if bad else []
+        out[case.get("name")] = {"outcome": outcome, "message": message, "line": failing[-1] if failing else None}
     return out
 
 
@@ -90,10 +93,10 @@ def main(argv=None) -> int:
         found = outcomes(junit) if junit.exists() else {}
     manager = "trimesh (python-fcl)" if args.stock else "warp_ccd.trimesh"
     print(f"trimesh {commit[:12]} tests/test_collision.py on {manager}: "
-          + ", ".join(f"{name} {state}" for name, state in found.items()))
+          + ", ".join(f"{name} {state['outcome']}" for name, state in found.items()))
     if args.out:
-        Path(args.out).write_text(json.dumps({"trimesh_commit": commit, "manager": manager, "pytest_status": rc,
-                                              "tests": found}, indent=1) + "\n")
+        Path(args.out).write_text(json.dumps({"trimesh_commit": commit, "manager": manager, "path": args.path,
+                                              "pytest_status": rc, "tests": found}, indent=1) + "\n")
     return rc
 
 
