@@ -86,6 +86,14 @@ FIRST_BATCH = 16
 
 _SERIAL = itertools.count()
 
+CollisionAnswer = bool | tuple[bool, set] | tuple[bool, list] | tuple[bool, set, list]
+"""What the ``in_collision_*`` calls return: ``is_collision``, then the names and the :class:`ContactData` list where
+asked for (trimesh's)."""
+
+DistanceAnswer = float | tuple[float, Any] | tuple[float, Any, Any]
+"""What the ``min_distance_*`` calls return: the distance, then the names and the :class:`DistanceData` where asked
+for (trimesh's)."""
+
 
 class ContactData:
     """One contact of two objects (trimesh's ``ContactData``, python-fcl's contact).
@@ -253,7 +261,7 @@ def _rigid_problem(m: np.ndarray) -> str | None:
     return None
 
 
-def _answer(result: bool, names, data, return_names: bool, return_data: bool):
+def _answer(result: Any, names: Any, data: Any, return_names: bool, return_data: bool) -> Any:
     """trimesh's return values: ``result``, then the names and the data where asked for."""
     if return_names and return_data:
         return result, names, data
@@ -622,7 +630,7 @@ class CollisionManager:
                                                              contacts.triangles.tolist()))]
 
     def in_collision_single(self, mesh: Any, transform: ArrayLike | None = None, return_names: bool = False,
-                            return_data: bool = False):
+                            return_data: bool = False) -> CollisionAnswer:
         """Whether ``mesh`` placed by ``transform`` collides with any of the manager's objects.
 
         Args:
@@ -644,7 +652,7 @@ class CollisionManager:
         data = self._contacts(world, contacts) if return_data else []
         return _answer(bool(len(pairs)), names, data, return_names, return_data)
 
-    def in_collision_internal(self, return_names: bool = False, return_data: bool = False):
+    def in_collision_internal(self, return_names: bool = False, return_data: bool = False) -> CollisionAnswer:
         """Whether any two of the manager's objects collide.
 
         Args:
@@ -663,7 +671,7 @@ class CollisionManager:
         return _answer(bool(len(pairs)), names, data, return_names, return_data)
 
     def in_collision_other(self, other_manager: CollisionManager, return_names: bool = False,
-                           return_data: bool = False):
+                           return_data: bool = False) -> CollisionAnswer:
         """Whether any object of this manager collides with any of ``other_manager``'s.
 
         Args:
@@ -684,11 +692,12 @@ class CollisionManager:
         return _answer(bool(len(pairs)), names, data, return_names, return_data)
 
     # ------------------------------------------------------------------ distances
-    def _distance_data(self, world: _World, pair: np.ndarray, d: float, points, triangles) -> DistanceData:
+    def _distance_data(self, world: _World, pair: np.ndarray, d: float, points: np.ndarray,
+                       triangles: np.ndarray) -> DistanceData:
         return DistanceData((world.names[pair[0]], world.names[pair[1]]), d, points, triangles)
 
     def min_distance_single(self, mesh: Any, transform: ArrayLike | None = None, return_name: bool = False,
-                            return_data: bool = False):
+                            return_data: bool = False) -> DistanceAnswer:
         """The least distance between ``mesh`` placed by ``transform`` and the manager's objects (negative
         where they intersect: minus the depth).
 
@@ -715,7 +724,8 @@ class CollisionManager:
         data = self._distance_data(world, pair, d, points, triangles) if return_data else None
         return _answer(d, self._names[pair[0]], data, return_name, return_data)
 
-    def min_distance_internal(self, name: Any = None, return_names: bool = False, return_data: bool = False):
+    def min_distance_internal(self, name: Any = None, return_names: bool = False,
+                              return_data: bool = False) -> DistanceAnswer:
         """The least distance between two of the manager's objects, or between the object called ``name``
         and the others (negative where they intersect: minus the depth).
 
@@ -755,7 +765,7 @@ class CollisionManager:
         return _answer(d, names, data, return_names, return_data)
 
     def min_distance_other(self, other_manager: CollisionManager, return_names: bool = False,
-                           return_data: bool = False):
+                           return_data: bool = False) -> DistanceAnswer:
         """The least distance between an object of this manager and one of ``other_manager``'s (negative
         where they intersect: minus the depth).
 
