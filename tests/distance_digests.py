@@ -1,7 +1,7 @@
 """Recorded digests of distances, one verdict on every device: the SHA-256 of what
 :func:`warp_ccd.geometry.tri_tri_distance` gives on the near-degenerate pairs of
-``tests/awkward_pairs.py``, and of a clearance frame's rows and a distance query's answers on
-fixed scenes, as computed on the CPU (``tests/data/distance_digests.json``). A device whose digests
+``tests/awkward_pairs.py``, of a clearance frame's rows and a distance query's answers, and of a contacts frame and
+signed distances on fixed scenes, as computed on the CPU (``tests/data/distance_digests.json``). A device whose digests
 differ rounds differently (see ``fuse_fp``). To record them anew after a deliberate change:
 
     python tests/distance_digests.py --write
@@ -65,11 +65,28 @@ def scene_digest(precision: str, device) -> str:
                    far.closest_triangles)
 
 
+def contacts_digest(precision: str, device) -> str:
+    """A contacts frame (points, normals, depths, triangles, reduced) and the signed distances on seeded
+    icospheres over a box: one set of contacts on every device."""
+    rng = np.random.default_rng(23)
+    ball = icosphere(2)
+    meshes = []
+    for _ in range(6):
+        q, _r = np.linalg.qr(rng.normal(size=(3, 3)))
+        meshes.append((np.asarray(ball[0], np.float64) @ q.T + rng.uniform(-0.8, 0.8, 3), ball[1]))
+    v, t = wc.scene.shape("cube")
+    meshes.append((np.asarray(v) * [3, 3, 0.5] - [0, 0, 1.2], t))
+    c = wc.contacts(meshes, device=device, precision=precision, max_per_pair=6)
+    d = wc.distance(meshes, device=device, precision=precision)
+    return _digest(c.pairs, c.triangles, c.point_a, c.point_b, c.normal, c.depth, d.distance, d.closest_points)
+
+
 def digests(device) -> dict:
     out = {}
     for precision in PRECISIONS:
         out[f"pairs_{precision}"] = pair_digest(precision, device)
         out[f"scene_{precision}"] = scene_digest(precision, device)
+        out[f"contacts_{precision}"] = contacts_digest(precision, device)
     return out
 
 

@@ -8,7 +8,7 @@ import pytest
 
 import warp_ccd as wc
 
-NAMESPACES = ("warp_ccd.geometry", "warp_ccd.scene", "warp_ccd.stages", "warp_ccd.usd")
+NAMESPACES = ("warp_ccd.geometry", "warp_ccd.scene", "warp_ccd.stages", "warp_ccd.usd", "warp_ccd.trimesh")
 
 def test_top_level_is_short_and_resolves():
     assert len(wc.__all__) <= 15  # the one-shot calls (collide, distance, ...), their classes and options

@@ -17,6 +17,7 @@ from test_depth import _convex_shapes, random_rotation, rotated
 
 import warp_ccd as wc
 
+import distance_digests
 from conftest import ALL_DEVICES
 
 
@@ -145,6 +146,30 @@ def test_random_convex_pairs_deepest_contact_is_the_exact_depth(device, seed):
     assert checked >= 3
 
 
+def test_non_convex_scanned_mesh_contacts_lie_on_both_surfaces(device):
+    """The scanned bear (3,968 triangles, closed, not convex) with a box pushed into its back and a copy of itself
+    moved into it: every contact on both surfaces and consistent (the oracles of :func:`check_contacts`), and each
+    pair's deepest contact is the pair's depth as the check measures it."""
+    from warp_ccd._src.check.crossing import CrossingClassifier
+
+    from test_clearance import asset_meshes
+
+    v, t = asset_meshes("bear.usd", device)[0]
+    size = np.ptp(v, axis=0).max()
+    top = v[np.argmax(v[:, 2])]
+    cube = box(top - [0.1 * size, 0.1 * size, 0.12 * size], top + [0.1 * size, 0.1 * size, 0.08 * size])
+    moved = (v + [0.25 * np.ptp(v[:, 0]), 0.0, 0.05 * np.ptp(v[:, 2])], t)
+    meshes = [(v, t), cube, moved]
+    c = wc.contacts(meshes, device=device, precision="float64")
+    check_contacts(meshes, c, tol=1e-6)
+    scene = wc.Scene.from_meshes(meshes, device=device, precision="float64")
+    res = wc.CollisionPipeline(scene).detect()
+    found = CrossingClassifier(scene)(res.device_triangle_pairs)
+    for p, want in zip(found.pairs, found.pair_depth):
+        mine = (c.pairs == p).all(axis=1)
+        assert c.depth[mine].max() == pytest.approx(want, rel=1e-3), p  # the check's floors differ by its tolerance
+
+
 def test_reduction_keeps_the_deepest_and_at_most_max_per_pair(device):
     rng = np.random.default_rng(3)
     ball = wc.scene.icosphere(3)
@@ -191,6 +216,22 @@ def test_pipeline_contacts_every_frame_and_options(device):
         wc.CollisionPipeline(scene, margin=0.1)
     with pytest.raises(ValueError, match="contacts: a continuous pipeline"):
         wc.CollisionPipeline(scene, contacts=True, continuous=True)
+    cube = wc.scene.shape("cube")
+    for bad, match in (({"max_per_pair": 33}, "max_per_pair"), ({"max_per_pair": True}, "max_per_pair"),
+                       ({"max_per_pair": 2.5}, "max_per_pair"), ({"margin": -0.1}, "margin"),
+                       ({"margin": float("nan")}, "margin")):
+        with pytest.raises(ValueError, match=match):
+            wc.contacts([cube, cube], **bad)
+    with pytest.raises(ValueError, match="mesh 1"):
+        wc.contacts([cube, (cube[0], cube[1] + 100)])
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_every_device_gives_the_recorded_contacts(device, precision):
+    """Contacts and signed distances bit for bit as recorded on the CPU, so that a GPU machine without a CPU device
+    checks it too."""
+    got = distance_digests.contacts_digest(precision, device)
+    assert got == distance_digests.read_reference()[f"contacts_{precision}"], f"differs on {device} from the CPU's"
 
 
 @pytest.mark.skipif(len(ALL_DEVICES) < 2, reason="one device")

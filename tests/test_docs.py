@@ -23,7 +23,7 @@ from test_readme import python_blocks, run_blocks
 import warp_ccd
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-NAMESPACES = ("scene", "stages", "geometry", "usd", "preview", "bench")
+NAMESPACES = ("scene", "stages", "geometry", "usd", "preview", "bench", "trimesh")
 
 
 def load_config() -> dict:

@@ -132,6 +132,25 @@ def test_persistent_query_moves_and_deforms(device):
     np.testing.assert_allclose(moving.query().distance, [3.5], rtol=2e-2)
 
 
+def test_set_pairs_measures_other_pairs_on_the_same_trees(device):
+    """A DistanceQuery given other pairs (more than it held, then fewer) answers as a new query would."""
+    v, t = icosphere(2)
+    meshes = [(v + [3.0 * k, 0, 0], t) for k in range(5)]
+    scene = wc.Scene.from_meshes(meshes, device=device)
+    query = wc.DistanceQuery(scene, [[0, 1]])
+    bvh = query.bvh
+    for pairs in ([[0, 4], [3, 1], [2, 4]], [[4, 3]], []):
+        query.set_pairs(pairs)
+        res = query.query()
+        fresh = wc.DistanceQuery(scene, pairs).query()
+        np.testing.assert_array_equal(res.pairs, np.reshape(pairs, (-1, 2)))
+        np.testing.assert_array_equal(res.distance, fresh.distance)
+        np.testing.assert_array_equal(res.closest_triangles, fresh.closest_triangles)
+    assert query.bvh is bvh
+    with pytest.raises(ValueError, match="itself"):
+        query.set_pairs([[2, 2]])
+
+
 def test_small_capacities_grow_to_the_same_answer(device):
     rng = np.random.default_rng(8)
     v, t = icosphere(3)

@@ -1,7 +1,7 @@
 """warp_ccd's implementation, by concept. Nothing here is public: the public modules (``warp_ccd``,
 ``warp_ccd.geometry``, ``warp_ccd.scene``, ``warp_ccd.stages``, ``warp_ccd.usd``, ``warp_ccd.preview``,
-``warp_ccd.bench``, ``warp_ccd.newton``) re-export what users call, and a name may move between these folders
-without notice.
+``warp_ccd.bench``, ``warp_ccd.trimesh``, ``warp_ccd.newton``) re-export what users call, and a name may move
+between these folders without notice.
 
 Folders, each importing only those above it in this list (``tests/test_layout.py`` keeps the rule):
 
@@ -17,6 +17,7 @@ Folders, each importing only those above it in this list (``tests/test_layout.py
 * ``check``: the check application (``check_usd``, its report, overlay, many files, Ray).
 * ``preview``, ``output``, ``cli``, ``bench``: pictures, atomic file writing, the ``warp-ccd`` command,
   the scaling benchmark.
-* ``compat``: bridges to other libraries' simulations (newton's rigid contacts), each importing its library
+* ``compat``: bridges to other libraries: drop-ins for their collision APIs (trimesh's ``CollisionManager``),
+  warp_ccd's results where their simulations read them (newton's rigid contacts); each imports its library
   in its own module.
 """

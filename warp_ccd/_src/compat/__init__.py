@@ -1,3 +1,5 @@
-"""Bridges to other libraries' simulations: warp_ccd's results written where their solvers read them
-(:mod:`~warp_ccd._src.compat.newton`: mesh-mesh contacts for newton's rigid-body solvers). Each imports its
-library inside its own module: importing warp_ccd never imports them."""
+"""Bridges to other libraries: drop-ins for their collision APIs, built on the library's scenes, pipelines and
+queries (``trimesh.collision.CollisionManager``: :mod:`~warp_ccd._src.compat.trimesh`), and warp_ccd's results
+written where their simulations read them (mesh-mesh contacts for newton's rigid-body solvers:
+:mod:`~warp_ccd._src.compat.newton`). Each imports its library inside its own module: importing warp_ccd never
+imports them."""

@@ -48,6 +48,7 @@ from ..geometry.primitives import _closest_on_triangle, _unit_normal
 from ..geometry.triangle import CONTACT_AREA, CONTACT_SEGMENT, tri_tri_segment
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
 from ..runtime.buffers import upper_bound
+from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, mesh_triangle
 from ..trees.bvh import TreeView
 from .depth import _probe
@@ -61,7 +62,7 @@ wp.set_module_options({"enable_backward": False, "fuse_fp": False})
 MAX_PER_PAIR = 8
 """Default most contacts an object pair keeps (module docstring)."""
 MAX_PER_PAIR_LIMIT = 32
-"""Largest ``max_per_pair`` accepted."""
+"""Largest ``max_per_pair`` accepted (the option's rule, :data:`~warp_ccd._src.runtime.options.OPTIONS`)."""
 TIE_TOLERANCE = 1.0e-6
 """Scores (depths, distances, areas) within this fraction of the best are equal: the first by identity wins."""
 _TIE = wp.constant(wp.float64(TIE_TOLERANCE))
@@ -586,13 +587,10 @@ class ContactStage:
 
     def __init__(self, scene, trees, surface: SurfaceTopology, object_solid: np.ndarray, *,
                  max_per_pair: int = MAX_PER_PAIR, tolerance: float = TRIANGLE_TOLERANCE):
-        if isinstance(max_per_pair, bool) or not isinstance(max_per_pair, int | np.integer) or \
-                not 1 <= max_per_pair <= MAX_PER_PAIR_LIMIT:
-            raise ValueError(f"max_per_pair: expected an int in [1, {MAX_PER_PAIR_LIMIT}], got {max_per_pair!r}")
         self.scene = scene
         self.trees = trees
         self.surface = surface
-        self.max_per_pair = int(max_per_pair)
+        self.max_per_pair = check_option("max_per_pair", max_per_pair)
         self.tolerance = float(tolerance)
         self.object_solid = wp.array(np.asarray(object_solid, np.int32), dtype=wp.int32, device=scene.device)
         self._buffers: dict[str, wp.array] = {}

@@ -452,8 +452,16 @@ def contacts(meshes: Sequence, transforms: ArrayLike | None = None, device: Devi
     """One-shot contacts among meshes, for a solver (:mod:`~warp_ccd._src.narrowphase.contacts`).
 
     Args:
-        meshes, transforms, device, precision, world, group, mask, exclude_pairs, options, kwargs: as
-            :func:`collide`.
+        meshes: sequence of ``(vertices (n, 3) float, triangles (m, 3) int)``, one per object.
+        transforms: ``(N, 4, 4)`` rigid transforms or ``(N, 7)`` poses, or None (vertices in world space).
+        device: Warp device (default: Warp's default device).
+        precision: ``"float32"`` (default) or ``"float64"``.
+        world: ``(N,)`` world id of each object (as :func:`collide`).
+        group: ``(N,)`` collision group of each object (as :func:`collide`).
+        mask: ``(N,)`` collision mask of each object (as :func:`collide`).
+        exclude_pairs: ``(E, 2)`` object pairs that never collide.
+        options: the pipeline's :class:`~warp_ccd._src.pipeline.options.PipelineOptions`; None: the defaults.
+        **kwargs: options by name, over ``options`` (``tolerance``, capacities, ...).
         max_per_pair: the most contacts an object pair keeps (in ``[1, 32]``).
         margin: pairs apart by at most this distance (scene units) get a speculative contact too: their closest
             points, ``depth = -distance``.

@@ -336,7 +336,9 @@ class CollisionResult:
         t = self.triangle_pairs
         if t.shape[0] == 0:
             return np.zeros((0, 2), np.int32)
-        return np.unique(t[:, [0, 2]], axis=0).astype(np.int32)
+        n = np.int64(max(self.num_objects, 1))
+        key = np.unique(t[:, 0].astype(np.int64) * n + t[:, 2])  # one int64 key a row: no sort of records
+        return np.stack([key // n, key % n], axis=1).astype(np.int32)
 
     @cached_property
     def containment_pairs(self) -> np.ndarray | None:

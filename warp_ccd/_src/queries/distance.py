@@ -116,6 +116,26 @@ class DistanceQuery:
         self.tolerance = float(tolerance)
         self._depth = None
 
+    def set_pairs(self, pairs: ArrayLike) -> None:
+        """Measures other object pairs from the next :meth:`query` on, keeping the trees and the buffers as
+        they have grown (a caller that picks its pairs query by query, as a nearest-pair search does).
+
+        Args:
+            pairs: ``(P, 2)`` object ids ``(a, b)``, ``a != b``.
+
+        Raises:
+            ValueError: a bad shape, an id out of range, or a pair of an object with itself.
+        """
+        ids = _pairs_array(pairs, self.scene.num_objects)
+        count = len(ids)
+        if self.pairs.ensure(count):
+            self.counter_read.generation += 1  # a captured query holds the old storage
+        if count:
+            self.pairs.data[:count].assign(wp.array(ids, dtype=wp.vec2i, device=self.device))
+        self.pairs.count.fill_(count)
+        self.pairs.last_count = count
+        self.pair_ids = ids
+
     def _launch(self) -> None:
         self.bvh.refit(self.scene, object_boxes=False)  # deforming trees; no broad phase needs boxes
         self.stage.launch(self.scene, self.pairs)

@@ -122,7 +122,7 @@ OPTIONS: dict[str, Rule] = {
     "self_intersections": FLAG,
     "contacts": FLAG,
     "signed": FLAG,
-    "max_per_pair": Rule("integer", low=1, high=32),
+    "max_per_pair": Rule("integer", low=1, high=32),  # contacts' MAX_PER_PAIR_LIMIT
     "margin": Rule("number", low=0.0, high=CLEARANCE_MAX),
     "duplicates": FLAG,
     # How a frame runs.
