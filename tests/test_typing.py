@@ -1,9 +1,9 @@
 """The public API is fully annotated, and the package says so (``warp_ccd/py.typed``).
 
 Every function and class method reachable from the ``__all__`` of the public modules (the top level,
-``scene``, ``stages``, ``geometry``, ``usd``, ``preview``, ``trimesh``) annotates each parameter (``self`` and ``cls``
-aside) and its return. Warp's ``@wp.func``, ``@wp.kernel`` and ``@wp.struct`` objects are Warp's to type
-(their arguments are typed for Warp already) and are left out; so are constants. A class contributes its
+``scene``, ``stages``, ``geometry``, ``usd``, ``preview``, ``trimesh``, ``newton``) annotates each parameter
+(``self`` and ``cls`` aside) and its return. Warp's ``@wp.func``, ``@wp.kernel`` and ``@wp.struct`` objects are
+Warp's to type (their arguments are typed for Warp already) and are left out; so are constants. A class contributes its
 ``__init__`` and its public methods, properties, class and static methods, inherited ones included,
 where the package defines them.
 """
@@ -20,7 +20,7 @@ import warp as wp
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 PUBLIC_MODULES = ("warp_ccd", "warp_ccd.scene", "warp_ccd.stages", "warp_ccd.geometry", "warp_ccd.usd",
-                  "warp_ccd.preview", "warp_ccd.trimesh")
+                  "warp_ccd.preview", "warp_ccd.trimesh", "warp_ccd.newton")
 
 # Public functions allowed to lack annotations while their module is reworked: none now (keep it empty).
 PENDING: set[str] = set()
