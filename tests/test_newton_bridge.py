@@ -289,3 +289,47 @@ def test_stack_comes_to_rest_without_gaining_energy_or_sinking():
     gained = (energy[rest:] - energy[rest]).max(axis=0)
     assert (gained <= tolerance).all(), (gained, tolerance)
     assert depth[rest:].max() < 0.01 * 0.2, depth[rest:].max()  # 1% of the smallest body's size
+
+
+def ring_mesh():
+    """A ring (torus: radii 0.3 and 0.08, 256 triangles) as a ``newton.Mesh``, outward triangles."""
+    u = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)[:, None]
+    w = np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)[None, :]
+    r = 0.3 + 0.08 * np.cos(w)
+    v = np.stack([r * np.cos(u), r * np.sin(u), 0.08 * np.sin(w) + 0.0 * u], axis=2).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(16), np.arange(8), indexing="ij")
+    a, b, c, d = i * 8 + j, (i + 1) % 16 * 8 + j, (i + 1) % 16 * 8 + (j + 1) % 8, i * 8 + (j + 1) % 8
+    t = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return newton.Mesh(v.astype(np.float32), t.astype(np.int32).reshape(-1))
+
+
+@pytest.mark.slow
+def test_ring_on_a_ring_settles_without_gaining_energy():
+    # Non-convex: a ring lying across another on the ground (XPBD, 480 Hz, 0.75 s): about a minute on a CPU.
+    b = newton.ModelBuilder()
+    b.add_ground_plane()
+    ring = ring_mesh()
+    for k, z in enumerate((0.08, 0.245)):
+        body = b.add_body(xform=wp.transform(wp.vec3(0.1 * k, 0.0, z), quat_z(0.3 * k)))
+        b.add_shape_mesh(body, mesh=ring)
+    model = b.finalize(device=DEFAULT_DEVICE)
+    bridge = MeshContactBridge(model)
+    contacts = bridge.contacts()
+    solver = newton.solvers.SolverXPBD(model, iterations=8)
+    s0, s1, control = model.state(), model.state(), model.control()
+    energy, depth = [], []
+    for _ in range(360):
+        s0.clear_forces()
+        bridge.collide(s0, contacts)
+        c = bridge.result.contacts
+        depth.append(c.depth.max() if c.count else 0.0)
+        solver.step(s0, s1, control, contacts, 1.0 / 480.0)
+        s0, s1 = s1, s0
+        energy.append(energies(model, s0))
+    energy, depth = np.array(energy), np.array(depth)
+    z = s0.body_q.numpy()[:, 2]
+    assert z[0] == pytest.approx(0.08, abs=2e-3) and 0.2 < z[1] < 0.245  # the upper ring still on the lower one
+    rest = 120
+    tolerance = model.body_mass.numpy() * 9.81 * 0.0016  # a 1.6 mm rise (1% of the ring's thickness)
+    assert ((energy[rest:] - energy[rest]).max(axis=0) <= tolerance).all()
+    assert depth[rest:].max() < 0.01 * 0.16
