@@ -21,8 +21,8 @@
 #
 #   bash bench/run_cuda.sh                 # every part; results in bench/results/ (or $OUT when set)
 #   bash bench/run_cuda.sh tests scaling   # some parts: tests, resources, stages, profile, narrow, scaling, spheres, boxes, deforming,
-#                                          # broad, build, host, usd, distributed, ccd, continuous, clearance, distance, self,
-#                                          # worlds
+#                                          # broad, build, host, usd, distributed, ccd, continuous, clearance, contacts,
+#                                          # trimesh, distance, self, worlds
 #   DEVICE=cpu SMOKE=1 bash bench/run_cuda.sh   # tiny sizes, to check the script itself
 #
 # Where the tree is a copy whose git (if any) does not describe it, set WARP_CCD_GIT_COMMIT (and
@@ -39,7 +39,7 @@ export PYTHONPATH="$PWD${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 device=${DEVICE:-cuda:0}
 out=${OUT:-bench/results}
 tag=${device//:/}
-parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd distributed ccd continuous clearance distance self worlds}
+parts=${*:-tests resources stages profile narrow scaling spheres boxes deforming broad build host usd distributed ccd continuous clearance contacts trimesh distance self worlds}
 mkdir -p "$out"
 if [ -n "${SMOKE:-}" ]; then
     big="100 300"; spheres="100"; boxes="1000 3000"; frames=2; tests="tests/test_pipeline.py"; narrow=2000
@@ -48,7 +48,7 @@ if [ -n "${SMOKE:-}" ]; then
     distributed="--objects 200 --frames 8 --long-frames 40 --layers 2 --batch 4 --batch-objects 50 --batch-frames 6"
     mixed="20 50"; boxcases="poly:200 80:100"; deforming="30"; level=2; staged="poly:100"; staged_big="poly:300"
     ccd="--queries 4000 --objects 100 --ipctk-queries 1000 --repeats 2"; continuous="100 300"
-    clearance="100 300"; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --crumpled 4 --sheet-n 20"
+    clearance="100 300"; profiled_contacts=300; distance="--triangles 1e3 4e3"; selfargs="--mesh-triangles 2e4 --sheets 4 --crumpled 4 --sheet-n 20"
     worldargs="--worlds 16 --loop-worlds 4"
 else
     big="1e2 1e3 1e4 1e5 1e6"; spheres="1e2 1e3 1e4 1e5"; boxes="1e3 1e4 1e5 1e6 1e7"; frames=20; tests=${TESTS:-tests}
@@ -59,7 +59,7 @@ else
     mixed="1e3 1e4"; boxcases="poly:1000 poly:1000000 80:100000 1280:10000 mixed:1000"; deforming="1e3 1e4"; level=3
     staged="poly:1000 poly:10000 80:1000 mixed:1000"; staged_big="poly:100000 poly:1000000 80:100000 1280:10000"
     ccd="--queries 1e7 --objects 1e4 --ipctk-queries 2e4 --repeats 10"; continuous="1e3 1e4 1e5 1e6"
-    clearance="1e3 1e4 1e5 1e6"; distance="--triangles 1e4 1e5"; selfargs="--mesh-triangles 1.3e6 --sheets 1e2 1e3 --crumpled 1e2"
+    clearance="1e3 1e4 1e5 1e6"; profiled_contacts=1e5; distance="--triangles 1e4 1e5"; selfargs="--mesh-triangles 1.3e6 --sheets 1e2 1e3 --crumpled 1e2"
     worldargs="--worlds 4096 --loop-worlds 256"
 fi
 status=0
@@ -130,6 +130,12 @@ for part in $parts; do
     clearance)
         step python3 -m bench.clearance --device "$device" --objects $clearance --clearance 0.05 0.2 \
             --frames $frames --warmup 3 --profile --out "$out/clearance_$tag.json" ;;
+    contacts)
+        step python3 -m bench.contacts --device "$device" --objects $clearance --frames $((frames / 2)) --warmup 2 \
+            --out "$out/contacts_$tag.json"
+        step python3 -m bench.contacts_profile "$profiled_contacts" > "$out/contacts_profile_$tag.txt" 2>&1 ;;
+    trimesh)
+        step python3 -m bench.trimesh_manager --device "$device" --out "$out/trimesh_manager_$tag.json" ;;
     distance)
         step python3 -m bench.distance --device "$device" $distance --gap 0.5 0.01 --frames $frames \
             --warmup 3 --profile --out "$out/distance_$tag.json" ;;

@@ -49,8 +49,8 @@ from ..geometry.triangle import CONTACT_AREA, CONTACT_SEGMENT, tri_tri_segment
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
 from ..runtime.buffers import upper_bound
 from ..runtime.options import check_option
-from ..scene.scene import MeshTopology, mesh_triangle
-from ..trees.bvh import TreeView
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
+from ..trees.bvh import SceneBVH, TreeView
 from .depth import _probe
 from .surface import SurfaceTopology
 
@@ -514,8 +514,9 @@ class Contacts:
         pair_depth: ``(K,)`` float64 the depth of each object pair of :attr:`object_pairs` (NaN: neither closed).
     """
 
-    def __init__(self, count: int, device_pairs, device_point_a, device_point_b, device_normal, device_depth,
-                 device_triangles, device_count, object_pairs: np.ndarray, pair_depth: np.ndarray):
+    def __init__(self, count: int, device_pairs: wp.array, device_point_a: wp.array, device_point_b: wp.array,
+                 device_normal: wp.array, device_depth: wp.array, device_triangles: wp.array, device_count: wp.array,
+                 object_pairs: np.ndarray, pair_depth: np.ndarray) -> None:
         self.count = int(count)
         self.device_pairs = device_pairs
         self.device_point_a = device_point_a
@@ -585,8 +586,8 @@ class ContactStage:
         tolerance: relative tolerance (of triangle sizes: a depth below it has no direction of its own).
     """
 
-    def __init__(self, scene, trees, surface: SurfaceTopology, object_solid: np.ndarray, *,
-                 max_per_pair: int = MAX_PER_PAIR, tolerance: float = TRIANGLE_TOLERANCE):
+    def __init__(self, scene: Scene, trees: SceneBVH, surface: SurfaceTopology, object_solid: np.ndarray, *,
+                 max_per_pair: int = MAX_PER_PAIR, tolerance: float = TRIANGLE_TOLERANCE) -> None:
         self.scene = scene
         self.trees = trees
         self.surface = surface

@@ -67,7 +67,7 @@ from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _closest_on_triangle, _max_abs, _unit_normal
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
 from ..runtime.buffers import reserve_slot, upper_bound
-from ..scene.scene import MeshTopology, mesh_triangle
+from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from .surface import SurfaceTopology, _side_at, surface_topology
 
@@ -937,8 +937,9 @@ class DepthResult:
         pair_triangles: ``(K, 2)`` int32 the local triangles of ``a`` and ``b`` the witness lies on, -1 where none.
     """
 
-    def __init__(self, pair_depth, row_depth, contained_depth, regions, levels, stopped=None, pair_points=None,
-                 pair_triangles=None):
+    def __init__(self, pair_depth: np.ndarray, row_depth: np.ndarray, contained_depth: np.ndarray, regions: int,
+                 levels: int, stopped: np.ndarray | None = None, pair_points: np.ndarray | None = None,
+                 pair_triangles: np.ndarray | None = None) -> None:
         self.pair_depth = pair_depth
         self.row_depth = row_depth
         self.contained_depth = contained_depth
@@ -965,8 +966,8 @@ class PenetrationDepth:
         d = depth(res.intersecting_pairs, rows=res.triangle_pairs).pair_depth
     """
 
-    def __init__(self, scene, *, trees: SceneBVH | None = None, tolerance: float = TOLERANCE,
-                 triangle_tolerance: float = TRIANGLE_TOLERANCE, surface: SurfaceTopology | None = None):
+    def __init__(self, scene: Scene, *, trees: SceneBVH | None = None, tolerance: float = TOLERANCE,
+                 triangle_tolerance: float = TRIANGLE_TOLERANCE, surface: SurfaceTopology | None = None) -> None:
         """
         Args:
             scene: the :class:`~warp_ccd._src.scene.scene.Scene`.
