@@ -553,13 +553,17 @@ def _split_kernel(
 
 @wp.func
 def _witness_key(tri: int, uv: Region):
-    """A region's place, to choose one witness among equal depths the same way on every device: its root triangle,
-    then its centroid's barycentric coordinates to 16 bits each."""
+    """A region's place, to choose one witness among equal depths the same way on every device: its centroid's
+    distance from its root triangle's centroid (barycentric, 15 bits), then its root triangle, then its
+    centroid (8 bits each). Among the points of a plateau (a box sunk flat into another) the middle of a
+    triangle wins, not a corner of the plateau, where another face of the solid is as near and gives another
+    direction."""
     third = wp.float64(1.0 / 3.0)
     u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
     v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
-    q = wp.int64(int(u * wp.float64(65535.0))) * wp.int64(65536) + wp.int64(int(v * wp.float64(65535.0)))
-    return wp.int64(tri) * wp.int64(4294967296) + q
+    off = wp.min((wp.abs(u - third) + wp.abs(v - third)) * wp.float64(0.75), wp.float64(1.0))  # in [0, 1]
+    place = wp.int64(int(u * wp.float64(255.0))) * wp.int64(256) + wp.int64(int(v * wp.float64(255.0)))
+    return (wp.int64(int(off * wp.float64(32767.0))) * wp.int64(2147483648) + wp.int64(tri)) * wp.int64(65536) + place
 
 
 @wp.func
