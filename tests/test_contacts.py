@@ -104,16 +104,15 @@ def test_open_sheets_crossing_have_contacts_at_depth_zero(device):
     assert np.allclose(c.point_a[:, 2], 0.0, atol=1e-6) and np.allclose(c.point_a[:, 1], 0.0, atol=1e-6)
 
 
-def test_apart_pairs_within_the_margin_get_speculative_contacts(device):
+def test_apart_pairs_within_the_margin_get_a_speculative_contact(device):
     a = box([0, 0, 0], [1, 1, 1])
     b = box([0.2, 0.2, 1.03], [0.8, 0.8, 1.5])
     far = box([5, 5, 5], [6, 6, 6])
     c = wc.contacts([a, b, far], device=device, margin=0.05)
-    assert (c.pairs == [0, 1]).all() and c.count >= 3  # the closest points, and corners of the closest triangles
-    assert c.depth == pytest.approx(np.full(c.count, -0.03), rel=1e-5)
+    assert c.pairs.tolist() == [[0, 1]]
+    assert c.depth == pytest.approx([-0.03], rel=1e-5)
     assert np.allclose(c.normal, [0, 0, -1], atol=1e-4)  # float32 closest points
     assert np.allclose(c.point_a, c.point_b - c.depth[:, None] * c.normal, atol=1e-6)
-    assert np.allclose(c.point_b[:, 2], 1.03, atol=1e-6) and np.ptp(c.point_b[:, :2], axis=0).min() >= 0.6 - 1e-6
     assert wc.contacts([a, b, far], device=device).count == 0  # no margin: nothing
     assert wc.contacts([a, (b[0] + [0, 0, 0.04], b[1])], device=device, margin=0.05).count == 0  # 0.07 apart
 

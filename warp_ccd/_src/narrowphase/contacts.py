@@ -16,9 +16,7 @@ that surface; ``depth < 0`` is a speculative contact of a pair apart by ``-depth
 * *crossing*: the ends of each row's intersection segment, or the corners of the area where coplanar triangles
   overlap, on both surfaces at once (depth 0): where the surfaces meet; the outline of the contact region (and
   the only contacts of open surfaces, which bound no solid, and of surfaces resting on each other).
-* *near* (a margin ``d > 0``): a pair apart but within ``d`` gets its closest points, ``depth = -distance``, and
-  each vertex of its two closest triangles within ``d`` of the other surface with its nearest point there (a box
-  hovering over a floor: its corners).
+* *near* (a margin ``d > 0``): a pair apart but within ``d`` gets its closest points, ``depth = -distance``.
 
 The normal of a contact deeper than its tolerance is the direction between its two points. One at depth 0 (a
 crossing's end, a vertex on the other surface) has no direction of its own: it takes the pair's *reference
@@ -53,7 +51,7 @@ from ..runtime.buffers import upper_bound
 from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
-from .depth import _probe, nearest_triangle
+from .depth import _probe
 from .surface import SurfaceTopology
 
 __all__ = ["KIND_CROSSING", "KIND_DEEPEST", "KIND_NEAR", "KIND_VERTEX", "MAX_PER_PAIR", "TIE_TOLERANCE", "Contacts",
@@ -361,66 +359,6 @@ def _pair_candidates_kernel(
     cand_key[c] = _key(p, kind, 0)
 
 
-@wp.kernel
-def _near_candidates_kernel(
-    mesh: MeshTopology,
-    tree: TreeView,
-    pose: wp.array[Any],
-    scale: wp.array[wp.float32],
-    deforming: wp.array[wp.int32],
-    world_vertex: wp.array[Any],
-    pair_ids: wp.array[wp.vec2i],
-    pair_triangles: wp.array[wp.vec2i],
-    pair_kind: wp.array[wp.int32],
-    margin: wp.float64,
-    tol_rel: wp.float64,
-    offset: int,
-    # Outputs
-    cand_key: wp.array[wp.int64],
-    cand_point_a: wp.array[wp.vec3d],
-    cand_point_b: wp.array[wp.vec3d],
-    cand_normal: wp.array[wp.vec3d],
-    cand_depth: wp.array[wp.float64],
-    cand_triangles: wp.array[wp.vec2i],
-):
-    """One thread per pair apart within the margin and slot: the vertices of its closest triangles (slots 0-2 of
-    ``a``'s, 3-5 of ``b``'s), each with its nearest point on the other surface, where that is within the margin:
-    speculative contacts that span the gap (a box hovering over a floor: its corners), not its closest point
-    alone."""
-    p, slot = wp.tid()
-    c = offset + p * 6 + slot
-    cand_key[c] = NO_KEY
-    if pair_kind[p] != KIND_NEAR:
-        return
-    side = slot // 3
-    src = pair_ids[p][side]
-    dst = pair_ids[p][1 - side]
-    tsrc = pair_triangles[p][side]
-    s = mesh.object_shape[src]
-    local = mesh.shape_triangle[mesh.shape_triangle_start[s] + tsrc][slot % 3]
-    v = wp.vec3d(world_vertex[mesh.object_vertex_start[src] + local])
-    d, t = nearest_triangle(mesh, tree, pose, scale, deforming, world_vertex, dst, v, tol_rel)
-    if t < 0 or d > margin or d <= wp.float64(0.0):
-        return
-    z0, z1, z2 = mesh_triangle(mesh, world_vertex, dst, t)
-    q, feature = _closest_on_triangle(v, wp.vec3d(z0), wp.vec3d(z1), wp.vec3d(z2))
-    gap = wp.length(q - v)
-    if gap <= wp.float64(0.0):
-        return
-    if side == 0:  # v on a, q on b: a lies along v - q from b
-        cand_point_a[c] = v
-        cand_point_b[c] = q
-        cand_normal[c] = (v - q) / gap
-        cand_triangles[c] = wp.vec2i(tsrc, t)
-    else:
-        cand_point_a[c] = q
-        cand_point_b[c] = v
-        cand_normal[c] = (q - v) / gap
-        cand_triangles[c] = wp.vec2i(t, tsrc)
-    cand_depth[c] = -gap
-    cand_key[c] = _key(p, KIND_NEAR, 1 + side * (1 << 29) + local)
-
-
 @wp.func
 def _area(a: wp.vec3d, b: wp.vec3d, c: wp.vec3d):
     return wp.length(wp.cross(b - a, c - a)) * wp.float64(0.5)
@@ -563,8 +501,6 @@ def _gather_kernel(
 
 _ROW_CANDIDATES = precision_overloads(_row_candidates_kernel,
                                       lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
-_NEAR_CANDIDATES = precision_overloads(_near_candidates_kernel,
-                                       lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 
 
 class Contacts:
@@ -670,7 +606,7 @@ class ContactStage:
         return a
 
     def __call__(self, pairs: np.ndarray, rows: np.ndarray, pair_depth: np.ndarray, pair_points: np.ndarray,
-                 pair_triangles: np.ndarray, near: dict | None = None, margin: float = 0.0) -> Contacts:
+                 pair_triangles: np.ndarray, near: dict | None = None) -> Contacts:
         """The contacts of object pairs.
 
         Args:
@@ -682,8 +618,6 @@ class ContactStage:
                 pair apart its closest points.
             pair_triangles: ``(K, 2)`` the witness's (or closest points') triangles.
             near: None, or ``{"apart": (K,) bool}``: which pairs are apart (their points are closest points).
-            margin: the distance within which pairs apart get speculative contacts (the vertices of their closest
-                triangles within it, besides their closest points).
 
         Returns:
             The :class:`Contacts`.
@@ -710,8 +644,7 @@ class ContactStage:
         reference = np.zeros((k, 3))
         deep = has_point & ~apart & (length > 0)
         reference[deep] = gap[deep] / length[deep, None]
-        near_slots = 6 * k if apart.any() else 0
-        total = m * ROW_SLOTS + k + near_slots
+        total = m * ROW_SLOTS + k
         cap = 2 * total  # radix sort scratch
         key = self._buffer("key", cap, wp.int64)
         value = self._buffer("value", cap, wp.int32)
@@ -726,19 +659,11 @@ class ContactStage:
                               wp.array(rows.astype(np.int32), dtype=wp.vec4i, device=d),
                               wp.array(row_pair, dtype=wp.int32, device=d), ref_dev, self.tolerance],
                       outputs=[key, *cand], device=d)
-        tris_dev = wp.array(np.asarray(pair_triangles, np.int32).reshape(k, 2), dtype=wp.vec2i, device=d)
-        kind_dev = wp.array(kind, dtype=wp.int32, device=d)
-        pairs_dev = wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device=d)
         wp.launch(_pair_candidates_kernel, dim=k,
-                  inputs=[wp.array(np.nan_to_num(points.reshape(k, 6)), dtype=wp.float64, device=d), tris_dev,
-                          kind_dev, m * ROW_SLOTS],
+                  inputs=[wp.array(np.nan_to_num(points.reshape(k, 6)), dtype=wp.float64, device=d),
+                          wp.array(np.asarray(pair_triangles, np.int32).reshape(k, 2), dtype=wp.vec2i, device=d),
+                          wp.array(kind, dtype=wp.int32, device=d), m * ROW_SLOTS],
                   outputs=[key, *cand], device=d)
-        if near_slots:
-            wp.launch(_NEAR_CANDIDATES[scene.precision], dim=(k, 6),
-                      inputs=[scene.topology, self.trees.tree, scene.object_pose, scene.object_scale,
-                              self.trees.object_deforming, scene.world_vertex, pairs_dev, tris_dev, kind_dev,
-                              float(margin), self.tolerance, m * ROW_SLOTS + k],
-                      outputs=[key, *cand], device=d)
         wp.copy(value, wp.array(np.arange(total, dtype=np.int32), dtype=wp.int32, device=d), count=total)
         wp.utils.radix_sort_pairs(key, value, total)
         chosen = self._buffer("chosen", (k, kmax), wp.int32)
@@ -752,7 +677,7 @@ class ContactStage:
         out = [wp.empty(max(c, 1), dtype=t, device=d) for t in (wp.vec2i, wp.vec3d, wp.vec3d, wp.vec3d, wp.float64,
                                                                   wp.vec2i)]
         wp.launch(_gather_kernel, dim=(k, kmax),
-                  inputs=[chosen, per_pair, start, pairs_dev, *cand],
+                  inputs=[chosen, per_pair, start, wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device=d), *cand],
                   outputs=out, device=d)
         count_dev.fill_(c)
         depth = np.where(apart, np.nan, np.asarray(pair_depth, np.float64))

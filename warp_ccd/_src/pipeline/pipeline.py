@@ -320,7 +320,7 @@ class CollisionPipeline:
             order = np.argsort(pairs[:, 0] * n + pairs[:, 1], kind="stable")
             pairs, points, triangles, depth, apart = pairs[order], points[order], triangles[order], depth[order], \
                 apart[order]
-        return self.contact_phase(pairs, rows, depth, points, triangles, near={"apart": apart}, margin=margin)
+        return self.contact_phase(pairs, rows, depth, points, triangles, near={"apart": apart})
 
     def _no_pairs(self, step: float | None, self_rows: tuple | None = None) -> CollisionResult:
         """The result of a scene of fewer than two objects (moved by ``step`` first, when given); with
