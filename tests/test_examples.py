@@ -84,9 +84,16 @@ def test_example_user_meshes_collide_over_time():
     assert deforming == {True, False}
 
 
+NEWTON_VIEWER_NEEDS_CPU = "cpu" not in [str(d) for d in wp.get_devices()]
+"""newton's USD viewer computes vertex normals in a CPU kernel: where Warp has no CPU compiler (a CUDA machine's
+Warp may not), the newton example cannot write its animation."""
+
+
 def test_example_newton_pile_one_frame(tmp_path, device):
     pytest.importorskip("newton")
     pxr = pytest.importorskip("pxr")
+    if NEWTON_VIEWER_NEEDS_CPU:
+        pytest.skip("newton's USD viewer needs Warp's CPU compiler, absent here")
     module = load_example("example_newton_pile")
     path = tmp_path / "pile.usda"
     with wp.ScopedDevice(device):
@@ -112,6 +119,8 @@ def test_example_newton_pile_one_frame(tmp_path, device):
 def test_example_scripts_run_one_frame(tmp_path, name, args, files):
     if name == "example_newton_pile":
         pytest.importorskip("newton")
+        if NEWTON_VIEWER_NEEDS_CPU:
+            pytest.skip("newton's USD viewer needs Warp's CPU compiler, absent here")
     proc = run_script(name, "--device", DEFAULT_DEVICE, "--num-frames", "1", *args, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(files)  # default stage path(s)

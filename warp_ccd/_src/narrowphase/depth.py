@@ -597,6 +597,40 @@ def _pick_witness_kernel(
         wp.atomic_min(job_witness_key, j, _witness_key(root_tri[r], region[k]))
 
 
+@wp.func
+def _witness_fine_key(uv: Region):
+    """A region's centroid to 30 bits a coordinate: among regions of one :func:`_witness_key` (the same root triangle
+    and coarse place), the least wins; no two regions of one root share it."""
+    third = wp.float64(1.0 / 3.0)
+    scale = wp.float64(1073741823.0)
+    u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
+    v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
+    return wp.int64(int(u * scale)) * wp.int64(1073741824) + wp.int64(int(v * scale))
+
+
+@wp.kernel
+def _pick_witness_fine_kernel(
+    region_root: wp.array[wp.int32],
+    region: wp.array[Region],
+    region_low: wp.array[wp.float64],
+    root_job: wp.array[wp.int32],
+    root_tri: wp.array[wp.int32],
+    job_depth: wp.array[wp.float64],
+    job_witness_depth: wp.array[wp.float64],
+    job_witness_key: wp.array[wp.int64],
+    # Outputs
+    job_witness_fine: wp.array[wp.int64],
+):
+    """One thread per region of a level: the bidders of the winning place bid their centroid
+    (:func:`_witness_fine_key`)."""
+    k = wp.tid()
+    low = region_low[k]
+    r = region_root[k]
+    j = root_job[r]
+    if _bids(low, job_depth[j], job_witness_depth[j]) and job_witness_key[j] == _witness_key(root_tri[r], region[k]):
+        wp.atomic_min(job_witness_fine, j, _witness_fine_key(region[k]))
+
+
 @wp.kernel
 def _keep_witness_kernel(
     region_root: wp.array[wp.int32],
@@ -608,6 +642,7 @@ def _keep_witness_kernel(
     root_tri: wp.array[wp.int32],
     job_depth: wp.array[wp.float64],
     job_witness_key: wp.array[wp.int64],
+    job_witness_fine: wp.array[wp.int64],
     # Outputs
     job_witness_depth: wp.array[wp.float64],
     job_witness_point: wp.array[wp.vec3d],
@@ -620,7 +655,8 @@ def _keep_witness_kernel(
     r = region_root[k]
     j = root_job[r]
     if _bids(low, job_depth[j], job_witness_depth[j]):
-        if job_witness_key[j] == _witness_key(root_tri[r], region[k]):
+        if job_witness_key[j] == _witness_key(root_tri[r], region[k]) and \
+                job_witness_fine[j] == _witness_fine_key(region[k]):
             job_witness_depth[j] = low
             job_witness_point[j] = region_point[k]
             job_witness_triangles[j] = wp.vec2i(root_tri[r], region_near[k])
@@ -1107,6 +1143,7 @@ class PenetrationDepth:
         root_depth = wp.zeros(num_roots, dtype=wp.float64, device=d)
         witness_depth = wp.zeros(num_jobs, dtype=wp.float64, device=d)
         witness_key = wp.empty(num_jobs, dtype=wp.int64, device=d)
+        witness_fine = wp.empty(num_jobs, dtype=wp.int64, device=d)
         witness_point = wp.zeros(num_jobs, dtype=wp.vec3d, device=d)
         witness_other = wp.zeros(num_jobs, dtype=wp.vec3d, device=d)
         witness_triangles = wp.full(num_jobs, wp.vec2i(-1, -1), dtype=wp.vec2i, device=d)
@@ -1134,11 +1171,16 @@ class PenetrationDepth:
                               cur[0], cur[1], cur[2], self.triangle_tolerance, self.resolution, quick],
                       outputs=[bound, next_hint, job_depth, root_depth, job_count, low, low_point, low_near], device=d)
             witness_key.fill_(np.iinfo(np.int64).max)
+            witness_fine.fill_(np.iinfo(np.int64).max)
             wp.launch(_pick_witness_kernel, dim=n,
                       inputs=[cur[0], cur[1], low, root_job, root_tri, job_depth, witness_depth],
                       outputs=[witness_key], device=d)
+            wp.launch(_pick_witness_fine_kernel, dim=n,
+                      inputs=[cur[0], cur[1], low, root_job, root_tri, job_depth, witness_depth, witness_key],
+                      outputs=[witness_fine], device=d)
             wp.launch(_keep_witness_kernel, dim=n,
-                      inputs=[cur[0], cur[1], low, low_point, low_near, root_job, root_tri, job_depth, witness_key],
+                      inputs=[cur[0], cur[1], low, low_point, low_near, root_job, root_tri, job_depth, witness_key,
+                              witness_fine],
                       outputs=[witness_depth, witness_point, witness_triangles], device=d)
             wp.launch(_stop_kernel, dim=num_jobs, inputs=[job_count, job_before, job_twin, PAIR_REGIONS],
                       outputs=[job_stop], device=d)
