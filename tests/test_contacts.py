@@ -93,6 +93,32 @@ def test_box_sunk_into_a_slab_gives_its_corners_at_the_depth(device):
     assert {tuple(np.round(p[:2], 6)) for p in bottom} >= {(-0.5, -0.3), (0.5, -0.3), (-0.5, 0.3), (0.5, 0.3)}
 
 
+def test_an_object_wholly_inside_another_gets_its_deepest_contact_with_containment(device):
+    v, t = wc.scene.shape("cube")  # faces at +-0.577
+    big, small = (v * 3, t), (v * 0.5 + [0.2, 0, 0], t)
+    for meshes, sign in (([small, big], -1.0), ([big, small], 1.0)):
+        res = wc.collide(meshes, device=device, precision="float64", containment=True, contacts=True)
+        c = res.contacts
+        assert res.colliding.all() and c.count == 1 and c.pairs.tolist() == [[0, 1]]
+        # The inner surface's deepest point (its face at x = 0.2 - 0.289) and the outer's nearest, 1.643 away.
+        assert c.depth[0] == pytest.approx(3 * 0.57735027 - (0.57735027 * 0.5 - 0.2), rel=1e-6)
+        assert np.allclose(c.normal[0], [sign, 0, 0])
+        assert np.allclose(c.point_a, c.point_b - c.depth[:, None] * c.normal)
+    assert wc.contacts([small, big], device=device).count == 0  # without containment the frame sees no pair
+
+
+def test_signed_distance_of_an_object_wholly_inside_another_is_negative(device):
+    v, t = wc.scene.shape("cube")
+    big, small = (v * 3, t), (v * 0.5 + [0.2, 0, 0], t)
+    poking = (v * 0.5 + [3 * 0.57735027 - 0.2, 0, 0], t)  # half out of the big one's +x face
+    d_in = wc.distance([small], [big], device=device, precision="float64")
+    d_out = wc.distance([poking], [big], device=device, precision="float64")
+    assert d_in.distance[0] == pytest.approx(-(3 * 0.57735027 - (0.57735027 * 0.5 - 0.2)), rel=1e-6)
+    assert d_out.distance[0] < 0.0 and d_in.distance[0] < d_out.distance[0]  # deeper inside: more negative
+    assert np.allclose(d_in.normal, [[1, 0, 0]])  # from a to b: a leaves along minus it
+    assert wc.distance([big], [small], device=device, precision="float64").distance == pytest.approx(d_in.distance)
+
+
 def test_open_sheets_crossing_have_contacts_at_depth_zero(device):
     a = grid(2, 2.0)
     b = grid(2, 2.0)

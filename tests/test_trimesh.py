@@ -429,3 +429,23 @@ def test_least_distances_agree_with_trimesh(seed):
     if d > 0:
         got = ours.min_distance_other(our_other, return_names=True)
         assert got[0] == pytest.approx(d, rel=1e-4) and got[1] == names
+
+
+def test_an_object_wholly_inside_another_is_the_nearest_pair_as_with_fcl():
+    """A small box inside a big one (no surfaces crossing) and another box overlapping the big one: trimesh's FCL
+    manager and ours agree on which pair is nearest and that its distance is negative (ours: minus the inner
+    surface's depth, 0.9; FCL's EPA: the least translation, 1.1) and on the collision."""
+    collision = pytest.importorskip("trimesh.collision")
+    pytest.importorskip("fcl")
+    big, small, box = (trimesh.creation.box(extents=e) for e in ([2, 2, 2], [0.2, 0.2, 0.2], [1, 1, 1]))
+    answers = []
+    for kind in (collision.CollisionManager, CollisionManager):
+        m, n = kind(), kind()
+        m.add_object("a", box, trimesh.transformations.translation_matrix([1.2, 0, 0]))
+        m.add_object("b", big)
+        n.add_object("s", small)
+        answers.append((m.min_distance_other(n, return_names=True), m.in_collision_other(n, return_names=True)))
+    (fcl_distance, fcl_names), fcl_hit = answers[0]
+    (distance, names), hit = answers[1]
+    assert names == fcl_names == ("b", "s") and hit == fcl_hit
+    assert fcl_distance < 0 and distance == pytest.approx(-0.9, rel=1e-5)

@@ -149,6 +149,56 @@ def _world_to_body(body_q: wp.array[wp.transform], body: int):
     return wp.transform_inverse(body_q[body])
 
 
+@wp.func
+def _kept(contact_depth: wp.array[wp.float64], contact_pair: wp.array[wp.vec2i], object_shape: wp.array[wp.int32],
+          shape_margin: wp.array[wp.float32], shape_gap: wp.array[wp.float32], gap: float, i: int):
+    """Whether contact ``i`` lies within its pair's gap (``gap < 0``: newton's ``shape_gap[0] + shape_gap[1]``)."""
+    pair = contact_pair[i]
+    s0 = object_shape[pair[0]]
+    s1 = object_shape[pair[1]]
+    pair_gap = gap
+    if gap < 0.0:
+        pair_gap = shape_gap[s0] + shape_gap[s1]
+    return -wp.float32(contact_depth[i]) - (shape_margin[s0] + shape_margin[s1]) <= pair_gap
+
+
+@wp.kernel
+def _keep_contacts_kernel(
+    contact_count: wp.array[wp.int32],
+    contact_pair: wp.array[wp.vec2i],
+    contact_depth: wp.array[wp.float64],
+    object_shape: wp.array[wp.int32],
+    shape_margin: wp.array[wp.float32],
+    shape_gap: wp.array[wp.float32],
+    gap: float,
+    # Outputs
+    keep: wp.array[wp.int32],
+):
+    """One thread per warp_ccd contact slot: 1 for a contact within its pair's gap, else 0 (scanned into slots)."""
+    i = wp.tid()
+    keep[i] = 0
+    if i < contact_count[0] and _kept(contact_depth, contact_pair, object_shape, shape_margin, shape_gap, gap, i):
+        keep[i] = 1
+
+
+@wp.kernel
+def _count_contacts_kernel(
+    keep: wp.array[wp.int32],
+    slot: wp.array[wp.int32],
+    contact_max: int,
+    # Outputs
+    out_count: wp.array[wp.int32],
+    dropped: wp.array[wp.int32],
+):
+    """One thread: newton's count raised by the contacts kept; those past ``contact_max`` counted in ``dropped``."""
+    last = keep.shape[0] - 1
+    total = slot[last] + keep[last]
+    end = out_count[0] + total
+    if end > contact_max:
+        dropped[0] = dropped[0] + wp.min(end - contact_max, total)
+    out_count[0] = end
+
+
 @wp.kernel
 def _append_contacts_kernel(
     contact_count: wp.array[wp.int32],
@@ -165,8 +215,10 @@ def _append_contacts_kernel(
     gap: float,
     slop: float,
     contact_max: int,
-    # Outputs
+    keep: wp.array[wp.int32],
+    slot: wp.array[wp.int32],
     out_count: wp.array[wp.int32],
+    # Outputs
     out_shape0: wp.array[wp.int32],
     out_shape1: wp.array[wp.int32],
     out_point0: wp.array[wp.vec3],
@@ -181,28 +233,21 @@ def _append_contacts_kernel(
     out_damping: wp.array[wp.float32],
     out_friction: wp.array[wp.float32],
     out_surface_velocity: wp.array[wp.vec3],
-    dropped: wp.array[wp.int32],
 ):
-    """One thread per warp_ccd contact slot: a contact within its pair's gap appended to newton's arrays after
-    their count (module docs: conventions mapped); one past ``contact_max`` counted in ``dropped``. ``gap < 0``:
-    each pair's gap is newton's ``shape_gap[0] + shape_gap[1]``. The thickness written is ``shape_margin - slop /
-    2`` a side (the gap is measured from the surfaces, without the slop)."""
+    """One thread per warp_ccd contact slot: a contact within its pair's gap (``keep``) written to newton's arrays at
+    newton's count plus its scanned ``slot``, in warp_ccd's order on every device (module docs: conventions mapped);
+    those past ``contact_max`` are not written (:func:`_count_contacts_kernel` counts them). The thickness written
+    is ``shape_margin - slop / 2`` a side (the gap is measured from the surfaces, without the slop)."""
     i = wp.tid()
-    if i >= contact_count[0]:
+    if i >= contact_count[0] or keep[i] == 0:
         return
     pair = contact_pair[i]
     s0 = object_shape[pair[0]]
     s1 = object_shape[pair[1]]
-    pair_gap = gap
-    if gap < 0.0:
-        pair_gap = shape_gap[s0] + shape_gap[s1]
-    if -wp.float32(contact_depth[i]) - (shape_margin[s0] + shape_margin[s1]) > pair_gap:
-        return
     margin0 = shape_margin[s0] - 0.5 * slop  # the thickness the solver reads
     margin1 = shape_margin[s1] - 0.5 * slop
-    index = wp.atomic_add(out_count, 0, 1)
+    index = out_count[0] + slot[i]  # newton's count (raised after this kernel) plus the scanned slot: in order
     if index >= contact_max:
-        wp.atomic_add(dropped, 0, 1)
         return
     x0 = _world_to_body(body_q, shape_body[s0])
     x1 = _world_to_body(body_q, shape_body[s1])
@@ -374,6 +419,8 @@ class MeshContactBridge:
         self.object_shape = wp.array(self.mesh_shapes, dtype=wp.int32, device=self.device)
         self.object_pose = wp.zeros(m, dtype=wp.transform, device=self.device)
         self.dropped_device = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self._keep: wp.array | None = None  # the append's flags and slots (a scan: contacts kept in order)
+        self._slot: wp.array | None = None
         self._empty = {t: wp.empty(0, dtype=t, device=self.device) for t in (wp.float32, wp.vec3)}
         self.result = None
         self.scene = None
@@ -440,7 +487,7 @@ class MeshContactBridge:
         return contacts
 
     def append(self, state: Any, source: Any, contacts: Any) -> None:
-        """Appends the contacts of ``source`` to newton's ``contacts`` (one kernel).
+        """Appends the contacts of ``source`` to newton's ``contacts`` in their order (flags, a scan, a write, a count).
 
         Args:
             state: the :class:`newton.State` the contacts were found at (``body_q``: body frames).
@@ -462,12 +509,21 @@ class MeshContactBridge:
         def optional(a: wp.array | None, dtype) -> wp.array:
             return a if a is not None else self._empty[dtype]
 
+        gap = -1.0 if self.gap is None else self.gap
+        if self._keep is None or self._keep.shape[0] != capacity:
+            self._keep = wp.empty(capacity, dtype=wp.int32, device=d)
+            self._slot = wp.empty(capacity, dtype=wp.int32, device=d)
+        wp.launch(_keep_contacts_kernel, dim=capacity,
+                  inputs=[source.device_count, source.device_pairs, source.device_depth, self.object_shape,
+                          self._shape_margin, self._shape_gap, gap],
+                  outputs=[self._keep], device=d)
+        wp.utils.array_scan(self._keep, self._slot, inclusive=False)
         wp.launch(_append_contacts_kernel, dim=capacity,
                   inputs=[source.device_count, source.device_pairs, source.device_point_a, source.device_point_b,
                           source.device_normal, source.device_depth, self.object_shape, state.body_q,
-                          self._shape_body, self._shape_margin, self._shape_gap,
-                          -1.0 if self.gap is None else self.gap, self.slop, contacts.rigid_contact_max],
-                  outputs=[contacts.rigid_contact_count, contacts.rigid_contact_shape0, contacts.rigid_contact_shape1,
+                          self._shape_body, self._shape_margin, self._shape_gap, gap, self.slop,
+                          contacts.rigid_contact_max, self._keep, self._slot, contacts.rigid_contact_count],
+                  outputs=[contacts.rigid_contact_shape0, contacts.rigid_contact_shape1,
                            contacts.rigid_contact_point0, contacts.rigid_contact_point1,
                            contacts.rigid_contact_offset0, contacts.rigid_contact_offset1,
                            contacts.rigid_contact_normal, contacts.rigid_contact_margin0,
@@ -475,8 +531,10 @@ class MeshContactBridge:
                            optional(contacts.rigid_contact_stiffness, wp.float32),
                            optional(contacts.rigid_contact_damping, wp.float32),
                            optional(contacts.rigid_contact_friction, wp.float32),
-                           optional(contacts.rigid_contact_surface_velocity, wp.vec3), self.dropped_device],
+                           optional(contacts.rigid_contact_surface_velocity, wp.vec3)],
                   device=d)
+        wp.launch(_count_contacts_kernel, dim=1, inputs=[self._keep, self._slot, contacts.rigid_contact_max],
+                  outputs=[contacts.rigid_contact_count, self.dropped_device], device=d)
 
     @property
     def dropped(self) -> int:

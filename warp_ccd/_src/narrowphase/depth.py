@@ -464,6 +464,36 @@ def _region_kernel(
 
 
 @wp.kernel
+def _inside_kernel(
+    mesh: MeshTopology,
+    surface: SurfaceTopology,
+    tree: TreeView,
+    pose: wp.array[Any],
+    scale: wp.array[wp.float32],
+    deforming: wp.array[wp.int32],
+    world_vertex: wp.array[Any],
+    pair: wp.array[wp.vec2i],
+    tol_rel: wp.float64,
+    # Outputs
+    inside: wp.array[wp.int32],
+):
+    """One thread per ``(inner, outer)`` pair whose surfaces do not meet: whether the inner object's first vertex lies
+    inside the outer solid (then all of it does)."""
+    k = wp.tid()
+    src = pair[k][0]
+    dst = pair[k][1]
+    s = mesh.object_shape[src]
+    inside[k] = 0
+    if mesh.shape_triangle_start[s + 1] == mesh.shape_triangle_start[s]:
+        return
+    local = mesh.shape_triangle[mesh.shape_triangle_start[s]][0]
+    v = wp.vec3d(world_vertex[mesh.object_vertex_start[src] + local])
+    d, t, hit = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, v, tol_rel)
+    if hit:
+        inside[k] = 1
+
+
+@wp.kernel
 def _stop_kernel(
     job_count: wp.array[wp.int64],
     job_before: wp.array[wp.int64],
@@ -933,6 +963,7 @@ _CANDIDATES = precision_overloads(_candidates_kernel, lambda s, v, q, t: {"pose"
 _SEED = precision_overloads(_seed_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 _CONVEX = precision_overloads(_convex_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
 _WITNESS = precision_overloads(_witness_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v]})
+_INSIDE = precision_overloads(_inside_kernel, lambda s, v, q, t: {"world_vertex": wp.array[v], "pose": wp.array[t]})
 
 
 @wp.kernel
@@ -975,6 +1006,8 @@ class DepthResult:
             depth is 0 or undefined. Among points of equal depth (within :data:`WITNESS_TIE`), one chosen by place
             (root triangle, then position in it), the same on every device.
         pair_triangles: ``(K, 2)`` int32 the local triangles of ``a`` and ``b`` the witness lies on, -1 where none.
+        contained_points, contained_triangles: ``(C, 2, 3)``, ``(C, 2)``: each contained pair's witness, as
+            ``(point on the inner, point on the outer)``, and their triangles (NaN, -1 where none).
     """
 
     def __init__(self, pair_depth: np.ndarray, row_depth: np.ndarray, contained_depth: np.ndarray, regions: int,
@@ -988,6 +1021,8 @@ class DepthResult:
         self.stopped = np.zeros(len(pair_depth), bool) if stopped is None else stopped
         k = len(pair_depth)
         self.pair_points = np.full((k, 2, 3), np.nan) if pair_points is None else pair_points
+        self.contained_points = np.full((len(contained_depth), 2, 3), np.nan)
+        self.contained_triangles = np.full((len(contained_depth), 2), -1, np.int32)
         self.pair_triangles = np.full((k, 2), -1, np.int32) if pair_triangles is None else pair_triangles
 
 
@@ -1049,6 +1084,24 @@ class PenetrationDepth:
             a = wp.empty(max(int(n * 1.5), 64), dtype=dtype, device=self.scene.device)
             self._buffers[name] = a
         return a
+
+    def inside(self, pairs: np.ndarray) -> np.ndarray:
+        """``(P,)`` bool: each ``(inner, outer)`` pair's inner object lies inside the outer's closed solid, for pairs
+        whose surfaces do not meet (one vertex decides: the side at its nearest feature). False where the outer is
+        open."""
+        pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+        if not len(pairs):
+            return np.zeros(0, bool)
+        scene, d = self.scene, self.scene.device
+        if self.own_trees:
+            self.trees.refit(scene)
+        out = wp.zeros(len(pairs), dtype=wp.int32, device=d)
+        wp.launch(_INSIDE[scene.precision], dim=len(pairs),
+                  inputs=[scene.topology, self.surface, self.trees.tree, scene.object_pose, scene.object_scale,
+                          self.trees.object_deforming, scene.world_vertex,
+                          wp.array(pairs.astype(np.int32), dtype=wp.vec2i, device=d), self.triangle_tolerance],
+                  outputs=[out], device=d)
+        return (out.numpy() != 0) & (self.object_solid[pairs[:, 1]] > 0)
 
     def jobs(self, pairs: np.ndarray, contained: np.ndarray) -> np.ndarray:
         """``(J, 2)`` int32 rows ``(src, dst)``: a surface measured inside a closed object, both ways for each
@@ -1235,7 +1288,14 @@ class PenetrationDepth:
         points[~ok] = np.nan
         triangles = np.where(use_ab[:, None], tris[way], tris[way][:, ::-1]).astype(np.int32)
         triangles[~ok] = -1
-        return DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped, points, triangles)
+        result = DepthResult(pair_depth, row_depth, contained_depth, total, level, stopped, points, triangles)
+        # Each contained pair's witness: its inner surface's deepest point inside the outer solid, (inner, outer).
+        way = np.maximum(inner, 0)
+        found = (inner >= 0) & has[way]
+        result.contained_points = np.stack([src[way], dst[way]], 1).reshape(-1, 2, 3)
+        result.contained_points[~found] = np.nan
+        result.contained_triangles = np.where(found[:, None], tris[way], -1).astype(np.int32).reshape(-1, 2)
+        return result
 
     def _row_roots(self, row_key: np.ndarray, size: int) -> tuple[wp.array, wp.array]:
         """Root buffers of at least ``size`` roots, the rows' triangles first."""

@@ -299,18 +299,31 @@ class CollisionPipeline:
 
     def _contacts(self, result: CollisionResult) -> Contacts:
         """The frame's contacts (:mod:`~warp_ccd._src.narrowphase.contacts`): the intersecting pairs' depths and
-        witnesses (:class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`), then the contact stage; with a
-        margin, the pairs apart within it too."""
+        witnesses (:class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`), then the contact stage; with
+        ``containment``, each pair of one object wholly inside another gets its deepest contact (the inner surface's
+        deepest point); with a margin, the pairs apart within it too."""
         rows = result.triangle_pairs.astype(np.int64)
         pairs = result.intersecting_pairs.astype(np.int64).reshape(-1, 2)
-        found = self.depth(pairs, rows=rows)
+        contained = result.containment_pairs
+        contained = np.zeros((0, 2), np.int64) if contained is None else contained.astype(np.int64).reshape(-1, 2)
+        found = self.depth(pairs, rows=rows, contained=contained)
         points, triangles, depth = found.pair_points, found.pair_triangles, found.pair_depth
+        n = np.int64(max(self.scene.num_objects, 1))
+        if len(contained):  # (inner, outer): its inner surface's deepest point, as a pair (a, b), a < b
+            flip = contained[:, 0] > contained[:, 1]
+            inner_points = np.where(flip[:, None, None], found.contained_points[:, ::-1], found.contained_points)
+            inner_tris = np.where(flip[:, None], found.contained_triangles[:, ::-1], found.contained_triangles)
+            pairs = np.concatenate([pairs, np.sort(contained, axis=1)])
+            points = np.concatenate([points, inner_points])
+            triangles = np.concatenate([triangles, inner_tris]).astype(np.int32)
+            depth = np.concatenate([depth, found.contained_depth])
+            order = np.argsort(pairs[:, 0] * n + pairs[:, 1], kind="stable")
+            pairs, points, triangles, depth = pairs[order], points[order], triangles[order], depth[order]
         apart = np.zeros(len(pairs), bool)
         margin = self.options.margin
         if margin > 0.0 and result.object_distance is not None:
             near = result.object_pairs.astype(np.int64).reshape(-1, 2)
             keep = (~result.object_intersecting.astype(bool)) & (result.object_distance <= margin)
-            n = np.int64(max(self.scene.num_objects, 1))
             keep &= ~np.isin(near[:, 0] * n + near[:, 1], pairs[:, 0] * n + pairs[:, 1])
             pairs = np.concatenate([pairs, near[keep]])
             points = np.concatenate([points, result.closest_points[keep].reshape(-1, 2, 3)])

@@ -67,7 +67,8 @@ class DistanceQuery:
         graph: run each query as a captured CUDA graph (default: on CUDA).
         front_capacity: initial capacity of the walk's front of node pairs (it grows).
         listed_capacity: initial capacity of the walk's measured triangle pairs (it grows).
-        signed: the distance of intersecting pairs is minus their penetration depth (python-fcl's sign; the depth of
+        signed: the distance of intersecting pairs, and of pairs one of which lies wholly inside the other's closed
+            solid, is minus their penetration depth (python-fcl's sign; the depth of
             :mod:`~warp_ccd._src.narrowphase.depth`: the deepest point of either surface inside the other's solid),
             their closest points the depth's witness (a point of one surface inside the other and its nearest point
             on that other); False: 0 and one point of the intersection. Touching pairs and pairs of open surfaces
@@ -163,26 +164,39 @@ class DistanceQuery:
     def _sign(self, stage: TreeDistance, count: int) -> None:
         """Intersecting pairs' distances made minus their depths, with the depth's witness as closest points and
         the direction from ``a`` to ``b`` ``(p - q) / |p - q|`` (``a`` leaves ``b`` along minus it), written into
-        the query's arrays. Their depths come from :class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth` down the
-        query's trees, over each object's triangles within the other's box."""
+        the query's arrays; likewise a pair apart whose one object lies wholly inside the other's closed solid (its
+        inner surface's depth). The depths come from :class:`~warp_ccd._src.narrowphase.depth.PenetrationDepth`
+        down the query's trees, over each object's triangles within the other's box."""
         dist = stage.distance[:count].numpy()
-        hit = np.flatnonzero(dist <= 0.0)
-        if not len(hit):
-            return
         if self._depth is None:
             self._depth = PenetrationDepth(self.scene, trees=self.bvh, triangle_tolerance=self.tolerance)
+        ids = self.pair_ids.astype(np.int64)
+        apart = np.flatnonzero(dist > 0.0)
+        a_in_b = np.zeros(count, bool)
+        b_in_a = np.zeros(count, bool)
+        a_in_b[apart] = self._depth.inside(ids[apart])
+        b_in_a[apart] = self._depth.inside(ids[apart, ::-1]) & ~a_in_b[apart]
+        hit = np.flatnonzero(dist <= 0.0)
+        inner = np.flatnonzero(a_in_b | b_in_a)
+        if not len(hit) and not len(inner):
+            return
         self.bvh.refit(self.scene)  # the object boxes too: each object's triangles within the other's are measured
-        ids = self.pair_ids[hit].astype(np.int64)
-        swap = ids[:, 0] > ids[:, 1]
-        found = self._depth(np.sort(ids, axis=1), in_boxes=True)
-        ok = np.isfinite(found.pair_depth) & (found.pair_depth > 0.0) & np.isfinite(found.pair_points).all(axis=(1, 2))
+        contained = np.where(a_in_b[inner, None], ids[inner], ids[inner, ::-1])  # (inner, outer)
+        found = self._depth(np.sort(ids[hit], axis=1), in_boxes=True, contained=contained)
+        swap = ids[hit, 0] > ids[hit, 1]
+        # Every signed row: (row, depth, (point on a, point on b), (tri a, tri b)).
+        points = np.concatenate([np.where(swap[:, None, None], found.pair_points[:, ::-1], found.pair_points),
+                                 np.where(b_in_a[inner, None, None], found.contained_points[:, ::-1],
+                                          found.contained_points)])
+        tris = np.concatenate([np.where(swap[:, None], found.pair_triangles[:, ::-1], found.pair_triangles),
+                               np.where(b_in_a[inner, None], found.contained_triangles[:, ::-1],
+                                        found.contained_triangles)])
+        depth = np.concatenate([found.pair_depth, found.contained_depth])
+        rows = np.concatenate([hit, inner])
+        ok = np.isfinite(depth) & (depth > 0.0) & np.isfinite(points).all(axis=(1, 2))
         if not ok.any():
             return
-        at, depth = hit[ok], found.pair_depth[ok]
-        points = found.pair_points[ok]
-        tris = found.pair_triangles[ok]
-        points = np.where(swap[ok, None, None], points[:, ::-1], points)  # as (point on a, point on b) of the row
-        tris = np.where(swap[ok, None], tris[:, ::-1], tris)
+        at, depth, points, tris = rows[ok], depth[ok], points[ok], tris[ok]
         gap = points[:, 0] - points[:, 1]
         normal = gap / np.maximum(np.linalg.norm(gap, axis=1), 1e-300)[:, None]
         all_dist, all_points = dist.copy(), stage.point[:count].numpy()
