@@ -44,14 +44,14 @@ import numpy as np
 import warp as wp
 
 from ..geometry.precision import precision_overloads
-from ..geometry.primitives import _closest_on_triangle, _unit_normal
+from ..geometry.primitives import _unit_normal
 from ..geometry.triangle import CONTACT_AREA, CONTACT_SEGMENT, tri_tri_segment
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
-from ..runtime.buffers import upper_bound
+from ..runtime.buffers import WorkArrays, upper_bound
 from ..runtime.options import check_option
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
-from .depth import _probe
+from .depth import _probe, nearest_point
 from .surface import SurfaceTopology
 
 __all__ = ["KIND_CROSSING", "KIND_DEEPEST", "KIND_NEAR", "KIND_VERTEX", "MAX_PER_PAIR", "TIE_TOLERANCE", "Contacts",
@@ -265,8 +265,7 @@ def _row_candidates_kernel(
         d, t, inside = _probe(mesh, surface, tree, pose, scale, deforming, world_vertex, dst, v, tol_rel)
         if not inside:
             return
-        z0, z1, z2 = mesh_triangle(mesh, world_vertex, dst, t)
-        q, feature = _closest_on_triangle(v, wp.vec3d(z0), wp.vec3d(z1), wp.vec3d(z2))
+        q = nearest_point(mesh, world_vertex, dst, t, v)
         gap = q - v
         depth = wp.length(gap)
         if side == 0:  # v on a, q on b: a moves along q - v to leave
@@ -381,6 +380,27 @@ def _score(step: int, chosen: _Chosen, m: int, point: wp.array[wp.vec3d], order:
     return least
 
 
+@wp.func
+def _next(step: int, chosen: _Chosen, m: int, point: wp.array[wp.vec3d], depth: wp.array[wp.float64],
+          order: wp.array[wp.int32], first: int, end: int, zero: wp.float64, floor: wp.float64):
+    """The candidate of ``[first, end)`` (sorted positions) that adds most at ``step`` (:func:`_score`), among those
+    deeper than ``zero`` first, then among all: the first within :data:`TIE_TOLERANCE` of the best; -1 where none
+    adds more than ``floor``."""
+    for tier in range(2):
+        top = wp.float64(0.0)
+        for c in range(first, end):
+            if tier == 0 and depth[order[c]] <= zero:
+                continue
+            top = wp.max(top, _score(step, chosen, m, point, order, c))
+        if top > floor:
+            for c in range(first, end):
+                if tier == 0 and depth[order[c]] <= zero:
+                    continue
+                if _score(step, chosen, m, point, order, c) >= top * (wp.float64(1.0) - _TIE):
+                    return c
+    return int(-1)
+
+
 @wp.kernel
 def _reduce_kernel(
     sorted_key: wp.array[wp.int64],
@@ -422,41 +442,12 @@ def _reduce_kernel(
     zero = wp.max(_TIE * wp.abs(best), eps)
     while m < max_per_pair:
         step = wp.min(m, 3)
-        found = int(-1)
-        for tier in range(2):  # positive depths first, then any
-            top = wp.float64(0.0)
-            for c in range(first, end):
-                if tier == 0 and cand_depth[order[c]] <= zero:
-                    continue
-                top = wp.max(top, _score(step, chosen, m, cand_point_a, order, c))
-            floor = eps
-            if step == 2:
-                floor = eps * spread
-            if top > floor:
-                for c in range(first, end):
-                    if tier == 0 and cand_depth[order[c]] <= zero:
-                        continue
-                    if _score(step, chosen, m, cand_point_a, order, c) >= top * (wp.float64(1.0) - _TIE):
-                        found = c
-                        break
-            if found >= 0:
-                break
+        floor = eps
+        if step == 2:
+            floor = eps * spread
+        found = _next(step, chosen, m, cand_point_a, cand_depth, order, first, end, zero, floor)
         if found < 0 and step == 2:  # all on one line: the farthest from the chosen instead
-            for tier in range(2):
-                top = wp.float64(0.0)
-                for c in range(first, end):
-                    if tier == 0 and cand_depth[order[c]] <= zero:
-                        continue
-                    top = wp.max(top, _score(3, chosen, m, cand_point_a, order, c))
-                if top > eps:
-                    for c in range(first, end):
-                        if tier == 0 and cand_depth[order[c]] <= zero:
-                            continue
-                        if _score(3, chosen, m, cand_point_a, order, c) >= top * (wp.float64(1.0) - _TIE):
-                            found = c
-                            break
-                if found >= 0:
-                    break
+            found = _next(3, chosen, m, cand_point_a, cand_depth, order, first, end, zero, eps)
         if found < 0:
             break
         chosen[m] = found
@@ -594,16 +585,7 @@ class ContactStage:
         self.max_per_pair = check_option("max_per_pair", max_per_pair)
         self.tolerance = float(tolerance)
         self.object_solid = wp.array(np.asarray(object_solid, np.int32), dtype=wp.int32, device=scene.device)
-        self._buffers: dict[str, wp.array] = {}
-
-    def _buffer(self, name: str, shape, dtype) -> wp.array:
-        a = self._buffers.get(name)
-        n = shape if isinstance(shape, int) else shape[0]
-        if a is None or a.shape[0] < n or (not isinstance(shape, int) and a.shape[1:] != tuple(shape[1:])):
-            full = max(int(n * 1.5), 64)
-            a = wp.empty(full if isinstance(shape, int) else (full, *shape[1:]), dtype=dtype, device=self.scene.device)
-            self._buffers[name] = a
-        return a
+        self._work = WorkArrays(scene.device)
 
     def __call__(self, pairs: np.ndarray, rows: np.ndarray, pair_depth: np.ndarray, pair_points: np.ndarray,
                  pair_triangles: np.ndarray, near: dict | None = None) -> Contacts:
@@ -646,9 +628,9 @@ class ContactStage:
         reference[deep] = gap[deep] / length[deep, None]
         total = m * ROW_SLOTS + k
         cap = 2 * total  # radix sort scratch
-        key = self._buffer("key", cap, wp.int64)
-        value = self._buffer("value", cap, wp.int32)
-        cand = [self._buffer(name, total, t) for name, t in (("point_a", wp.vec3d), ("point_b", wp.vec3d),
+        key = self._work.get("key", cap, wp.int64)
+        value = self._work.get("value", cap, wp.int32)
+        cand = [self._work.get(name, total, t) for name, t in (("point_a", wp.vec3d), ("point_b", wp.vec3d),
                                                              ("normal", wp.vec3d), ("depth", wp.float64),
                                                              ("triangles", wp.vec2i))]
         ref_dev = wp.array(reference, dtype=wp.vec3d, device=d)
@@ -666,11 +648,11 @@ class ContactStage:
                   outputs=[key, *cand], device=d)
         wp.copy(value, wp.array(np.arange(total, dtype=np.int32), dtype=wp.int32, device=d), count=total)
         wp.utils.radix_sort_pairs(key, value, total)
-        chosen = self._buffer("chosen", (k, kmax), wp.int32)
-        per_pair = self._buffer("per_pair", k, wp.int32)
+        chosen = self._work.get("chosen", (k, kmax), wp.int32)
+        per_pair = self._work.get("per_pair", k, wp.int32)
         wp.launch(_reduce_kernel, dim=k, inputs=[key, value, total, cand[0], cand[3], kmax, self.tolerance],
                   outputs=[chosen, per_pair], device=d)
-        start = self._buffer("start", k, wp.int32)
+        start = self._work.get("start", k, wp.int32)
         wp.utils.array_scan(per_pair[:k], start[:k], inclusive=False)
         counts = per_pair[:k].numpy()
         c = int(counts.sum())

@@ -66,7 +66,7 @@ import warp as wp
 from ..geometry.precision import precision_overloads
 from ..geometry.primitives import _closest_on_triangle, _max_abs, _unit_normal
 from ..geometry.triangle import TOLERANCE as TRIANGLE_TOLERANCE
-from ..runtime.buffers import reserve_slot, upper_bound
+from ..runtime.buffers import WorkArrays, reserve_slot, upper_bound
 from ..scene.scene import MeshTopology, Scene, mesh_triangle
 from ..trees.bvh import SceneBVH, TreeView
 from .surface import SurfaceTopology, _side_at, surface_topology
@@ -190,6 +190,14 @@ def nearest_triangle(mesh: MeshTopology, tree: TreeView, pose: wp.array[Any], sc
             stack[top + 1] = child[0]
             top += 2
     return best, best_tri
+
+
+@wp.func
+def nearest_point(mesh: MeshTopology, world_vertex: wp.array[Any], obj: int, tri: int, p: wp.vec3d):
+    """The point of local triangle ``tri`` of ``obj`` nearest to ``p`` (world, float64)."""
+    y0, y1, y2 = mesh_triangle(mesh, world_vertex, obj, tri)
+    c, feature = _closest_on_triangle(p, wp.vec3d(y0), wp.vec3d(y1), wp.vec3d(y2))
+    return c
 
 
 @wp.func
@@ -582,6 +590,15 @@ def _split_kernel(
 
 
 @wp.func
+def _centroid_uv(uv: Region):
+    """The barycentric ``(u, v)`` of a region's centroid in its root triangle, clamped to ``[0, 1]``."""
+    third = wp.float64(1.0 / 3.0)
+    u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
+    v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
+    return u, v
+
+
+@wp.func
 def _witness_key(tri: int, uv: Region):
     """A region's place, to choose one witness among equal depths the same way on every device: its centroid's
     distance from its root triangle's centroid (barycentric, 15 bits), then its root triangle, then its
@@ -589,8 +606,7 @@ def _witness_key(tri: int, uv: Region):
     triangle wins, not a corner of the plateau, where another face of the solid is as near and gives another
     direction."""
     third = wp.float64(1.0 / 3.0)
-    u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
-    v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
+    u, v = _centroid_uv(uv)
     off = wp.min((wp.abs(u - third) + wp.abs(v - third)) * wp.float64(0.75), wp.float64(1.0))  # in [0, 1]
     place = wp.int64(int(u * wp.float64(255.0))) * wp.int64(256) + wp.int64(int(v * wp.float64(255.0)))
     return (wp.int64(int(off * wp.float64(32767.0))) * wp.int64(2147483648) + wp.int64(tri)) * wp.int64(65536) + place
@@ -631,10 +647,8 @@ def _pick_witness_kernel(
 def _witness_fine_key(uv: Region):
     """A region's centroid to 30 bits a coordinate: among regions of one :func:`_witness_key` (the same root triangle
     and coarse place), the least wins; no two regions of one root share it."""
-    third = wp.float64(1.0 / 3.0)
     scale = wp.float64(1073741823.0)
-    u = wp.clamp((uv[0] + uv[2] + uv[4]) * third, wp.float64(0.0), wp.float64(1.0))
-    v = wp.clamp((uv[1] + uv[3] + uv[5]) * third, wp.float64(0.0), wp.float64(1.0))
+    u, v = _centroid_uv(uv)
     return wp.int64(int(u * scale)) * wp.int64(1073741824) + wp.int64(int(v * scale))
 
 
@@ -708,9 +722,7 @@ def _witness_kernel(
     t = job_witness_triangles[j][1]
     if job_witness_depth[j] <= wp.float64(0.0) or t < 0:
         return
-    y0, y1, y2 = mesh_triangle(mesh, world_vertex, job[j][1], t)
-    c, feature = _closest_on_triangle(job_witness_point[j], wp.vec3d(y0), wp.vec3d(y1), wp.vec3d(y2))
-    job_witness_other[j] = c
+    job_witness_other[j] = nearest_point(mesh, world_vertex, job[j][1], t, job_witness_point[j])
 
 
 @wp.kernel
@@ -1073,17 +1085,9 @@ class PenetrationDepth:
             hi = np.maximum.reduceat(v, start[:-1][full], axis=0)
             diag[full] = np.linalg.norm(hi - lo, axis=1)
         self.object_size = diag[scene.object_shape.numpy()] * scene.object_scale.numpy().astype(np.float64)
-        self._buffers: dict[str, wp.array] = {}
+        self._work = WorkArrays(scene.device)
         self.resolution = ROUNDING_ULPS * float(np.finfo(np.float32 if scene.precision == "float32"
                                                          else np.float64).eps)
-
-    def _buffer(self, name: str, n: int, dtype) -> wp.array:
-        """A work array of at least ``n`` items (grown by half again over the need)."""
-        a = self._buffers.get(name)
-        if a is None or a.shape[0] < n:
-            a = wp.empty(max(int(n * 1.5), 64), dtype=dtype, device=self.scene.device)
-            self._buffers[name] = a
-        return a
 
     def inside(self, pairs: np.ndarray) -> np.ndarray:
         """``(P,)`` bool: each ``(inner, outer)`` pair's inner object lies inside the outer's closed solid, for pairs
@@ -1202,7 +1206,7 @@ class PenetrationDepth:
         witness_triangles = wp.full(num_jobs, wp.vec2i(-1, -1), dtype=wp.vec2i, device=d)
         # Levels of regions.
         n = num_roots
-        cur = [self._buffer(f"{name}0", n, t) for name, t in (("root", wp.int32), ("region", Region),
+        cur = [self._work.get(f"{name}0", n, t) for name, t in (("root", wp.int32), ("region", Region),
                                                                 ("hint", wp.int32))]
         wp.launch(_roots_kernel, dim=n, inputs=[n], outputs=cur, device=d)
         total = 0
@@ -1213,11 +1217,11 @@ class PenetrationDepth:
         while n > 0 and level < MAX_LEVELS:
             total += n
             self.level_regions.append(n)
-            bound = self._buffer("bound", n, wp.float64)
-            next_hint = self._buffer("next_hint", n, wp.int32)
-            low = self._buffer("low", n, wp.float64)
-            low_point = self._buffer("low_point", n, wp.vec3d)
-            low_near = self._buffer("low_near", n, wp.int32)
+            bound = self._work.get("bound", n, wp.float64)
+            next_hint = self._work.get("next_hint", n, wp.int32)
+            low = self._work.get("low", n, wp.float64)
+            low_point = self._work.get("low_point", n, wp.vec3d)
+            low_near = self._work.get("low_near", n, wp.int32)
             wp.launch(_REGION[scene.precision], dim=n,
                       inputs=[scene.topology, self.surface, tree.tree, scene.object_pose, scene.object_scale,
                               tree.object_deforming, scene.world_vertex, job_dev, job_convex, root_job, root_tri,
@@ -1242,7 +1246,7 @@ class PenetrationDepth:
             level += 1 - quick
             want = n if quick else 4 * n
             while True:
-                nxt = [self._buffer(f"{name}{step % 2}", want, t)
+                nxt = [self._work.get(f"{name}{step % 2}", want, t)
                        for name, t in (("root", wp.int32), ("region", Region), ("hint", wp.int32))]
                 count.zero_()
                 wp.launch(_split_kernel, dim=n,
@@ -1300,8 +1304,8 @@ class PenetrationDepth:
     def _row_roots(self, row_key: np.ndarray, size: int) -> tuple[wp.array, wp.array]:
         """Root buffers of at least ``size`` roots, the rows' triangles first."""
         d = self.scene.device
-        root_job = self._buffer("root_job", size, wp.int32)
-        root_tri = self._buffer("root_tri", size, wp.int32)
+        root_job = self._work.get("root_job", size, wp.int32)
+        root_tri = self._work.get("root_tri", size, wp.int32)
         if len(row_key):
             stride = np.int64(self.stride)
             root_job[:len(row_key)].assign(wp.array((row_key // stride).astype(np.int32), dtype=wp.int32, device=d))
@@ -1320,7 +1324,7 @@ class PenetrationDepth:
         num_rows, num_jobs = len(row_key), len(jobs)
         root_job, root_tri = self._row_roots(row_key, num_rows + total)
         capacity = root_job.shape[0]
-        state = self._buffer("state", total, wp.int32)
+        state = self._work.get("state", total, wp.int32)
         state.zero_()
         count = wp.zeros(1, dtype=wp.int64, device=d)
         if num_rows:
@@ -1373,8 +1377,8 @@ class PenetrationDepth:
             if num_rows + extra <= root_job.shape[0]:
                 return root_job, root_tri, num_rows + extra
             capacity = extra
-            self._buffers.pop("root_job")
-            self._buffers.pop("root_tri")
+            self._work.drop("root_job")
+            self._work.drop("root_tri")
 
     def _job_of(self, job_key: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
         """The job index of each ``(src, dst)``, -1 where there is none."""

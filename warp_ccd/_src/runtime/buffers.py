@@ -38,6 +38,7 @@ __all__ = [
     "ITEM_LIST_SIZE",
     "CounterRead",
     "GrowableBuffer",
+    "WorkArrays",
     "block_dim_for",
     "blocks_have_lanes",
     "block_reserve",
@@ -226,6 +227,33 @@ class GrowableBuffer:
         if not self.fitted:
             raise RuntimeError(f"{self.name}: the buffer grew after its last read; run the frame again first")
         return self.data[: self.last_count]
+
+
+class WorkArrays:
+    """A stage's named work arrays on one device, sized by the call that asks: each is made anew, half again over the
+    need (at least 64 rows), when asked for more rows than it holds or for another shape of row.
+
+    Args:
+        device: the Warp device.
+    """
+
+    def __init__(self, device: Any) -> None:
+        self.device = device
+        self._arrays: dict[str, wp.array] = {}
+
+    def get(self, name: str, shape: int | tuple, dtype: Any) -> wp.array:
+        """The array ``name`` of at least ``shape`` (an int: rows; a tuple: rows first), of ``dtype``."""
+        rows, rest = (shape, ()) if isinstance(shape, int) else (shape[0], tuple(shape[1:]))
+        a = self._arrays.get(name)
+        if a is None or a.shape[0] < rows or tuple(a.shape[1:]) != rest:
+            full = max(int(rows * 1.5), 64)
+            a = wp.empty((full, *rest) if rest else full, dtype=dtype, device=self.device)
+            self._arrays[name] = a
+        return a
+
+    def drop(self, name: str) -> None:
+        """Forgets the array ``name`` (the next :meth:`get` makes it anew)."""
+        self._arrays.pop(name, None)
 
 
 @wp.kernel
