@@ -307,32 +307,28 @@ class CollisionPipeline:
         contained = result.containment_pairs
         contained = np.zeros((0, 2), np.int64) if contained is None else contained.astype(np.int64).reshape(-1, 2)
         found = self.depth(pairs, rows=rows, contained=contained)
-        points, triangles, depth = found.pair_points, found.pair_triangles, found.pair_depth
-        n = np.int64(max(self.scene.num_objects, 1))
+        # Rows of pairs, points (on a, on b), triangles, depths, apart: intersecting, contained, near; one sort.
+        parts = [(pairs, found.pair_points, found.pair_triangles, found.pair_depth, np.zeros(len(pairs), bool))]
         if len(contained):  # (inner, outer): its inner surface's deepest point, as a pair (a, b), a < b
             flip = contained[:, 0] > contained[:, 1]
-            inner_points = np.where(flip[:, None, None], found.contained_points[:, ::-1], found.contained_points)
-            inner_tris = np.where(flip[:, None], found.contained_triangles[:, ::-1], found.contained_triangles)
-            pairs = np.concatenate([pairs, np.sort(contained, axis=1)])
-            points = np.concatenate([points, inner_points])
-            triangles = np.concatenate([triangles, inner_tris]).astype(np.int32)
-            depth = np.concatenate([depth, found.contained_depth])
-            order = np.argsort(pairs[:, 0] * n + pairs[:, 1], kind="stable")
-            pairs, points, triangles, depth = pairs[order], points[order], triangles[order], depth[order]
-        apart = np.zeros(len(pairs), bool)
-        margin = self.options.margin
-        if margin > 0.0 and result.object_distance is not None:
+            parts.append((np.sort(contained, axis=1),
+                          np.where(flip[:, None, None], found.contained_points[:, ::-1], found.contained_points),
+                          np.where(flip[:, None], found.contained_triangles[:, ::-1], found.contained_triangles),
+                          found.contained_depth, np.zeros(len(contained), bool)))
+        n = np.int64(max(self.scene.num_objects, 1))
+        if self.options.margin > 0.0 and result.object_distance is not None:
             near = result.object_pairs.astype(np.int64).reshape(-1, 2)
-            keep = (~result.object_intersecting.astype(bool)) & (result.object_distance <= margin)
-            keep &= ~np.isin(near[:, 0] * n + near[:, 1], pairs[:, 0] * n + pairs[:, 1])
-            pairs = np.concatenate([pairs, near[keep]])
-            points = np.concatenate([points, result.closest_points[keep].reshape(-1, 2, 3)])
-            triangles = np.concatenate([triangles, result.closest_triangles[keep].reshape(-1, 2)]).astype(np.int32)
-            depth = np.concatenate([depth, -result.object_distance[keep]])
-            apart = np.concatenate([apart, np.ones(int(keep.sum()), bool)])
+            keep = (~result.object_intersecting.astype(bool)) & (result.object_distance <= self.options.margin)
+            touched = np.concatenate([p[0] for p in parts])
+            keep &= ~np.isin(near[:, 0] * n + near[:, 1], touched[:, 0] * n + touched[:, 1])
+            parts.append((near[keep], result.closest_points[keep].reshape(-1, 2, 3),
+                          result.closest_triangles[keep].reshape(-1, 2), -result.object_distance[keep],
+                          np.ones(int(keep.sum()), bool)))
+        pairs, points, triangles, depth, apart = (np.concatenate(column) for column in zip(*parts))
+        if len(parts) > 1:
             order = np.argsort(pairs[:, 0] * n + pairs[:, 1], kind="stable")
-            pairs, points, triangles, depth, apart = pairs[order], points[order], triangles[order], depth[order], \
-                apart[order]
+            pairs, points, triangles, depth, apart = (pairs[order], points[order], triangles[order], depth[order],
+                                                      apart[order])
         return self.contact_phase(pairs, rows, depth, points, triangles, near={"apart": apart})
 
     def _no_pairs(self, step: float | None, self_rows: tuple | None = None) -> CollisionResult:
