@@ -261,26 +261,32 @@ def energies(model, state):
     return np.array(out)
 
 
-def test_stack_comes_to_rest_without_gaining_energy_or_sinking():
-    # Three mesh cubes (0.2 a side): two stacked on the ground, the third dropped onto them, under XPBD at 480 Hz
-    # for 1.25 s; all still by 0.6 s.
-    bodies = [((0.0, 0.0, 0.1), 0.0, "mesh"), ((0.03, 0.02, 0.302), 0.3, "mesh"), ((-0.02, 0.0, 0.58), 0.6, "mesh")]
-    model = model_of(bodies)
+def simulate(model, steps: int, dt: float = 1.0 / 480.0):
+    """``steps`` XPBD steps of ``model`` with the bridge's contacts: ``(bridge, last state, (steps, bodies) energies
+    [J], (steps,) deepest contact [m] of each step)``."""
     bridge = MeshContactBridge(model)
     contacts = bridge.contacts()
     solver = newton.solvers.SolverXPBD(model, iterations=8)
     s0, s1, control = model.state(), model.state(), model.control()
     energy, depth = [], []
-    for _ in range(600):
+    for _ in range(steps):
         s0.clear_forces()
         bridge.collide(s0, contacts)
         c = bridge.result.contacts
         depth.append(c.depth.max() if c.count else 0.0)
-        solver.step(s0, s1, control, contacts, 1.0 / 480.0)
+        solver.step(s0, s1, control, contacts, dt)
         s0, s1 = s1, s0
         energy.append(energies(model, s0))
-    energy, depth = np.array(energy), np.array(depth)
-    q = s0.body_q.numpy()
+    return bridge, s0, np.array(energy), np.array(depth)
+
+
+def test_stack_comes_to_rest_without_gaining_energy_or_sinking():
+    # Three mesh cubes (0.2 a side): two stacked on the ground, the third dropped onto them, under XPBD at 480 Hz
+    # for 1.25 s; all still by 0.6 s.
+    bodies = [((0.0, 0.0, 0.1), 0.0, "mesh"), ((0.03, 0.02, 0.302), 0.3, "mesh"), ((-0.02, 0.0, 0.58), 0.6, "mesh")]
+    model = model_of(bodies)
+    bridge, state, energy, depth = simulate(model, 600)
+    q = state.body_q.numpy()
     np.testing.assert_allclose(q[:, 2], [0.1, 0.3, 0.5], atol=2e-3)  # stacked, none fallen off
     assert np.abs(q[:, :2] - [b[0][:2] for b in bodies]).max() < 0.05  # nor slid far
     assert bridge.dropped == 0
@@ -313,21 +319,8 @@ def test_ring_on_a_ring_settles_without_gaining_energy():
         body = b.add_body(xform=wp.transform(wp.vec3(0.1 * k, 0.0, z), quat_z(0.3 * k)))
         b.add_shape_mesh(body, mesh=ring)
     model = b.finalize(device=DEFAULT_DEVICE)
-    bridge = MeshContactBridge(model)
-    contacts = bridge.contacts()
-    solver = newton.solvers.SolverXPBD(model, iterations=8)
-    s0, s1, control = model.state(), model.state(), model.control()
-    energy, depth = [], []
-    for _ in range(360):
-        s0.clear_forces()
-        bridge.collide(s0, contacts)
-        c = bridge.result.contacts
-        depth.append(c.depth.max() if c.count else 0.0)
-        solver.step(s0, s1, control, contacts, 1.0 / 480.0)
-        s0, s1 = s1, s0
-        energy.append(energies(model, s0))
-    energy, depth = np.array(energy), np.array(depth)
-    z = s0.body_q.numpy()[:, 2]
+    _, state, energy, depth = simulate(model, 360)
+    z = state.body_q.numpy()[:, 2]
     assert z[0] == pytest.approx(0.08, abs=2e-3) and 0.2 < z[1] < 0.245  # the upper ring still on the lower one
     rest = 120
     tolerance = model.body_mass.numpy() * 9.81 * 0.0016  # a 1.6 mm rise (1% of the ring's thickness)
